@@ -1,0 +1,40 @@
+"""regrasp_pin: regrasp planning for multi-fingered robot hands.
+
+When one finger's contact drifts to its joint limits while the object moves, the
+finger lifts off, travels around the object without touching it or the other
+fingers, and lands on a better contact, while the other fingers keep holding.
+Kinematics by Pinocchio, exact distances by Coal.
+
+``import regrasp_pin`` never imports meshcat or matplotlib.
+"""
+
+from __future__ import annotations
+
+from . import exceptions
+from .exceptions import (
+    ContactError,
+    GeometryError,
+    InputError,
+    MissingExtraError,
+    ModelFileError,
+    PlanningError,
+    RegraspError,
+    UnknownNameError,
+    VerificationError,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ContactError",
+    "GeometryError",
+    "InputError",
+    "MissingExtraError",
+    "ModelFileError",
+    "PlanningError",
+    "RegraspError",
+    "UnknownNameError",
+    "VerificationError",
+    "__version__",
+    "exceptions",
+]

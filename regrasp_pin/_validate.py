@@ -1,0 +1,89 @@
+"""Input checks shared by the public API: each raises :class:`InputError` naming the argument."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .exceptions import InputError, UnknownNameError
+
+
+def as_array(
+    value: object,
+    argument: str,
+    shape: Sequence[int | None],
+    *,
+    finite: bool = True,
+    dtype: type = np.float64,
+) -> np.ndarray:
+    """Convert ``value`` to a float array of the given shape (None = any size).
+
+    Raises:
+        InputError: if the value is not numeric, has the wrong shape, or (``finite``)
+            contains NaN or inf.
+    """
+    try:
+        arr = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise InputError(argument, f"not a numeric array ({exc})", _shape_text(shape)) from None
+    if arr.ndim != len(shape) or any(
+        want is not None and have != want for have, want in zip(arr.shape, shape)
+    ):
+        raise InputError(argument, f"has shape {arr.shape}", f"shape {_shape_text(shape)}")
+    if finite and not np.all(np.isfinite(arr)):
+        raise InputError(argument, "contains NaN or inf", "finite values")
+    return arr
+
+
+def as_batch(
+    value: object, argument: str, width: int, *, finite: bool = True
+) -> tuple[np.ndarray, bool]:
+    """Accept ``(width,)`` or ``(N, width)``; return ``(N, width)`` and whether it was 1-D."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(argument, f"not a numeric array ({exc})", f"shape (N, {width})") from None
+    single = arr.ndim == 1
+    if single:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != width:
+        raise InputError(
+            argument, f"has shape {np.shape(value)}", f"shape ({width},) or (N, {width})"
+        )
+    if finite and not np.all(np.isfinite(arr)):
+        raise InputError(argument, "contains NaN or inf", "finite values")
+    return arr, single
+
+
+def positive(value: float, argument: str, *, allow_zero: bool = False) -> float:
+    """Return ``float(value)`` if it is finite and > 0 (>= 0 with ``allow_zero``)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(argument, f"{value!r} is not a number", "a positive number") from None
+    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        expected = "a finite number >= 0" if allow_zero else "a finite number > 0"
+        raise InputError(argument, f"{value!r} is not allowed", expected)
+    return v
+
+
+def positive_int(value: object, argument: str, minimum: int = 1) -> int:
+    """Return ``int(value)`` if it is an integer >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InputError(argument, f"{value!r} is not an integer", f"an integer >= {minimum}")
+    if value < minimum:
+        raise InputError(argument, f"{value} is too small", f"an integer >= {minimum}")
+    return int(value)
+
+
+def choice(value: object, argument: str, valid: Sequence[str]) -> str:
+    """Return ``value`` if it is one of ``valid``; else raise :class:`UnknownNameError`."""
+    if not isinstance(value, str) or value not in valid:
+        raise UnknownNameError(argument, value, valid)
+    return value
+
+
+def _shape_text(shape: Sequence[int | None]) -> str:
+    parts = ["N" if s is None else str(s) for s in shape]
+    return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
