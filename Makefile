@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml | $(PY)
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/regrasp-pin demo --out out
+	$(VENV)/bin/regrasp-pin info
 
 test: $(STAMP)
 	$(PY) -m pytest -q

@@ -22,10 +22,17 @@ from .exceptions import (
     UnknownNameError,
     VerificationError,
 )
+from .hand import Finger, Hand
+from .ik import IKResult
+from .kinematics import FingerChain
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Finger",
+    "FingerChain",
+    "Hand",
+    "IKResult",
     "ContactError",
     "GeometryError",
     "InputError",

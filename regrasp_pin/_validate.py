@@ -28,7 +28,7 @@ def as_array(
     except (TypeError, ValueError) as exc:
         raise InputError(argument, f"not a numeric array ({exc})", _shape_text(shape)) from None
     if arr.ndim != len(shape) or any(
-        want is not None and have != want for have, want in zip(arr.shape, shape)
+        want is not None and have != want for have, want in zip(arr.shape, shape, strict=False)
     ):
         raise InputError(argument, f"has shape {arr.shape}", f"shape {_shape_text(shape)}")
     if finite and not np.all(np.isfinite(arr)):

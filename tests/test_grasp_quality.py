@@ -1,0 +1,165 @@
+"""Force closure and the Ferrari-Canny epsilon on known grasps of a box."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_close
+from scipy.optimize import linprog
+from scipy.spatial import ConvexHull
+
+from regrasp_pin.exceptions import InputError
+from regrasp_pin.grasp_quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
+from regrasp_pin.objects import Box
+
+MU = 0.5
+BOX = Box((0.06, 0.04, 0.04))
+SCALE_M = BOX.radius_m
+
+# Thumb on +x opposite two fingers on -x (normals are the box's OUTWARD normals).
+TRIPOD_P = np.array([[0.03, 0.0, 0.0], [-0.03, 0.01, 0.01], [-0.03, -0.01, -0.01]])
+TRIPOD_N = np.array([[1.0, 0, 0], [-1.0, 0, 0], [-1.0, 0, 0]])
+PINCH_P = np.array([[0.03, 0.0, 0.0], [-0.03, 0.0, 0.0]])
+PINCH_N = np.array([[1.0, 0, 0], [-1.0, 0, 0]])
+# Two fingers on +x, two on -x, crossed.
+QUAD_P = np.array([[0.03, 0.01, 0.0], [0.03, -0.01, 0.0], [-0.03, 0.0, 0.01], [-0.03, 0.0, -0.01]])
+QUAD_N = np.array([[1.0, 0, 0], [1.0, 0, 0], [-1.0, 0, 0], [-1.0, 0, 0]])
+
+
+def _resists(wrenches: np.ndarray, target: np.ndarray) -> bool:
+    """Whether ``-target`` is a non-negative combination of the wrenches (an LP)."""
+    res = linprog(np.ones(len(wrenches)), A_eq=wrenches.T, b_eq=-target,
+                  bounds=(0, None), method="highs")
+    return res.status == 0
+
+
+def test_primitive_wrenches_push_into_the_object():
+    w = contact_wrenches(TRIPOD_P, TRIPOD_N, MU, n_edges=6, torque_scale_m=SCALE_M)
+    assert w.shape == (18, 6)
+    f = w[:, :3].reshape(3, 6, 3)
+    normal_part = -np.einsum("kmi,ki->km", f, TRIPOD_N)
+    assert_close(normal_part, np.ones((3, 6)), atol=1e-15, what="unit inward normal force")
+    tangential = np.linalg.norm(f + TRIPOD_N[:, None, :], axis=2)
+    assert_close(tangential, np.full((3, 6), MU), atol=1e-15, what="on the cone")
+    tau = np.cross(np.repeat(TRIPOD_P, 6, axis=0), w[:, :3]) / SCALE_M
+    assert_close(w[:, 3:], tau, atol=1e-15, what="torque about the centre of mass")
+
+
+def test_tripod_on_a_box_is_force_closure():
+    eps = ferrari_canny_epsilon(TRIPOD_P, TRIPOD_N, MU, torque_scale_m=SCALE_M)
+    assert eps > 0.01
+    assert is_force_closure(TRIPOD_P, TRIPOD_N, MU)
+    # Independent check by linear programming: any wrench of norm eps can be resisted.
+    w = contact_wrenches(TRIPOD_P, TRIPOD_N, MU, torque_scale_m=SCALE_M)
+    rng = np.random.default_rng(0)
+    dirs = rng.normal(size=(20, 6))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    assert all(_resists(w, d) for d in dirs)
+
+
+def _in_hull(wrenches: np.ndarray, x: np.ndarray) -> bool:
+    """Whether x is a convex combination of the wrenches (an LP)."""
+    n = len(wrenches)
+    res = linprog(np.zeros(n), A_eq=np.vstack([wrenches.T, np.ones((1, n))]),
+                  b_eq=np.append(x, 1.0), bounds=(0, None), method="highs")
+    return res.status == 0
+
+
+def test_epsilon_is_the_inscribed_ball_radius():
+    w = contact_wrenches(QUAD_P, QUAD_N, MU, torque_scale_m=SCALE_M)
+    eps = ferrari_canny_epsilon(QUAD_P, QUAD_N, MU, torque_scale_m=SCALE_M)
+    # The ball lies inside the hull: the support function max_i w_i . d >= eps in every
+    # direction d, and points at radius eps are convex combinations of the wrenches.
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(2000, 6))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    assert np.all(np.max(d @ w.T, axis=1) >= eps - 1e-12)
+    assert all(_in_hull(w, 0.999 * eps * di) for di in d[:10])
+    # And it is the largest such ball: along the nearest facet's normal the support
+    # equals eps, so a slightly larger point there is outside the hull.
+    hull = ConvexHull(w)
+    a = hull.equations[np.argmin(-hull.equations[:, -1]), :6]
+    assert_close(np.max(w @ a), eps, atol=1e-12, what="support along the nearest facet")
+    assert _in_hull(w, 0.999 * eps * a)
+    assert not _in_hull(w, 1.001 * eps * a)
+
+
+def test_antipodal_point_pinch_cannot_resist_torque_about_its_axis():
+    """Two point contacts with friction span no torque about the line joining them.
+
+    So a two-finger pinch with POINT contacts is not force closure in 6-D, whatever mu:
+    epsilon is 0 (the 16 wrenches span 5 dimensions). With torsional (soft-finger)
+    friction it is.
+    """
+    assert ferrari_canny_epsilon(PINCH_P, PINCH_N, MU) == 0.0
+    assert not is_force_closure(PINCH_P, PINCH_N, 2.0)
+    w = contact_wrenches(PINCH_P, PINCH_N, MU)
+    assert np.linalg.matrix_rank(w) == 5
+    assert_close(w[:, 3], np.zeros(len(w)), atol=1e-15, what="no torque about x")
+    assert _resists(w, np.array([0, 0.1, 0, 0, 0, 0]))  # it does resist a sideways push
+    assert ferrari_canny_epsilon(PINCH_P, PINCH_N, MU, torsion_m=0.005) > 0.01
+    assert is_force_closure(PINCH_P, PINCH_N, MU, torsion_m=0.005)
+
+
+def test_single_contact_is_not_force_closure():
+    assert ferrari_canny_epsilon(PINCH_P[:1], PINCH_N[:1], MU) == 0.0
+    assert ferrari_canny_epsilon(PINCH_P[:1], PINCH_N[:1], MU, n_edges=16,
+                                 torsion_m=0.01) == 0.0
+    assert not is_force_closure(PINCH_P[:1], PINCH_N[:1], MU)
+
+
+def test_frictionless_contacts_are_not_force_closure():
+    assert ferrari_canny_epsilon(QUAD_P, QUAD_N, 0.0) == 0.0
+    # Four contacts on four different faces, frictionless: still not.
+    p = np.array([[0.03, 0.005, 0], [-0.03, -0.005, 0], [0, 0.02, 0.005], [0, -0.02, -0.005]])
+    n = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
+    assert not is_force_closure(p, n, 0.0)
+    assert is_force_closure(p, n, MU)
+
+
+def test_contacts_on_one_side_are_not_force_closure():
+    p = np.array([[0.03, 0.01, 0.01], [0.03, -0.01, 0.01], [0.03, 0.0, -0.01]])
+    n = np.tile([1.0, 0, 0], (3, 1))
+    assert ferrari_canny_epsilon(p, n, MU) == 0.0  # nothing pulls back along +x
+
+
+def test_epsilon_grows_when_contacts_spread_apart():
+    eps = [ferrari_canny_epsilon(QUAD_P * [1.0, s, s], QUAD_N, MU, torque_scale_m=SCALE_M)
+           for s in (0.5, 1.0, 1.5, 2.0)]
+    assert np.all(np.diff(eps) > 0), eps
+
+
+def test_epsilon_grows_with_friction():
+    eps = [ferrari_canny_epsilon(TRIPOD_P, TRIPOD_N, mu, torque_scale_m=SCALE_M)
+           for mu in (0.2, 0.5, 1.0)]
+    assert np.all(np.diff(eps) > 0), eps
+
+
+def test_epsilon_is_invariant_to_permuting_contacts():
+    rng = np.random.default_rng(2)
+    s = BOX.sample_surface(0.004)
+    for _ in range(5):
+        idx = rng.choice(len(s), size=5, replace=False)
+        p, n = s.points[idx], s.normals[idx]
+        perm = rng.permutation(5)
+        a = ferrari_canny_epsilon(p, n, MU)
+        b = ferrari_canny_epsilon(p[perm], n[perm], MU)
+        assert_close(b, a, atol=1e-12, what="permuted contacts")
+
+
+def test_bad_input():
+    cases = [
+        (dict(mu=-0.1), "mu"),
+        (dict(mu=float("nan")), "mu"),
+        (dict(normals_object=TRIPOD_N * 2.0), "normals_object"),
+        (dict(normals_object=TRIPOD_N[:2]), "normals_object"),
+        (dict(points_object=np.full((3, 3), np.nan)), "points_object"),
+        (dict(points_object=np.zeros((0, 3)), normals_object=np.zeros((0, 3))), "points_object"),
+        (dict(n_edges=2), "n_edges"),
+        (dict(torque_scale_m=0.0), "torque_scale_m"),
+    ]
+    for change, argument in cases:
+        kw = dict(points_object=TRIPOD_P, normals_object=TRIPOD_N, mu=MU) | change
+        with pytest.raises(InputError) as info:
+            ferrari_canny_epsilon(**kw)
+        assert info.value.argument == argument

@@ -1,0 +1,89 @@
+"""Batched DLS IK: round trips through FK, limits, warm starts, unreachable targets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_close
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from regrasp_pin import Hand
+
+
+@pytest.fixture(scope="module")
+def five():
+    return Hand.five_finger()
+
+
+@pytest.fixture(scope="module")
+def allegro():
+    return Hand.allegro()
+
+
+@pytest.mark.parametrize("which", ["five", "allegro"])
+def test_cold_round_trip_success_rate(which, five, allegro):
+    hand = five if which == "five" else allegro
+    rng = np.random.default_rng(3)
+    for finger in hand.fingers.values():
+        q_true = rng.uniform(finger.lower, finger.upper, (2000, finger.k))
+        targets = finger.fk(q_true)
+        res = finger.ik(targets, tol_m=1e-5)
+        assert res.success_rate >= 0.995, f"{finger.name}: {res.success_rate:.4f}"
+        # reported residuals are true residuals
+        err = np.linalg.norm(finger.fk(res.q) - targets, axis=1)
+        assert_close(res.error_m, err, atol=1e-12, what="residual")
+        assert np.all(err[res.success] <= 1e-5)
+        assert np.all(finger.within_limits(res.q))
+
+
+def test_warm_start_converges_in_few_iterations(five):
+    finger = five.fingers["index"]
+    rng = np.random.default_rng(4)
+    q_prev = rng.uniform(finger.lower + 0.05, finger.upper - 0.05, (500, 3))
+    q_next = q_prev + rng.normal(0, 0.01, q_prev.shape)
+    res = finger.ik(finger.fk(q_next), q_prev)
+    assert res.success.all()
+    assert res.iterations <= 10
+
+
+def test_unreachable_target_reports_residual_not_exception(five):
+    finger = five.fingers["index"]
+    far = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -0.5]])
+    res = finger.ik(far)
+    assert not res.success.any()
+    # residual equals the distance from the target to the returned tip position
+    assert_close(res.error_m, np.linalg.norm(finger.fk(res.q) - far, axis=1), atol=1e-12)
+    # the finger reaches at most ~0.1 m from the palm, so these are far
+    assert np.all(res.error_m > 0.3)
+    assert np.all(finger.within_limits(res.q))
+
+
+@settings(derandomize=True, max_examples=40, deadline=None)
+@given(
+    st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3),
+    st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3),
+)
+def test_solutions_never_leave_the_joint_box(target, q_init):
+    finger = Hand.five_finger().fingers["thumb"]
+    res = finger.ik(np.array(target), np.array(q_init))
+    assert np.all(res.q >= finger.lower) and np.all(res.q <= finger.upper)
+    assert np.isfinite(res.error_m).all()
+
+
+def test_ik_bad_inputs(five):
+    finger = five.fingers["index"]
+    from regrasp_pin.exceptions import InputError
+
+    with pytest.raises(InputError, match="targets_palm"):
+        finger.ik(np.zeros((4, 2)))
+    with pytest.raises(InputError, match="NaN or inf"):
+        finger.ik(np.array([np.nan, 0.0, 0.0]))
+    with pytest.raises(InputError, match="q_init"):
+        finger.ik(np.zeros((3, 3)), np.zeros((2, 3)))
+    with pytest.raises(InputError, match="q_init.*NaN"):
+        finger.ik(np.zeros(3), np.array([0.0, np.inf, 0.0]))
+    with pytest.raises(InputError, match="tol_m"):
+        finger.ik(np.zeros(3), tol_m=0.0)
+    with pytest.raises(InputError, match="max_iter"):
+        finger.ik(np.zeros(3), max_iter=0)

@@ -1,0 +1,104 @@
+"""Batched finger kinematics against Pinocchio and finite differences, on both hands."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import assert_close
+
+from regrasp_pin import Hand
+from regrasp_pin.kinematics import FingerChain
+
+
+@pytest.fixture(scope="module", params=["five_finger", "allegro"])
+def hand(request):
+    return Hand.five_finger() if request.param == "five_finger" else Hand.allegro()
+
+
+def _pin_reference(hand, finger, q):
+    """Tip position, rotation and 3 x k Jacobian from Pinocchio, one point at a time."""
+    model, data = hand.model, hand.model.createData()
+    fid = model.getFrameId(finger.tip_frame)
+    vidx = [model.joints[int(j)].idx_v for j in finger.chain.joint_ids]
+    P, R, J = [], [], []
+    for qi in q:
+        qf = hand.to_full(finger.name, qi)
+        pin.forwardKinematics(model, data, qf)
+        pin.updateFramePlacements(model, data)
+        Jf = pin.computeFrameJacobian(model, data, qf, fid, pin.LOCAL_WORLD_ALIGNED)
+        P.append(data.oMf[fid].translation.copy())
+        R.append(data.oMf[fid].rotation.copy())
+        J.append(Jf[:3, vidx])
+    return np.array(P), np.array(R), np.array(J)
+
+
+def test_fk_rotation_jacobian_match_pinocchio(hand):
+    rng = np.random.default_rng(0)
+    for finger in hand.fingers.values():
+        q = rng.uniform(finger.lower, finger.upper, (40, finger.k))
+        p_ref, R_ref, J_ref = _pin_reference(hand, finger, q)
+        assert_close(finger.fk(q), p_ref, atol=1e-9, what=f"{finger.name} FK")
+        p, J = finger.jacobian(q)
+        assert_close(J, J_ref, atol=1e-9, what=f"{finger.name} Jacobian")
+        R, _ = finger.tip_poses(q)
+        assert_close(R, R_ref, atol=1e-9, what=f"{finger.name} tip rotation")
+
+
+def test_jacobian_matches_finite_differences(hand):
+    rng = np.random.default_rng(1)
+    h = 1e-6
+    for finger in hand.fingers.values():
+        q = rng.uniform(finger.lower + 0.01, finger.upper - 0.01, (10, finger.k))
+        _, J = finger.jacobian(q)
+        for c in range(finger.k):
+            dq = np.zeros(finger.k)
+            dq[c] = h
+            fd = (finger.fk(q + dq) - finger.fk(q - dq)) / (2 * h)
+            assert_close(J[:, :, c], fd, atol=1e-8, what=f"{finger.name} column {c}")
+
+
+def test_single_configuration_shapes_and_values(hand):
+    finger = next(iter(hand.fingers.values()))
+    q = finger.q_mid
+    p = finger.fk(q)
+    assert p.shape == (3,)
+    assert_close(p, finger.fk(q[None])[0], atol=0.0)
+
+
+def test_fast_trig_kernel_close_to_exact():
+    finger = Hand.five_finger().fingers["index"]
+    q = np.random.default_rng(2).uniform(finger.lower, finger.upper, (200, 3))
+    p_fast, _, _ = finger.chain.forward_soa(q.T.copy(), False, fast_trig=True)
+    assert_close(p_fast.T, finger.fk(q), atol=1e-7, what="single-precision trig")
+
+
+def test_mimic_dip_follows_pip_in_pinocchio_and_kernel():
+    hand = Hand.five_finger()
+    model, data = hand.model, hand.model.createData()
+    finger = hand.fingers["index"]
+    q = np.array([0.1, 0.4, 1.2])
+    pin.forwardKinematics(model, data, hand.to_full("index", q))
+    jp, jd = model.getJointId("index_pip"), model.getJointId("index_dip")
+    rel = data.oMi[jp].inverse() * data.oMi[jd]
+    # DIP's relative rotation about -y is 0.75 * PIP (the URDF <mimic> multiplier)
+    angle = pin.log3(rel.rotation) @ np.array([0.0, -1.0, 0.0])
+    assert angle == pytest.approx(0.75 * 1.2, abs=1e-12)
+    # and the finger has 3 independent joints although 4 joints are on its chain
+    assert finger.k == 3
+    assert len(finger.chain.path_axes) == 4
+
+
+def test_chain_rejects_non_revolute_joint(tmp_path):
+    urdf = tmp_path / "slider.urdf"
+    urdf.write_text(
+        """<robot name="s"><link name="base"/><link name="a"/><link name="b"/>
+        <joint name="j1" type="prismatic"><parent link="base"/><child link="a"/>
+        <axis xyz="1 0 0"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint>
+        <joint name="tipj" type="fixed"><parent link="a"/><child link="b"/></joint></robot>"""
+    )
+    model = pin.buildModelFromUrdf(str(urdf))
+    from regrasp_pin.exceptions import InputError
+
+    with pytest.raises(InputError, match="not revolute"):
+        FingerChain(model, "b")
