@@ -22,13 +22,39 @@ from .exceptions import (
     UnknownNameError,
     VerificationError,
 )
+from .grasp_quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
 from .hand import Finger, Hand
 from .ik import IKResult
 from .kinematics import FingerChain
+from .motion import ObjectMotion
+from .objects import (
+    Box,
+    ConvexMesh,
+    ConvexObject,
+    ExtrudedPolygon,
+    Face,
+    FaceAdjacency,
+    Prism,
+    SurfaceSample,
+    object_from_params,
+)
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Box",
+    "ConvexMesh",
+    "ConvexObject",
+    "ExtrudedPolygon",
+    "Face",
+    "FaceAdjacency",
+    "ObjectMotion",
+    "Prism",
+    "SurfaceSample",
+    "contact_wrenches",
+    "ferrari_canny_epsilon",
+    "is_force_closure",
+    "object_from_params",
     "Finger",
     "FingerChain",
     "Hand",
