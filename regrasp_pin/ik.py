@@ -31,6 +31,8 @@ _LAMBDA0_SQ = 1e-8  # [m^2]
 _LAMBDA_ERR = 1e-2  # [-], weight of |e|^2 in lambda^2
 _MAX_STEP = 0.4  # [rad] largest joint change per iteration
 _BLOCK = 8192  # points per block
+_STALL_SQ = 0.995**2  # an iteration must shrink the error by 0.5 % ...
+_STALL_TOL_FACTOR = 10.0  # ... unless it is already within 10 x tol
 
 
 @dataclass(frozen=True)
@@ -55,14 +57,22 @@ class IKResult:
         return float(np.mean(self.success)) if self.success.size else 1.0
 
 
+def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """sum_k a[k] * b[k] for (k, n) arrays (faster than einsum for small k)."""
+    out = a[0] * b[0]
+    for i in range(1, a.shape[0]):
+        out += a[i] * b[i]
+    return out
+
+
 def _dls_step(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
     """dq = J^T (J J^T + lambda^2 I)^-1 e for component-major J (3,k,n), e (3,n)."""
-    a00 = np.einsum("kn,kn->n", J[0], J[0])
-    a11 = np.einsum("kn,kn->n", J[1], J[1])
-    a22 = np.einsum("kn,kn->n", J[2], J[2])
-    a01 = np.einsum("kn,kn->n", J[0], J[1])
-    a02 = np.einsum("kn,kn->n", J[0], J[2])
-    a12 = np.einsum("kn,kn->n", J[1], J[2])
+    a00 = _rowdot(J[0], J[0])
+    a11 = _rowdot(J[1], J[1])
+    a22 = _rowdot(J[2], J[2])
+    a01 = _rowdot(J[0], J[1])
+    a02 = _rowdot(J[0], J[2])
+    a12 = _rowdot(J[1], J[2])
     lam = _LAMBDA0_SQ + _LAMBDA_ERR * err_sq
     a00 += lam
     a11 += lam
@@ -103,17 +113,23 @@ def _iterate(
     lo = lower[:, None]
     hi = upper[:, None]
     iters = 0
+    prev_sq = np.full(n, np.inf)
     while True:
         p, _, J = chain.forward_soa(qa, True, fast_trig)
         e = ta - p
-        err_sq = np.einsum("in,in->n", e, e)
+        err_sq = _rowdot(e, e)
         err[active] = np.sqrt(err_sq)
-        keep = err_sq > tol_m * tol_m
+        # done: converged, or stalled far from the target (an unreachable target whose
+        # error no longer drops by 0.5 % per iteration)
+        keep = (err_sq > tol_m * tol_m) & (
+            (err_sq < _STALL_SQ * prev_sq) | (err_sq < (_STALL_TOL_FACTOR * tol_m) ** 2)
+        )
         n_keep = int(np.count_nonzero(keep))
         if n_keep < keep.size:
             q[:, active] = qa  # write back finished points
             active, qa, ta = active[keep], qa[:, keep], ta[:, keep]
             J, e, err_sq = J[:, :, keep], e[:, keep], err_sq[keep]
+        prev_sq = err_sq
         if n_keep == 0 or iters == max_iter:
             break
         iters += 1
@@ -140,11 +156,15 @@ def _finish(
     tol_m: float,
     max_iter: int,
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Exact (double-precision) residuals for all points; iterate on those above tol."""
+    """Exact (double-precision) residuals for all points; finish those just above tol.
+
+    Points far above the tolerance after the first pass have stalled (unreachable) or
+    run out of iterations; more iterations would not help them (restarts might).
+    """
     p, _, _ = chain.forward_soa(q, False)
     d = targets - p
-    err = np.sqrt(np.einsum("in,in->n", d, d))
-    bad = np.flatnonzero(err > tol_m)
+    err = np.sqrt(_rowdot(d, d))
+    bad = np.flatnonzero((err > tol_m) & (err <= _STALL_TOL_FACTOR * tol_m))
     iters = 0
     if bad.size:
         qb, eb, iters = _iterate(chain, lower, upper, targets[:, bad], q[:, bad], tol_m, max_iter)
@@ -218,18 +238,25 @@ def solve_position_ik(
     q, err, it = _finish(chain, lower, upper, targets, q, tol_m, max_iter)
     iters += it
     if restarts:
-        for seed in _seeds(lower, upper):
-            bad = np.flatnonzero(err > tol_m)
-            if bad.size == 0:
-                break
-            q_try = np.repeat(seed[:, None], bad.size, axis=1)
-            q_try, err_try, it = _iterate(
-                chain, lower, upper, targets[:, bad], q_try, tol_m, max_iter
-            )
-            iters += it
-            better = err_try < err[bad]
-            q[:, bad[better]] = q_try[:, better]
-            err[bad[better]] = err_try[better]
+        bad = np.flatnonzero(err > tol_m)
+        if bad.size:
+            # every seed for every failed point, in one batch; keep the best per point
+            seeds = _seeds(lower, upper)
+            ns = seeds.shape[0]
+            k = q.shape[0]
+            q_try = np.repeat(seeds.T[:, None, :], bad.size, axis=1).reshape(k, -1)
+            t_try = np.repeat(targets[:, bad, None], ns, axis=2).reshape(3, -1)
+            q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter, True)
+            q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
+            iters += it + it2
+            e_try = e_try.reshape(bad.size, ns)
+            best = np.argmin(e_try, axis=1)
+            rows = np.arange(bad.size)
+            e_best = e_try[rows, best]
+            better = e_best < err[bad]
+            q_best = q_try.reshape(k, bad.size, ns)[:, rows, best]
+            q[:, bad[better]] = q_best[:, better]
+            err[bad[better]] = e_best[better]
     return IKResult(
         q=np.ascontiguousarray(q.T), success=err <= tol_m, error_m=err, iterations=iters
     )

@@ -38,9 +38,9 @@ LINK_RADII = (0.0080, 0.0075, 0.0070)
 # Thumb: base on the radial side of the palm near the wrist. At q = 0 it lies in the
 # palm plane pointing 60 deg outward; the opposition joint turns it about the palm x
 # axis in front of the palm, where its two flexion joints curl it toward the fingertips.
-THUMB_BASE = (-0.0150, 0.0300, -0.006)
+THUMB_BASE = (0.0050, 0.0300, -0.006)
 THUMB_OUT = 60 * DEG
-THUMB_LENGTHS = (0.040, 0.033, 0.026)  # metacarpal, proximal, distal
+THUMB_LENGTHS = (0.045, 0.035, 0.028)  # metacarpal, proximal, distal
 THUMB_RADII = (0.0095, 0.0085, 0.0075)
 THUMB_OPP_LIMITS = (0.0, 115 * DEG)
 THUMB_MCP_LIMITS = (-10 * DEG, 70 * DEG)

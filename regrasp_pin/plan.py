@@ -1,0 +1,268 @@
+"""The plan file: a whole-hand manipulation plan as JSON (format ``regrasp_pin.plan/1``).
+
+A plan stores, at strictly increasing times ``t`` [s], the full hand configuration
+``q`` (in the order of ``pin.buildModelFromUrdf(urdf, mimic=True)``) and the object pose
+``T_palm_object`` as ``[x, y, z, qx, qy, qz, qw]`` (palm frame). Linear interpolation of
+``q`` and slerp of the pose between consecutive samples *is* the motion that was
+verified. ``phases`` says, per finger, when it held which contact and when it
+regrasped. See ``docs/plan_format.md`` for every field.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._validate import as_array
+from .exceptions import InputError, ModelFileError
+
+__all__ = ["PLAN_FORMAT", "ContactPhase", "Plan", "RegraspPhase", "repo_root"]
+
+PLAN_FORMAT = "regrasp_pin.plan/1"
+
+
+def repo_root() -> Path:
+    """The folder that holds ``urdf/`` for the bundled hands (the repository root)."""
+    return Path(__file__).resolve().parent.parent
+
+
+@dataclass(frozen=True)
+class ContactPhase:
+    """A finger holds a contact fixed in the object frame from ``t_start`` to ``t_end`` [s].
+
+    Attributes:
+        finger: Finger name.
+        t_start: Start time [s].
+        t_end: End time [s].
+        p_object: Contact point on the surface, object frame ``(3,)`` [m].
+        n_object: Outward surface normal at the contact, object frame ``(3,)``.
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    p_object: np.ndarray
+    n_object: np.ndarray
+    kind: str = field(default="contact", init=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "finger": self.finger,
+            "kind": self.kind,
+            "t_start": self.t_start,
+            "t_end": self.t_end,
+            "p_object": np.asarray(self.p_object).tolist(),
+            "n_object": np.asarray(self.n_object).tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class RegraspPhase:
+    """A finger moves from contact P to contact Q from ``t_start`` to ``t_end`` [s].
+
+    Attributes:
+        finger: Finger name.
+        t_start: Lift-off time [s].
+        t_end: Landing time [s].
+        P_object: Old contact, object frame ``(3,)`` [m].
+        Q_object: New contact, object frame ``(3,)`` [m].
+        waypoints_object: Hopfield waypoints of the fingertip centre, object frame
+            ``(m, 3)`` [m].
+        min_clearance_m: Smallest clearance margin found by the Coal verification [m].
+        planning_ms: Time spent planning and verifying this regrasp [ms].
+        reason: Why the finger regrasped when it did.
+        extra: Further JSON-able data (grid path, tip path, stage times, ...).
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    P_object: np.ndarray
+    Q_object: np.ndarray
+    waypoints_object: np.ndarray
+    min_clearance_m: float
+    planning_ms: float
+    reason: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+    kind: str = field(default="regrasp", init=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {
+            "finger": self.finger,
+            "kind": self.kind,
+            "t_start": self.t_start,
+            "t_end": self.t_end,
+            "P_object": np.asarray(self.P_object).tolist(),
+            "Q_object": np.asarray(self.Q_object).tolist(),
+            "waypoints_object": np.asarray(self.waypoints_object).tolist(),
+            "min_clearance_m": self.min_clearance_m,
+            "planning_ms": self.planning_ms,
+            "reason": self.reason,
+        }
+        d.update(self.extra)
+        return d
+
+
+Phase = ContactPhase | RegraspPhase
+
+
+def _phase_from_dict(d: dict[str, Any]) -> Phase:
+    if d.get("kind") == "contact":
+        return ContactPhase(
+            finger=d["finger"],
+            t_start=float(d["t_start"]),
+            t_end=float(d["t_end"]),
+            p_object=np.asarray(d["p_object"], float),
+            n_object=np.asarray(d["n_object"], float),
+        )
+    if d.get("kind") == "regrasp":
+        known = {
+            "finger", "kind", "t_start", "t_end", "P_object", "Q_object",
+            "waypoints_object", "min_clearance_m", "planning_ms", "reason",
+        }  # fmt: skip
+        return RegraspPhase(
+            finger=d["finger"],
+            t_start=float(d["t_start"]),
+            t_end=float(d["t_end"]),
+            P_object=np.asarray(d["P_object"], float),
+            Q_object=np.asarray(d["Q_object"], float),
+            waypoints_object=np.asarray(d["waypoints_object"], float),
+            min_clearance_m=float(d["min_clearance_m"]),
+            planning_ms=float(d["planning_ms"]),
+            reason=str(d.get("reason", "")),
+            extra={k: v for k, v in d.items() if k not in known},
+        )
+    raise InputError("phases", f"unknown phase kind {d.get('kind')!r}", "'contact' or 'regrasp'")
+
+
+@dataclass
+class Plan:
+    """A whole-hand plan (see the module docstring).
+
+    Attributes:
+        hand: ``{"name", "urdf", "fingers": {name: {"tip_frame", "tip_radius", "joints"}}}``.
+        object: ``{"kind", "params", "vertices", "faces"}`` (mesh in the object frame).
+        t: Sample times ``(S,)`` [s], strictly increasing.
+        q: Full hand configurations ``(S, nq)`` [rad].
+        T_palm_object: Object poses ``(S, 7)`` as ``[x, y, z, qx, qy, qz, qw]``.
+        phases: Per finger, its phases in time order.
+        summary: Free-form summary (totals, timings).
+    """
+
+    hand: dict[str, Any]
+    object: dict[str, Any]
+    t: np.ndarray
+    q: np.ndarray
+    T_palm_object: np.ndarray
+    phases: dict[str, list[Phase]]
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.t = as_array(self.t, "t", (None,))
+        if self.t.size < 2 or np.any(np.diff(self.t) <= 0):
+            raise InputError("t", "is not strictly increasing with >= 2 samples", "times [s]")
+        self.q = as_array(self.q, "q", (self.t.size, None))
+        self.T_palm_object = as_array(self.T_palm_object, "T_palm_object", (self.t.size, 7))
+
+    # ------------------------------------------------------------------ I/O
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document as a dict."""
+        return {
+            "format": PLAN_FORMAT,
+            "hand": self.hand,
+            "object": self.object,
+            "t": self.t.tolist(),
+            "q": self.q.tolist(),
+            "T_palm_object": self.T_palm_object.tolist(),
+            "phases": {f: [p.to_dict() for p in ps] for f, ps in self.phases.items()},
+            "summary": self.summary,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the plan as JSON; returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict()))
+        return path
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Plan:
+        """Build a plan from its JSON document.
+
+        Raises:
+            InputError: wrong ``format`` or malformed fields.
+        """
+        if d.get("format") != PLAN_FORMAT:
+            raise InputError("format", f"is {d.get('format')!r}", repr(PLAN_FORMAT))
+        try:
+            phases = {f: [_phase_from_dict(p) for p in ps] for f, ps in d["phases"].items()}
+            return cls(
+                hand=d["hand"],
+                object=d["object"],
+                t=np.asarray(d["t"], float),
+                q=np.asarray(d["q"], float),
+                T_palm_object=np.asarray(d["T_palm_object"], float),
+                phases=phases,
+                summary=d.get("summary", {}),
+            )
+        except KeyError as exc:
+            raise InputError("plan", f"missing field {exc}", "a regrasp_pin.plan/1 document") from None
+
+    @classmethod
+    def load(cls, path: str | Path) -> Plan:
+        """Read a plan file.
+
+        Raises:
+            ModelFileError: the file does not exist or is not JSON.
+            InputError: the document is not a ``regrasp_pin.plan/1`` plan.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise ModelFileError(path, "no such plan file")
+        try:
+            d = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise ModelFileError(path, f"not JSON: {exc}") from None
+        return cls.from_dict(d)
+
+    # ------------------------------------------------------------- accessors
+    @property
+    def urdf_path(self) -> Path:
+        """Absolute path of the hand's URDF (bundled hands are relative to the repo)."""
+        p = Path(self.hand["urdf"])
+        return p if p.is_absolute() else repo_root() / p
+
+    def load_hand(self):  # noqa: ANN201 - avoids importing hand at module import
+        """Rebuild the :class:`~regrasp_pin.hand.Hand` from the URDF and finger table."""
+        from .hand import Hand
+
+        fingers = {n: f["tip_frame"] for n, f in self.hand["fingers"].items()}
+        radii = {n: float(f["tip_radius"]) for n, f in self.hand["fingers"].items()}
+        return Hand.from_urdf(
+            self.urdf_path, fingers, tip_radius=radii, name=self.hand.get("name")
+        )
+
+    def load_object(self):  # noqa: ANN201
+        """Rebuild the object from its kind and parameters."""
+        from .objects import object_from_params
+
+        return object_from_params(self.object["kind"], self.object["params"])
+
+    def poses(self) -> np.ndarray:
+        """Object poses ``(S, 4, 4)`` in the palm frame."""
+        from scipy.spatial.transform import Rotation
+
+        T = np.zeros((self.t.size, 4, 4))
+        T[:, :3, :3] = Rotation.from_quat(self.T_palm_object[:, 3:]).as_matrix()
+        T[:, :3, 3] = self.T_palm_object[:, :3]
+        T[:, 3, 3] = 1.0
+        return T
+
+    def regrasps(self) -> list[RegraspPhase]:
+        """All regrasp phases, in time order."""
+        out = [p for ps in self.phases.values() for p in ps if isinstance(p, RegraspPhase)]
+        return sorted(out, key=lambda p: p.t_start)
