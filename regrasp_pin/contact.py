@@ -26,7 +26,7 @@ import pinocchio as pin
 from .hand import Finger, Hand
 from .objects import ConvexObject
 
-__all__ = ["ContactModel", "LinkClearance", "tip_targets", "pad_cosines"]
+__all__ = ["ContactModel", "FingerClearance", "LinkClearance", "pad_cosines", "tip_targets"]
 
 
 @dataclass(frozen=True)
@@ -39,13 +39,20 @@ class ContactModel:
         link_clearance_m: Smallest distance between the finger's non-tip links and the
             object [m].
         limit_margin_rad: A contact closer than this to a joint limit (boundary plane)
-            triggers a regrasp; new contacts must be at least this far inside [rad].
+            triggers a regrasp [rad].
+        choice_margin_rad: New and initial contacts must be at least this far inside
+            the joint limits [rad] (more than the trigger margin, so that a new contact
+            is not let go at once).
+        choice_link_clearance_m: New and initial contacts must keep the finger's other
+            links at least this far from the object [m].
     """
 
     cone_deg: float = 60.0
     ik_tol_m: float = 1e-5
     link_clearance_m: float = 0.0
     limit_margin_rad: float = 0.05
+    choice_margin_rad: float = 0.1
+    choice_link_clearance_m: float = 0.002
 
     @property
     def cos_cone(self) -> float:
@@ -53,7 +60,10 @@ class ContactModel:
 
 
 def tip_targets(
-    points_object: np.ndarray, normals_object: np.ndarray, tip_radius: float, T_palm_object: np.ndarray
+    points_object: np.ndarray,
+    normals_object: np.ndarray,
+    tip_radius: float,
+    T_palm_object: np.ndarray,
 ) -> np.ndarray:
     """Tip-centre targets ``s + r n`` in the palm frame.
 
@@ -72,9 +82,7 @@ def tip_targets(
     return c_object @ np.swapaxes(R, -1, -2) + t[..., None, :]
 
 
-def pad_cosines(
-    finger: Finger, q: np.ndarray, normals_palm: np.ndarray
-) -> np.ndarray:
+def pad_cosines(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
     """Cosine of the angle between the pad direction and the inward normal ``-n``.
 
     Args:
@@ -139,8 +147,59 @@ class LinkClearance:
             for g in self.geometry_ids:
                 self._res.clear()
                 d = coal.distance(
-                    objs[g].geometry, self._gdata.oMg[g], self.obj_geom, tf_obj, self._req, self._res
+                    objs[g].geometry,
+                    self._gdata.oMg[g],
+                    self.obj_geom,
+                    tf_obj,
+                    self._req,
+                    self._res,
                 )
                 best = min(best, d)
             out[i] = best
         return out
+
+
+class FingerClearance:
+    """Coal distances between one finger's collision geometries and the other fingers'.
+
+    Args:
+        hand: The hand.
+        finger: Finger name.
+    """
+
+    def __init__(self, hand: Hand, finger: str):
+        self.hand = hand
+        self.finger = hand.finger(finger)
+        mine = set(self.finger.geometry_ids)
+        self.pairs = [
+            (a, b)
+            for name, other in hand.fingers.items()
+            if name != finger
+            for a in self.finger.geometry_ids
+            for b in other.geometry_ids
+            if b not in mine
+        ]
+        self._data = hand.model.createData()
+        self._gdata = pin.GeometryData(hand.collision_model)
+        self._req = coal.DistanceRequest()
+        self._res = coal.DistanceResult()
+
+    def __call__(self, q_full: np.ndarray) -> float:
+        """Smallest distance [m] between this finger and any other finger at ``q_full``."""
+        model, cm = self.hand.model, self.hand.collision_model
+        pin.forwardKinematics(model, self._data, np.asarray(q_full, float))
+        pin.updateGeometryPlacements(model, self._data, cm, self._gdata)
+        objs = cm.geometryObjects
+        best = np.inf
+        for a, b in self.pairs:
+            self._res.clear()
+            d = coal.distance(
+                objs[a].geometry,
+                self._gdata.oMg[a],
+                objs[b].geometry,
+                self._gdata.oMg[b],
+                self._req,
+                self._res,
+            )
+            best = min(best, d)
+        return float(best)

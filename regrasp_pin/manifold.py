@@ -65,6 +65,7 @@ class Manifold:
         pad_ok: ``(T, N)`` the pad faces the surface.
         lower: ``(k,)`` joint limits [rad].
         upper: ``(k,)`` joint limits [rad].
+        T_palm_object: ``(T, 4, 4)`` object poses at the grid times.
     """
 
     finger: str
@@ -76,6 +77,7 @@ class Manifold:
     pad_ok: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    T_palm_object: np.ndarray
 
     @property
     def feasible(self) -> np.ndarray:
@@ -240,10 +242,15 @@ def build_manifold(
             continue
         ti = ti + s0
         res = solve_position_ik(
-            finger.chain, lo, hi, targets[ti, pi], q_prev[pi],
-            tol_m=contact.ik_tol_m, max_iter=max_iter if s0 == 0 else max_iter_warm,
+            finger.chain,
+            lo,
+            hi,
+            targets[ti, pi],
+            q_prev[pi],
+            tol_m=contact.ik_tol_m,
+            max_iter=max_iter if s0 == 0 else max_iter_warm,
             restarts=(s0 == 0),
-        )  # fmt: skip
+        )
         q_out[ti, pi] = res.q
         reach[ti, pi] = res.success
         last = ti == s1 - 1
@@ -273,4 +280,5 @@ def build_manifold(
         pad_ok=pad & reach,
         lower=finger.lower.copy(),
         upper=finger.upper.copy(),
+        T_palm_object=T_all,
     )

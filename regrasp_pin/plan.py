@@ -121,9 +121,17 @@ def _phase_from_dict(d: dict[str, Any]) -> Phase:
         )
     if d.get("kind") == "regrasp":
         known = {
-            "finger", "kind", "t_start", "t_end", "P_object", "Q_object",
-            "waypoints_object", "min_clearance_m", "planning_ms", "reason",
-        }  # fmt: skip
+            "finger",
+            "kind",
+            "t_start",
+            "t_end",
+            "P_object",
+            "Q_object",
+            "waypoints_object",
+            "min_clearance_m",
+            "planning_ms",
+            "reason",
+        }
         return RegraspPhase(
             finger=d["finger"],
             t_start=float(d["t_start"]),
@@ -210,7 +218,9 @@ class Plan:
                 summary=d.get("summary", {}),
             )
         except KeyError as exc:
-            raise InputError("plan", f"missing field {exc}", "a regrasp_pin.plan/1 document") from None
+            raise InputError(
+                "plan", f"missing field {exc}", "a regrasp_pin.plan/1 document"
+            ) from None
 
     @classmethod
     def load(cls, path: str | Path) -> Plan:
@@ -242,9 +252,7 @@ class Plan:
 
         fingers = {n: f["tip_frame"] for n, f in self.hand["fingers"].items()}
         radii = {n: float(f["tip_radius"]) for n, f in self.hand["fingers"].items()}
-        return Hand.from_urdf(
-            self.urdf_path, fingers, tip_radius=radii, name=self.hand.get("name")
-        )
+        return Hand.from_urdf(self.urdf_path, fingers, tip_radius=radii, name=self.hand.get("name"))
 
     def load_object(self):  # noqa: ANN201
         """Rebuild the object from its kind and parameters."""

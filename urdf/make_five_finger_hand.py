@@ -35,16 +35,17 @@ PIP_LIMITS = (0.0, 100 * DEG)
 DIP_RATIO = 0.75  # DIP = 0.75 * PIP (<mimic>)
 LINK_RADII = (0.0080, 0.0075, 0.0070)
 
-# Thumb: base on the radial side of the palm near the wrist. At q = 0 it lies in the
-# palm plane pointing 60 deg outward; the opposition joint turns it about the palm x
-# axis in front of the palm, where its two flexion joints curl it toward the fingertips.
-THUMB_BASE = (0.0050, 0.0300, -0.006)
-THUMB_OUT = 60 * DEG
-THUMB_LENGTHS = (0.045, 0.035, 0.028)  # metacarpal, proximal, distal
+# Thumb: base on the radial side of the palm. At q = 0 it lies in the palm plane
+# pointing outward (tilted 20 deg toward the fingers); the opposition joint turns it
+# about the palm x axis in front of the palm, where its two flexion joints curl it
+# toward the fingertips.
+THUMB_BASE = (0.0200, 0.0200, -0.006)
+THUMB_OUT = 10 * DEG
+THUMB_LENGTHS = (0.030, 0.035, 0.028)  # metacarpal, proximal, distal
 THUMB_RADII = (0.0095, 0.0085, 0.0075)
 THUMB_OPP_LIMITS = (0.0, 115 * DEG)
-THUMB_MCP_LIMITS = (-10 * DEG, 70 * DEG)
-THUMB_IP_LIMITS = (0.0, 90 * DEG)
+THUMB_MCP_LIMITS = (-30 * DEG, 80 * DEG)
+THUMB_IP_LIMITS = (-30 * DEG, 90 * DEG)
 
 SKIN = "0.93 0.78 0.66 1"
 NAIL = "0.80 0.55 0.45 1"
@@ -181,12 +182,18 @@ def build() -> str:
         out.append(_empty_link(f"{name}_tip"))
         out.append(_fixed(f"{name}_tip_joint", f"{name}_distal", f"{name}_tip", (ld, 0, 0)))
 
-    # Thumb base frame: x = (cos a, sin a, 0), z = (sin a, -cos a, 0) rotated by -90 deg
-    # about palm x so that, after +90 deg of opposition, z points toward the fingertips.
+    # Thumb base frame: x (along the thumb) = (sin a, cos a, 0): in the palm plane,
+    # pointing out of the radial side and tilted by a toward the fingers; z (the
+    # flexion side, where the pad is) = (cos a, -sin a, 0): toward the fingers; y = palm z.
+    # The opposition joint turns the thumb about the palm x axis, standing it up in
+    # front of the palm (x -> palm z at 90 deg) while its flexion still curls it
+    # toward the fingertips, so that its pad faces theirs.
     a = THUMB_OUT
-    # rpy of a frame whose x = (cos a, sin a, 0) and z = (sin a, -cos a, 0):
-    # Rz(a) gives x = (cos a, sin a, 0), y = (-sin a, cos a, 0), z = (0, 0, 1);
-    # then Rx(+90 deg) about the new x turns z into -y_new = (sin a, -cos a, 0).
+    R = (
+        (math.sin(a), 0.0, math.cos(a)),
+        (math.cos(a), 0.0, -math.sin(a)),
+        (0.0, 1.0, 0.0),
+    )
     lm_, lp_, ld_ = THUMB_LENGTHS
     out.append(_cylinder_link("thumb_metacarpal", lm_, THUMB_RADII[0], SKIN, False))
     out.append(
@@ -195,8 +202,8 @@ def build() -> str:
             "palm",
             "thumb_metacarpal",
             THUMB_BASE,
-            (math.pi / 2, 0, a),
-            _opp_axis_local(a),
+            _rpy(R),
+            R[0],  # palm x expressed in the thumb base frame (first row of R)
             THUMB_OPP_LIMITS,
         )
     )
@@ -230,13 +237,12 @@ def build() -> str:
     return "\n".join(out) + "\n"
 
 
-def _opp_axis_local(a: float) -> tuple[float, float, float]:
-    """Palm x axis expressed in the thumb base frame R = Rz(a) Rx(90 deg)."""
-    # R^T e_x: rows of R are ... R = Rz(a) @ Rx(pi/2); R^T e_x = Rx(-pi/2) Rz(-a) e_x
-    c, s = math.cos(a), math.sin(a)
-    v = (c, -s, 0.0)  # Rz(-a) e_x
-    # Rx(-90): (x, y, z) -> (x, z, -y)
-    return (v[0], v[2], -v[1])
+def _rpy(R: tuple[tuple[float, ...], ...]) -> tuple[float, float, float]:
+    """URDF roll-pitch-yaw of a rotation matrix (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    roll = math.atan2(R[2][1], R[2][2])
+    pitch = -math.asin(max(-1.0, min(1.0, R[2][0])))
+    yaw = math.atan2(R[1][0], R[0][0])
+    return (roll, pitch, yaw)
 
 
 if __name__ == "__main__":

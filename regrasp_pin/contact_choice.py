@@ -1,0 +1,410 @@
+"""Choosing the new contact Q (the paper's conditions (a) and (b)) and the initial grasp.
+
+Condition (a): Q lies inside the boundary planes (and is feasible) at the time the
+finger can arrive, ``t_arrive`` = trigger time + regrasp duration. Condition (b): among
+those, Q stays inside longest over the rest of the motion. Ties are broken by the
+larger joint margin at arrival, then by the shorter distance from P.
+
+Beyond the paper, the grasp must keep holding: Q must be at least ``min_separation_m``
+from the other fingers' contacts, the other contacts plus Q must be in force closure,
+and Q should keep or improve the grasp quality (Ferrari-Canny epsilon) that P gave
+with the others. Candidates are taken in the order of (b); the first that passes every
+test (and a Coal check that no other link of the finger touches the object at
+arrival) is chosen. If none keeps the quality, the best force-closure candidate is
+taken and the result says so.
+
+"Distance from P" is the straight-line distance in the object frame (a lower bound of
+the surface distance; it is only a tie-breaker).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from .contact import ContactModel, FingerClearance, LinkClearance
+from .exceptions import ContactError
+from .grasp_quality import ferrari_canny_epsilon
+from .hand import Hand
+from .manifold import Manifold
+from .objects import ConvexObject, SurfaceSample
+
+__all__ = [
+    "Grasp",
+    "NewContact",
+    "choose_new_contact",
+    "exit_times",
+    "initial_grasp",
+]
+
+SCREEN_EDGES = 6  # friction-cone edges used when screening candidates
+
+
+@dataclass(frozen=True)
+class NewContact:
+    """The chosen new contact Q.
+
+    Attributes:
+        finger: Finger name.
+        index: Index of Q in the surface sample.
+        p_object: Q, object frame ``(3,)`` [m].
+        n_object: Outward normal at Q, object frame ``(3,)``.
+        q_arrive: ``(k,)`` finger configuration at arrival [rad].
+        t_arrive_s: Arrival time [s].
+        exit_time_s: First grid time after arrival at which Q stops being usable (the
+            motion's end if never) [s].
+        margin_rad: Joint margin at arrival [rad].
+        distance_from_P_m: Straight distance from P [m].
+        epsilon: Ferrari-Canny epsilon of the other contacts plus Q.
+        epsilon_with_P: Epsilon of the other contacts plus P (the quality to keep).
+        quality_kept: Whether ``epsilon >= epsilon_with_P``.
+        n_candidates: Number of candidates that satisfied condition (a).
+        rank: Position of Q in the order of condition (b) (0 = the paper's choice).
+    """
+
+    finger: str
+    index: int
+    p_object: np.ndarray
+    n_object: np.ndarray
+    q_arrive: np.ndarray
+    t_arrive_s: float
+    exit_time_s: float
+    margin_rad: float
+    distance_from_P_m: float
+    epsilon: float
+    epsilon_with_P: float
+    quality_kept: bool
+    n_candidates: int
+    rank: int
+
+
+def exit_times(usable: np.ndarray, times_s: np.ndarray, start: int) -> np.ndarray:
+    """First time at or after grid index ``start`` at which each point is not usable.
+
+    Args:
+        usable: ``(T, N)`` boolean.
+        times_s: ``(T,)`` grid times [s].
+        start: Grid index to start from.
+
+    Returns:
+        ``(N,)`` exit times [s]; ``times_s[-1]`` for points usable to the end, and
+        ``times_s[start]`` for points not usable at ``start``.
+    """
+    tail = usable[start:]
+    never_leaves = tail.all(axis=0)
+    first_bad = np.argmin(tail, axis=0)  # index of the first False
+    out = times_s[start + first_bad]
+    out[never_leaves] = times_s[-1]
+    return out
+
+
+def choose_new_contact(
+    hand: Hand,
+    obj: ConvexObject,
+    manifold: Manifold,
+    sample: SurfaceSample,
+    t_arrive_s: float,
+    *,
+    P_object: np.ndarray,
+    n_P_object: np.ndarray,
+    others: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    contact: ContactModel | None = None,
+    mu: float = 0.8,
+    min_separation_m: float | None = None,
+    link_check: bool = True,
+    max_checks: int = 60,
+    exclude_radius_m: float = 0.0,
+    exclude_points_object: np.ndarray | None = None,
+    q_hand_arrive: np.ndarray | None = None,
+    finger_clearance_m: float = 0.002,
+) -> NewContact:
+    """Choose Q for ``manifold.finger`` (see the module docstring).
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        manifold: The finger's manifold over times that reach the end of the motion.
+        sample: The surface sample the manifold was built on.
+        t_arrive_s: When the finger can land [s].
+        P_object: The contact being released, object frame ``(3,)`` [m].
+        n_P_object: Its outward normal.
+        others: The contacts that keep holding: finger -> (point, outward normal),
+            object frame.
+        contact: Contact model (margin for condition (a), link clearance).
+        mu: Friction coefficient for the grasp-quality test.
+        min_separation_m: Smallest distance from the other contacts [m]; default
+            ``2 * tip_radius + 2 mm``.
+        link_check: Check with Coal that no other link of the finger touches the
+            object at arrival.
+        max_checks: Most candidates given the (slower) quality and Coal tests.
+        exclude_radius_m: Candidates closer than this to P (and to each of
+            ``exclude_points_object``) are ignored [m].
+        exclude_points_object: ``(E, 3)`` points to stay away from (e.g. contacts
+            for which no verified path was found).
+        q_hand_arrive: ``(nq,)`` hand configuration at arrival (the other fingers
+            holding); when given, Q must put the finger at least ``finger_clearance_m``
+            from the other fingers (Coal).
+        finger_clearance_m: See ``q_hand_arrive`` [m].
+
+    Returns:
+        The :class:`NewContact`.
+
+    Raises:
+        ContactError: no candidate satisfies condition (a), or none keeps the other
+            fingers' grasp in force closure; the message says which finger, when, why.
+    """
+    contact = contact or ContactModel()
+    finger = hand.finger(manifold.finger)
+    sep = 2 * finger.tip_radius + 0.002 if min_separation_m is None else min_separation_m
+    ka = manifold.time_index(t_arrive_s)
+    usable = manifold.usable(contact.limit_margin_rad)
+    cand = manifold.usable(contact.choice_margin_rad)[ka]
+    pts = sample.points
+    for p_other, _ in others.values():
+        cand &= np.linalg.norm(pts - p_other, axis=1) >= sep
+    if exclude_radius_m > 0:
+        cand &= np.linalg.norm(pts - P_object, axis=1) >= exclude_radius_m
+        if exclude_points_object is not None:
+            for e in np.asarray(exclude_points_object, float).reshape(-1, 3):
+                cand &= np.linalg.norm(pts - e, axis=1) >= exclude_radius_m
+    idx = np.flatnonzero(cand)
+    if idx.size == 0:
+        raise ContactError(
+            f"no surface point is inside the joint limits (margin >= "
+            f"{contact.choice_margin_rad:.2f} rad), faces the pad and is clear of the other "
+            f"contacts at arrival ({int(usable[ka].sum())} usable before the separation test)",
+            finger=finger.name,
+            time_s=float(manifold.times_s[ka]),
+        )
+    t_exit = exit_times(usable[:, idx], manifold.times_s, ka)
+    margin = manifold.margin_rad[ka, idx]
+    dist = np.linalg.norm(pts[idx] - P_object, axis=1)
+    order = np.lexsort((dist, -margin, -t_exit))  # (b), then margin, then distance
+
+    other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
+    other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
+    scale = obj.radius_m
+
+    def eps(p: np.ndarray, n: np.ndarray) -> float:
+        return ferrari_canny_epsilon(
+            np.vstack([other_p, p[None]]),
+            np.vstack([other_n, n[None]]),
+            mu,
+            n_edges=SCREEN_EDGES,
+            torque_scale_m=scale,
+        )
+
+    eps_P = eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
+    lc = LinkClearance(hand, finger.name, obj) if link_check else None
+    fc = FingerClearance(hand, finger.name) if q_hand_arrive is not None else None
+    T_arrive = None
+    fallback = None
+    for rank, j in enumerate(order[:max_checks]):
+        i = idx[j]
+        e = eps(pts[i], sample.normals[i])
+        if e <= 0.0:
+            continue
+        if lc is not None:
+            if T_arrive is None:
+                T_arrive = manifold.T_palm_object[ka]
+            q_full = hand.to_full(finger.name, manifold.q[ka, i])
+            if lc(q_full[None], T_arrive)[0] < contact.choice_link_clearance_m:
+                continue
+        if fc is not None:
+            q_all = np.array(q_hand_arrive, float)
+            q_all[finger.q_indices] = manifold.q[ka, i]
+            if fc(q_all) < finger_clearance_m:
+                continue
+        result = NewContact(
+            finger=finger.name,
+            index=int(i),
+            p_object=pts[i].copy(),
+            n_object=sample.normals[i].copy(),
+            q_arrive=manifold.q[ka, i].copy(),
+            t_arrive_s=float(manifold.times_s[ka]),
+            exit_time_s=float(t_exit[j]),
+            margin_rad=float(margin[j]),
+            distance_from_P_m=float(dist[j]),
+            epsilon=float(e),
+            epsilon_with_P=float(eps_P),
+            quality_kept=bool(e >= eps_P),
+            n_candidates=int(idx.size),
+            rank=rank,
+        )
+        if result.quality_kept:
+            return result
+        if fallback is None:
+            fallback = result
+    if fallback is not None:
+        return fallback
+    raise ContactError(
+        f"none of the {min(idx.size, max_checks)} best candidates (of {idx.size}) keeps the "
+        "grasp in force closure with the other contacts and clear of the finger's links",
+        finger=finger.name,
+        time_s=float(manifold.times_s[ka]),
+    )
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """One contact per finger.
+
+    Attributes:
+        points_object: finger -> contact point, object frame ``(3,)`` [m].
+        normals_object: finger -> outward normal, object frame ``(3,)``.
+        q: finger -> ``(k,)`` configuration at the grasp time [rad].
+        indices: finger -> index in the surface sample.
+        epsilon: Ferrari-Canny epsilon of all contacts.
+    """
+
+    points_object: dict[str, np.ndarray]
+    normals_object: dict[str, np.ndarray]
+    q: dict[str, np.ndarray]
+    indices: dict[str, int]
+    epsilon: float
+
+
+def initial_grasp(
+    hand: Hand,
+    obj: ConvexObject,
+    manifolds: Mapping[str, Manifold],
+    sample: SurfaceSample,
+    *,
+    t_index: int = 0,
+    contact: ContactModel | None = None,
+    mu: float = 0.8,
+    min_separation_m: float | None = None,
+    candidates_per_finger: int = 20,
+    trials: int = 80,
+    seed: int = 0,
+    finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
+) -> Grasp:
+    """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
+
+    Each finger's candidates are its usable points at ``t_index`` (margin >=
+    ``contact.limit_margin_rad``, pad facing, links clear), ranked by how long they stay
+    usable and then by margin; the best ``candidates_per_finger`` (spread over the
+    surface) enter a seeded randomized search for the combination that maximizes
+    first the number of fingers that can let go with the others still in force closure
+    (so that fingers can regrasp later), then the smallest of those leave-one-out
+    epsilons, the mean lasting fraction and the epsilon, among force-closure grasps
+    whose contacts are ``min_separation_m`` apart.
+
+    Raises:
+        ContactError: a finger has no usable contact, or no combination is in force
+            closure.
+    """
+    contact = contact or ContactModel()
+    rng = np.random.default_rng(seed)
+    names = list(manifolds)
+    pts, nrm = sample.points, sample.normals
+    per_finger: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name in names:
+        man = manifolds[name]
+        finger = hand.finger(name)
+        usable = man.usable(contact.limit_margin_rad)
+        idx = np.flatnonzero(man.usable(contact.choice_margin_rad)[t_index])
+        if idx.size == 0:
+            raise ContactError(
+                "no usable contact at the start (inside the limits with margin, pad facing)",
+                finger=name,
+                time_s=float(man.times_s[t_index]),
+            )
+        last = exit_times(usable[:, idx], man.times_s, t_index)
+        frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
+        order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
+        chosen: list[int] = []
+        spread = 2 * finger.tip_radius
+        lc = LinkClearance(hand, name, obj)
+        T0 = man.T_palm_object[t_index]
+        for j in order:
+            i = idx[j]
+            if any(np.linalg.norm(pts[i] - pts[idx[c]]) < spread for c in chosen):
+                continue
+            q_i = hand.to_full(name, man.q[t_index, i])[None]
+            if lc(q_i, T0)[0] < contact.choice_link_clearance_m:
+                continue
+            chosen.append(j)
+            if len(chosen) == candidates_per_finger:
+                break
+        if not chosen:
+            raise ContactError("every usable contact makes a link touch the object", finger=name)
+        per_finger[name] = (idx[chosen], frac[chosen])
+
+    sep_default = 2 * max(hand.finger(n).tip_radius for n in names) + 0.002
+    sep = sep_default if min_separation_m is None else min_separation_m
+    best = None
+    best_score = -np.inf
+    for trial in range(trials):
+        order_f = rng.permutation(names) if trial else names
+        pick: dict[str, int] = {}
+        score_frac = 0.0
+        for name in order_f:
+            ids, frac = per_finger[name]
+            ok = [
+                c
+                for c in range(ids.size)
+                if all(np.linalg.norm(pts[ids[c]] - pts[pick[o]]) >= sep for o in pick)
+            ]
+            if not ok:
+                break
+            # trial 0 is greedy; later trials sample, favouring the long-lasting ones
+            c = ok[0] if trial == 0 else ok[int(rng.integers(0, min(len(ok), 4)))]
+            pick[name] = int(ids[c])
+            score_frac += float(frac[c])
+        if len(pick) != len(names):
+            continue
+        ii = np.array([pick[n] for n in names])
+        e = ferrari_canny_epsilon(
+            pts[ii], nrm[ii], mu, n_edges=SCREEN_EDGES, torque_scale_m=obj.radius_m
+        )
+        if e <= 0:
+            continue
+        # robustness: how many fingers can let go with the rest still in force closure
+        loo = (
+            [
+                ferrari_canny_epsilon(
+                    np.delete(pts[ii], j, 0),
+                    np.delete(nrm[ii], j, 0),
+                    mu,
+                    n_edges=SCREEN_EDGES,
+                    torque_scale_m=obj.radius_m,
+                )
+                for j in range(len(names))
+            ]
+            if len(names) > 3
+            else []
+        )
+        removable = [x for x in loo if x > 0]
+        score = (
+            len(removable)
+            + (min(removable) / (min(removable) + 0.05) if removable else 0.0)
+            + score_frac / len(names)
+            + e / (e + 0.05)
+        )
+        if score > best_score:
+            q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
+            if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
+                continue
+            best_score, best = score, (dict(pick), e, q_pick)
+    if best is None:
+        raise ContactError(
+            f"no combination of the usable contacts is in force closure (mu={mu}) with the "
+            f"contacts {sep * 1e3:.0f} mm apart"
+        )
+    pick, e, q_pick = best
+    e_full = ferrari_canny_epsilon(
+        pts[[pick[n] for n in names]],
+        nrm[[pick[n] for n in names]],
+        mu,
+        torque_scale_m=obj.radius_m,
+    )
+    return Grasp(
+        points_object={n: pts[pick[n]].copy() for n in names},
+        normals_object={n: nrm[pick[n]].copy() for n in names},
+        q=q_pick,
+        indices=dict(pick),
+        epsilon=float(e_full if e_full > 0 else e),
+    )

@@ -1,0 +1,615 @@
+"""Competitive (winner-take-all) Hopfield network for polygonal approximation (section 2.2.2).
+
+The network has ``n x m`` binary neurons ``V[x, i]``: row ``x`` is a curve point, column
+``i`` a polygon vertex, and exactly one neuron per column is active (Eq. 6), so a state is
+simply the vertex index of every column, ``indices[i]``. With the connection matrix ``H``
+of arc-to-chord deviations (Eq. 7, :mod:`regrasp_pin.deviation`) the energy (Eq. 8) is
+
+    E_8 = sum_i sum_x sum_y (h[y, x] V[x, i] V[y, i-1] + h[x, y] V[x, i] V[y, i+1])
+        = 2 * sum_i h[indices[i], indices[i+1]],
+
+i.e. every chord is counted once from each end. We report ``E = E_8 / 2``, the sum of the
+polygon's chord deviations. The input of neuron ``(x, i)`` (Eq. 10, from the weights of
+Eq. 9 and ``I = 0``) is
+
+    U[x, i] = -(h[indices[i-1], x] + h[x, indices[i+1]]),
+
+and the winner-take-all rule (Eq. 6) activates, in column ``i``, the row with the largest
+input, i.e. the point that minimizes the two chords it closes with its neighbours.
+
+Why the energy never rises: columns are updated sequentially (Gauss-Seidel), and a
+column's input only depends on its two neighbour columns. Given the neighbours, the
+column's contribution to ``E`` is exactly ``-U[x, i]``, so the winner minimizes ``E`` over
+that column; we move the winner only when it is *strictly* better than the current row
+(ties keep the current one). Each update therefore lowers ``E`` or leaves the state
+unchanged, and since there are finitely many states the network stops. Columns that are not
+neighbours do not interact, so all even columns (then all odd ones) are updated at once;
+this is the same sequence of energies as updating them one after the other.
+
+Vertices stay ordered: column ``i`` only competes over the points strictly between its
+neighbours (on a closed curve, the cyclic interval). For open curves (a path from P to Q)
+the first and last columns are pinned to the end points.
+
+Closing the gap to the optimum (a departure from the paper): the plain network stops in a
+local minimum. :func:`competitive_hopfield` keeps the plain run from the paper's initial
+state and then tries more initial states (shifted equidistant states on closed curves, a
+greedy bottom-up merge) and perturbations (a column's winner relocated to another chord;
+several columns removed and greedily re-inserted), each followed by re-convergence of the
+same network. A result is accepted only if its energy is lower, so the answer is never
+worse than the plain network.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._validate import as_array, positive_int
+from .exceptions import InputError
+
+logger = logging.getLogger(__name__)
+
+#: Safety limit on sweeps of one network run (the run always terminates; see module doc).
+MAX_SWEEPS = 100_000
+
+
+@dataclass(frozen=True)
+class NetworkRun:
+    """One run of the network from a given state until it no longer changes.
+
+    Attributes:
+        indices: Final vertex index of every column, shape ``(m,)``, ordered.
+        energy: Final energy ``E = E_8 / 2`` (sum of chord deviations).
+        sweeps: Number of sweeps, including the last one that changed nothing.
+        energy_history: Energy before the first sweep and after every sweep, shape
+            ``(sweeps + 1,)``; never increasing.
+        max_span: Widest interval (in curve steps between the two neighbours) any column
+            competed over; entries of ``H`` with a larger span were never read.
+    """
+
+    indices: np.ndarray
+    energy: float
+    sweeps: int
+    energy_history: np.ndarray
+    max_span: int
+
+
+@dataclass(frozen=True)
+class HopfieldResult:
+    """Result of :func:`competitive_hopfield`.
+
+    Attributes:
+        indices: Best vertex indices found, shape ``(m,)``, ordered.
+        energy: Their energy (sum of chord deviations).
+        sweeps: Total sweeps over all network runs.
+        energy_history: The plain run's energies (before and after each sweep), followed by
+            the best energy after each further initial state or perturbation round;
+            never increasing.
+        plain_indices: Result of the plain network from the paper's initial state, ``(m,)``.
+        plain_energy: Its energy; ``energy <= plain_energy`` always.
+        plain_sweeps: Sweeps of the plain run.
+        plain_max_span: ``max_span`` of the plain run (see :class:`NetworkRun`).
+    """
+
+    indices: np.ndarray
+    energy: float
+    sweeps: int
+    energy_history: np.ndarray
+    plain_indices: np.ndarray
+    plain_energy: float
+    plain_sweeps: int
+    plain_max_span: int
+
+
+# ------------------------------------------------------------------------ basics
+def initial_state(points: object, m: int, *, closed: bool = False) -> np.ndarray:
+    """The paper's initial state: ``m`` points as equidistant as possible along the curve.
+
+    Targets are spaced evenly in arc length (cumulative chord length, including the closing
+    segment of a closed curve) and snapped to the nearest following point; the indices are
+    then made strictly increasing. Open curves keep both end points.
+
+    Args:
+        points: Curve points, shape ``(n, d)``.
+        m: Number of vertices, ``2 <= m <= n`` (``3 <= m`` if closed).
+        closed: Closed curve (start at point 0, spacing ``length / m``).
+
+    Returns:
+        Vertex indices, shape ``(m,)``, strictly increasing.
+    """
+    P = as_array(points, "points", (None, None))
+    n = P.shape[0]
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    if closed:
+        seg = np.append(seg, np.linalg.norm(P[0] - P[-1]))
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    total = cum[-1]
+    if total <= 0:  # all points coincide: fall back to index spacing
+        cum = np.arange(cum.shape[0], dtype=float)
+        total = cum[-1]
+    if closed:
+        targets = np.arange(m) / m * total
+        idx = np.searchsorted(cum[:n], targets)
+    else:
+        targets = np.arange(m) / (m - 1) * total
+        idx = np.searchsorted(cum, targets)
+    return _make_increasing(idx, n, closed)
+
+
+def _make_increasing(idx: np.ndarray, n: int, closed: bool) -> np.ndarray:
+    """Clip ``idx`` so that it is strictly increasing within ``[0, n)`` (ends pinned if open)."""
+    m = idx.shape[0]
+    i = np.arange(m)
+    idx = np.clip(np.asarray(idx, dtype=np.int64), i, n - m + i)
+    idx = np.maximum.accumulate(idx - i) + i
+    if not closed:
+        idx[0], idx[-1] = 0, n - 1
+    return idx
+
+
+def polygon_energy(H: np.ndarray, indices: np.ndarray, *, closed: bool = False) -> float:
+    """Energy ``E = E_8 / 2`` of a state: the sum of its chord deviations (Eq. 8).
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``.
+        indices: Vertex indices, shape ``(m,)``, ordered.
+        closed: Include the closing chord from the last vertex back to the first.
+
+    Returns:
+        The energy (``inf`` if a chord is not available in ``H``).
+    """
+    s = np.asarray(indices)
+    if closed:
+        return float(H[s, np.roll(s, -1)].sum())
+    return float(H[s[:-1], s[1:]].sum())
+
+
+def network_input(
+    H: np.ndarray, indices: np.ndarray, column: int, *, closed: bool = False
+) -> np.ndarray:
+    """Input ``U[x, i]`` of every neuron of one column (Eq. 10).
+
+    ``U[x, i] = -(h[indices[i-1], x] + h[x, indices[i+1]])``; rows outside the interval
+    between the two neighbours (which would break the vertex order) get ``-inf``.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``.
+        indices: Current state, shape ``(m,)``.
+        column: Column ``i``; for open curves ``1 <= i <= m - 2``.
+        closed: Closed curve (cyclic neighbours, Eq. 5).
+
+    Returns:
+        ``U[:, i]``, shape ``(n,)``.
+    """
+    s = np.asarray(indices)
+    m = s.shape[0]
+    p, q = s[(column - 1) % m], s[(column + 1) % m]
+    cost = _local_costs(H, H.T, np.array([p]), np.array([q]))[0]
+    return -cost
+
+
+def _local_costs(H: np.ndarray, HT: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``h[p, x] + h[x, q]`` for x strictly inside the cyclic interval (p, q), else inf.
+
+    Shapes: ``p``, ``q`` ``(k,)`` -> ``(k, n)``.
+    """
+    n = H.shape[0]
+    cost = H[p] + HT[q]
+    offset = (np.arange(n)[None, :] - p[:, None]) % n
+    span = ((q - p) % n)[:, None]
+    inside = (offset > 0) & (offset < span)
+    return np.where(inside, cost, np.inf)
+
+
+def _window_costs(
+    H: np.ndarray, HT: np.ndarray, p: np.ndarray, q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Like :func:`_local_costs` but only over the interval: ``(points (k, w), costs (k, w))``.
+
+    ``points[r, c] = (p[r] + 1 + c) mod n``; costs beyond a row's own interval are inf.
+    """
+    n = H.shape[0]
+    span = (q - p) % n
+    width = max(int(span.max()) - 1, 1)
+    c = np.arange(width)
+    x = p[:, None] + 1 + c[None, :]
+    x %= n
+    cost = np.take(H.reshape(-1), x + (p * n)[:, None])
+    cost += np.take(HT.reshape(-1), x + (q * n)[:, None])
+    cost[c[None, :] >= (span - 1)[:, None]] = np.inf
+    return x, cost
+
+
+def _column_groups(m: int, closed: bool) -> list[np.ndarray]:
+    """Sets of mutually non-adjacent free columns (updated together, then the next set)."""
+    cols = np.arange(m) if closed else np.arange(1, m - 1)
+    evens = cols[cols % 2 == 0]
+    odds = cols[cols % 2 == 1]
+    groups = [evens, odds]
+    if closed and m % 2 == 1:  # column m-1 is adjacent to column 0
+        groups = [evens[:-1], odds, evens[-1:]]
+    return [g for g in groups if g.size]
+
+
+# ------------------------------------------------------------------- the network
+def run_network(
+    H: np.ndarray,
+    indices: object,
+    *,
+    closed: bool = False,
+    max_sweeps: int = MAX_SWEEPS,
+) -> NetworkRun:
+    """Run the competitive network (steps 3-5 of the paper) until the state stops changing.
+
+    Each sweep updates every free column once with the winner-take-all rule (Eq. 6) on its
+    input (Eq. 10); a column moves only to a strictly better row, so the energy never
+    rises (see the module docstring).
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)`` (``inf`` marks unavailable chords).
+        indices: Initial state, shape ``(m,)``, strictly increasing vertex indices.
+        closed: Closed curve (cyclic columns); otherwise columns 0 and m-1 stay pinned.
+        max_sweeps: Safety limit on the number of sweeps.
+
+    Returns:
+        The converged state with its energy history.
+
+    Raises:
+        InputError: ``H`` is not square or ``indices`` is not a valid state.
+    """
+    H = _check_matrix(H)
+    s = _check_state(indices, H.shape[0], closed)
+    return _run(H, np.ascontiguousarray(H.T), s, closed, max_sweeps)
+
+
+def _run(H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool, max_sweeps: int) -> NetworkRun:
+    """:func:`run_network` without input checks (``HT`` is ``H.T`` made contiguous)."""
+    s = s.copy()
+    groups = _column_groups(s.shape[0], closed)
+    history = [polygon_energy(H, s, closed=closed)]
+    sweeps, max_span = 0, 0
+    for _ in range(max_sweeps):
+        changed, span = _sweep(H, HT, s, groups)
+        sweeps += 1
+        max_span = max(max_span, span)
+        history.append(polygon_energy(H, s, closed=closed))
+        if not changed:
+            break
+    if closed:  # a column may have moved past index 0: relabel the columns cyclically
+        s = np.sort(s)
+    return NetworkRun(s, history[-1], sweeps, np.asarray(history), max_span)
+
+
+def _sweep(H: np.ndarray, HT: np.ndarray, s: np.ndarray, groups: list[np.ndarray]) -> tuple:
+    """One sweep in place; returns (whether any column moved, widest span competed over)."""
+    m, n = s.shape[0], H.shape[0]
+    changed, max_span = False, 0
+    for cols in groups:
+        p, q = s[(cols - 1) % m], s[(cols + 1) % m]
+        max_span = max(max_span, int(((q - p) % n).max()))
+        x, cost = _window_costs(H, HT, p, q)  # -U (Eq. 10) over the interval
+        win = cost.argmin(axis=1)  # winner-take-all (Eq. 6)
+        r = np.arange(cols.shape[0])
+        cur = (s[cols] - p - 1) % n  # current row's position in the window
+        better = cost[r, win] < cost[r, cur]
+        if better.any():
+            s[cols[better]] = x[r, win][better]
+            changed = True
+    return changed, max_span
+
+
+def _check_matrix(H: object) -> np.ndarray:
+    arr = as_array(H, "H", (None, None), finite=False)
+    if arr.shape[0] != arr.shape[1] or arr.shape[0] < 2:
+        raise InputError("H", f"has shape {arr.shape}", "a square (n, n) matrix with n >= 2")
+    if np.isnan(arr).any():
+        raise InputError("H", "contains NaN", "finite values or +inf")
+    return arr
+
+
+def _check_state(indices: object, n: int, closed: bool) -> np.ndarray:
+    s = np.array(indices, dtype=np.int64).ravel()
+    m = s.shape[0]
+    low = 3 if closed else 2
+    if m < low or m > n:
+        raise InputError("indices", f"has {m} vertices", f"{low} <= m <= n={n}")
+    if s.min() < 0 or s.max() >= n or np.any(np.diff(s) <= 0):
+        raise InputError("indices", "is not strictly increasing within [0, n)", "a valid state")
+    if not closed and (s[0] != 0 or s[-1] != n - 1):
+        raise InputError("indices", "does not start at 0 and end at n-1", "open-curve ends kept")
+    return s
+
+
+# ------------------------------------------------ improvement: starts and moves
+def _chords(s: np.ndarray, closed: bool) -> tuple[np.ndarray, np.ndarray]:
+    return (s, np.append(s[1:], s[0])) if closed else (s[:-1], s[1:])
+
+
+def _insertion(
+    H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best point to insert into every chord: (point, new local cost, current chord cost)."""
+    a, b = _chords(s, closed)
+    pts, cost = _window_costs(H, HT, a, b)
+    j = cost.argmin(axis=1)
+    r = np.arange(a.shape[0])
+    return pts[r, j], cost[r, j], H[a, b]
+
+
+def _split_gain(new: np.ndarray, old: np.ndarray) -> np.ndarray:
+    """Energy change of splitting chords; unavailable (inf) chords are split first, no NaN."""
+    gain = np.full(new.shape, np.inf)
+    fin = np.isfinite(old) & np.isfinite(new)
+    gain[fin] = new[fin] - old[fin]
+    must = ~np.isfinite(old) & np.isfinite(new)
+    gain[must] = -np.inf
+    return gain
+
+
+def _relocations(
+    H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool, count: int
+) -> list[tuple[float, np.ndarray]]:
+    """The ``count`` best moves of one vertex into another chord: (energy change, state).
+
+    Removing vertex ``i`` and inserting the best point of a chord not adjacent to it changes
+    the energy by the sum of the two exact local changes.
+    """
+    m = s.shape[0]
+    x, new, old = _insertion(H, HT, s, closed)
+    gain_ins = _split_gain(new, old)  # chord j = (s[j], s[j+1])
+    i = np.arange(m)
+    prev, nxt = s[i - 1], s[(i + 1) % m]
+    with np.errstate(invalid="ignore"):
+        gain_rem = H[prev, nxt] - H[prev, s] - H[s, nxt]
+    gain_rem = np.where(np.isfinite(gain_rem), gain_rem, np.inf)
+    if not closed:
+        gain_rem[0] = gain_rem[-1] = np.inf
+    total = gain_rem[:, None] + gain_ins[None, :]
+    # inserting into a chord adjacent to the removed vertex is a plain network move
+    nc = total.shape[1]
+    total[i, i % nc] = np.inf
+    total[i, (i - 1) % nc] = np.inf
+    flat = total.ravel()
+    count = min(count, flat.shape[0])
+    best = np.argpartition(flat, count - 1)[:count] if count < flat.shape[0] else np.arange(count)
+    best = best[np.argsort(flat[best], kind="stable")]
+    moves = []
+    for k in best.tolist():
+        if not np.isfinite(flat[k]):
+            break
+        ri, cj = divmod(k, nc)
+        moves.append((float(flat[k]), np.sort(np.append(np.delete(s, ri), x[cj]))))
+    return moves
+
+
+def _insert_greedy(
+    H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool, count: int
+) -> np.ndarray | None:
+    """Insert ``count`` vertices one by one, each at the best split; None if impossible."""
+    for _ in range(count):
+        x, new, old = _insertion(H, HT, s, closed)
+        gain = _split_gain(new, old)
+        if np.isneginf(gain).any():  # an unavailable chord: split it at its cheapest point
+            cand = np.where(np.isneginf(gain), new, np.inf)
+            j = int(np.argmin(cand))
+        else:
+            j = int(np.argmin(gain))
+            if not np.isfinite(gain[j]):
+                return None
+        s = np.sort(np.append(s, x[j]))
+    return s
+
+
+def _converge(
+    H: np.ndarray, HT: np.ndarray, s: np.ndarray, groups: list[np.ndarray], closed: bool
+) -> tuple[np.ndarray, int]:
+    """Sweeps of the network until no column moves (in place); returns (state, sweeps)."""
+    sweeps = 0
+    while True:
+        changed, _span = _sweep(H, HT, s, groups)
+        sweeps += 1
+        if not changed:
+            break
+    return (np.sort(s) if closed else s), sweeps
+
+
+def _local_search(
+    H: np.ndarray,
+    HT: np.ndarray,
+    s: np.ndarray,
+    closed: bool,
+    trials: int = 3,
+    budget: int = 10_000,
+) -> tuple[np.ndarray, float, int]:
+    """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
+
+    After the network has converged, the ``trials`` most promising relocations of one
+    vertex to another chord are tried: one that lowers the energy at once is taken; one
+    that does not is kept only if the network, re-converged from it, ends lower.
+    """
+    groups = _column_groups(s.shape[0], closed)
+    s, sweeps = _converge(H, HT, s.copy(), groups, closed)
+    energy = polygon_energy(H, s, closed=closed)
+    for _ in range(budget):
+        improved = False
+        for gain, moved in _relocations(H, HT, s, closed, trials):
+            if gain < 0:
+                s, sw = _converge(H, HT, moved, groups, closed)
+            else:
+                moved, sw = _converge(H, HT, moved, groups, closed)
+                if not polygon_energy(H, moved, closed=closed) < energy:
+                    sweeps += sw
+                    continue
+                s = moved
+            sweeps += sw
+            energy = polygon_energy(H, s, closed=closed)
+            improved = True
+            break
+        if not improved:
+            break
+    return s, energy, sweeps
+
+
+def _greedy_merge(H: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
+    """Bottom-up start: from all points, repeatedly drop the vertices cheapest to remove.
+
+    Each round selects the cheapest half of the surplus and drops every other vertex of each
+    run of adjacent selected ones (so no two dropped vertices are neighbours).
+    """
+    n = H.shape[0]
+    s = np.arange(n)
+    while s.shape[0] > m:
+        k = s.shape[0]
+        idx = np.arange(k)
+        prev, nxt = s[idx - 1], s[(idx + 1) % k]
+        with np.errstate(invalid="ignore"):
+            cost = H[prev, nxt] - H[prev, s] - H[s, nxt]
+        cost = np.where(np.isfinite(cost), cost, np.inf)
+        if not closed:
+            cost[0] = cost[-1] = np.inf
+        # rank by cost, ties broken by a fixed scrambled order of the positions
+        prio = (idx * 2654435761) % 4294967296
+        rank = np.empty(k, dtype=np.int64)
+        rank[np.lexsort((prio, cost))] = idx
+        take = max(1, (k - m) // 2)
+        sel = (rank < take) & np.isfinite(cost)
+        if not sel.any():
+            return None
+        # within each run of consecutive selected vertices keep every other one
+        pos = np.flatnonzero(sel)
+        run_start = np.concatenate([[True], np.diff(pos) > 1])
+        first = np.maximum.accumulate(np.where(run_start, np.arange(pos.size), 0))
+        drop = pos[(np.arange(pos.size) - first) % 2 == 0]
+        if closed and drop.size > 1 and drop[0] == 0 and drop[-1] == k - 1:
+            drop = drop[:-1]
+        s = np.delete(s, drop)
+    return s
+
+
+def _greedy_split(H: np.ndarray, HT: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
+    """Top-down start: from the fewest evenly spaced vertices whose chords are all available
+    in ``H``, repeatedly insert the vertex that lowers the energy most."""
+    n = H.shape[0]
+    low = 3 if closed else 2
+    for k in range(low, m + 1):
+        s = _make_increasing(np.round(np.linspace(0, n if closed else n - 1, k, endpoint=not closed)).astype(np.int64), n, closed)
+        if np.isfinite(polygon_energy(H, s, closed=closed)):
+            return _insert_greedy(H, HT, s, closed, m - k)
+    return None
+
+
+def competitive_hopfield(
+    H: np.ndarray,
+    m: int,
+    *,
+    closed: bool = False,
+    initial: object = None,
+    points: object = None,
+    restarts: int = 8,
+    seed: int = 0,
+    plain: NetworkRun | None = None,
+    trials: int = 3,
+) -> HopfieldResult:
+    """Polygonal approximation with the competitive Hopfield network, plus restarts.
+
+    First the plain network of the paper runs from its initial state (``initial``, or the
+    equidistant state of :func:`initial_state`). Then, to escape its local minimum, the
+    same network is re-converged from further states: shifted equidistant states (closed
+    curves), a greedy bottom-up merge, single-vertex relocations and ``restarts`` rounds of
+    perturbation (remove a few vertices, re-insert them greedily). Only strictly better
+    results are kept, so the answer is never worse than the plain network.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``; ``inf`` marks chords that may not be used.
+        m: Number of vertices (``2 <= m <= n``; ``3 <= m`` if closed).
+        closed: Closed curve.
+        initial: Initial state, shape ``(m,)``; default: equidistant along ``points`` (or
+            along the index if ``points`` is None).
+        points: Curve points ``(n, d)`` used for the equidistant initial states.
+        restarts: Number of perturbation rounds after the deterministic starts (0: none).
+        seed: Seed of the perturbation draws.
+        plain: The plain run from ``initial`` if already computed on this ``H`` (it is then
+            not repeated).
+        trials: Relocations tried (with re-convergence) when no single move helps.
+
+    Returns:
+        The best state, the plain network's result and the sweep/energy record.
+
+    Raises:
+        InputError: invalid ``H``, ``m``, ``initial`` or ``restarts``.
+    """
+    H = _check_matrix(H)
+    n = H.shape[0]
+    m = positive_int(m, "m", 3 if closed else 2)
+    if m > n:
+        raise InputError("m", f"{m} exceeds the number of points n={n}", f"m <= {n}")
+    restarts = positive_int(restarts, "restarts", 0)
+    if points is None:
+        points = np.arange(n, dtype=float)[:, None] * np.array([[1.0, 0.0]])
+    if initial is None:
+        initial = initial_state(points, m, closed=closed)
+    HT = np.ascontiguousarray(H.T)
+    if plain is None:
+        plain = _run(H, HT, _check_state(initial, n, closed), closed, MAX_SWEEPS)
+    best_s, best_e = plain.indices, plain.energy
+    history = list(plain.energy_history)
+    sweeps = plain.sweeps
+
+    def consider(s: np.ndarray | None) -> None:
+        nonlocal best_s, best_e, sweeps
+        if s is not None and s.shape[0] == m:
+            s2, e2, sw = _local_search(H, HT, s, closed, trials)
+            sweeps += sw
+            if e2 < best_e:
+                best_s, best_e = s2, e2
+        history.append(best_e)
+
+    consider(plain.indices)
+    if closed:
+        for phase in (0.25, 0.5, 0.75):
+            consider(np.sort(_shifted_state(points, m, phase)))
+    consider(_greedy_merge(H, m, closed))
+    consider(_greedy_split(H, HT, m, closed))
+    rng = np.random.default_rng(seed)
+    free = np.arange(m) if closed else np.arange(1, m - 1)
+    for _ in range(restarts):
+        if free.size == 0 or not np.isfinite(best_e):
+            break
+        if rng.random() < 0.5:  # a run of consecutive columns, up to most of them
+            k = int(rng.integers(1, max(1, (2 * free.size) // 3) + 1))
+            start = int(rng.integers(0, free.size))
+            drop = free[(start + np.arange(k)) % free.size]
+        else:
+            k = int(rng.integers(1, max(1, free.size // 3) + 1))
+            drop = rng.choice(free, size=k, replace=False)
+        s = _insert_greedy(H, HT, np.delete(best_s, drop), closed, k)
+        consider(s)
+    logger.debug("hopfield: plain %.6g -> best %.6g (%d sweeps)", plain.energy, best_e, sweeps)
+    return HopfieldResult(
+        indices=np.asarray(best_s),
+        energy=float(best_e),
+        sweeps=sweeps,
+        energy_history=np.asarray(history),
+        plain_indices=plain.indices,
+        plain_energy=plain.energy,
+        plain_sweeps=plain.sweeps,
+        plain_max_span=plain.max_span,
+    )
+
+
+def _shifted_state(points: object, m: int, phase: float) -> np.ndarray:
+    """Equidistant closed-curve state whose first target is ``phase`` of a spacing along."""
+    P = np.asarray(points, dtype=float)
+    n = P.shape[0]
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    seg = np.append(seg, np.linalg.norm(P[0] - P[-1]))
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    total = cum[-1]
+    if total <= 0:
+        cum = np.arange(n + 1, dtype=float)
+        total = float(n)
+    targets = (np.arange(m) + phase) / m * total
+    idx = np.searchsorted(cum[:n], targets)
+    return _make_increasing(idx, n, True)

@@ -1,0 +1,522 @@
+"""Whole-hand manipulation by regrasping (the paper's test, section 3).
+
+The object follows its motion ``T_palm_object(t)``. Every finger holds a contact fixed
+in the object frame and follows it by IK; when a contact comes within the trigger
+margin of a boundary plane (or stops being feasible), that finger regrasps -- lifts
+off, travels around the object and lands on a new contact Q -- while the others keep
+holding. One finger is in the air at a time.
+
+Scheduling. Triggers are taken in time order. A regrasp starts ``lead_s`` before its
+trigger, earlier if the next finger's trigger would otherwise fall inside it (so that
+finger can go right after), and never while the fingers that stay would lose force
+closure or be fewer than ``min_holding``. Each regrasp phase records why it started
+when it did. A motion that cannot be achieved raises :class:`~.exceptions.PlanningError`
+with the finger, the time, the reason and the partial plan up to that time.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .contact import ContactModel
+from .contact_choice import Grasp, choose_new_contact, initial_grasp
+from .exceptions import ContactError, PlanningError, RegraspError
+from .grasp_quality import ferrari_canny_epsilon
+from .hand import Hand
+from .manifold import Manifold, build_manifold
+from .motion import ObjectMotion
+from .objects import ConvexObject, SurfaceSample
+from .plan import ContactPhase, Plan, RegraspPhase
+from .regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .tracking import ContactTrack, track_contact
+
+__all__ = ["PlannerParams", "ManipulationPlan", "plan_manipulation"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PlannerParams:
+    """Parameters of the whole-hand planner.
+
+    Attributes:
+        dt_s: Time step of the holding phases [s].
+        manifold_dt_s: Time step of the joint-space manifolds used to choose Q [s].
+        sample_spacing_m: Surface sampling spacing for the manifolds [m].
+        lead_s: A regrasp starts at least this long before its trigger [s].
+        min_holding: Fewest fingers that must hold while one is in the air.
+        mu: Friction coefficient for force closure.
+        candidates: How many new contacts Q to try per regrasp before giving up.
+        contact: The contact model (trigger margin, pad cone, tolerances).
+        regrasp: Parameters of each regrasp.
+    """
+
+    dt_s: float = 0.01
+    manifold_dt_s: float = 0.05
+    sample_spacing_m: float = 0.002
+    lead_s: float = 0.02
+    min_holding: int = 3
+    mu: float = 0.8
+    candidates: int = 4
+    contact: ContactModel = field(default_factory=ContactModel)
+    regrasp: RegraspParams = field(default_factory=RegraspParams)
+
+
+@dataclass
+class _Holding:
+    """A finger holding a contact from ``t_from`` on, with its track."""
+
+    p: np.ndarray
+    n: np.ndarray
+    t_from: float
+    track: ContactTrack
+    t_to: float | None = None
+
+    def q_at(self, finger, times: np.ndarray) -> np.ndarray:
+        tr = self.track
+        return np.stack(
+            [np.interp(times, tr.times_s, tr.q[:, j]) for j in range(tr.q.shape[1])], axis=1
+        )
+
+
+@dataclass
+class ManipulationPlan:
+    """The result of :func:`plan_manipulation`.
+
+    Attributes:
+        plan: The plan file content (:class:`~regrasp_pin.plan.Plan`).
+        regrasps: The verified regrasps, in time order.
+        grasp: The initial grasp.
+        manifolds: The joint-space manifolds per finger.
+        sample: The surface sample.
+        stage_s: Time spent per stage [s].
+    """
+
+    plan: Plan
+    regrasps: list[RegraspResult]
+    grasp: Grasp
+    manifolds: dict[str, Manifold]
+    sample: SurfaceSample
+    stage_s: dict[str, float]
+
+
+def plan_manipulation(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    *,
+    grasp: Grasp | None = None,
+    params: PlannerParams | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> ManipulationPlan:
+    """Plan the whole hand over the whole motion.
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        motion: The object's motion ``T_palm_object(t)``.
+        grasp: Initial grasp; found by :func:`~.contact_choice.initial_grasp` if None.
+        params: :class:`PlannerParams`.
+        progress: Called with the planned time [s] as planning advances (e.g. to
+            drive a progress bar).
+
+    Returns:
+        A :class:`ManipulationPlan`.
+
+    Raises:
+        ContactError: no initial grasp.
+        PlanningError: the motion cannot be achieved; ``partial`` holds the plan up to
+            the failure.
+    """
+    params = params or PlannerParams()
+    stage: dict[str, float] = {}
+    t0 = time.perf_counter()
+    sample = obj.sample_surface(params.sample_spacing_m)
+    n_m = max(int(round(motion.duration_s / params.manifold_dt_s)), 1) + 1
+    m_times = np.linspace(motion.t_start, motion.t_end, n_m)
+    manifolds = {
+        name: build_manifold(hand.fingers[name], sample, motion, m_times, contact=params.contact)
+        for name in hand.finger_names
+    }
+    stage["manifolds"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if grasp is None:
+        grasp = initial_grasp(hand, obj, manifolds, sample, contact=params.contact, mu=params.mu)
+    stage["initial grasp"] = time.perf_counter() - t0
+
+    grid = np.arange(motion.t_start, motion.t_end + 1e-9, params.dt_s)
+    if grid[-1] < motion.t_end - 1e-9:
+        grid = np.append(grid, motion.t_end)
+    grid[-1] = min(grid[-1], motion.t_end)
+
+    t0 = time.perf_counter()
+    holding: dict[str, _Holding] = {}
+    for name in hand.finger_names:
+        holding[name] = _hold(
+            hand,
+            obj,
+            motion,
+            grid,
+            name,
+            grasp.points_object[name],
+            grasp.normals_object[name],
+            grasp.q[name],
+            motion.t_start,
+            params,
+        )
+    phases: dict[str, list] = {name: [] for name in hand.finger_names}
+    regrasps: list[RegraspResult] = []
+    stage["tracking"] = time.perf_counter() - t0
+    stage["regrasps"] = 0.0
+    now = motion.t_start  # no regrasp may start before this (one finger in the air)
+    D = params.regrasp.duration_s
+
+    history: dict[str, list[_Holding]] = {name: [] for name in hand.finger_names}
+
+    def partial_plan() -> Plan:
+        return _assemble(
+            hand, obj, motion, grid, history, holding, phases, regrasps, until=now, params=params
+        )
+
+    while True:
+        triggers = sorted(
+            (h.track.trigger()[0], name)
+            for name, h in holding.items()
+            if h.track.trigger()[0] is not None
+        )
+        triggers = [(t, n) for t, n in triggers if t is not None]
+        if not triggers:
+            break
+        t_trig, name = triggers[0]
+        reason_trig = holding[name].track.trigger()[1]
+        start = t_trig - params.lead_s
+        why = f"{reason_trig} at t={t_trig:.3f} s; lift-off {params.lead_s:.3f} s before"
+        if len(triggers) > 1:
+            t_next, next_name = triggers[1]
+            if t_next - params.lead_s < start + D:
+                start = t_next - params.lead_s - D
+                why += f", moved earlier so that {next_name} (trigger t={t_next:.3f} s) can follow"
+        start = max(start, now, holding[name].t_from)
+        if start + D > t_trig + 1e-9 and start > t_trig - params.lead_s + 1e-9:
+            # cannot start early enough: the finger would pass its trigger in contact
+            pass
+        if start + D > motion.t_end:
+            # too late to regrasp before the end; holding to the trigger is impossible
+            raise PlanningError(
+                f"{reason_trig} at t={t_trig:.3f} s, but a regrasp ({D:.2f} s) would not end "
+                "before the motion does",
+                finger=name,
+                time_s=t_trig,
+                partial=partial_plan(),
+            )
+        if start > t_trig:
+            raise PlanningError(
+                f"{reason_trig} at t={t_trig:.3f} s while another finger is still in the air "
+                f"(free from t={now:.3f} s)",
+                finger=name,
+                time_s=t_trig,
+                partial=partial_plan(),
+            )
+        stay = [n for n in hand.finger_names if n != name]
+        if len(stay) < params.min_holding:
+            raise PlanningError(
+                f"only {len(stay)} fingers would hold (need {params.min_holding})",
+                finger=name,
+                time_s=start,
+                partial=partial_plan(),
+            )
+        p_stay = np.array([holding[n].p for n in stay])
+        n_stay = np.array([holding[n].n for n in stay])
+        eps_stay = ferrari_canny_epsilon(p_stay, n_stay, params.mu, torque_scale_m=obj.radius_m)
+        if eps_stay <= 0.0:
+            raise PlanningError(
+                f"{reason_trig} at t={t_trig:.3f} s, but without it the other fingers are not "
+                "in force closure",
+                finger=name,
+                time_s=start,
+                partial=partial_plan(),
+            )
+
+        t_r = time.perf_counter()
+        result = _regrasp(hand, obj, motion, manifolds[name], sample, name, start, holding, params)
+        stage["regrasps"] += time.perf_counter() - t_r
+        if isinstance(result, RegraspError):
+            raise PlanningError(
+                f"no verified regrasp: {result}", finger=name, time_s=start, partial=partial_plan()
+            ) from result
+        res, choice = result
+        h = holding[name]
+        phases[name].append(
+            ContactPhase(
+                finger=name, t_start=h.t_from, t_end=res.t_start, p_object=h.p, n_object=h.n
+            )
+        )
+        phases[name].append(
+            RegraspPhase(
+                finger=name,
+                t_start=res.t_start,
+                t_end=res.t_end,
+                P_object=res.P_object,
+                Q_object=res.Q_object,
+                waypoints_object=res.waypoints_object,
+                min_clearance_m=res.min_clearance_m,
+                planning_ms=res.planning_ms,
+                reason=why,
+                extra={
+                    "n_P_object": res.n_P_object.tolist(),
+                    "n_Q_object": res.n_Q_object.tolist(),
+                    "trigger_time_s": t_trig,
+                    "waypoint_times_s": res.waypoint_times_s.tolist(),
+                    "grid_path_object": res.grid_path.points_object.tolist(),
+                    "tip_path_object": res.tip_path.points_object[
+                        :: max(1, len(res.tip_path) // 200)
+                    ].tolist(),
+                    "path_length_m": res.path_length_m,
+                    "m": int(res.waypoints_object.shape[0]),
+                    "q_exit_time_s": choice.exit_time_s,
+                    "quality_kept": choice.quality_kept,
+                    "epsilon": choice.epsilon,
+                    "stage_ms": res.stage_ms,
+                    "attempts": list(res.attempts),
+                },
+            )
+        )
+        regrasps.append(res)
+        h.t_to = res.t_start
+        history[name].append(h)
+        holding[name] = _hold(
+            hand,
+            obj,
+            motion,
+            grid,
+            name,
+            res.Q_object,
+            res.n_Q_object,
+            res.q[-1],
+            res.t_end,
+            params,
+        )
+        now = res.t_end
+        if progress is not None:
+            progress(now)
+        log.info("%s regrasped at t=%.3f s (%s)", name, res.t_start, why)
+
+    for name, h in holding.items():
+        phases[name].append(
+            ContactPhase(
+                finger=name, t_start=h.t_from, t_end=motion.t_end, p_object=h.p, n_object=h.n
+            )
+        )
+    t0 = time.perf_counter()
+    plan = _assemble(
+        hand,
+        obj,
+        motion,
+        grid,
+        history,
+        holding,
+        phases,
+        regrasps,
+        until=motion.t_end,
+        params=params,
+    )
+    stage["assembly"] = time.perf_counter() - t0
+    plan.summary.update(
+        {
+            "regrasps": len(regrasps),
+            "fingers_regrasped": sorted({r.finger for r in regrasps}),
+            "initial_epsilon": grasp.epsilon,
+            "stage_s": stage,
+        }
+    )
+    return ManipulationPlan(plan, regrasps, grasp, manifolds, sample, stage)
+
+
+def _hold(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    grid: np.ndarray,
+    name: str,
+    p: np.ndarray,
+    n: np.ndarray,
+    q_start: np.ndarray,
+    t_from: float,
+    params: PlannerParams,
+) -> _Holding:
+    times = np.concatenate([[t_from], grid[grid > t_from + 1e-9]])
+    if times.size < 2:
+        times = (
+            np.array([t_from, motion.t_end])
+            if motion.t_end > t_from
+            else np.array([t_from, t_from + 1e-6])
+        )
+    track = track_contact(hand, name, obj, motion, times, p, n, q_start, contact=params.contact)
+    return _Holding(p=np.asarray(p, float), n=np.asarray(n, float), t_from=t_from, track=track)
+
+
+def _exact_holding_q(
+    hand: Hand, motion: ObjectMotion, name: str, h: _Holding, times: np.ndarray, tol_m: float
+) -> np.ndarray:
+    """Exact IK of a holding finger at arbitrary times (warm from its track)."""
+    f = hand.fingers[name]
+    T = motion.pose(times)
+    c = h.p + f.tip_radius * h.n
+    targets = T[:, :3, :3] @ c + T[:, :3, 3]
+    res = f.ik(targets, h.q_at(name, times), tol_m=tol_m)
+    return res.q
+
+
+def _regrasp(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    manifold: Manifold,
+    sample: SurfaceSample,
+    name: str,
+    start: float,
+    holding: dict[str, _Holding],
+    params: PlannerParams,
+) -> tuple[RegraspResult, object] | RegraspError:
+    f = hand.fingers[name]
+    h = holding[name]
+    stay = {n: (holding[n].p, holding[n].n) for n in holding if n != name}
+    # exact IK at the lift-off time so the regrasp starts on P
+    q_start = _exact_holding_q(hand, motion, name, h, np.array([start]), params.contact.ik_tol_m)[0]
+    others_tips = np.array([p + hand.fingers[n].tip_radius * nn for n, (p, nn) in stay.items()])
+
+    def q_hand(times: np.ndarray) -> np.ndarray:
+        q = np.broadcast_to(hand.neutral(), (times.size, hand.model.nq)).copy()
+        for n in stay:
+            q[:, hand.fingers[n].q_indices] = _exact_holding_q(
+                hand, motion, n, holding[n], times, params.contact.ik_tol_m
+            )
+        return q
+
+    failed: list[np.ndarray] = []
+    last: RegraspError | None = None
+    for _ in range(params.candidates):
+        try:
+            choice = choose_new_contact(
+                hand,
+                obj,
+                manifold,
+                sample,
+                start + params.regrasp.duration_s,
+                P_object=h.p,
+                n_P_object=h.n,
+                others=stay,
+                contact=params.contact,
+                mu=params.mu,
+                exclude_radius_m=2 * f.tip_radius,
+                exclude_points_object=np.array(failed) if failed else None,
+                q_hand_arrive=q_hand(np.array([start + params.regrasp.duration_s]))[0],
+            )
+        except ContactError as exc:
+            return exc if last is None else last
+        try:
+            res = plan_regrasp(
+                hand,
+                obj,
+                motion,
+                name,
+                start,
+                h.p,
+                h.n,
+                choice.p_object,
+                choice.n_object,
+                q_start,
+                q_hand,
+                others_tips_object=others_tips,
+                params=params.regrasp,
+            )
+            return res, choice
+        except RegraspError as exc:
+            log.info("regrasp %s to %s failed: %s", name, choice.p_object.round(4), exc)
+            failed.append(choice.p_object)
+            last = exc
+    return last if last is not None else PlanningError("no candidate", finger=name, time_s=start)
+
+
+def _assemble(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    grid: np.ndarray,
+    history: dict[str, list[_Holding]],
+    holding: dict[str, _Holding],
+    phases: dict[str, list],
+    regrasps: list[RegraspResult],
+    *,
+    until: float,
+    params: PlannerParams,
+) -> Plan:
+    """Sample the whole hand: grid times outside the regrasps, the regrasps' own samples
+    inside them (so linear interpolation between samples is what was verified).
+
+    Holding fingers are placed by exact IK on their contact at every sample (warm from
+    their track), which is exactly what the regrasp verification used for them.
+    """
+    keep = np.ones(grid.size, bool)
+    for r in regrasps:
+        keep &= ~((grid > r.t_start - 1e-9) & (grid < r.t_end + 1e-9))
+    times = np.unique(np.round(np.concatenate([grid[keep]] + [r.times_s for r in regrasps]), 9))
+    times = times[times <= until + 1e-9]
+    if times.size < 2:
+        times = np.array([motion.t_start, max(until, motion.t_start + params.dt_s)])
+    q = np.broadcast_to(hand.neutral(), (times.size, hand.model.nq)).copy()
+    for name in hand.finger_names:
+        f = hand.fingers[name]
+        in_air = np.zeros(times.size, bool)
+        for r in regrasps:
+            if r.finger == name:
+                sel = (times >= r.t_start - 1e-9) & (times <= r.t_end + 1e-9)
+                for j in range(f.k):
+                    q[sel, f.q_indices[j]] = np.interp(times[sel], r.times_s, r.q[:, j])
+                in_air |= sel
+        for h in [*history[name], holding[name]]:
+            b = h.t_to if h.t_to is not None else until
+            sel = (times >= h.t_from - 1e-9) & (times <= b + 1e-9) & ~in_air
+            if sel.any():
+                q[np.ix_(np.flatnonzero(sel), f.q_indices)] = _exact_holding_q(
+                    hand, motion, name, h, times[sel], params.contact.ik_tol_m
+                )
+    hand_dict = {
+        "name": hand.name,
+        "urdf": _urdf_entry(hand),
+        "fingers": {
+            n: {"tip_frame": f.tip_frame, "tip_radius": f.tip_radius, "joints": list(f.joint_names)}
+            for n, f in hand.fingers.items()
+        },
+    }
+    verts, faces = obj.mesh()
+    obj_dict = {
+        "kind": obj.kind,
+        "params": obj.params,
+        "vertices": np.asarray(verts).tolist(),
+        "faces": np.asarray(faces).tolist(),
+    }
+    return Plan(
+        hand=hand_dict,
+        object=obj_dict,
+        t=times,
+        q=q,
+        T_palm_object=motion.as_xyzquat(times),
+        phases={n: list(ps) for n, ps in phases.items()},
+        summary={},
+    )
+
+
+def _urdf_entry(hand: Hand) -> str:
+    from .plan import repo_root
+
+    path = hand.urdf_path.resolve()
+    try:
+        return str(path.relative_to(repo_root()))
+    except ValueError:
+        return str(path)

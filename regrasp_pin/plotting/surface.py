@@ -1,0 +1,103 @@
+"""Figs. 4 and 8 of the paper: the unfolded grid, its inflation, the grid path and the polygon."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import InputError
+from ..inflation import TipPath
+from ..surface_grid import SurfaceGrid
+from ..surface_path import GridPath
+from . import require_pyplot
+
+__all__ = ["plot_unfolded_grid"]
+
+
+def plot_unfolded_grid(
+    grid: SurfaceGrid,
+    path: GridPath | None = None,
+    heights: np.ndarray | None = None,
+    polygon_indices: np.ndarray | None = None,
+    tip_path: TipPath | None = None,
+    ax: Any = None,
+    *,
+    title: str | None = "Unfolded surface grid from P to Q (Fig. 4)",
+) -> Any:
+    """Draw the unfolded region, the grid, the grid path and a polygon through waypoints.
+
+    Face polygons are outlined, the edges between unfolded faces dashed; grid nodes are
+    coloured by inflation height when ``heights`` is given; P and Q are marked. All
+    lengths are drawn in millimetres in the unfolded plane.
+
+    Args:
+        grid: The surface grid.
+        path: A grid path to draw.
+        heights: Inflation height of each node [m], shape (M,) (e.g.
+            :func:`regrasp_pin.inflation.grid_inflation`).
+        polygon_indices: Indices of waypoints, shape (m,) int, into ``tip_path`` if
+            given, else into ``path``; the polygon through them is drawn (Fig. 8).
+        tip_path: The inflated tip path (its surface points are drawn in the plane).
+        ax: A matplotlib axes; default a new figure.
+        title: Axes title (None for none).
+
+    Returns:
+        The matplotlib figure.
+
+    Raises:
+        MissingExtraError: if matplotlib is not installed.
+        InputError: if ``heights`` or ``polygon_indices`` do not fit.
+    """
+    plt = require_pyplot()
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6.5, 5))
+    else:
+        fig = ax.figure
+    mm = 1e3
+    for unf in grid.unfoldings:
+        poly = np.vstack([unf.polygon_uv, unf.polygon_uv[:1]]) * mm
+        ax.plot(poly[:, 0], poly[:, 1], color="0.25", lw=1.2, zorder=3)
+        centre = unf.polygon_uv.mean(axis=0) * mm
+        ax.annotate(f"face {unf.face_id}", centre, color="0.45", fontsize=8, ha="center")
+    for hinge in grid.hinges_uv:
+        ax.plot(hinge[:, 0] * mm, hinge[:, 1] * mm, color="tab:orange", lw=1.5, ls="--",
+                zorder=3)
+    uv = grid.uv * mm
+    if heights is not None:
+        h = np.asarray(heights, dtype=float)
+        if h.shape != (len(grid),):
+            raise InputError("heights", f"has shape {h.shape}", f"({len(grid)},)")
+        sc = ax.scatter(uv[:, 0], uv[:, 1], c=h * mm, s=4, cmap="viridis", zorder=2)
+        fig.colorbar(sc, ax=ax, label="inflation height [mm]")
+    else:
+        ax.scatter(uv[:, 0], uv[:, 1], s=2, c="0.6", zorder=2, label="grid nodes")
+    if path is not None:
+        ax.plot(path.uv[:, 0] * mm, path.uv[:, 1] * mm, color="tab:blue", lw=2, zorder=3,
+                label=f"grid path ({path.length_m * mm:.1f} mm)")
+    if tip_path is not None:
+        ax.plot(tip_path.uv[:, 0] * mm, tip_path.uv[:, 1] * mm, color="tab:cyan", lw=1,
+                ls=":", zorder=3, label="tip path (surface trace)")
+    if polygon_indices is not None:
+        source = tip_path.uv if tip_path is not None else (path.uv if path is not None else None)
+        if source is None:
+            raise InputError("polygon_indices", "needs a path or a tip_path to index")
+        idx = np.asarray(polygon_indices)
+        if idx.ndim != 1 or idx.size < 2 or not np.issubdtype(idx.dtype, np.integer) or (
+                np.any(idx < 0) or np.any(idx >= source.shape[0])):
+            raise InputError("polygon_indices", "must be >= 2 indices into the path",
+                             f"integers in [0, {source.shape[0]})")
+        poly = source[idx] * mm
+        ax.plot(poly[:, 0], poly[:, 1], color="tab:red", lw=1.5, marker="o", ms=5, zorder=4,
+                label=f"polygon ({idx.size} waypoints)")
+    for name, i, colour in (("P", grid.p_index, "tab:green"), ("Q", grid.q_index, "tab:red")):
+        ax.scatter(*uv[i], s=90, c=colour, marker="*", zorder=5)
+        ax.annotate(name, uv[i], textcoords="offset points", xytext=(6, 6), fontsize=11,
+                    weight="bold", color=colour)
+    ax.set_aspect("equal")
+    ax.set_xlabel("unfolded u [mm]")
+    ax.set_ylabel("unfolded v [mm]")
+    ax.legend(loc="best", fontsize=8)
+    if title:
+        ax.set_title(title)
+    return fig

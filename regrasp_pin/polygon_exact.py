@@ -1,0 +1,250 @@
+"""Exact optimum of the polygonal-approximation energy by dynamic programming.
+
+It minimizes the same energy as the competitive network (Eq. 8 halved: the sum of the
+chord deviations ``H[s_i, s_{i+1}]``) over all ordered vertex sets, and is the yardstick for
+:mod:`regrasp_pin.hopfield`.
+
+Open curves: the vertices start at point 0 and end at point ``n - 1``; ``C_j[y]``, the
+cheapest path from 0 to ``y`` with ``j`` chords, obeys
+``C_j[y] = min_L C_{j-1}[y - L] + H[y - L, y]``, O(m n^2) in general.
+
+Closed curves: the optimum is the best over start points ``t`` of the open problem from
+``t`` around to ``t + n`` with ``m`` chords. Trying every start costs n times more, so only
+the starts of a window that every better polygon must hit are tried: a polygon with no
+vertex in ``[a, a + w)`` has a chord covering the window, and chords whose deviation plus a
+lower bound of the cheapest cover of the rest of the curve (:func:`rest_lower_bound`)
+exceeds the incumbent energy cannot be in a better polygon. The window is chosen as small
+as these chords allow; the result is exact.
+
+All layers are vectorized over the end point, the chord span and the start point; spans
+whose chords are all unavailable (``inf``) are skipped, and states whose cost plus the
+rest bound exceed the incumbent are pruned.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.lib.stride_tricks import as_strided
+
+from ._validate import positive_int
+from .deviation import rest_lower_bound
+from .exceptions import InputError
+from .hopfield import _check_matrix, _check_state, polygon_energy
+
+# Cap on the number of candidate values evaluated at once (memory) [elements].
+_CHUNK = 1 << 22
+_RTOL = 1e-12
+
+
+@dataclass(frozen=True)
+class ExactResult:
+    """Result of :func:`exact_polygon`.
+
+    Attributes:
+        indices: Optimal vertex indices, shape ``(m,)``, ordered.
+        energy: Optimal energy (sum of chord deviations).
+        starts: Number of start points solved (1 for open curves).
+    """
+
+    indices: np.ndarray
+    energy: float
+    starts: int
+
+
+def exact_polygon(
+    H: object, m: int, *, closed: bool = False, incumbent: object = None
+) -> ExactResult:
+    """Globally optimal polygon for deviation matrix ``H`` by dynamic programming.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``; ``inf`` marks chords that may not be used.
+        m: Number of vertices (``2 <= m <= n`` open, ``3 <= m <= n`` closed).
+        closed: Closed curve.
+        incumbent: Optional feasible state ``(m,)`` (e.g. from the network); its energy
+            bounds the search. The result is never worse than it.
+
+    Returns:
+        The optimal vertex indices and energy.
+
+    Raises:
+        InputError: invalid ``H``, ``m`` or ``incumbent``, or no polygon with finite energy
+            exists in ``H``.
+    """
+    H = _check_matrix(H)
+    n = H.shape[0]
+    m = positive_int(m, "m", 3 if closed else 2)
+    if m > n:
+        raise InputError("m", f"{m} exceeds the number of points n={n}", f"m <= {n}")
+    ub, inc = np.inf, None
+    if incumbent is not None:
+        inc = _check_state(incumbent, n, closed)
+        if inc.shape[0] != m:
+            raise InputError("incumbent", f"has {inc.shape[0]} vertices", f"{m} vertices")
+        ub = polygon_energy(H, inc, closed=closed)
+    solver = _Solver(H, closed)
+    if not closed:
+        best = solver.solve(np.array([0]), n - 1, m - 1, ub)
+        starts = 1
+    else:
+        if not np.isfinite(ub):
+            first = solver.solve(np.array([0]), n, m, np.inf)
+            if first is not None:
+                inc, ub = first
+        window = solver.start_window(m, ub) if np.isfinite(ub) else np.arange(n)
+        best = solver.solve(window, n, m, ub)
+        starts = int(window.shape[0])
+    if best is not None and (inc is None or best[1] < ub):
+        s, e = best
+    elif inc is not None and np.isfinite(ub):
+        s, e = inc, ub
+    else:
+        raise InputError("H", "admits no polygon with finite energy", "available chords")
+    s = np.sort(np.asarray(s) % n)
+    return ExactResult(s, polygon_energy(H, s, closed=closed), starts)
+
+
+class _Solver:
+    """Banded DP over chord spans, vectorized over start points."""
+
+    def __init__(self, H: np.ndarray, closed: bool) -> None:
+        n = H.shape[0]
+        self.n, self.closed = n, closed
+        # B[y, L] = H[(y - L) mod n, y]: the chord of span L ending at y (inf if unavailable)
+        if closed:
+            stack = np.concatenate([H, H])
+        else:
+            stack = np.concatenate([np.full((n, n), np.inf), H])
+        rs, cs = stack.strides
+        view = as_strided(stack[n:], shape=(n, n), strides=(rs + cs, -rs), writeable=False)
+        spans = np.flatnonzero(np.isfinite(view).any(axis=0))
+        spans = spans[spans >= 1]
+        if spans.size == 0:
+            raise InputError("H", "has no available chord", "finite off-diagonal entries")
+        self.Lmin, self.Lmax = int(spans[0]), int(spans[-1])
+        B = np.ascontiguousarray(view[:, self.Lmin : self.Lmax + 1])
+        # rows t + r for unrolled starts t < 2n and offsets r <= n
+        self.B2 = np.concatenate([B, B, B]) if closed else B
+        self.min_by_length = np.full(n, np.inf)
+        self.min_by_length[self.Lmin : self.Lmax + 1] = B.min(axis=0)
+        self._rest: dict[int, np.ndarray] = {}
+
+    def rest(self, chords: int) -> np.ndarray:
+        """Lower bound of covering ``l`` steps with ``chords`` chords, for l = 0 .. n."""
+        if chords not in self._rest:
+            self._rest[chords] = rest_lower_bound(
+                self.min_by_length, chords, np.arange(self.n + 1)
+            )
+        return self._rest[chords]
+
+    def start_window(self, m: int, ub: float) -> np.ndarray:
+        """Smallest window of start points that every polygon better than ``ub`` must hit."""
+        n, W = self.n, self.Lmax - self.Lmin + 1
+        L = np.arange(self.Lmin, self.Lmax + 1)
+        # forward form: chord (x, L) is B[(x + L) mod n, L]
+        ends = (np.arange(n)[:, None] + L[None, :]) % n
+        fwd = self.B2[ends, np.arange(W)[None, :]]
+        limit = ub * (1 + _RTOL) + 1e-300
+        feasible = fwd + self.rest(m - 1)[n - L][None, :] <= limit
+        reach = np.where(feasible, L[None, :], 0).max(axis=1)  # longest useful chord from x
+        has = feasible.any(axis=1)
+        # a polygon missing [a, a + w) has a chord (x, x + L) with x < a and x + L >= a + w
+        end2 = np.concatenate([np.arange(n) - n + reach, np.arange(n) + reach])  # x in [-n, n)
+        G = self.Lmax
+        win = as_strided(
+            end2[n - G :], shape=(n, G), strides=(end2.strides[0],) * 2, writeable=False
+        )  # win[a, k] = end of chord from x = a - G + k
+        need = np.maximum(win.max(axis=1) - np.arange(n) + 1, 1)
+        a = int(np.argmin(need))
+        w = int(min(need[a], n))
+        starts = a + np.arange(w)  # unrolled, consecutive
+        useful = np.flatnonzero(has[starts % n])
+        if useful.size == 0:
+            return starts[:0]
+        return starts[useful[0] : useful[-1] + 1]
+
+    def solve(
+        self, starts: np.ndarray, total: int, chords: int, ub: float
+    ) -> tuple[np.ndarray, float] | None:
+        """Best path of ``chords`` chords from each start ``t`` to ``t + total``.
+
+        ``starts`` must be consecutive (unrolled) integers.
+
+        Returns (vertex positions as absolute unrolled indices, energy) of the best start,
+        or None if no path beats ``ub``.
+        """
+        best: tuple[np.ndarray, float] | None = None
+        W = self.Lmax - self.Lmin + 1
+        per_start = (total + 1) * W
+        chunk = max(1, _CHUNK // max(per_start, 1))
+        for c0 in range(0, starts.shape[0], chunk):
+            res = self._solve_chunk(starts[c0 : c0 + chunk], total, chords, ub)
+            if res is not None and res[1] < ub:
+                best, ub = res, res[1]
+        return best
+
+    def _solve_chunk(
+        self, starts: np.ndarray, total: int, chords: int, ub: float
+    ) -> tuple[np.ndarray, float] | None:
+        T = starts.shape[0]
+        Lmin, Lmax = self.Lmin, self.Lmax
+        W = Lmax - Lmin + 1
+        limit = ub * (1 + _RTOL) + 1e-300 if np.isfinite(ub) else np.inf
+        pad = Lmax
+        C = np.full((T, pad + total + 1), np.inf)
+        C[:, pad] = 0.0
+        lo = hi = 0
+        args: list[tuple[int, np.ndarray]] = []
+        B2 = self.B2
+        rb0, rb1 = B2.strides
+        for j in range(1, chords + 1):
+            remaining = chords - j
+            r_lo = max(lo + Lmin, total - remaining * Lmax)
+            r_hi = min(hi + Lmax, total - remaining * Lmin)
+            if j == chords:
+                r_lo = r_hi = total
+            if r_lo > r_hi:
+                return None
+            R = r_hi - r_lo + 1
+            cs = C.strides
+            base = pad + r_lo - Lmin
+            prev = as_strided(
+                C[:, base:], shape=(T, R, W), strides=(cs[0], cs[1], -cs[1]), writeable=False
+            )
+            # chord costs B2[t + r, L]: starts are consecutive, so one strided view
+            costs = as_strided(
+                B2[int(starts[0]) + r_lo :],
+                shape=(T, R, W),
+                strides=(rb0, rb0, rb1),
+                writeable=False,
+            )
+            cand = costs + prev
+            arg = cand.argmin(axis=2)
+            val = np.take_along_axis(cand, arg[..., None], axis=2)[..., 0]
+            if np.isfinite(limit):
+                val[val + self.rest(remaining)[total - np.arange(r_lo, r_hi + 1)] > limit] = np.inf
+            C = np.full((T, pad + total + 1), np.inf)
+            C[:, pad + r_lo : pad + r_hi + 1] = val
+            args.append((r_lo, arg))
+            fin = np.isfinite(val)
+            if not fin.any():
+                return None
+            cols = np.flatnonzero(fin.any(axis=0))
+            lo, hi = r_lo + int(cols[0]), r_lo + int(cols[-1])
+        final = C[:, pad + total]
+        k = int(np.argmin(final))
+        energy = float(final[k])
+        if not np.isfinite(energy):
+            return None
+        # backtrack
+        t = int(starts[k])
+        r = total
+        pos = [r]
+        for r_lo, arg in reversed(args):
+            L = Lmin + int(arg[k, r - r_lo])
+            r -= L
+            pos.append(r)
+        pos = pos[::-1]
+        verts = t + np.asarray(pos[:-1] if self.closed else pos)
+        return verts, energy

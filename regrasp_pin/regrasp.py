@@ -1,0 +1,502 @@
+"""One verified regrasp: inflated surface, grid path, Hopfield waypoints, joint trajectory.
+
+Sections 2.1-2.3 of the paper. The finger lets go of P at ``t_start`` and lands on Q
+at ``t_start + duration`` while the object keeps moving:
+
+1. In the object frame, the surface region holding P and Q is unfolded into a plane
+   and gridded (:mod:`.surface_grid`); grid nodes cost more where the finger's IK, at
+   the time the tip would pass over them, comes near a boundary plane, and nodes
+   under another fingertip are forbidden. The cheapest grid path (Dijkstra,
+   :mod:`.surface_path`) is lifted onto the virtually inflated surface
+   (:mod:`.inflation`): the fingertip-centre curve.
+2. The competitive Hopfield network reduces that curve to m waypoints (Eqs. 5-10).
+3. The waypoints are joined by a shape-preserving C1 curve (PCHIP, no overshoot)
+   traversed with a minimum-jerk timing, so the tip leaves P and reaches Q at rest
+   relative to the object; waypoint i is passed at time t_i, in step with the
+   object's motion (section 2.3). Each sample is moved to the palm frame with
+   ``T_palm_object(t)`` and turned into joint angles by warm-started batched IK.
+4. Coal checks the whole trajectory densely (:mod:`.verify`): the finger against the
+   object (no penetration; at least ``clearance_m`` away from the lift-off and
+   landing zones) and against the other fingers, which keep holding and move with
+   the object; joint limits and velocity limits are checked too.
+
+If a candidate fails, the planner raises m, inflates more, and reroutes around the
+joint limits more strongly, in that order. It never returns a path that has not
+passed the check; when nothing passes it raises :class:`~.exceptions.VerificationError`
+with the finger, the time and what failed.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from ._validate import as_array, positive
+from .contact import LinkClearance
+from .exceptions import InputError, PlanningError, RegraspError, VerificationError
+from .hand import Hand
+from .inflation import TipPath, grid_inflation, inflate_path
+from .motion import ObjectMotion
+from .objects import ConvexObject
+from .polygon import PolygonResult, approximate_polygon
+from .surface_grid import SurfaceGrid, build_surface_grid
+from .surface_path import GridPath, shortest_grid_path
+from .verify import VerificationReport, verify_finger_motion
+
+__all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
+
+log = logging.getLogger(__name__)
+
+_UNREACHABLE_COST = 20.0  # node cost where IK cannot reach the inflated point
+
+
+@dataclass(frozen=True)
+class RegraspParams:
+    """Parameters of one regrasp.
+
+    Attributes:
+        duration_s: Time from lift-off to landing [s].
+        clearance_m: Clearance the fingertip must keep from the object away from the
+            lift-off and landing zones (verified with Coal) [m].
+        inflation_factor: The surface is inflated by ``inflation_factor * clearance_m``
+            so that the waypoint curve, which cuts corners, still keeps ``clearance_m``.
+        taper_m: Length of the lift-off and landing zones along the surface path [m]
+            (default: the inflation height).
+        grid_spacing_m: Grid spacing on the unfolded surface [m].
+        m: Number of Hopfield waypoints (P, Q and m - 2 intermediate points).
+        max_m: Largest m tried when the waypoint curve loses clearance.
+        deviation: Hopfield deviation measure ("max" as in Eq. 7, "sum", "ise").
+        method: "hopfield" (the paper) or "exact" (dynamic programming).
+        limit_margin_rad: Nodes whose IK margin is below this cost extra [rad].
+        limit_weight: Weight of the joint-limit cost in the grid path.
+        contact_keepout_m: Extra distance kept from the other fingertips [m].
+        link_clearance_m: Clearance of the finger's other links from the object [m].
+        finger_clearance_m: Clearance from the other fingers [m].
+        sample_dt_s: Time step of the returned trajectory [s] (the verifier
+            densifies further, to 1 mrad joint steps).
+        ik_tol_m: IK tolerance along the trajectory [m].
+    """
+
+    duration_s: float = 0.5
+    clearance_m: float = 0.005
+    inflation_factor: float = 1.6
+    taper_m: float | None = None
+    grid_spacing_m: float = 0.002
+    m: int = 7
+    max_m: int = 13
+    deviation: str = "ise"
+    method: str = "hopfield"
+    limit_margin_rad: float = 0.25
+    limit_weight: float = 3.0
+    contact_keepout_m: float = 0.003
+    link_clearance_m: float = 0.0
+    finger_clearance_m: float = 0.0005
+    sample_dt_s: float = 0.005
+    ik_tol_m: float = 1e-5
+
+    def validate(self) -> RegraspParams:
+        positive(self.duration_s, "duration_s")
+        positive(self.clearance_m, "clearance_m")
+        positive(self.grid_spacing_m, "grid_spacing_m")
+        positive(self.sample_dt_s, "sample_dt_s")
+        if self.inflation_factor < 1.0:
+            raise InputError("inflation_factor", f"{self.inflation_factor} < 1", "a number >= 1")
+        if not isinstance(self.m, int) or self.m < 2:
+            raise InputError("m", f"{self.m!r} is not allowed", "an integer >= 2")
+        if self.taper_m is not None:
+            positive(self.taper_m, "taper_m")
+        return self
+
+
+@dataclass(frozen=True)
+class RegraspResult:
+    """A verified regrasp.
+
+    Attributes:
+        finger: Finger name.
+        t_start: Lift-off time [s].
+        t_end: Landing time [s].
+        P_object: Released contact, object frame ``(3,)`` [m].
+        n_P_object: Its outward normal.
+        Q_object: New contact, object frame ``(3,)`` [m].
+        n_Q_object: Its outward normal.
+        grid: The unfolded surface grid.
+        grid_path: The grid path from P to Q.
+        tip_path: The fingertip-centre curve over the inflated surface.
+        polygon: The Hopfield (or exact) polygonal approximation of ``tip_path``.
+        waypoints_object: ``(m, 3)`` waypoints (tip centres), object frame [m].
+        waypoint_times_s: ``(m,)`` when each waypoint is passed [s].
+        times_s: ``(S,)`` trajectory times [s].
+        q: ``(S, k)`` finger joint trajectory [rad].
+        tip_object: ``(S, 3)`` planned tip centres in the object frame [m].
+        report: The Coal verification report (``report.ok`` is always True).
+        min_clearance_m: Smallest Coal distance between the finger and the object
+            away from the lift-off and landing zones (the middle half of the motion when
+            the path is too short to leave them) [m].
+        stage_ms: Time spent in each stage [ms].
+        attempts: What was tried before success, and why it failed.
+        params: The parameters that succeeded.
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    P_object: np.ndarray
+    n_P_object: np.ndarray
+    Q_object: np.ndarray
+    n_Q_object: np.ndarray
+    grid: SurfaceGrid
+    grid_path: GridPath
+    tip_path: TipPath
+    polygon: PolygonResult
+    waypoints_object: np.ndarray
+    waypoint_times_s: np.ndarray
+    times_s: np.ndarray
+    q: np.ndarray
+    tip_object: np.ndarray
+    report: VerificationReport
+    min_clearance_m: float
+    stage_ms: dict[str, float] = field(default_factory=dict)
+    attempts: tuple[str, ...] = ()
+    params: RegraspParams | None = None
+
+    @property
+    def planning_ms(self) -> float:
+        """Total planning and verification time [ms]."""
+        return float(sum(self.stage_ms.values()))
+
+    @property
+    def path_length_m(self) -> float:
+        """Length of the fingertip-centre trajectory in the object frame [m]."""
+        return float(np.linalg.norm(np.diff(self.tip_object, axis=0), axis=1).sum())
+
+
+def minimum_jerk(tau: np.ndarray) -> np.ndarray:
+    """Minimum-jerk progress ``10 tau^3 - 15 tau^4 + 6 tau^5`` for ``tau`` in [0, 1]."""
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+
+
+def _inverse_minimum_jerk(s: np.ndarray) -> np.ndarray:
+    table_tau = np.linspace(0.0, 1.0, 2001)
+    return np.interp(s, minimum_jerk(table_tau), table_tau)
+
+
+class _Stages:
+    def __init__(self) -> None:
+        self.ms: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.ms[name] = self.ms.get(name, 0.0) + 1e3 * (now - self._t)
+        self._t = now
+
+
+def plan_regrasp(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    finger: str,
+    t_start: float,
+    P_object: np.ndarray,
+    n_P_object: np.ndarray,
+    Q_object: np.ndarray,
+    n_Q_object: np.ndarray,
+    q_start: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    *,
+    others_tips_object: np.ndarray | None = None,
+    params: RegraspParams | None = None,
+) -> RegraspResult:
+    """Plan and verify one finger's regrasp from P to Q while the object moves.
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        motion: Object motion ``T_palm_object(t)``; ``[t_start, t_start + duration]``
+            must lie within it.
+        finger: The regrasping finger.
+        t_start: Lift-off time [s].
+        P_object: Current contact, object frame ``(3,)`` [m]; on the surface.
+        n_P_object: Outward normal at P.
+        Q_object: New contact, object frame ``(3,)`` [m]; on the surface.
+        n_Q_object: Outward normal at Q.
+        q_start: ``(k,)`` finger configuration at lift-off (tip at P) [rad].
+        q_hand: Maps times ``(S,)`` to full hand configurations ``(S, nq)`` of the other
+            fingers (holding their contacts); the regrasping finger's entries are
+            overwritten.
+        others_tips_object: ``(F, 3)`` tip centres of the other fingers in the object
+            frame (they are fixed there while holding) [m]; grid nodes under them are
+            forbidden.
+        params: :class:`RegraspParams`.
+
+    Returns:
+        A :class:`RegraspResult` whose trajectory passed the Coal verification.
+
+    Raises:
+        InputError: bad parameters, P or Q not on the object, P == Q.
+        VerificationError: no candidate passed the verification (finger, time, why).
+        PlanningError: the path or the IK failed for every candidate.
+    """
+    params = (params or RegraspParams()).validate()
+    f = hand.finger(finger)
+    P = as_array(P_object, "P_object", (3,))
+    Q = as_array(Q_object, "Q_object", (3,))
+    nP = as_array(n_P_object, "n_P_object", (3,))
+    nQ = as_array(n_Q_object, "n_Q_object", (3,))
+    q0 = as_array(q_start, "q_start", (f.k,))
+    t_end = float(t_start) + params.duration_s
+    if t_start < motion.t_start - 1e-9 or t_end > motion.t_end + 1e-9:
+        raise InputError(
+            "t_start",
+            f"regrasp [{t_start:.3f}, {t_end:.3f}] s leaves the motion",
+            f"within [{motion.t_start:.3f}, {motion.t_end:.3f}] s",
+        )
+    others = (
+        np.zeros((0, 3))
+        if others_tips_object is None
+        else as_array(others_tips_object, "others_tips_object", (None, 3))
+    )
+    stages = _Stages()
+    grid = build_surface_grid(obj, P, Q, spacing_m=params.grid_spacing_m)
+    stages.lap("grid")
+
+    attempts: list[str] = []
+    last_error: RegraspError | None = None
+    schedule = _schedule(params)
+    path_cache: dict[tuple[float, float], tuple[GridPath, TipPath]] = {}
+    for p_try in schedule:
+        key = (p_try.inflation_factor, p_try.limit_weight)
+        try:
+            if key not in path_cache:
+                path_cache[key] = _surface_path(
+                    hand, f.name, obj, motion, grid, t_start, q0, others, p_try
+                )
+            gpath, tip_path = path_cache[key]
+            stages.lap("path")
+            result = _attempt(
+                hand, obj, motion, f.name, t_start, grid, gpath, tip_path, q0, q_hand, p_try, stages
+            )
+        except (PlanningError, VerificationError) as exc:
+            attempts.append(
+                f"m={p_try.m}, inflation x{p_try.inflation_factor:g}, "
+                f"limit weight {p_try.limit_weight:g}: {exc.reason}"
+            )
+            last_error = exc
+            log.debug("regrasp %s attempt failed: %s", f.name, attempts[-1])
+            continue
+        log.info(
+            "regrasp %s at t=%.3f s verified (m=%d, min clearance %.2f mm, %.0f ms)",
+            f.name,
+            t_start,
+            p_try.m,
+            1e3 * result.min_clearance_m,
+            sum(stages.ms.values()),
+        )
+        return replace(
+            result,
+            P_object=P,
+            n_P_object=nP,
+            Q_object=Q,
+            n_Q_object=nQ,
+            stage_ms=dict(stages.ms),
+            attempts=tuple(attempts),
+            params=p_try,
+        )
+    reason = "no candidate path passed: " + " | ".join(attempts[-3:])
+    if isinstance(last_error, VerificationError):
+        raise VerificationError(reason, finger=f.name, time_s=last_error.time_s)
+    raise PlanningError(reason, finger=f.name, time_s=float(t_start))
+
+
+def _schedule(params: RegraspParams) -> list[RegraspParams]:
+    """Raise m, then the inflation, then the weight of the joint limits."""
+    out = []
+    ms = list(range(params.m, params.max_m + 1, 2)) or [params.m]
+    for infl, weight in (
+        (params.inflation_factor, params.limit_weight),
+        (params.inflation_factor * 1.5, params.limit_weight),
+        (params.inflation_factor * 1.5, params.limit_weight * 4.0),
+    ):
+        for m in ms:
+            out.append(replace(params, m=m, inflation_factor=infl, limit_weight=weight))
+    return out
+
+
+def _surface_path(
+    hand: Hand,
+    finger: str,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    grid: SurfaceGrid,
+    t_start: float,
+    q0: np.ndarray,
+    others_tips: np.ndarray,
+    p: RegraspParams,
+) -> tuple[GridPath, TipPath]:
+    """Grid path weighing distance and joint limits, lifted onto the inflated surface."""
+    f = hand.finger(finger)
+    height = p.inflation_factor * p.clearance_m
+    taper = p.taper_m if p.taper_m is not None else height
+    h_nodes = grid_inflation(grid, height, taper)
+    tips = grid.points_object + (f.tip_radius + h_nodes)[:, None] * grid.normals_object
+    # time at which the tip passes over each node: progress along P -> Q (unfolded)
+    d = grid.uv[grid.q_index] - grid.uv[grid.p_index]
+    s = np.clip((grid.uv - grid.uv[grid.p_index]) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
+    t_nodes = t_start + p.duration_s * _inverse_minimum_jerk(s)
+    T = motion.pose(t_nodes)
+    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips) + T[:, :3, 3]
+    res = f.ik(targets, q0, tol_m=1e-4, max_iter=20, restarts=False)
+    margin = f.limit_margin(res.q)
+    cost = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
+    cost[~res.success] = _UNREACHABLE_COST
+    if others_tips.size:
+        keep = 2 * f.tip_radius + p.contact_keepout_m
+        dist = np.linalg.norm(tips[:, None, :] - others_tips[None], axis=2).min(axis=1)
+        cost[dist < keep] = np.inf
+        cost[[grid.p_index, grid.q_index]] = np.minimum(cost[[grid.p_index, grid.q_index]], 0.0)
+    gpath = shortest_grid_path(grid, cost, cost_weight=p.limit_weight)
+    tip_path = inflate_path(
+        obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
+    )
+    return gpath, tip_path
+
+
+def _attempt(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    finger: str,
+    t_start: float,
+    grid: SurfaceGrid,
+    gpath: GridPath,
+    tip_path: TipPath,
+    q0: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    p: RegraspParams,
+    stages: _Stages,
+) -> RegraspResult:
+    f = hand.finger(finger)
+    pts = tip_path.points_object
+    m = min(p.m, len(tip_path))
+    poly = approximate_polygon(pts, m, closed=False, deviation=p.deviation, method=p.method)
+    W = poly.vertices
+    stages.lap("hopfield")
+
+    # C1 shape-preserving curve through the waypoints, by chord length
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))])
+    curve = PchipInterpolator(chord, W, axis=0)
+    u_fine = np.linspace(0.0, chord[-1], 2001)
+    c_fine = curve(u_fine)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c_fine, axis=0), axis=1))])
+    n_t = max(int(np.ceil(p.duration_s / p.sample_dt_s)), 8) + 1
+    times = t_start + np.linspace(0.0, p.duration_s, n_t)
+    progress = minimum_jerk(np.linspace(0.0, 1.0, n_t))
+    u = np.interp(progress * arc[-1], arc, u_fine)
+    tip_obj = curve(u)
+    tip_obj[0], tip_obj[-1] = pts[0], pts[-1]
+    # where along the surface path each sample is (for the lift-off/landing zones)
+    a_way = tip_path.arc_length_m[poly.indices]
+    a_samples = np.interp(u, chord, a_way)
+    taper = tip_path.taper_m
+    in_flight = (a_samples >= taper) & (a_samples <= tip_path.length_m - taper)
+    required = np.where(in_flight, p.clearance_m, 0.0)
+    planned = obj.signed_distance(tip_obj) - f.tip_radius
+    short = planned < required - 1e-9
+    if short.any():
+        i = int(np.argmax(required - planned))
+        raise PlanningError(
+            f"the waypoint curve keeps only {1e3 * planned[i]:.2f} mm of the required "
+            f"{1e3 * required[i]:.2f} mm",
+            finger=finger,
+            time_s=float(times[i]),
+        )
+    waypoint_times = (
+        np.interp(np.interp(chord, u_fine, arc) / arc[-1], progress, times - t_start) + t_start
+    )
+    stages.lap("timing")
+
+    # joint trajectory: palm-frame targets, warm-started IK in chunks
+    T = motion.pose(times)
+    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tip_obj) + T[:, :3, 3]
+    q = np.empty((n_t, f.k))
+    prev = q0
+    for s0 in range(0, n_t, 16):
+        res = f.ik(targets[s0 : s0 + 16], prev, tol_m=p.ik_tol_m)
+        if not res.success.all():
+            i = s0 + int(np.argmax(~res.success))
+            raise PlanningError(
+                f"IK cannot follow the path (residual {1e3 * res.error_m.max():.2f} mm)",
+                finger=finger,
+                time_s=float(times[i]),
+            )
+        q[s0 : s0 + 16] = res.q
+        prev = res.q[-1]
+    vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
+    over = vel > f.velocity_limit
+    if over.any():
+        i, j = np.unravel_index(np.argmax(vel / f.velocity_limit), vel.shape)
+        raise PlanningError(
+            f"joint {f.joint_names[j]} would move at {vel[i, j]:.2f} rad/s "
+            f"(limit {f.velocity_limit[j]:.2f})",
+            finger=finger,
+            time_s=float(times[i]),
+        )
+    stages.lap("ik")
+
+    q_full = np.array(q_hand(times), dtype=float)
+    q_full[:, f.q_indices] = q
+    report = verify_finger_motion(
+        hand,
+        obj,
+        finger,
+        times,
+        q_full,
+        T,
+        tip_clearance_m=required,
+        link_clearance_m=p.link_clearance_m,
+        finger_clearance_m=p.finger_clearance_m,
+    )
+    stages.lap("verify")
+    if not report.ok:
+        worst = report.worst_failure
+        what = (
+            f"{worst.kind} {worst.detail}: {1e3 * worst.value:.2f} mm"
+            f" < {1e3 * worst.required:.2f} mm"
+            if worst is not None and worst.kind != "joint-limit"
+            else (str(worst) if worst is not None else "verification failed")
+        )
+        raise VerificationError(f"Coal check failed ({what})", finger=finger, time_s=report.time_s)
+    # smallest Coal distance of the whole finger to the object where full clearance is
+    # required (the verifier has already proven the bounds; this is the figure to report)
+    # smallest Coal distance of the whole finger to the object in flight (between the
+    # lift-off and landing zones; the middle half of the motion if the path is short)
+    flight = in_flight if in_flight.any() else (np.abs(progress - 0.5) <= 0.25)
+    lc = LinkClearance(hand, finger, obj, include_tip=True)
+    min_clear = float(lc(q_full[flight], T[flight]).min())
+    return RegraspResult(
+        finger=finger,
+        t_start=float(t_start),
+        t_end=float(times[-1]),
+        P_object=np.zeros(3),
+        n_P_object=np.zeros(3),
+        Q_object=np.zeros(3),
+        n_Q_object=np.zeros(3),
+        grid=grid,
+        grid_path=gpath,
+        tip_path=tip_path,
+        polygon=poly,
+        waypoints_object=W,
+        waypoint_times_s=waypoint_times,
+        times_s=times,
+        q=q,
+        tip_object=tip_obj,
+        report=report,
+        min_clearance_m=min_clear,
+    )

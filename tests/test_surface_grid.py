@@ -1,0 +1,312 @@
+"""Unfolded surface grid (regrasp_pin.surface_grid) and grid path (regrasp_pin.surface_path).
+
+Box of 60 x 40 x 40 mm: x in [-30, 30] mm, y and z in [-20, 20] mm. Geodesics across
+box edges are checked against the unfolded straight line computed by hand.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from regrasp_pin.exceptions import GeometryError, InputError, PlanningError
+from regrasp_pin.objects import Box, ConvexMesh, Prism
+from regrasp_pin.surface_grid import build_surface_grid, unfold_faces
+from regrasp_pin.surface_path import edge_weights, shortest_grid_path
+from tests.conftest import assert_close
+
+SPACING = 0.002
+
+
+@pytest.fixture(scope="module")
+def box() -> Box:
+    return Box((0.06, 0.04, 0.04))
+
+
+@pytest.fixture(scope="module")
+def mesh() -> ConvexMesh:
+    return ConvexMesh(np.random.default_rng(7).normal(size=(30, 3)) * 0.03)
+
+
+@pytest.fixture(scope="module")
+def prism() -> Prism:
+    return Prism(6, 0.03, 0.05)
+
+
+def _face_with_normal(obj, normal) -> int:
+    return int(np.argmax(obj.normals @ np.asarray(normal, dtype=float)))
+
+
+def _random_in_face(face, rng, n) -> np.ndarray:
+    """Random points of a convex face: convex combinations of its vertices."""
+    w = rng.dirichlet(np.ones(face.polygon.shape[0]), size=n)
+    return w @ face.polygon
+
+
+# ---------------------------------------------------------------------- unfolding
+@pytest.mark.parametrize("name", ["box", "prism", "mesh"])
+def test_unfolding_across_each_edge_preserves_the_geodesic(name, request):
+    """Two points on faces sharing an edge: their unfolded distance is the length of the
+    straight surface line across the edge, hypot(a_p + a_q, alpha_p - alpha_q), where a is
+    the distance to the edge line and alpha the coordinate along it."""
+    obj = request.getfixturevalue(name)
+    rng = np.random.default_rng(1)
+    for adj in obj.face_adjacency:
+        fa, fb = obj.faces[adj.face_a], obj.faces[adj.face_b]
+        unf_a, unf_b = unfold_faces(obj, [adj.face_a, adj.face_b])
+        p, q = _random_in_face(fa, rng, 5), _random_in_face(fb, rng, 5)
+        e0 = adj.edge[0]
+        e = (adj.edge[1] - adj.edge[0]) / np.linalg.norm(adj.edge[1] - adj.edge[0])
+        alpha_p, alpha_q = (p - e0) @ e, (q - e0) @ e
+        a_p = np.linalg.norm(p - e0 - alpha_p[:, None] * e, axis=1)
+        a_q = np.linalg.norm(q - e0 - alpha_q[:, None] * e, axis=1)
+        expected = np.hypot(a_p + a_q, alpha_p - alpha_q)
+        got = np.linalg.norm(unf_a.to_unfolded(fa.to_uv(p)) - unf_b.to_unfolded(fb.to_uv(q)),
+                             axis=1)
+        assert_close(got, expected, atol=1e-12, what=f"faces {adj.face_a}-{adj.face_b}")
+        # The shared edge lands at the same place from both faces, and the round trip
+        # unfolded -> object is exact.
+        assert_close(unf_b.to_unfolded(fb.to_uv(adj.edge)), unf_b.hinge_uv, atol=1e-12)
+        assert_close(unf_b.to_object(unf_b.to_unfolded(fb.to_uv(q))), q, atol=1e-12)
+
+
+def test_unfold_rejects_faces_that_share_no_edge(box):
+    top, bottom = _face_with_normal(box, [0, 0, 1]), _face_with_normal(box, [0, 0, -1])
+    with pytest.raises(GeometryError, match="share no edge"):
+        unfold_faces(box, [top, bottom])
+
+
+# ---------------------------------------------------------------------- region + grid
+def test_top_to_side_geodesic_is_the_unfolded_straight_line(box):
+    """P on the top, Q on the +x side 20 mm below the top edge: unfolding the side about
+    the top's +x edge puts Q at (30 + 20, -10) mm, so the geodesic is hypot(50, 15) mm."""
+    P, Q = np.array([0.0, 0.005, 0.02]), np.array([0.03, -0.01, 0.0])
+    grid = build_surface_grid(box, P, Q, spacing_m=SPACING)
+    expected = math.hypot(0.05, 0.015)
+    top, side = _face_with_normal(box, [0, 0, 1]), _face_with_normal(box, [1, 0, 0])
+    assert grid.face_chain == (top, side)
+    assert_close(np.linalg.norm(grid.uv[grid.q_index] - grid.uv[grid.p_index]), expected,
+                 atol=1e-12, what="unfolded P-Q distance")
+    assert_close(grid.geodesic_m, expected, atol=1e-12)
+    path = shortest_grid_path(grid)
+    assert expected - 1e-12 <= path.length_m <= 1.03 * expected
+    assert path.face_ids[0] == top and path.face_ids[-1] == side
+
+
+def test_top_to_bottom_goes_over_the_nearest_side(box):
+    """P and Q 10 mm from the +x end on top and bottom: over the +x face the route is
+    10 + 40 + 10 = 60 mm (over a y face it would be 20 + 40 + 20 = 80 mm)."""
+    P, Q = np.array([0.02, 0.0, 0.02]), np.array([0.02, 0.0, -0.02])
+    grid = build_surface_grid(box, P, Q, spacing_m=SPACING)
+    assert grid.face_chain[1] == _face_with_normal(box, [1, 0, 0])
+    assert_close(grid.geodesic_m, 0.06, atol=1e-12)
+    path = shortest_grid_path(grid)
+    assert 0.06 - 1e-12 <= path.length_m <= 1.03 * 0.06
+    with pytest.raises(GeometryError, match="region cannot be unfolded"):
+        build_surface_grid(box, P, Q, spacing_m=SPACING, max_faces=2)
+
+
+def test_point_on_an_edge_may_use_either_face(box):
+    """P on the top/+x edge and Q on the +x face share the +x face: one face, straight."""
+    P, Q = np.array([0.03, 0.0, 0.02]), np.array([0.03, 0.01, -0.01])
+    grid = build_surface_grid(box, P, Q, spacing_m=SPACING)
+    assert grid.face_chain == (_face_with_normal(box, [1, 0, 0]),)
+    assert_close(grid.geodesic_m, np.linalg.norm(Q - P), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["box", "prism", "mesh"])
+def test_nodes_and_mapped_points_lie_on_their_faces(name, request):
+    obj = request.getfixturevalue(name)
+    sample = obj.sample_surface(0.01)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        i = rng.integers(len(sample))
+        dist = np.linalg.norm(sample.points - sample.points[i], axis=1)
+        j = rng.choice(np.flatnonzero((dist > 0.015) & (dist < 0.03)))  # a few faces away
+        grid = build_surface_grid(obj, sample.points[i], sample.points[j], spacing_m=SPACING)
+        assert np.max(np.abs(obj.signed_distance(grid.points_object))) < 1e-9
+        _assert_on_faces(obj, grid.points_object, grid.face_ids)
+        assert_close(grid.normals_object, obj.normals[grid.face_ids], atol=0)
+        assert_close(grid.to_object(grid.uv, grid.face_ids)[0], grid.points_object, atol=1e-15)
+        assert_close(grid.P_object, sample.points[i], atol=1e-12, what="P node")
+        assert_close(grid.Q_object, sample.points[j], atol=1e-12, what="Q node")
+        # Random points of the unfolded region map onto the surface, on their face.
+        lo, hi = grid.uv.min(axis=0), grid.uv.max(axis=0)
+        uv = rng.uniform(lo, hi, size=(2000, 2))
+        uv = uv[grid.contains(uv)]
+        pts, nrm, fid = grid.to_object(uv)
+        assert np.max(np.abs(obj.signed_distance(pts))) < 1e-9
+        _assert_on_faces(obj, pts, fid)
+
+
+def _assert_on_faces(obj, pts, face_ids):
+    plane = np.einsum("nd,nd->n", pts, obj.normals[face_ids]) - obj.offsets[face_ids]
+    assert np.max(np.abs(plane)) < 1e-12
+    for f in np.unique(face_ids):
+        face = obj.faces[f]
+        assert np.all(face.contains_uv(face.to_uv(pts[face_ids == f]), -1e-9))
+
+
+def test_edges_stay_inside_the_region_and_use_the_16_stencil(box):
+    P, Q = np.array([-0.025, 0.0, 0.02]), np.array([0.025, 0.0, 0.02])
+    grid = build_surface_grid(box, P, Q, spacing_m=SPACING)
+    assert len(grid.unfoldings) == 5  # the top face and its four neighbours
+    a, b = grid.uv[grid.edges[:, 0]], grid.uv[grid.edges[:, 1]]
+    assert_close(grid.edge_lengths_m, np.linalg.norm(b - a, axis=1), atol=0)
+    for t in np.linspace(0.05, 0.95, 10):
+        assert np.all(grid.contains(a + t * (b - a))), f"an edge leaves the region at t={t}"
+    lattice = ~np.isin(grid.edges, [grid.q_index]).any(axis=1)
+    assert np.max(grid.edge_lengths_m[lattice]) <= math.sqrt(5) * SPACING * (1 + 1e-9)
+    assert np.max(grid.edge_lengths_m[~lattice]) <= 2 * SPACING * (1 + 1e-9)
+    degree = np.bincount(grid.edges[lattice].ravel(), minlength=len(grid))
+    assert degree.max() == 16
+    centre = np.argmin(np.linalg.norm(grid.points_object - [0.0, 0.0, 0.02], axis=1))
+    assert degree[centre] == 16
+    # Edges between faces are surface paths of the edge's length: map 400 points of each
+    # back to 3-D and sum the chords (a chord across the 90-degree edge cuts at most
+    # 0.3 x 1/400 of the edge).
+    cross = np.flatnonzero(grid.face_ids[grid.edges[:, 0]] != grid.face_ids[grid.edges[:, 1]])
+    assert cross.size > 50
+    t = np.linspace(0.0, 1.0, 401)
+    for e in cross[:: max(1, cross.size // 40)]:
+        seg = a[e] + t[:, None] * (b[e] - a[e])
+        pts = grid.to_object(seg)[0]
+        length = np.linalg.norm(np.diff(pts, axis=0), axis=1).sum()
+        assert_close(length, grid.edge_lengths_m[e], atol=0, rtol=1e-3, what=f"edge {e}")
+
+
+def test_no_edge_jumps_the_gap_between_unfolded_neighbours(box):
+    """Around the top face the unfolded sides leave empty corner squares: no edge may
+    cross one (its midpoint would lie outside every face)."""
+    grid = build_surface_grid(box, np.array([0.02, 0.01, 0.02]), np.array([0.025, 0.015, 0.02]))
+    mid = 0.5 * (grid.uv[grid.edges[:, 0]] + grid.uv[grid.edges[:, 1]])
+    assert np.all(grid.contains(mid))
+    corners = np.array([u.polygon_uv for u in grid.unfoldings[:1]])[0]
+    # Points just outside a corner of the top face, diagonally, are outside the region.
+    out = corners * (1 + 1e-3)
+    assert not np.any(grid.contains(out))
+
+
+def test_geodesic_bounds_on_random_pairs(box, mesh):
+    """A surface route is at least the straight 3-D distance; the grid path is at least
+    the region's geodesic and within 3 % (plus two steps for the ends) of it."""
+    rng = np.random.default_rng(11)
+    for obj in (box, mesh):
+        sample = obj.sample_surface(0.004)
+        for _ in range(8):
+            i, j = rng.choice(len(sample), size=2, replace=False)
+            P, Q = sample.points[i], sample.points[j]
+            try:
+                grid = build_surface_grid(obj, P, Q, spacing_m=SPACING)
+            except GeometryError:
+                continue  # farther than max_faces faces apart
+            assert grid.geodesic_m >= np.linalg.norm(Q - P) - 1e-12
+            path = shortest_grid_path(grid)
+            assert grid.geodesic_m - 1e-12 <= path.length_m
+            assert path.length_m <= 1.03 * grid.geodesic_m + 2 * SPACING
+
+
+# ---------------------------------------------------------------------- paths and costs
+WALL_GAP_PATH_M = 2 * math.hypot(0.021, 0.01) + 0.008  # around the wall's corners
+
+
+def _wall_cost(grid, value, gap=True):
+    """Cost ``value`` on a wall |x| < 4 mm, open for y <= -10 mm when ``gap``."""
+    x, y = grid.points_object[:, 0], grid.points_object[:, 1]
+    wall = (np.abs(x) < 0.004) & ((y > -0.01) if gap else True)
+    return np.where(wall, value, 0.0)
+
+
+@pytest.fixture(scope="module")
+def top_grid(box):
+    return build_surface_grid(box, np.array([-0.025, 0.0, 0.02]), np.array([0.025, 0.0, 0.02]),
+                              spacing_m=SPACING)
+
+
+def test_single_face_path_is_the_straight_line(top_grid):
+    path = shortest_grid_path(top_grid)
+    assert 0.05 - 1e-12 <= path.length_m <= 1.03 * 0.05
+    assert path.nodes[0] == top_grid.p_index and path.nodes[-1] == top_grid.q_index
+    assert_close(path.arc_length_m[-1], path.length_m, atol=0)
+    assert_close(path.cost, path.length_m, atol=1e-15, what="cost without node costs")
+
+
+def test_forbidden_wall_steers_the_path_through_the_gap(top_grid):
+    """With a wall |x| < 4 mm forbidden for y > -10 mm, the shortest route hugs the gap's
+    corners (-4, -10) and (4, -10) mm: 2 hypot(21, 10) + 8 = 54.5 mm."""
+    cost = _wall_cost(top_grid, np.inf)
+    path = shortest_grid_path(top_grid, cost)
+    assert np.all(np.isfinite(cost[path.nodes]))
+    assert_close(path.length_m, WALL_GAP_PATH_M, atol=0, rtol=0.03)
+    in_wall_x = np.abs(path.points_object[:, 0]) < 0.004
+    assert np.all(path.points_object[in_wall_x, 1] <= -0.01)
+    # A high finite cost steers it the same way; a low one is crossed (the detour is
+    # 4.5 mm longer, the band 8 mm wide: crossing costs 8 mm x 0.1 = 0.8 mm extra).
+    high = shortest_grid_path(top_grid, _wall_cost(top_grid, 100.0))
+    assert_close(high.length_m, WALL_GAP_PATH_M, atol=0, rtol=0.03)
+    low = shortest_grid_path(top_grid, _wall_cost(top_grid, 0.1))
+    assert_close(low.length_m, 0.05, atol=1e-12)
+    assert low.cost > low.length_m
+
+
+def test_path_cost_is_the_sum_of_the_edge_weights(top_grid):
+    rng = np.random.default_rng(5)
+    cost = rng.uniform(0.0, 2.0, size=len(top_grid))
+    path = shortest_grid_path(top_grid, cost, cost_weight=0.7)
+    seg = np.linalg.norm(np.diff(path.uv, axis=0), axis=1)
+    expected = np.sum(seg * (1 + 0.7 * 0.5 * (cost[path.nodes[:-1]] + cost[path.nodes[1:]])))
+    assert_close(path.cost, expected, atol=1e-12)
+    weights = edge_weights(top_grid, cost, cost_weight=0.7)
+    assert np.all(weights >= top_grid.edge_lengths_m)
+
+
+def test_unreachable_q_raises_planning_error(top_grid):
+    with pytest.raises(PlanningError, match="unreachable"):
+        shortest_grid_path(top_grid, _wall_cost(top_grid, np.inf, gap=False))
+    cost = np.zeros(len(top_grid))
+    cost[top_grid.q_index] = np.inf
+    with pytest.raises(PlanningError, match="Q has an infinite"):
+        shortest_grid_path(top_grid, cost)
+
+
+def test_bad_node_cost_is_refused(top_grid):
+    m = len(top_grid)
+    for bad, word in ((np.full(m, np.nan), "NaN"), (-np.ones(m), "negative"),
+                      (np.zeros(m + 1), "shape")):
+        with pytest.raises(InputError, match=word) as err:
+            shortest_grid_path(top_grid, bad)
+        assert err.value.argument == "node_cost"
+    with pytest.raises(InputError) as err:
+        shortest_grid_path(top_grid, np.zeros(m), cost_weight=-1.0)
+    assert err.value.argument == "cost_weight"
+
+
+# ---------------------------------------------------------------------- bad input
+def test_points_off_the_surface_are_refused(box):
+    on = np.array([0.0, 0.0, 0.02])
+    with pytest.raises(InputError, match="not on the object surface") as err:
+        build_surface_grid(box, np.array([0.0, 0.0, 0.025]), on)
+    assert err.value.argument == "P_object" and "0.005" in str(err.value)
+    with pytest.raises(InputError, match="not on the object surface") as err:
+        build_surface_grid(box, on, np.array([0.0, 0.0, 0.0]))
+    assert err.value.argument == "Q_object"
+    with pytest.raises(InputError) as err:
+        build_surface_grid(box, np.array([0.0, np.nan, 0.02]), on)
+    assert err.value.argument == "P_object"
+
+
+def test_coinciding_points_and_bad_parameters_are_refused(box):
+    P = np.array([0.0, 0.0, 0.02])
+    with pytest.raises(InputError, match="coincide") as err:
+        build_surface_grid(box, P, P + [0.0005, 0.0, 0.0])
+    assert err.value.argument == "Q_object"
+    Q = np.array([0.01, 0.0, 0.02])
+    for bad in (0.0, -0.001, np.nan):
+        with pytest.raises(InputError) as err:
+            build_surface_grid(box, P, Q, spacing_m=bad)
+        assert err.value.argument == "spacing_m"
+    with pytest.raises(InputError) as err:
+        build_surface_grid(box, P, Q, max_faces=0)
+    assert err.value.argument == "max_faces"
