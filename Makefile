@@ -27,5 +27,8 @@ bench: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
+docs-images: $(STAMP)
+	$(PY) docs/make_screenshots.py
+
 clean:
 	rm -rf $(VENV) out .pytest_cache build *.egg-info

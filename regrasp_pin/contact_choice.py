@@ -201,21 +201,25 @@ def choose_new_contact(
     fc = FingerClearance(hand, finger.name) if q_hand_arrive is not None else None
     T_arrive = None
     fallback = None
+    rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}
     for rank, j in enumerate(order[:max_checks]):
         i = idx[j]
         e = eps(pts[i], sample.normals[i])
         if e <= 0.0:
+            rejected["force closure"] += 1
             continue
         if lc is not None:
             if T_arrive is None:
                 T_arrive = manifold.T_palm_object[ka]
             q_full = hand.to_full(finger.name, manifold.q[ka, i])
             if lc(q_full[None], T_arrive)[0] < contact.choice_link_clearance_m:
+                rejected["link clearance"] += 1
                 continue
         if fc is not None:
             q_all = np.array(q_hand_arrive, float)
             q_all[finger.q_indices] = manifold.q[ka, i]
             if fc(q_all) < finger_clearance_m:
+                rejected["finger clearance"] += 1
                 continue
         result = NewContact(
             finger=finger.name,
@@ -239,9 +243,10 @@ def choose_new_contact(
             fallback = result
     if fallback is not None:
         return fallback
+    why = ", ".join(f"{n} {k}" for k, n in rejected.items() if n)
     raise ContactError(
-        f"none of the {min(idx.size, max_checks)} best candidates (of {idx.size}) keeps the "
-        "grasp in force closure with the other contacts and clear of the finger's links",
+        f"none of the {min(idx.size, max_checks)} best candidates (of {idx.size}) passes "
+        f"(rejected for: {why})",
         finger=finger.name,
         time_s=float(manifold.times_s[ka]),
     )
@@ -288,8 +293,9 @@ def initial_grasp(
     usable and then by margin; the best ``candidates_per_finger`` (spread over the
     surface) enter a seeded randomized search for the combination that maximizes
     first the number of fingers that can let go with the others still in force closure
-    (so that fingers can regrasp later), then the smallest of those leave-one-out
-    epsilons, the mean lasting fraction and the epsilon, among force-closure grasps
+    (so that fingers can regrasp later), then twice the shortest lasting fraction, the
+    smallest of those leave-one-out epsilons, the mean lasting fraction and the epsilon,
+    among force-closure grasps
     whose contacts are ``min_separation_m`` apart.
 
     Raises:
@@ -341,6 +347,7 @@ def initial_grasp(
         order_f = rng.permutation(names) if trial else names
         pick: dict[str, int] = {}
         score_frac = 0.0
+        min_frac = 1.0
         for name in order_f:
             ids, frac = per_finger[name]
             ok = [
@@ -354,6 +361,7 @@ def initial_grasp(
             c = ok[0] if trial == 0 else ok[int(rng.integers(0, min(len(ok), 4)))]
             pick[name] = int(ids[c])
             score_frac += float(frac[c])
+            min_frac = min(min_frac, float(frac[c]))
         if len(pick) != len(names):
             continue
         ii = np.array([pick[n] for n in names])
@@ -381,6 +389,7 @@ def initial_grasp(
         score = (
             len(removable)
             + (min(removable) / (min(removable) + 0.05) if removable else 0.0)
+            + 2.0 * min_frac
             + score_frac / len(names)
             + e / (e + 0.05)
         )

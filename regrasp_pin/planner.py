@@ -35,7 +35,7 @@ from .plan import ContactPhase, Plan, RegraspPhase
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .tracking import ContactTrack, track_contact
 
-__all__ = ["PlannerParams", "ManipulationPlan", "plan_manipulation"]
+__all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation", "rest_configuration"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +52,9 @@ class PlannerParams:
         min_holding: Fewest fingers that must hold while one is in the air.
         mu: Friction coefficient for force closure.
         candidates: How many new contacts Q to try per regrasp before giving up.
+        fingers: The fingers that take part (default: all). The others stay idle at
+            the configuration of :func:`rest_configuration`, as obstacles that every
+            regrasp is verified against.
         contact: The contact model (trigger margin, pad cone, tolerances).
         regrasp: Parameters of each regrasp.
     """
@@ -63,6 +66,7 @@ class PlannerParams:
     min_holding: int = 3
     mu: float = 0.8
     candidates: int = 4
+    fingers: tuple[str, ...] | None = None
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
 
@@ -134,6 +138,12 @@ def plan_manipulation(
             the failure.
     """
     params = params or PlannerParams()
+    active = tuple(params.fingers) if params.fingers else hand.finger_names
+    for name in active:
+        hand.finger(name)  # raises UnknownNameError listing the valid names
+    base_q = rest_configuration(
+        hand, obj, motion, [n for n in hand.finger_names if n not in active]
+    )
     stage: dict[str, float] = {}
     t0 = time.perf_counter()
     sample = obj.sample_surface(params.sample_spacing_m)
@@ -141,7 +151,7 @@ def plan_manipulation(
     m_times = np.linspace(motion.t_start, motion.t_end, n_m)
     manifolds = {
         name: build_manifold(hand.fingers[name], sample, motion, m_times, contact=params.contact)
-        for name in hand.finger_names
+        for name in active
     }
     stage["manifolds"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -156,7 +166,7 @@ def plan_manipulation(
 
     t0 = time.perf_counter()
     holding: dict[str, _Holding] = {}
-    for name in hand.finger_names:
+    for name in active:
         holding[name] = _hold(
             hand,
             obj,
@@ -169,18 +179,28 @@ def plan_manipulation(
             motion.t_start,
             params,
         )
-    phases: dict[str, list] = {name: [] for name in hand.finger_names}
+    phases: dict[str, list] = {name: [] for name in active}
     regrasps: list[RegraspResult] = []
     stage["tracking"] = time.perf_counter() - t0
     stage["regrasps"] = 0.0
     now = motion.t_start  # no regrasp may start before this (one finger in the air)
     D = params.regrasp.duration_s
 
-    history: dict[str, list[_Holding]] = {name: [] for name in hand.finger_names}
+    history: dict[str, list[_Holding]] = {name: [] for name in active}
 
     def partial_plan() -> Plan:
         return _assemble(
-            hand, obj, motion, grid, history, holding, phases, regrasps, until=now, params=params
+            hand,
+            obj,
+            motion,
+            grid,
+            history,
+            holding,
+            phases,
+            regrasps,
+            until=now,
+            params=params,
+            base_q=base_q,
         )
 
     while True:
@@ -222,7 +242,7 @@ def plan_manipulation(
                 time_s=t_trig,
                 partial=partial_plan(),
             )
-        stay = [n for n in hand.finger_names if n != name]
+        stay = [n for n in active if n != name]
         if len(stay) < params.min_holding:
             raise PlanningError(
                 f"only {len(stay)} fingers would hold (need {params.min_holding})",
@@ -243,7 +263,9 @@ def plan_manipulation(
             )
 
         t_r = time.perf_counter()
-        result = _regrasp(hand, obj, motion, manifolds[name], sample, name, start, holding, params)
+        result = _regrasp(
+            hand, obj, motion, manifolds[name], sample, name, start, holding, params, base_q
+        )
         stage["regrasps"] += time.perf_counter() - t_r
         if isinstance(result, RegraspError):
             raise PlanningError(
@@ -382,6 +404,7 @@ def _regrasp(
     start: float,
     holding: dict[str, _Holding],
     params: PlannerParams,
+    base_q: np.ndarray,
 ) -> tuple[RegraspResult, object] | RegraspError:
     f = hand.fingers[name]
     h = holding[name]
@@ -391,7 +414,7 @@ def _regrasp(
     others_tips = np.array([p + hand.fingers[n].tip_radius * nn for n, (p, nn) in stay.items()])
 
     def q_hand(times: np.ndarray) -> np.ndarray:
-        q = np.broadcast_to(hand.neutral(), (times.size, hand.model.nq)).copy()
+        q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
         for n in stay:
             q[:, hand.fingers[n].q_indices] = _exact_holding_q(
                 hand, motion, n, holding[n], times, params.contact.ik_tol_m
@@ -455,6 +478,7 @@ def _assemble(
     *,
     until: float,
     params: PlannerParams,
+    base_q: np.ndarray,
 ) -> Plan:
     """Sample the whole hand: grid times outside the regrasps, the regrasps' own samples
     inside them (so linear interpolation between samples is what was verified).
@@ -469,8 +493,8 @@ def _assemble(
     times = times[times <= until + 1e-9]
     if times.size < 2:
         times = np.array([motion.t_start, max(until, motion.t_start + params.dt_s)])
-    q = np.broadcast_to(hand.neutral(), (times.size, hand.model.nq)).copy()
-    for name in hand.finger_names:
+    q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
+    for name in holding:
         f = hand.fingers[name]
         in_air = np.zeros(times.size, bool)
         for r in regrasps:
@@ -520,3 +544,32 @@ def _urdf_entry(hand: Hand) -> str:
         return str(path.relative_to(repo_root()))
     except ValueError:
         return str(path)
+
+
+def rest_configuration(
+    hand: Hand, obj: ConvexObject, motion: ObjectMotion, idle: list[str]
+) -> np.ndarray:
+    """Full configuration ``(nq,)`` with the idle fingers where they stay clearest of
+    the object over the motion (Coal), chosen among a few fixed postures; the other
+    fingers at the middle of their limits.
+    """
+    from .contact import LinkClearance
+
+    q = hand.neutral()
+    if not idle:
+        return q
+    T = motion.pose(np.linspace(motion.t_start, motion.t_end, 7))
+    for name in idle:
+        f = hand.fingers[name]
+        fr = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+        grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
+        postures = f.lower + grid * (f.upper - f.lower)
+        lc = LinkClearance(hand, name, obj, include_tip=True)
+        best, best_d = f.q_mid, -np.inf
+        for qf in postures:
+            full = hand.to_full(name, qf, q)
+            d = float(lc(np.repeat(full[None], len(T), 0), T).min())
+            if d > best_d + 1e-6:
+                best, best_d = qf, d
+        q[f.q_indices] = best
+    return q

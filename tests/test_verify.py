@@ -15,6 +15,12 @@ from conftest import assert_close
 from scipy.optimize import brentq, minimize_scalar
 from scipy.spatial.transform import Rotation
 
+from regrasp_pin._pair_distances import (
+    PairDistances,
+    _geometry,
+    _placements,
+    _segment_distance,
+)
 from regrasp_pin.exceptions import InputError, UnknownNameError, VerificationError
 from regrasp_pin.hand import Hand
 from regrasp_pin.motion import ObjectMotion
@@ -23,10 +29,6 @@ from regrasp_pin.verify import (
     OBJECT_LEVER_M,
     Failure,
     VerificationReport,
-    _geometry,
-    _PairChecker,
-    _placements,
-    _segment_distance,
     densify,
     verify_finger_motion,
 )
@@ -185,7 +187,7 @@ def test_lower_bounds_never_exceed_coal_distances(hand_name):
                   for _ in range(D)])
     for obj in (Box((0.06, 0.04, 0.03)), Prism(5, 0.03, 0.05)):
         for finger in ("thumb", "index"):
-            checker = _PairChecker(hand, obj, hand.finger(finger), q, T, np.zeros(D), 0.0,
+            checker = PairDistances(hand, obj, hand.finger(finger), q, T, np.zeros(D), 0.0,
                                    1.0)  # 1 m: every pair gets the fine bound
             checker._query(*np.nonzero(np.ones(checker.lb.shape, dtype=bool)))
             assert np.all(checker.exact >= checker.lb - 1e-9)
@@ -249,6 +251,19 @@ def test_static_configuration_reports_exact_minima(five, gap):
     assert not failing
     for key, value in mins.items():
         assert_close(report_mins(r)[key], value, atol=1e-8, what=key)
+
+
+def test_single_sample_is_checked_as_is(five):
+    obj = Box((0.04, 0.04, 0.04))
+    tip = five.finger("index").fk(STRAIGHT)
+    T = pose(tip + [TIP_R + 0.001 + 0.02, 0.0, 0.0])  # 1 mm gap
+    q = five.to_full("index", STRAIGHT, np.zeros(five.model.nq))
+    r = verify_finger_motion(five, obj, "index", [0.0], q[None], T[None], tip_clearance_m=0.0)
+    assert r.ok and r.n_samples == 1 and r.max_tip_step_m == 0.0
+    assert_close(r.min_tip_object_m, 0.001, atol=1e-9, what="gap")
+    r = verify_finger_motion(five, obj, "index", [0.0], q[None], T[None],
+                             tip_clearance_m=0.002)
+    assert [x.kind for x in r.failures] == ["tip-object"] and r.time_s == 0.0
 
 
 def test_touching_tip_passes_with_zero_clearance_only(five):
@@ -343,6 +358,29 @@ def test_sweep_between_two_clear_samples_is_caught_by_densification(five):
     dense = verify_finger_motion(five, obj, "index", t, q, Ts, tip_clearance_m=0.0)
     assert not dense.ok and dense.n_samples == 301
     assert {x.kind for x in dense.failures} == {"tip-object"}
+
+
+def test_interpolation_slack_bounds_what_happens_between_samples(five):
+    """Ten times denser sampling never finds a distance below min - slack."""
+    size, _, q, t = _sweep_case(five, 2)
+    # a box face 0.5 mm outside the tip's arc, touching it at abduction 0.155 rad,
+    # between the coarse samples (0.01 rad apart, 0.15 and 0.16)
+    f = five.finger("index")
+    mcp = five.model.jointPlacements[five.model.getJointId("index_abd")].translation
+    tip = f.fk(np.array([0.155, 0.0, 0.0]))
+    radial = (tip - mcp) / np.linalg.norm(tip - mcp)
+    T = pose(tip + radial * (TIP_R + 0.0005 + 0.005), [0.0, 0.0, np.arctan2(radial[1],
+                                                                              radial[0])])
+    Ts = np.tile(T, (2, 1, 1))
+    coarse = verify_finger_motion(five, Box(size), "index", t, q, Ts, tip_clearance_m=0.0,
+                                  max_joint_step_rad=0.01)
+    fine = verify_finger_motion(five, Box(size), "index", t, q, Ts, tip_clearance_m=0.0,
+                                max_joint_step_rad=0.001)
+    assert 0 < fine.interpolation_slack_m < 1e-4  # 1 mrad: under 0.1 mm here
+    assert coarse.min_tip_object_m > 0  # a near miss
+    assert fine.min_tip_object_m <= coarse.min_tip_object_m
+    assert fine.min_tip_object_m >= coarse.min_tip_object_m - coarse.interpolation_slack_m
+    assert fine.interpolation_slack_m <= 0.1 * coarse.interpolation_slack_m * 1.01
 
 
 def test_max_tip_step_refines_the_sampling(five):

@@ -1,0 +1,54 @@
+"""The paper's Fig. 9: one finger's joint angles over the whole motion."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..plan import Plan, RegraspPhase
+from . import require_pyplot
+
+
+def plot_joint_angles(plan: Plan, finger: str, *, ax: Any = None) -> Any:
+    """Joint angles [deg] of ``finger`` against time [s], regrasp intervals shaded.
+
+    Args:
+        plan: A plan (e.g. ``Plan.load("out/plan.json")``).
+        finger: Finger name (e.g. ``"index"``, the paper's forefinger).
+        ax: Matplotlib axes to draw into; a new figure when None.
+
+    Returns:
+        The matplotlib figure.
+    """
+    plt = require_pyplot()
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(8, 3.6))
+    else:
+        fig = ax.figure
+    info = plan.hand["fingers"][finger]
+    hand = plan.load_hand()
+    f = hand.finger(finger)
+    q = plan.q[:, f.q_indices]
+    for j, name in enumerate(info["joints"]):
+        line = ax.plot(plan.t, np.degrees(q[:, j]), lw=1.6, label=name)[0]
+        for lim in (f.lower[j], f.upper[j]):
+            ax.axhline(np.degrees(lim), color=line.get_color(), lw=0.6, ls=":")
+    for ph in plan.phases.get(finger, []):
+        if isinstance(ph, RegraspPhase):
+            ax.axvspan(ph.t_start, ph.t_end, color="0.85", zorder=0)
+            ax.text(
+                0.5 * (ph.t_start + ph.t_end),
+                ax.get_ylim()[1],
+                "regrasp",
+                ha="center",
+                va="top",
+                fontsize=8,
+                color="0.3",
+            )
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("joint angle [deg]")
+    ax.set_title(f"{finger}: joint angles (dotted: limits; grey: regrasps)")
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    return fig
