@@ -5,12 +5,16 @@ finger lifts off, travels around the object without touching it or the other
 fingers, and lands on a better contact, while the other fingers keep holding.
 Kinematics by Pinocchio, exact distances by Coal.
 
-``import regrasp_pin`` never imports meshcat or matplotlib.
+``import regrasp_pin`` never imports meshcat or matplotlib: the viewer lives in
+``regrasp_pin.viz`` and the figures in ``regrasp_pin.plotting``.
 """
 
 from __future__ import annotations
 
 from . import exceptions
+from .contact import ContactModel, FingerClearance, LinkClearance
+from .contact_choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
+from .deviation import deviation_matrix
 from .exceptions import (
     ContactError,
     GeometryError,
@@ -25,7 +29,9 @@ from .exceptions import (
 from .grasp_quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
 from .hand import Finger, Hand
 from .ik import IKResult
+from .inflation import TipPath, grid_inflation, inflate_path, inflation_height
 from .kinematics import FingerChain
+from .manifold import Manifold, build_manifold
 from .motion import ObjectMotion
 from .objects import (
     Box,
@@ -38,36 +44,83 @@ from .objects import (
     SurfaceSample,
     object_from_params,
 )
+from .plan import ContactPhase, Plan, RegraspPhase
+from .planner import ManipulationPlan, PlannerParams, plan_manipulation
+from .polygon import PolygonResult, approximate_polygon
+from .regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .scenarios import Scenario, make_scenario
+from .surface_grid import SurfaceGrid, build_surface_grid
+from .surface_path import GridPath, shortest_grid_path
+from .tracking import ContactTrack, track_contact
+from .verify import Failure, VerificationReport, densify, verify_finger_motion
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Box",
+    "ContactError",
+    "ContactModel",
+    "ContactPhase",
+    "ContactTrack",
     "ConvexMesh",
     "ConvexObject",
     "ExtrudedPolygon",
     "Face",
     "FaceAdjacency",
-    "ObjectMotion",
-    "Prism",
-    "SurfaceSample",
-    "contact_wrenches",
-    "ferrari_canny_epsilon",
-    "is_force_closure",
-    "object_from_params",
+    "Failure",
     "Finger",
     "FingerChain",
+    "FingerClearance",
+    "GeometryError",
+    "Grasp",
+    "GridPath",
     "Hand",
     "IKResult",
-    "ContactError",
-    "GeometryError",
     "InputError",
+    "LinkClearance",
+    "ManipulationPlan",
+    "Manifold",
     "MissingExtraError",
     "ModelFileError",
+    "NewContact",
+    "ObjectMotion",
+    "Plan",
+    "PlannerParams",
     "PlanningError",
+    "PolygonResult",
+    "Prism",
     "RegraspError",
+    "RegraspParams",
+    "RegraspPhase",
+    "RegraspResult",
+    "Scenario",
+    "SurfaceGrid",
+    "SurfaceSample",
+    "TipPath",
     "UnknownNameError",
     "VerificationError",
+    "VerificationReport",
     "__version__",
+    "approximate_polygon",
+    "build_manifold",
+    "build_surface_grid",
+    "choose_new_contact",
+    "contact_wrenches",
+    "densify",
+    "deviation_matrix",
     "exceptions",
+    "exit_times",
+    "ferrari_canny_epsilon",
+    "grid_inflation",
+    "inflate_path",
+    "inflation_height",
+    "initial_grasp",
+    "is_force_closure",
+    "make_scenario",
+    "object_from_params",
+    "plan_manipulation",
+    "plan_regrasp",
+    "shortest_grid_path",
+    "track_contact",
+    "verify_finger_motion",
 ]

@@ -36,8 +36,8 @@ class ContactModel:
     Attributes:
         cone_deg: Largest angle between the pad direction and the inward normal [deg].
         ik_tol_m: IK tolerance for a contact to count as reached [m].
-        link_clearance_m: Smallest distance between the finger's non-tip links and the
-            object [m].
+        link_clearance_m: A held contact triggers a regrasp when the finger's non-tip
+            links come closer than this to the object [m].
         limit_margin_rad: A contact closer than this to a joint limit (boundary plane)
             triggers a regrasp [rad].
         choice_margin_rad: New and initial contacts must be at least this far inside
@@ -49,10 +49,10 @@ class ContactModel:
 
     cone_deg: float = 60.0
     ik_tol_m: float = 1e-5
-    link_clearance_m: float = 0.0
+    link_clearance_m: float = 0.001
     limit_margin_rad: float = 0.05
-    choice_margin_rad: float = 0.1
-    choice_link_clearance_m: float = 0.002
+    choice_margin_rad: float = 0.08
+    choice_link_clearance_m: float = 0.003
 
     @property
     def cos_cone(self) -> float:

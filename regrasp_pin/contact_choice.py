@@ -135,7 +135,7 @@ def choose_new_contact(
         contact: Contact model (margin for condition (a), link clearance).
         mu: Friction coefficient for the grasp-quality test.
         min_separation_m: Smallest distance from the other contacts [m]; default
-            ``2 * tip_radius + 2 mm``.
+            ``2 * tip_radius + 1 mm``.
         link_check: Check with Coal that no other link of the finger touches the
             object at arrival.
         max_checks: Most candidates given the (slower) quality and Coal tests.
@@ -157,7 +157,7 @@ def choose_new_contact(
     """
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
-    sep = 2 * finger.tip_radius + 0.002 if min_separation_m is None else min_separation_m
+    sep = 2 * finger.tip_radius + 0.001 if min_separation_m is None else min_separation_m
     ka = manifold.time_index(t_arrive_s)
     usable = manifold.usable(contact.limit_margin_rad)
     cand = manifold.usable(contact.choice_margin_rad)[ka]
@@ -339,7 +339,7 @@ def initial_grasp(
             raise ContactError("every usable contact makes a link touch the object", finger=name)
         per_finger[name] = (idx[chosen], frac[chosen])
 
-    sep_default = 2 * max(hand.finger(n).tip_radius for n in names) + 0.002
+    sep_default = 2 * max(hand.finger(n).tip_radius for n in names) + 0.001
     sep = sep_default if min_separation_m is None else min_separation_m
     best = None
     best_score = -np.inf

@@ -26,7 +26,7 @@ passes. With ``cap`` (and ``m``) chords that provably cannot appear in a polygon
 from __future__ import annotations
 
 import numpy as np
-from numpy.lib.stride_tricks import as_strided, sliding_window_view
+from numpy.lib.stride_tricks import sliding_window_view
 
 from ._validate import as_array, choice, positive_int
 from .exceptions import InputError
@@ -226,10 +226,11 @@ def _lower_hull(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vertices of the lower convex hull of points sorted by ``x`` (monotone chain)."""
     hx: list[float] = []
     hy: list[float] = []
-    for xi, yi in zip(x.tolist(), y.tolist()):
-        while len(hx) >= 2 and (hx[-1] - hx[-2]) * (yi - hy[-2]) - (hy[-1] - hy[-2]) * (
-            xi - hx[-2]
-        ) <= 0:
+    for xi, yi in zip(x.tolist(), y.tolist(), strict=True):
+        while (
+            len(hx) >= 2
+            and (hx[-1] - hx[-2]) * (yi - hy[-2]) - (hy[-1] - hy[-2]) * (xi - hx[-2]) <= 0
+        ):
             hx.pop()
             hy.pop()
         hx.append(xi)
@@ -315,9 +316,7 @@ class _Builder:
             xs, Ls = xs[ok], Ls[ok]
         return xs, Ls
 
-    def _keep(
-        self, lower: np.ndarray, valid: np.ndarray, cap: float, m: int | None
-    ) -> np.ndarray:
+    def _keep(self, lower: np.ndarray, valid: np.ndarray, cap: float, m: int | None) -> np.ndarray:
         """Chords that may appear in a polygon of energy <= cap, offset form."""
         n, ncols = lower.shape
         unit = {"max": self.scale, "sum": self.scale * n, "ise": self.scale**2 * n}[self._kind]
@@ -516,6 +515,4 @@ class _Builder:
         """Chords whose two ends coincide: distance to that point, computed directly."""
         xs, Ls = self._coincident(keep, ncols)
         if xs.size:
-            F[xs, Ls] = chord_deviations(
-                self.P, xs, (xs + Ls) % self.n, kind, closed=self.closed
-            )
+            F[xs, Ls] = chord_deviations(self.P, xs, (xs + Ls) % self.n, kind, closed=self.closed)

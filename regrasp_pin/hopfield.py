@@ -33,14 +33,15 @@ the first and last columns are pinned to the end points.
 Closing the gap to the optimum (a departure from the paper): the plain network stops in a
 local minimum. :func:`competitive_hopfield` keeps the plain run from the paper's initial
 state and then tries more initial states (shifted equidistant states on closed curves, a
-greedy bottom-up merge) and perturbations (a column's winner relocated to another chord;
-several columns removed and greedily re-inserted), each followed by re-convergence of the
-same network. A result is accepted only if its energy is lower, so the answer is never
-worse than the plain network.
+greedy bottom-up merge, a greedy top-down split) and perturbations (one column's vertex
+relocated to another chord; several columns removed and greedily re-inserted), each followed
+by re-convergence of the same network. A result is accepted only if its energy is lower, so
+the answer is never worse than the plain network.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -54,6 +55,8 @@ logger = logging.getLogger(__name__)
 #: Safety limit on sweeps of one network run (the run always terminates; see module doc).
 MAX_SWEEPS = 100_000
 
+_ARANGE = np.arange(1 << 12)  # offsets within a column window (reused)
+
 
 @dataclass(frozen=True)
 class NetworkRun:
@@ -66,7 +69,7 @@ class NetworkRun:
         energy_history: Energy before the first sweep and after every sweep, shape
             ``(sweeps + 1,)``; never increasing.
         max_span: Widest interval (in curve steps between the two neighbours) any column
-            competed over; entries of ``H`` with a larger span were never read.
+            competed over; chords spanning ``max_span`` steps or more were never read.
     """
 
     indices: np.ndarray
@@ -104,17 +107,20 @@ class HopfieldResult:
 
 
 # ------------------------------------------------------------------------ basics
-def initial_state(points: object, m: int, *, closed: bool = False) -> np.ndarray:
-    """The paper's initial state: ``m`` points as equidistant as possible along the curve.
+def initial_state(
+    points: object, m: int, *, closed: bool = False, phase: float = 0.0
+) -> np.ndarray:
+    """The paper's initial state (step 2): ``m`` points as equidistant as possible.
 
     Targets are spaced evenly in arc length (cumulative chord length, including the closing
-    segment of a closed curve) and snapped to the nearest following point; the indices are
-    then made strictly increasing. Open curves keep both end points.
+    segment of a closed curve) and snapped to the first point at or after each target; the
+    indices are then made strictly increasing. Open curves keep both end points.
 
     Args:
-        points: Curve points, shape ``(n, d)``.
+        points: Curve points, shape ``(n, d)`` [length unit].
         m: Number of vertices, ``2 <= m <= n`` (``3 <= m`` if closed).
-        closed: Closed curve (start at point 0, spacing ``length / m``).
+        closed: Closed curve (targets at ``(i + phase) * length / m``).
+        phase: Closed curves only: shift of the targets, as a fraction of their spacing.
 
     Returns:
         Vertex indices, shape ``(m,)``, strictly increasing.
@@ -125,16 +131,13 @@ def initial_state(points: object, m: int, *, closed: bool = False) -> np.ndarray
     if closed:
         seg = np.append(seg, np.linalg.norm(P[0] - P[-1]))
     cum = np.concatenate([[0.0], np.cumsum(seg)])
-    total = cum[-1]
-    if total <= 0:  # all points coincide: fall back to index spacing
+    if cum[-1] <= 0:  # all points coincide: fall back to index spacing
         cum = np.arange(cum.shape[0], dtype=float)
-        total = cum[-1]
+    total = cum[-1]
     if closed:
-        targets = np.arange(m) / m * total
-        idx = np.searchsorted(cum[:n], targets)
+        idx = np.searchsorted(cum[:n], (np.arange(m) + phase) / m * total)
     else:
-        targets = np.arange(m) / (m - 1) * total
-        idx = np.searchsorted(cum, targets)
+        idx = np.searchsorted(cum, np.arange(m) / (m - 1) * total)
     return _make_increasing(idx, n, closed)
 
 
@@ -205,23 +208,28 @@ def _local_costs(H: np.ndarray, HT: np.ndarray, p: np.ndarray, q: np.ndarray) ->
 
 def _window_costs(
     H: np.ndarray, HT: np.ndarray, p: np.ndarray, q: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Like :func:`_local_costs` but only over the interval: ``(points (k, w), costs (k, w))``.
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Like :func:`_local_costs` but only over the interval.
 
+    Returns ``(points (k, w), costs (k, w), widest span)`` with
     ``points[r, c] = (p[r] + 1 + c) mod n``; costs beyond a row's own interval are inf.
     """
     n = H.shape[0]
-    span = (q - p) % n
-    width = max(int(span.max()) - 1, 1)
-    c = np.arange(width)
-    x = p[:, None] + 1 + c[None, :]
+    span = q - p
+    span %= n
+    widest = int(span.max())
+    width = max(widest - 1, 1)
+    c = _ARANGE[:width] if width <= _ARANGE.shape[0] else np.arange(width)
+    x = p[:, None] + c
+    x += 1
     x %= n
     cost = np.take(H.reshape(-1), x + (p * n)[:, None])
     cost += np.take(HT.reshape(-1), x + (q * n)[:, None])
-    cost[c[None, :] >= (span - 1)[:, None]] = np.inf
-    return x, cost
+    cost[c >= (span - 1)[:, None]] = np.inf
+    return x, cost, widest
 
 
+@functools.lru_cache(maxsize=64)
 def _column_groups(m: int, closed: bool) -> list[np.ndarray]:
     """Sets of mutually non-adjacent free columns (updated together, then the next set)."""
     cols = np.arange(m) if closed else np.arange(1, m - 1)
@@ -259,8 +267,8 @@ def run_network(
     Raises:
         InputError: ``H`` is not square or ``indices`` is not a valid state.
     """
-    H = _check_matrix(H)
-    s = _check_state(indices, H.shape[0], closed)
+    H = check_deviation_matrix(H)
+    s = check_state(indices, H.shape[0], closed)
     return _run(H, np.ascontiguousarray(H.T), s, closed, max_sweeps)
 
 
@@ -282,25 +290,39 @@ def _run(H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool, max_sweeps:
     return NetworkRun(s, history[-1], sweeps, np.asarray(history), max_span)
 
 
+def _update(H: np.ndarray, HT: np.ndarray, s: np.ndarray, cols: np.ndarray) -> tuple:
+    """Winner-take-all update of non-adjacent columns ``cols`` in place.
+
+    Returns (columns that moved, widest span competed over).
+    """
+    m, n = s.shape[0], H.shape[0]
+    p, q = s[(cols - 1) % m], s[(cols + 1) % m]
+    x, cost, span = _window_costs(H, HT, p, q)  # -U (Eq. 10) over the interval
+    win = cost.argmin(axis=1)  # winner-take-all (Eq. 6)
+    r = np.arange(cols.shape[0])
+    cur = (s[cols] - p - 1) % n  # current row's position in the window
+    better = cost[r, win] < cost[r, cur]  # strictly better only: E never rises
+    moved = cols[better]
+    s[moved] = x[r, win][better]
+    return moved, span
+
+
 def _sweep(H: np.ndarray, HT: np.ndarray, s: np.ndarray, groups: list[np.ndarray]) -> tuple:
     """One sweep in place; returns (whether any column moved, widest span competed over)."""
-    m, n = s.shape[0], H.shape[0]
     changed, max_span = False, 0
     for cols in groups:
-        p, q = s[(cols - 1) % m], s[(cols + 1) % m]
-        max_span = max(max_span, int(((q - p) % n).max()))
-        x, cost = _window_costs(H, HT, p, q)  # -U (Eq. 10) over the interval
-        win = cost.argmin(axis=1)  # winner-take-all (Eq. 6)
-        r = np.arange(cols.shape[0])
-        cur = (s[cols] - p - 1) % n  # current row's position in the window
-        better = cost[r, win] < cost[r, cur]
-        if better.any():
-            s[cols[better]] = x[r, win][better]
-            changed = True
+        moved, span = _update(H, HT, s, cols)
+        max_span = max(max_span, span)
+        changed = changed or moved.size > 0
     return changed, max_span
 
 
-def _check_matrix(H: object) -> np.ndarray:
+def check_deviation_matrix(H: object) -> np.ndarray:
+    """Return ``H`` as a square float matrix (``n >= 2``) that may hold +inf but no NaN.
+
+    Raises:
+        InputError: wrong shape or NaN entries.
+    """
     arr = as_array(H, "H", (None, None), finite=False)
     if arr.shape[0] != arr.shape[1] or arr.shape[0] < 2:
         raise InputError("H", f"has shape {arr.shape}", "a square (n, n) matrix with n >= 2")
@@ -309,16 +331,33 @@ def _check_matrix(H: object) -> np.ndarray:
     return arr
 
 
-def _check_state(indices: object, n: int, closed: bool) -> np.ndarray:
-    s = np.array(indices, dtype=np.int64).ravel()
+def check_state(indices: object, n: int, closed: bool, argument: str = "indices") -> np.ndarray:
+    """Return ``indices`` as a valid network state for ``n`` points.
+
+    A state is a strictly increasing int array of ``m`` vertex indices in ``[0, n)``
+    (``2 <= m`` open, ``3 <= m`` closed); open curves start at 0 and end at ``n - 1``.
+
+    Raises:
+        InputError: naming ``argument``, if the state is not valid.
+    """
+    try:
+        s = np.array(indices, dtype=np.int64).ravel()
+    except (TypeError, ValueError):
+        raise InputError(
+            argument, f"{indices!r} is not an integer array", "vertex indices"
+        ) from None
     m = s.shape[0]
     low = 3 if closed else 2
     if m < low or m > n:
-        raise InputError("indices", f"has {m} vertices", f"{low} <= m <= n={n}")
+        raise InputError(argument, f"has {m} vertices", f"{low} <= m <= n={n}")
     if s.min() < 0 or s.max() >= n or np.any(np.diff(s) <= 0):
-        raise InputError("indices", "is not strictly increasing within [0, n)", "a valid state")
+        raise InputError(
+            argument, "is not strictly increasing within [0, n)", f"ordered indices in [0, {n})"
+        )
     if not closed and (s[0] != 0 or s[-1] != n - 1):
-        raise InputError("indices", "does not start at 0 and end at n-1", "open-curve ends kept")
+        raise InputError(
+            argument, "does not start at 0 and end at n-1", "an open path keeps both ends"
+        )
     return s
 
 
@@ -332,7 +371,7 @@ def _insertion(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Best point to insert into every chord: (point, new local cost, current chord cost)."""
     a, b = _chords(s, closed)
-    pts, cost = _window_costs(H, HT, a, b)
+    pts, cost, _span = _window_costs(H, HT, a, b)
     j = cost.argmin(axis=1)
     r = np.arange(a.shape[0])
     return pts[r, j], cost[r, j], H[a, b]
@@ -403,16 +442,47 @@ def _insert_greedy(
 
 
 def _converge(
-    H: np.ndarray, HT: np.ndarray, s: np.ndarray, groups: list[np.ndarray], closed: bool
+    H: np.ndarray,
+    HT: np.ndarray,
+    s: np.ndarray,
+    groups: list[np.ndarray],
+    closed: bool,
+    dirty: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
-    """Sweeps of the network until no column moves (in place); returns (state, sweeps)."""
+    """Run the network until no column moves (in place); returns (state, sweeps).
+
+    Only columns whose neighbours moved since their last update (``dirty``) can change,
+    so only those compete; a sweep visits each column group once.
+    """
+    m = s.shape[0]
+    dirty = np.ones(m, dtype=bool) if dirty is None else dirty.copy()
+    if not closed:
+        dirty[0] = dirty[-1] = False
     sweeps = 0
-    while True:
-        changed, _span = _sweep(H, HT, s, groups)
+    while dirty.any():
         sweeps += 1
-        if not changed:
-            break
+        for g in groups:
+            cols = g[dirty[g]]
+            if cols.size == 0:
+                continue
+            moved, _span = _update(H, HT, s, cols)
+            dirty[cols] = False
+            if moved.size:
+                dirty[(moved - 1) % m] = True
+                dirty[(moved + 1) % m] = True
+                if not closed:
+                    dirty[0] = dirty[-1] = False
     return (np.sort(s) if closed else s), sweeps
+
+
+def _changed_columns(old: np.ndarray, new: np.ndarray, n: int) -> np.ndarray:
+    """Columns of ``new`` whose vertex or neighbours differ from ``old`` (cyclic)."""
+    k, j = np.arange(old.shape[0]), np.arange(new.shape[0])
+    prev_old = np.full(n, -1)
+    next_old = np.full(n, -1)
+    prev_old[old] = old[k - 1]
+    next_old[old] = old[(k + 1) % k.shape[0]]
+    return (prev_old[new] != new[j - 1]) | (next_old[new] != new[(j + 1) % j.shape[0]])
 
 
 def _local_search(
@@ -420,7 +490,7 @@ def _local_search(
     HT: np.ndarray,
     s: np.ndarray,
     closed: bool,
-    trials: int = 3,
+    trials: int = 2,
     budget: int = 10_000,
 ) -> tuple[np.ndarray, float, int]:
     """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
@@ -432,13 +502,15 @@ def _local_search(
     groups = _column_groups(s.shape[0], closed)
     s, sweeps = _converge(H, HT, s.copy(), groups, closed)
     energy = polygon_energy(H, s, closed=closed)
+    n = H.shape[0]
     for _ in range(budget):
         improved = False
         for gain, moved in _relocations(H, HT, s, closed, trials):
+            dirty = _changed_columns(s, moved, n)
             if gain < 0:
-                s, sw = _converge(H, HT, moved, groups, closed)
+                s, sw = _converge(H, HT, moved, groups, closed, dirty)
             else:
-                moved, sw = _converge(H, HT, moved, groups, closed)
+                moved, sw = _converge(H, HT, moved, groups, closed, dirty)
                 if not polygon_energy(H, moved, closed=closed) < energy:
                     sweeps += sw
                     continue
@@ -489,12 +561,16 @@ def _greedy_merge(H: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
 
 
 def _greedy_split(H: np.ndarray, HT: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
-    """Top-down start: from the fewest evenly spaced vertices whose chords are all available
-    in ``H``, repeatedly insert the vertex that lowers the energy most."""
+    """Top-down start: repeatedly insert the vertex that lowers the energy most.
+
+    It starts from the fewest evenly spaced (by index) vertices whose chords are all
+    available in ``H``.
+    """
     n = H.shape[0]
     low = 3 if closed else 2
     for k in range(low, m + 1):
-        s = _make_increasing(np.round(np.linspace(0, n if closed else n - 1, k, endpoint=not closed)).astype(np.int64), n, closed)
+        grid = np.linspace(0, n if closed else n - 1, k, endpoint=not closed)
+        s = _make_increasing(np.round(grid).astype(np.int64), n, closed)
         if np.isfinite(polygon_energy(H, s, closed=closed)):
             return _insert_greedy(H, HT, s, closed, m - k)
     return None
@@ -507,19 +583,23 @@ def competitive_hopfield(
     closed: bool = False,
     initial: object = None,
     points: object = None,
-    restarts: int = 8,
+    restarts: int = 6,
     seed: int = 0,
     plain: NetworkRun | None = None,
-    trials: int = 3,
+    trials: int = 2,
 ) -> HopfieldResult:
     """Polygonal approximation with the competitive Hopfield network, plus restarts.
 
     First the plain network of the paper runs from its initial state (``initial``, or the
     equidistant state of :func:`initial_state`). Then, to escape its local minimum, the
     same network is re-converged from further states: shifted equidistant states (closed
-    curves), a greedy bottom-up merge, single-vertex relocations and ``restarts`` rounds of
+    curves), a greedy bottom-up merge, a greedy top-down split, and ``restarts`` rounds of
     perturbation (remove a few vertices, re-insert them greedily). Only strictly better
     results are kept, so the answer is never worse than the plain network.
+
+    Every state is polished by a local search: the network converges, then the ``trials``
+    most promising relocations of one vertex to another chord are tried, each followed by
+    re-convergence; the first that lowers the energy is kept and the search repeats.
 
     Args:
         H: Deviation matrix, shape ``(n, n)``; ``inf`` marks chords that may not be used.
@@ -540,7 +620,7 @@ def competitive_hopfield(
     Raises:
         InputError: invalid ``H``, ``m``, ``initial`` or ``restarts``.
     """
-    H = _check_matrix(H)
+    H = check_deviation_matrix(H)
     n = H.shape[0]
     m = positive_int(m, "m", 3 if closed else 2)
     if m > n:
@@ -552,7 +632,7 @@ def competitive_hopfield(
         initial = initial_state(points, m, closed=closed)
     HT = np.ascontiguousarray(H.T)
     if plain is None:
-        plain = _run(H, HT, _check_state(initial, n, closed), closed, MAX_SWEEPS)
+        plain = _run(H, HT, check_state(initial, n, closed), closed, MAX_SWEEPS)
     best_s, best_e = plain.indices, plain.energy
     history = list(plain.energy_history)
     sweeps = plain.sweeps
@@ -568,8 +648,8 @@ def competitive_hopfield(
 
     consider(plain.indices)
     if closed:
-        for phase in (0.25, 0.5, 0.75):
-            consider(np.sort(_shifted_state(points, m, phase)))
+        for phase in (0.5,):
+            consider(initial_state(points, m, closed=True, phase=phase))
     consider(_greedy_merge(H, m, closed))
     consider(_greedy_split(H, HT, m, closed))
     rng = np.random.default_rng(seed)
@@ -597,19 +677,3 @@ def competitive_hopfield(
         plain_sweeps=plain.sweeps,
         plain_max_span=plain.max_span,
     )
-
-
-def _shifted_state(points: object, m: int, phase: float) -> np.ndarray:
-    """Equidistant closed-curve state whose first target is ``phase`` of a spacing along."""
-    P = np.asarray(points, dtype=float)
-    n = P.shape[0]
-    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
-    seg = np.append(seg, np.linalg.norm(P[0] - P[-1]))
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    total = cum[-1]
-    if total <= 0:
-        cum = np.arange(n + 1, dtype=float)
-        total = float(n)
-    targets = (np.arange(m) + phase) / m * total
-    idx = np.searchsorted(cum[:n], targets)
-    return _make_increasing(idx, n, True)

@@ -225,6 +225,9 @@ def build_manifold(
     pad = np.zeros((nt, n), bool)
     q_prev = np.broadcast_to(finger.q_mid, (n, k)).copy()
     q_out[:] = np.nan
+    # per point: target and best IK residual at its last restart solve (see below)
+    anchor = targets[0].copy()
+    resid = np.zeros(n)
     # which points are worth solving at each time (vectorized over times and faces)
     n_palm_faces = np.einsum("tij,fj->tfi", T_all[:, :3, :3], np.array(list(face_normal.values())))
     best_cos = (pads @ -n_palm_faces.reshape(-1, 3).T).max(axis=0).reshape(n_palm_faces.shape[:2])
@@ -251,13 +254,19 @@ def build_manifold(
             max_iter=max_iter if s0 == 0 else max_iter_warm,
             restarts=(s0 == 0),
         )
-        q_out[ti, pi] = res.q
-        reach[ti, pi] = res.success
+        q_res, ok = res.q, res.success
+        if s0 == 0:
+            resid[pi[~ok]] = res.error_m[~ok]
+            anchor[pi[~ok]] = targets[0, pi[~ok]]
+        else:
+            _retry_failed(finger, lo, hi, targets, ti, pi, q_res, ok, anchor, resid, contact,
+                          max_iter)
+        q_out[ti, pi] = q_res
+        reach[ti, pi] = ok
         last = ti == s1 - 1
-        q_prev[pi[last]] = res.q[last]
-        ok = res.success
+        q_prev[pi[last]] = q_res[last]
         if ok.any():
-            cos = pad_cosines(finger, res.q[ok], normals_palm[ti[ok], pi[ok]])
+            cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
             pad[ti[ok], pi[ok]] = cos >= contact.cos_cone
     with np.errstate(invalid="ignore"):
         margin = np.minimum(q_out - finger.lower, finger.upper - q_out).min(axis=2)
@@ -282,3 +291,49 @@ def build_manifold(
         upper=finger.upper.copy(),
         T_palm_object=T_all,
     )
+
+
+def _retry_failed(
+    finger: Finger,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    targets: np.ndarray,
+    ti: np.ndarray,
+    pi: np.ndarray,
+    q_res: np.ndarray,
+    ok: np.ndarray,
+    anchor: np.ndarray,
+    resid: np.ndarray,
+    contact: ContactModel,
+    max_iter: int,
+) -> None:
+    """Retry, with restarts, warm-started points that failed (updates the arrays in place).
+
+    A warm start that fails may sit in a local minimum (e.g. on an extended limit) that
+    it would never leave as its target comes into reach. A point is retried once its
+    target has moved from ``anchor`` (where its last restart failed) by at least that
+    restart's residual ``resid``: before that it stays out of the reach the restart
+    found. Times are taken in order, so a point that comes into reach is warm-started
+    at the next time from its new solution.
+    """
+    sel = np.flatnonzero(~ok)
+    p = pi[sel]
+    moved = np.linalg.norm(targets[ti[sel], p] - anchor[p], axis=1)
+    keep = moved >= resid[p] - contact.ik_tol_m
+    sel, p = sel[keep], p[keep]
+    if sel.size == 0:
+        return
+    res = solve_position_ik(
+        finger.chain,
+        lo,
+        hi,
+        targets[ti[sel], p],
+        np.broadcast_to(0.5 * (lo + hi), (sel.size, finger.k)),
+        tol_m=contact.ik_tol_m,
+        max_iter=max_iter,
+        restarts=False,
+    )
+    q_res[sel], ok[sel] = res.q, res.success
+    bad = ~res.success  # (ti is ascending: the latest time of a point is written last)
+    resid[p[bad]] = res.error_m[bad]
+    anchor[p[bad]] = targets[ti[sel[bad]], p[bad]]

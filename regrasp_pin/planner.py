@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -52,6 +52,8 @@ class PlannerParams:
         min_holding: Fewest fingers that must hold while one is in the air.
         mu: Friction coefficient for force closure.
         candidates: How many new contacts Q to try per regrasp before giving up.
+        earlier_starts_s: When no verified regrasp starts at the scheduled time, the
+            planner retries this much earlier [s] (0 first).
         fingers: The fingers that take part (default: all). The others stay idle at
             the configuration of :func:`rest_configuration`, as obstacles that every
             regrasp is verified against.
@@ -67,6 +69,7 @@ class PlannerParams:
     mu: float = 0.8
     candidates: int = 4
     fingers: tuple[str, ...] | None = None
+    earlier_starts_s: tuple[float, ...] = (0.0, 0.1, 0.2)
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
 
@@ -188,7 +191,15 @@ def plan_manipulation(
 
     history: dict[str, list[_Holding]] = {name: [] for name in active}
 
-    def partial_plan() -> Plan:
+    def partial_plan(until: float) -> Plan:
+        """The plan up to ``until``: every finger holding its current contact."""
+        for n, h in holding.items():
+            if h.t_from < until:
+                phases[n].append(
+                    ContactPhase(
+                        finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n
+                    )
+                )
         return _assemble(
             hand,
             obj,
@@ -198,7 +209,7 @@ def plan_manipulation(
             holding,
             phases,
             regrasps,
-            until=now,
+            until=until,
             params=params,
             base_q=base_q,
         )
@@ -232,7 +243,7 @@ def plan_manipulation(
                 "before the motion does",
                 finger=name,
                 time_s=t_trig,
-                partial=partial_plan(),
+                partial=partial_plan(min(t_trig, motion.t_end)),
             )
         if start > t_trig:
             raise PlanningError(
@@ -240,7 +251,7 @@ def plan_manipulation(
                 f"(free from t={now:.3f} s)",
                 finger=name,
                 time_s=t_trig,
-                partial=partial_plan(),
+                partial=partial_plan(max(start, now)),
             )
         stay = [n for n in active if n != name]
         if len(stay) < params.min_holding:
@@ -248,7 +259,7 @@ def plan_manipulation(
                 f"only {len(stay)} fingers would hold (need {params.min_holding})",
                 finger=name,
                 time_s=start,
-                partial=partial_plan(),
+                partial=partial_plan(max(start, now)),
             )
         p_stay = np.array([holding[n].p for n in stay])
         n_stay = np.array([holding[n].n for n in stay])
@@ -259,17 +270,34 @@ def plan_manipulation(
                 "in force closure",
                 finger=name,
                 time_s=start,
-                partial=partial_plan(),
+                partial=partial_plan(max(start, now)),
             )
 
         t_r = time.perf_counter()
-        result = _regrasp(
-            hand, obj, motion, manifolds[name], sample, name, start, holding, params, base_q
-        )
+        # if no verified regrasp starts there, try lifting off earlier (other contacts
+        # are free then), never before the previous regrasp ended
+        result: tuple[RegraspResult, object] | RegraspError = PlanningError("not tried")
+        for early in params.earlier_starts_s:
+            s_try = start - early
+            if s_try < max(now, holding[name].t_from) - 1e-9:
+                continue
+            result = _regrasp(
+                hand, obj, motion, manifolds[name], sample, name, s_try, holding, params, base_q
+            )
+            if not isinstance(result, RegraspError):
+                if early > 0:
+                    why += (
+                        f"; lifted off {early:.2f} s earlier still: "
+                        "no verified path from the first start"
+                    )
+                break
         stage["regrasps"] += time.perf_counter() - t_r
         if isinstance(result, RegraspError):
             raise PlanningError(
-                f"no verified regrasp: {result}", finger=name, time_s=start, partial=partial_plan()
+                f"no verified regrasp: {result}",
+                finger=name,
+                time_s=start,
+                partial=partial_plan(max(start, now)),
             ) from result
         res, choice = result
         h = holding[name]
@@ -423,23 +451,36 @@ def _regrasp(
 
     failed: list[np.ndarray] = []
     last: RegraspError | None = None
+
+    def choose(duration: float):
+        return choose_new_contact(
+            hand,
+            obj,
+            manifold,
+            sample,
+            start + duration,
+            P_object=h.p,
+            n_P_object=h.n,
+            others=stay,
+            contact=params.contact,
+            mu=params.mu,
+            exclude_radius_m=2 * f.tip_radius,
+            exclude_points_object=np.array(failed) if failed else None,
+            q_hand_arrive=q_hand(np.array([start + duration]))[0],
+        )
+
     for _ in range(params.candidates):
+        duration = params.regrasp.duration_s
         try:
-            choice = choose_new_contact(
-                hand,
-                obj,
-                manifold,
-                sample,
-                start + params.regrasp.duration_s,
-                P_object=h.p,
-                n_P_object=h.n,
-                others=stay,
-                contact=params.contact,
-                mu=params.mu,
-                exclude_radius_m=2 * f.tip_radius,
-                exclude_points_object=np.array(failed) if failed else None,
-                q_hand_arrive=q_hand(np.array([start + params.regrasp.duration_s]))[0],
+            choice = choose(duration)
+            # long moves take longer: a minimum-jerk profile peaks at 1.875 x the mean
+            # speed; 1.5 more for a path that is not straight in joint space
+            needed = (
+                1.875 * 1.5 * float(np.max(np.abs(choice.q_arrive - q_start) / f.velocity_limit))
             )
+            if needed > duration and start + needed <= motion.t_end:
+                duration = float(np.ceil(needed / params.dt_s) * params.dt_s)
+                choice = choose(duration)
         except ContactError as exc:
             return exc if last is None else last
         try:
@@ -456,7 +497,7 @@ def _regrasp(
                 q_start,
                 q_hand,
                 others_tips_object=others_tips,
-                params=params.regrasp,
+                params=replace(params.regrasp, duration_s=duration),
             )
             return res, choice
         except RegraspError as exc:

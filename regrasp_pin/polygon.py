@@ -12,14 +12,15 @@ network ever competed over a wider span than the band, H is rebuilt in full and 
 rerun, so the plain network always sees exactly the numbers of the full matrix. The further
 restarts (:func:`~regrasp_pin.hopfield.competitive_hopfield`) search within the band.
 
-For ``method="exact"`` the network result is the incumbent; H is rebuilt with every chord
-that can still appear in a polygon at least as good (pruning with ``cap`` and ``m``), and the
-DP returns the global optimum.
+For ``method="exact"`` the network result is the incumbent; the chords longer than the band
+that can still appear in a polygon at least as good (pruning with ``cap`` and ``m``) are
+added to H, and the DP returns the global optimum.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -61,6 +62,9 @@ class PolygonResult:
         m: Number of vertices.
         plain_energy: Energy of the plain network from the paper's initial state
             (``energy <= plain_energy``).
+        timings_ms: Wall-clock time of the stages [ms]: ``"H"`` (the matrix the network
+            uses, including any widening of its band), ``"network"`` (plain run and
+            restarts) and, for ``"exact"``, ``"exact"`` (pruned H and the DP).
     """
 
     indices: np.ndarray
@@ -74,6 +78,7 @@ class PolygonResult:
     n: int
     m: int
     plain_energy: float
+    timings_ms: dict[str, float] = field(default_factory=dict, compare=False)
 
 
 def validate_m(m: object, n: int, closed: bool) -> int:
@@ -84,11 +89,11 @@ def validate_m(m: object, n: int, closed: bool) -> int:
             ``m > n``.
     """
     low = 3 if closed else 2
-    kind = "closed" if closed else "open"
+    kind = "a closed" if closed else "an open"
     if isinstance(m, bool) or not isinstance(m, (int, np.integer)):
         raise InputError("m", f"{m!r} is not an integer", f"an integer {low} <= m <= n={n}")
     if m < low:
-        raise InputError("m", f"{m} is too small for a {kind} curve", f"{low} <= m <= n={n}")
+        raise InputError("m", f"{m} is too small for {kind} curve", f"{low} <= m <= n={n}")
     if m > n:
         raise InputError("m", f"{m} exceeds the number of points n={n}", f"{low} <= m <= {n}")
     return int(m)
@@ -102,7 +107,7 @@ def approximate_polygon(
     deviation: str = "max",
     method: str = "hopfield",
     seed: int = 0,
-    restarts: int = 8,
+    restarts: int = 6,
 ) -> PolygonResult:
     """Approximate an ordered curve by ``m`` of its points (Fig. 8).
 
@@ -134,29 +139,48 @@ def approximate_polygon(
     seed = positive_int(seed, "seed", 0)
     restarts = positive_int(restarts, "restarts", 0)
 
+    clock = time.perf_counter
+    t0 = clock()
     s0 = initial_state(P, m, closed=closed)
     band = network_band(s0, n, closed)
     H = deviation_matrix(P, deviation, closed=closed, max_span=band)
+    t_h, t_net = clock() - t0, 0.0
+    t0 = clock()
     plain = run_network(H, s0, closed=closed)
-    while band is not None and plain.max_span > band:
+    # a column competing between neighbours p and q reads chords spanning < q - p steps
+    while band is not None and plain.max_span - 1 > band:
         # the plain network competed over spans outside the band: widen it and rerun, so
         # that the plain network sees exactly the full matrix
         wider = max(plain.max_span, int(1.5 * band))
         wider = None if wider >= n - 1 else wider
-        logger.debug("plain network needed span %d > band %d", plain.max_span, band)
+        logger.debug("plain network needed span %d > band %d", plain.max_span - 1, band)
+        t_net += clock() - t0
+        t0 = clock()
         extra = deviation_matrix(P, deviation, closed=closed, max_span=wider, min_span=band + 1)
         H = np.minimum(H, extra)
         band = wider
+        t_h += clock() - t0
+        t0 = clock()
         plain = run_network(H, s0, closed=closed)
     hop = competitive_hopfield(
         H, m, closed=closed, initial=s0, points=P, restarts=restarts, seed=seed, plain=plain
     )
+    t_net += clock() - t0
+    timings = {"H": t_h * 1e3, "network": t_net * 1e3}
     if method == "hopfield":
         idx, energy = hop.indices, hop.energy
         sweeps, history = hop.sweeps, hop.energy_history
     else:
-        Hx = deviation_matrix(P, deviation, closed=closed, cap=hop.energy, m=m)
+        t0 = clock()
+        if band is None:  # H is already the full matrix
+            Hx = H
+        else:  # the band is exact; add the longer chords that a better polygon may use
+            longer = deviation_matrix(
+                P, deviation, closed=closed, cap=hop.energy, m=m, min_span=band + 1
+            )
+            Hx = np.minimum(H, longer)
         ex = exact_polygon(Hx, m, closed=closed, incumbent=hop.indices)
+        timings["exact"] = (clock() - t0) * 1e3
         idx, energy = ex.indices, ex.energy
         sweeps, history = 0, np.zeros(0)
     idx = np.asarray(idx, dtype=np.int64)
@@ -172,6 +196,7 @@ def approximate_polygon(
         n=n,
         m=m,
         plain_energy=float(hop.plain_energy),
+        timings_ms=timings,
     )
 
 

@@ -31,10 +31,12 @@ from numpy.lib.stride_tricks import as_strided
 from ._validate import positive_int
 from .deviation import rest_lower_bound
 from .exceptions import InputError
-from .hopfield import _check_matrix, _check_state, polygon_energy
+from .hopfield import check_deviation_matrix, check_state, polygon_energy
 
 # Cap on the number of candidate values evaluated at once (memory) [elements].
 _CHUNK = 1 << 22
+# Consecutive start points solved together on closed curves.
+_RUN = 16
 _RTOL = 1e-12
 
 
@@ -72,33 +74,26 @@ def exact_polygon(
         InputError: invalid ``H``, ``m`` or ``incumbent``, or no polygon with finite energy
             exists in ``H``.
     """
-    H = _check_matrix(H)
+    H = check_deviation_matrix(H)
     n = H.shape[0]
     m = positive_int(m, "m", 3 if closed else 2)
     if m > n:
         raise InputError("m", f"{m} exceeds the number of points n={n}", f"m <= {n}")
     ub, inc = np.inf, None
     if incumbent is not None:
-        inc = _check_state(incumbent, n, closed)
+        inc = check_state(incumbent, n, closed, "incumbent")
         if inc.shape[0] != m:
             raise InputError("incumbent", f"has {inc.shape[0]} vertices", f"{m} vertices")
         ub = polygon_energy(H, inc, closed=closed)
     solver = _Solver(H, closed)
-    if not closed:
-        best = solver.solve(np.array([0]), n - 1, m - 1, ub)
-        starts = 1
+    if closed:
+        best, starts = solver.solve_closed(m, ub)
     else:
-        if not np.isfinite(ub):
-            first = solver.solve(np.array([0]), n, m, np.inf)
-            if first is not None:
-                inc, ub = first
-        window = solver.start_window(m, ub) if np.isfinite(ub) else np.arange(n)
-        best = solver.solve(window, n, m, ub)
-        starts = int(window.shape[0])
-    if best is not None and (inc is None or best[1] < ub):
-        s, e = best
+        best, starts = solver.solve(np.array([0]), n - 1, m - 1, ub), 1
+    if best is not None:
+        s = best[0]
     elif inc is not None and np.isfinite(ub):
-        s, e = inc, ub
+        s = inc  # nothing beats the incumbent: it is optimal
     else:
         raise InputError("H", "admits no polygon with finite energy", "available chords")
     s = np.sort(np.asarray(s) % n)
@@ -126,6 +121,13 @@ class _Solver:
         B = np.ascontiguousarray(view[:, self.Lmin : self.Lmax + 1])
         # rows t + r for unrolled starts t < 2n and offsets r <= n
         self.B2 = np.concatenate([B, B, B]) if closed else B
+        if closed:
+            # F[x, L] = H[x, (x + L) mod n]: the chord of span L starting at x
+            wide = np.concatenate([H, H], axis=1)
+            rs2, cs2 = wide.strides
+            fwd = as_strided(wide, shape=(n, n), strides=(rs2 + cs2, cs2), writeable=False)
+            F = np.ascontiguousarray(fwd[:, self.Lmin : self.Lmax + 1])
+            self.F3 = np.concatenate([F, F, F])
         self.min_by_length = np.full(n, np.inf)
         self.min_by_length[self.Lmin : self.Lmax + 1] = B.min(axis=0)
         self._rest: dict[int, np.ndarray] = {}
@@ -133,9 +135,7 @@ class _Solver:
     def rest(self, chords: int) -> np.ndarray:
         """Lower bound of covering ``l`` steps with ``chords`` chords, for l = 0 .. n."""
         if chords not in self._rest:
-            self._rest[chords] = rest_lower_bound(
-                self.min_by_length, chords, np.arange(self.n + 1)
-            )
+            self._rest[chords] = rest_lower_bound(self.min_by_length, chords, np.arange(self.n + 1))
         return self._rest[chords]
 
     def start_window(self, m: int, ub: float) -> np.ndarray:
@@ -164,12 +164,75 @@ class _Solver:
             return starts[:0]
         return starts[useful[0] : useful[-1] + 1]
 
+    def solve_closed(self, m: int, ub: float) -> tuple[tuple[np.ndarray, float] | None, int]:
+        """Best closed polygon better than ``ub``; returns ((positions, energy) or None, starts).
+
+        Starts are solved in runs of consecutive points; after each run the window of
+        starts that a better polygon must hit is recomputed with the improved bound.
+        """
+        n = self.n
+        best: tuple[np.ndarray, float] | None = None
+        if not np.isfinite(ub):  # no incumbent: the best polygon through point 0 first
+            best = self.solve(np.array([0]), n, m, np.inf)
+            if best is None:
+                return None, 1
+            ub = best[1]
+        tried = np.zeros(n, dtype=bool)
+        tried[0] = best is not None
+        count = int(tried.sum())
+        togo: tuple[int, np.ndarray] | None = None
+        while True:
+            window = self.start_window(m, ub)
+            todo = window[~tried[window % n]]
+            if todo.size == 0:
+                break
+            if togo is None:  # bounds for every start of this window (valid for any subset)
+                togo = (int(window[0]), self._cost_to_go(int(window[0]), window.size, m))
+            breaks = np.flatnonzero(np.diff(todo) > 1)
+            end = int(breaks[0]) + 1 if breaks.size else todo.size
+            run = todo[: min(end, _RUN)]
+            if togo[0] > run[0] or togo[0] + togo[1].shape[1] - n < run[-1] + 1:
+                togo = (int(run[0]), self._cost_to_go(int(run[0]), run.size, m))
+            res = self.solve(run, n, m, ub, togo)
+            tried[run % n] = True
+            count += int(run.size)
+            if res is not None and res[1] < ub:
+                best, ub = res, res[1]
+        return best, count
+
+    def _cost_to_go(self, t0: int, count: int, chords: int) -> np.ndarray:
+        """Lower bounds ``G[k, u]`` of ``k`` chords from ``t0 + u`` to any end in
+        ``[t0 + n, t0 + n + count)`` (a DP backwards from all those ends at once)."""
+        n = self.n
+        Lmin, Lmax = self.Lmin, self.Lmax
+        W = Lmax - Lmin + 1
+        size = n + count
+        G = np.full((chords + 1, size + Lmax), np.inf)
+        G[0, n:size] = 0.0
+        F3 = self.F3
+        rf0, rf1 = F3.strides
+        costs = as_strided(F3[t0:], shape=(size, W), strides=(rf0, rf1), writeable=False)
+        for k in range(1, chords + 1):
+            prev = G[k - 1]
+            nxt = as_strided(
+                prev[Lmin:], shape=(size, W), strides=(prev.strides[0],) * 2, writeable=False
+            )  # nxt[u, l] = G[k-1, u + Lmin + l]
+            G[k, :size] = (costs + nxt).min(axis=1)
+        return G[:, :size]
+
     def solve(
-        self, starts: np.ndarray, total: int, chords: int, ub: float
+        self,
+        starts: np.ndarray,
+        total: int,
+        chords: int,
+        ub: float,
+        togo: tuple[int, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, float] | None:
         """Best path of ``chords`` chords from each start ``t`` to ``t + total``.
 
-        ``starts`` must be consecutive (unrolled) integers.
+        ``starts`` must be consecutive (unrolled) integers. ``togo = (t0, G)`` are
+        cost-to-go bounds from :meth:`_cost_to_go` for a window of starts from ``t0`` that
+        contains ``starts``.
 
         Returns (vertex positions as absolute unrolled indices, energy) of the best start,
         or None if no path beats ``ub``.
@@ -179,13 +242,18 @@ class _Solver:
         per_start = (total + 1) * W
         chunk = max(1, _CHUNK // max(per_start, 1))
         for c0 in range(0, starts.shape[0], chunk):
-            res = self._solve_chunk(starts[c0 : c0 + chunk], total, chords, ub)
+            res = self._solve_chunk(starts[c0 : c0 + chunk], total, chords, ub, togo)
             if res is not None and res[1] < ub:
                 best, ub = res, res[1]
         return best
 
     def _solve_chunk(
-        self, starts: np.ndarray, total: int, chords: int, ub: float
+        self,
+        starts: np.ndarray,
+        total: int,
+        chords: int,
+        ub: float,
+        togo: tuple[int, np.ndarray] | None,
     ) -> tuple[np.ndarray, float] | None:
         T = starts.shape[0]
         Lmin, Lmax = self.Lmin, self.Lmax
@@ -194,6 +262,11 @@ class _Solver:
         pad = Lmax
         C = np.full((T, pad + total + 1), np.inf)
         C[:, pad] = 0.0
+        bound_rows = None
+        if togo is not None and np.isfinite(limit):
+            t0, G = togo
+            bound_rows = G  # G[k, u]: from position t0 + u with k chords left
+            shift = (starts - t0)[:, None]
         lo = hi = 0
         args: list[tuple[int, np.ndarray]] = []
         B2 = self.B2
@@ -223,7 +296,11 @@ class _Solver:
             arg = cand.argmin(axis=2)
             val = np.take_along_axis(cand, arg[..., None], axis=2)[..., 0]
             if np.isfinite(limit):
-                val[val + self.rest(remaining)[total - np.arange(r_lo, r_hi + 1)] > limit] = np.inf
+                r_all = np.arange(r_lo, r_hi + 1)
+                bound = self.rest(remaining)[total - r_all][None, :]
+                if bound_rows is not None:
+                    bound = np.maximum(bound, bound_rows[remaining][shift + r_all[None, :]])
+                val[val + bound > limit] = np.inf
             C = np.full((T, pad + total + 1), np.inf)
             C[:, pad + r_lo : pad + r_hi + 1] = val
             args.append((r_lo, arg))

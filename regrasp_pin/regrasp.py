@@ -53,6 +53,9 @@ __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
 log = logging.getLogger(__name__)
 
 _UNREACHABLE_COST = 20.0  # node cost where IK cannot reach the inflated point
+_PENETRATION_TOL_M = 5e-5  # the verifier's tolerance, applied to the planned curve too
+_FINGER_GAP_M = 0.004  # grid nodes whose finger comes closer than this to another cost more
+_FINGER_COST = 10.0  # cost per unit of (gap deficit / _FINGER_GAP_M)
 
 
 @dataclass(frozen=True)
@@ -264,6 +267,7 @@ def plan_regrasp(
         else as_array(others_tips_object, "others_tips_object", (None, 3))
     )
     stages = _Stages()
+    q_mid = np.asarray(q_hand(np.array([t_start + 0.5 * params.duration_s])), float)[0]
     grid = build_surface_grid(obj, P, Q, spacing_m=params.grid_spacing_m)
     stages.lap("grid")
 
@@ -276,7 +280,7 @@ def plan_regrasp(
         try:
             if key not in path_cache:
                 path_cache[key] = _surface_path(
-                    hand, f.name, obj, motion, grid, t_start, q0, others, p_try
+                    hand, f.name, obj, motion, grid, t_start, q0, others, p_try, q_mid
                 )
             gpath, tip_path = path_cache[key]
             stages.lap("path")
@@ -339,8 +343,14 @@ def _surface_path(
     q0: np.ndarray,
     others_tips: np.ndarray,
     p: RegraspParams,
+    q_others: np.ndarray | None = None,
 ) -> tuple[GridPath, TipPath]:
-    """Grid path weighing distance and joint limits, lifted onto the inflated surface."""
+    """Grid path weighing distance, joint limits and the other fingers, lifted onto the
+    inflated surface.
+
+    ``q_others`` (nq,) is the hand at mid-regrasp; nodes where the finger's links
+    (conservative capsules) come near another finger's cost more.
+    """
     f = hand.finger(finger)
     height = p.inflation_factor * p.clearance_m
     taper = p.taper_m if p.taper_m is not None else height
@@ -356,6 +366,10 @@ def _surface_path(
     margin = f.limit_margin(res.q)
     cost = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
     cost[~res.success] = _UNREACHABLE_COST
+    if q_others is not None:
+        gap = _finger_gap(hand, finger, res.q, q_others)
+        near = np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
+        cost += _FINGER_COST * near
     if others_tips.size:
         keep = 2 * f.tip_radius + p.contact_keepout_m
         dist = np.linalg.norm(tips[:, None, :] - others_tips[None], axis=2).min(axis=1)
@@ -366,6 +380,33 @@ def _surface_path(
         obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
     )
     return gpath, tip_path
+
+
+def _finger_gap(hand: Hand, finger: str, q_finger: np.ndarray, q_others: np.ndarray) -> np.ndarray:
+    """Lower bound ``(M,)`` on the distance between the finger (at each ``q_finger`` row)
+    and the other fingers (at ``q_others``), from capsules that contain the geometries."""
+    from ._pair_distances import _geometry, _placements, _segment_distance
+
+    f = hand.finger(finger)
+    other_ids = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
+    if not other_ids or not f.geometry_ids:
+        return np.full(q_finger.shape[0], np.inf)
+    q_full = np.broadcast_to(q_others, (q_finger.shape[0], q_others.size)).copy()
+    q_full[:, f.q_indices] = q_finger
+    mine = [_geometry(hand, g) for g in f.geometry_ids]
+    theirs = [_geometry(hand, g) for g in other_ids]
+    Rm, pm = _placements(mine, q_full)
+    Ro, po = _placements(theirs, q_others[None])
+    gap = np.full(q_finger.shape[0], np.inf)
+    for i, g in enumerate(mine):
+        a1 = pm[:, i] + Rm[:, i] @ g.seg_a
+        b1 = pm[:, i] + Rm[:, i] @ g.seg_b
+        for j, h in enumerate(theirs):
+            a2 = np.broadcast_to(po[0, j] + Ro[0, j] @ h.seg_a, a1.shape)
+            b2 = np.broadcast_to(po[0, j] + Ro[0, j] @ h.seg_b, a1.shape)
+            d, _ = _segment_distance(a1, b1, a2, b2)
+            gap = np.minimum(gap, d - g.radius - h.radius)
+    return gap
 
 
 def _attempt(
@@ -408,7 +449,7 @@ def _attempt(
     in_flight = (a_samples >= taper) & (a_samples <= tip_path.length_m - taper)
     required = np.where(in_flight, p.clearance_m, 0.0)
     planned = obj.signed_distance(tip_obj) - f.tip_radius
-    short = planned < required - 1e-9
+    short = planned < required - _PENETRATION_TOL_M
     if short.any():
         i = int(np.argmax(required - planned))
         raise PlanningError(

@@ -1,25 +1,36 @@
-"""Ready-made manipulation scenarios: a hand, an object, its pose and its motion.
+"""Ready-made manipulation scenarios: a hand, an object, its motion and a grasp.
 
 The canonical scenario follows the paper's test: the bundled five-finger hand holds a
-prismatic object in a fingertip grasp, and the object turns about an axis through it
-by far more than any fixed grasp allows, so the fingers must regrasp. Here the object
-is a hexagonal prism held between the thumb (on one end face) and the four fingers
-(on the other), turned about its own axis like a knob.
+prismatic object in a fingertip grasp while the object turns far more than any fixed
+grasp allows, so the fingers must regrasp. The prism lies with its axis along the
+palm x axis, the thumb on its near end face and the fingers on its far end face, and
+it is turned like a knob about the axis through the thumb's contact, along the
+thumb's contact normal: the thumb pins the object while the fingers walk around it.
+
+How it is built: an initial grasp is chosen for the turn about the prism's own axis
+(so that every contact lasts as long as possible), then the turn is placed about the
+thumb's contact, which makes the thumb's contact fixed in space.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ._validate import choice, positive
+from .contact import ContactModel
+from .contact_choice import Grasp, initial_grasp
+from .exceptions import InputError
 from .hand import Hand
+from .manifold import build_manifold
 from .motion import ObjectMotion
 from .objects import Box, ConvexObject, Prism
+from .planner import PlannerParams
+from .regrasp import RegraspParams
 
-__all__ = ["Scenario", "OBJECTS", "HANDS", "make_scenario"]
+__all__ = ["HANDS", "OBJECTS", "Scenario", "make_scenario"]
 
 HANDS = ("five_finger", "allegro")
 OBJECTS = ("hexagon", "octagon", "box")
@@ -27,80 +38,131 @@ OBJECTS = ("hexagon", "octagon", "box")
 
 @dataclass(frozen=True)
 class Scenario:
-    """A hand, an object and the object's motion in the palm frame."""
+    """A hand, an object, the object's motion, an initial grasp and planner settings."""
 
     name: str
     hand: Hand
     obj: ConvexObject
     motion: ObjectMotion
-    description: str
+    grasp: Grasp | None
+    params: PlannerParams = field(default_factory=PlannerParams)
+    description: str = ""
 
 
-def _object(kind: str, hand: str) -> ConvexObject:
-    big = hand == "allegro"
-    if kind == "hexagon":
-        return Prism(6, 0.038 if big else 0.032, 0.04)
-    if kind == "octagon":
-        return Prism(8, 0.040 if big else 0.034, 0.04)
-    return Box((0.04, 0.06, 0.06) if big else (0.04, 0.05, 0.05))
+# per hand: object pose in the palm frame, the axis of the turn, the fingers used
+_SETUP = {
+    "five_finger": {
+        "rotation": Rotation.from_euler("y", 90, degrees=True),  # prism axis -> palm x
+        "position": (0.06, 0.0, 0.08),
+        "fingers": ("thumb", "index", "middle", "ring"),
+        "objects": {
+            "hexagon": lambda: Prism(6, 0.032, 0.04),
+            "octagon": lambda: Prism(8, 0.034, 0.04),
+            "box": lambda: Box((0.04, 0.05, 0.05)),
+        },
+    },
+    "allegro": {
+        "rotation": Rotation.from_euler("x", 0, degrees=True),
+        "position": (0.09, 0.0, 0.10),
+        "fingers": ("thumb", "index", "middle", "ring"),
+        "objects": {
+            "hexagon": lambda: Prism(6, 0.040, 0.05),
+            "octagon": lambda: Prism(8, 0.042, 0.05),
+            "box": lambda: Box((0.05, 0.06, 0.06)),
+        },
+    },
+}
 
 
 def make_scenario(
     hand: str = "five_finger",
     obj: str = "hexagon",
     *,
-    angle_deg: float = 100.0,
+    angle_deg: float | None = None,
     rate_deg_s: float = 30.0,
     dt_s: float = 0.01,
+    seed: int = 0,
 ) -> Scenario:
-    """Build the canonical scenario.
+    """Build the canonical scenario (see the module docstring).
 
     Args:
         hand: ``"five_finger"`` (bundled) or ``"allegro"`` (example-robot-data).
-        obj: ``"hexagon"`` or ``"octagon"`` (prisms) or ``"box"``.
-        angle_deg: Total rotation of the object [deg]; its sign gives the direction.
-        rate_deg_s: Rotation speed [deg/s] (> 0).
+        obj: ``"hexagon"``, ``"octagon"`` (prisms) or ``"box"``.
+        angle_deg: Total turn [deg]; its sign gives the direction. Default -100.
+        rate_deg_s: Turning speed [deg/s] (> 0).
         dt_s: Sampling step of the motion [s].
+        seed: Seed of the initial-grasp search.
 
     Returns:
         The :class:`Scenario`.
 
     Raises:
         UnknownNameError: unknown hand or object.
-        InputError: non-positive rate or zero angle.
+        InputError: non-positive rate, zero or non-finite angle.
+        ContactError: no initial grasp (should not happen for the bundled setups).
     """
     choice(hand, "hand", HANDS)
     choice(obj, "obj", OBJECTS)
     rate = positive(rate_deg_s, "rate_deg_s")
-    if not np.isfinite(angle_deg) or angle_deg == 0:
-        from .exceptions import InputError
-
+    angle = -100.0 if angle_deg is None else float(angle_deg)
+    if not np.isfinite(angle) or angle == 0:
         raise InputError("angle_deg", f"{angle_deg!r} is not allowed", "a finite non-zero angle")
-    object_ = _object(obj, hand)
+    setup = _SETUP[hand]
+    h = Hand.five_finger() if hand == "five_finger" else Hand.allegro()
+    o = setup["objects"][obj]()
     T0 = np.eye(4)
-    if hand == "five_finger":
-        # prism axis (object z) along the palm x axis: thumb on the near end face,
-        # fingers wrapped onto the far end face
-        h = Hand.five_finger()
-        T0[:3, :3] = Rotation.from_euler("y", 90, degrees=True).as_matrix()
-        T0[:3, 3] = [0.065, 0.0, 0.06]
-        axis = np.array([1.0, 0.0, 0.0])
-    else:
-        # Allegro: fingers along palm +z, palm normal +x
-        h = Hand.allegro()
-        T0[:3, 3] = [0.09, 0.0, 0.10]
-        axis = np.array([0.0, 0.0, 1.0])
-    sign = 1.0 if angle_deg > 0 else -1.0
+    T0[:3, :3] = setup["rotation"].as_matrix()
+    T0[:3, 3] = setup["position"]
+    fingers = setup["fingers"]
+    contact = ContactModel()
+    rate_rad = np.sign(angle) * np.radians(rate)
+    duration = abs(angle) / rate
+    # 1) grasp chosen for the turn about the object's own axis (its z axis)
+    axis0 = T0[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    turn0 = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=axis0,
+        point_palm=T0[:3, 3],
+        rate_rad_s=rate_rad,
+        duration_s=duration,
+        dt_s=dt_s,
+    )
+    sample = o.sample_surface(0.002)
+    times = np.linspace(turn0.t_start, turn0.t_end, max(int(duration / 0.05), 1) + 1)
+    manifolds = {
+        n: build_manifold(h.fingers[n], sample, turn0, times, contact=contact) for n in fingers
+    }
+    grasp = initial_grasp(h, o, manifolds, sample, contact=contact, seed=seed)
+    # 2) the same turn about the thumb's contact, along its normal
+    R0 = T0[:3, :3]
+    pivot = R0 @ grasp.points_object["thumb"] + T0[:3, 3]
+    axis = -(R0 @ grasp.normals_object["thumb"])
+    axis *= np.sign(axis @ axis0) or 1.0
     motion = ObjectMotion.constant_twist(
         T0,
         axis_palm=axis,
-        point_palm=T0[:3, 3],
-        rate_rad_s=sign * np.radians(rate),
-        duration_s=abs(angle_deg) / rate,
+        point_palm=pivot,
+        rate_rad_s=rate_rad,
+        duration_s=duration,
         dt_s=dt_s,
     )
-    desc = (
-        f"{h.name} hand turns a {object_.kind} ({obj}) by {angle_deg:g} deg at "
-        f"{rate:g} deg/s about the palm {'xyz'[int(np.argmax(np.abs(axis)))]} axis"
+    params = PlannerParams(
+        fingers=fingers,
+        contact=contact,
+        regrasp=RegraspParams(clearance_m=0.003, duration_s=0.4),
     )
-    return Scenario(name=f"{hand}-{obj}", hand=h, obj=object_, motion=motion, description=desc)
+    idle = [n for n in h.finger_names if n not in fingers]
+    desc = (
+        f"{h.name} hand turns a {o.kind} ({obj}) by {angle:g} deg at {rate:g} deg/s about "
+        f"the axis through the thumb's contact; fingers {', '.join(fingers)}"
+        + (f" (idle: {', '.join(idle)})" if idle else "")
+    )
+    return Scenario(
+        name=f"{hand}-{obj}",
+        hand=h,
+        obj=o,
+        motion=motion,
+        grasp=grasp,
+        params=params,
+        description=desc,
+    )

@@ -1,0 +1,138 @@
+"""``regrasp-pin approx``: reduce a curve from a CSV file to m waypoints (Fig. 8)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+NAME = "approx"
+HELP = (
+    "Approximate a curve (CSV rows x,y or x,y,z; optional header) by m of its points with "
+    "the competitive Hopfield network or the exact DP optimum."
+)
+
+# Literal copies so that --help does not import numpy; checked against the library in tests.
+_DEVIATIONS = ("max", "sum", "ise")
+_METHODS = ("hopfield", "exact")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("curve", type=Path, help="CSV file with x,y or x,y,z rows")
+    parser.add_argument("-m", type=int, required=True, help="number of vertices (waypoints)")
+    parser.add_argument("--closed", action="store_true", help="treat the curve as closed")
+    parser.add_argument(
+        "--deviation",
+        choices=_DEVIATIONS,
+        default="max",
+        help="arc-to-chord deviation: max (Eq. 7, the paper's), sum, ise (default: max)",
+    )
+    parser.add_argument(
+        "--method", choices=_METHODS, default="hopfield", help="solver (default: hopfield)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the network's restarts")
+    parser.add_argument(
+        "--restarts", type=int, default=6, help="network perturbation rounds (default: 6)"
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--plot", type=Path, metavar="PNG", help="also save a Fig. 8 plot")
+
+
+def load_curve(path: Path) -> list[list[float]]:
+    """Rows of floats from a CSV file; a first line that is not numeric is a header.
+
+    Raises:
+        InputError: missing file, no data rows, a non-numeric cell, or ragged rows.
+    """
+    from ..exceptions import InputError
+
+    expected = "a CSV file of x,y or x,y,z rows"
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError("curve", f"cannot read {str(path)!r} ({exc.strerror})", expected) from None
+    rows: list[list[float]] = []
+    header_seen = False
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        cells = [c.strip() for c in line.replace(";", ",").split(",")]
+        try:
+            rows.append([float(c) for c in cells])
+        except ValueError:
+            if not rows and not header_seen:
+                header_seen = True
+                continue
+            raise InputError(
+                "curve", f"{path.name} line {lineno}: {line.strip()!r} is not numeric", expected
+            ) from None
+        if len(rows[-1]) != len(rows[0]):
+            raise InputError(
+                "curve",
+                f"{path.name} line {lineno}: {len(rows[-1])} columns, earlier rows have "
+                f"{len(rows[0])}",
+                expected,
+            )
+    if not rows:
+        raise InputError("curve", f"{path.name} has no data rows", expected)
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from ..polygon import approximate_polygon
+
+    points = np.asarray(load_curve(args.curve), dtype=float)
+    t0 = time.perf_counter()
+    res = approximate_polygon(
+        points,
+        args.m,
+        closed=args.closed,
+        deviation=args.deviation,
+        method=args.method,
+        seed=args.seed,
+        restarts=args.restarts,
+    )
+    time_ms = (time.perf_counter() - t0) * 1e3
+    if args.plot is not None:
+        from ..plotting.polygon import plot_polygon
+
+        fig = plot_polygon(points, res)
+        fig.savefig(args.plot, dpi=120, bbox_inches="tight")
+    report = {
+        "curve": str(args.curve),
+        "n": res.n,
+        "m": res.m,
+        "closed": res.closed,
+        "deviation": res.deviation,
+        "method": res.method,
+        "indices": res.indices.tolist(),
+        "vertices": res.vertices.tolist(),
+        "energy": res.energy,
+        "plain_energy": res.plain_energy,
+        "sweeps": res.sweeps,
+        "time_ms": round(time_ms, 3),
+        "timings_ms": {k: round(v, 3) for k, v in res.timings_ms.items()},
+    }
+    if args.plot is not None:
+        report["plot"] = str(args.plot)
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    kind = "closed" if res.closed else "open"
+    print(
+        f"{args.curve}: {res.n} points ({kind}, {points.shape[1]}-D) -> {res.m} vertices, "
+        f"method {res.method}, deviation {res.deviation}"
+    )
+    print(f"energy {res.energy:.6g} (plain network {res.plain_energy:.6g}), {time_ms:.1f} ms")
+    if res.method == "hopfield":
+        print(f"network sweeps {res.sweeps}")
+    print("vertices:")
+    for i, v in zip(res.indices.tolist(), res.vertices, strict=True):
+        coords = ", ".join(f"{c:.6g}" for c in v)
+        print(f"  {i:6d}  ({coords})")
+    if args.plot is not None:
+        print(f"plot written to {args.plot}")
+    return 0
