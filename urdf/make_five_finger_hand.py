@@ -39,7 +39,7 @@ LINK_RADII = (0.0080, 0.0075, 0.0070)
 # pointing outward (tilted 20 deg toward the fingers); the opposition joint turns it
 # about the palm x axis in front of the palm, where its two flexion joints curl it
 # toward the fingertips.
-THUMB_BASE = (0.0200, 0.0200, -0.006)
+THUMB_BASE = (0.0200, 0.0100, -0.006)
 THUMB_OUT = 10 * DEG
 THUMB_LENGTHS = (0.030, 0.035, 0.028)  # metacarpal, proximal, distal
 THUMB_RADII = (0.0095, 0.0085, 0.0075)
