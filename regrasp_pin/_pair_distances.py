@@ -239,7 +239,7 @@ class PairDistances:
     """
 
     def __init__(self, hand: Hand, obj: ConvexObject, f: Finger, q_d: np.ndarray,
-                 T_d: np.ndarray, tip_req: np.ndarray, link_req: float, ff_req: float
+                 T_d: np.ndarray, tip_req: np.ndarray, link_req: float | np.ndarray, ff_req: float
                  ) -> None:
         """Place the geometries and evaluate every lower bound.
 
@@ -250,7 +250,8 @@ class PairDistances:
             q_d: Dense configurations (D, nq) [rad].
             T_d: Dense object poses (D, 4, 4).
             tip_req: Required fingertip distance per sample (D,) [m].
-            link_req: Required distance of the other finger geometries to the object [m].
+            link_req: Required distance of the other finger geometries to the object [m],
+                one for all samples or one per dense sample (D,).
             ff_req: Required distance to the other fingers [m].
         """
         moving = [_geometry(hand, g) for g in f.geometry_ids]
@@ -322,7 +323,8 @@ class PairDistances:
         self.swept = np.full(self.lb.shape, -np.inf)
         self.required = np.empty(self.lb.shape)
         self.required[:, self.kind == TIP] = tip_req[:, None]
-        self.required[:, self.kind == LINK] = link_req
+        link = np.asarray(link_req, dtype=float)
+        self.required[:, self.kind == LINK] = link[:, None] if link.ndim else link
         self.required[:, self.kind == FF] = ff_req
         self.exact = np.full(self.lb.shape, np.nan)
         self.n_queries = 0

@@ -291,6 +291,34 @@ def plan_manipulation(
                         "no verified path from the first start"
                     )
                 break
+        # a regrasp that ends after another finger must let go leaves that finger no
+        # time: lift off earlier by the overlap, if possible
+        if not isinstance(result, RegraspError):
+            others_trig = [holding[n].track.trigger()[0] for n in active if n != name]
+            others_trig = [t for t in others_trig if t is not None]
+            if others_trig:
+                t_other = min(others_trig) - params.lead_s
+                overlap = result[0].t_end - t_other
+                s_try = result[0].t_start - overlap
+                if overlap > 0 and s_try >= max(now, holding[name].t_from) - 1e-9:
+                    earlier = _regrasp(
+                        hand,
+                        obj,
+                        motion,
+                        manifolds[name],
+                        sample,
+                        name,
+                        s_try,
+                        holding,
+                        params,
+                        base_q,
+                    )
+                    if not isinstance(earlier, RegraspError) and earlier[0].t_end <= t_other + 1e-9:
+                        result = earlier
+                        why += (
+                            f"; lifted off {overlap:.2f} s earlier so that the next finger "
+                            "can let go in time"
+                        )
         stage["regrasps"] += time.perf_counter() - t_r
         if isinstance(result, RegraspError):
             raise PlanningError(
@@ -467,6 +495,7 @@ def _regrasp(
             exclude_radius_m=2 * f.tip_radius,
             exclude_points_object=np.array(failed) if failed else None,
             q_hand_arrive=q_hand(np.array([start + duration]))[0],
+            finger_clearance_m=0.001,
         )
 
     for _ in range(params.candidates):
@@ -502,8 +531,31 @@ def _regrasp(
             return res, choice
         except RegraspError as exc:
             log.info("regrasp %s to %s failed: %s", name, choice.p_object.round(4), exc)
-            failed.append(choice.p_object)
             last = exc
+            if "rad/s" in str(exc) and start + 1.5 * duration <= motion.t_end:
+                # too fast for the joints: the same start, a longer regrasp, a new Q
+                try:
+                    longer = 1.5 * duration
+                    choice = choose(longer)
+                    res = plan_regrasp(
+                        hand,
+                        obj,
+                        motion,
+                        name,
+                        start,
+                        h.p,
+                        h.n,
+                        choice.p_object,
+                        choice.n_object,
+                        q_start,
+                        q_hand,
+                        others_tips_object=others_tips,
+                        params=replace(params.regrasp, duration_s=longer),
+                    )
+                    return res, choice
+                except RegraspError as exc2:
+                    last = exc2
+            failed.append(choice.p_object)
     return last if last is not None else PlanningError("no candidate", finger=name, time_s=start)
 
 

@@ -113,6 +113,7 @@ class RegraspParams:
             raise InputError("m", f"{self.m!r} is not allowed", "an integer >= 2")
         if self.taper_m is not None:
             positive(self.taper_m, "taper_m")
+        positive(self.limit_margin_rad, "limit_margin_rad")
         return self
 
 
@@ -254,6 +255,8 @@ def plan_regrasp(
     nP = as_array(n_P_object, "n_P_object", (3,))
     nQ = as_array(n_Q_object, "n_Q_object", (3,))
     q0 = as_array(q_start, "q_start", (f.k,))
+    if not np.isfinite(t_start):
+        raise InputError("t_start", f"{t_start!r} is not finite", "a time within the motion [s]")
     t_end = float(t_start) + params.duration_s
     if t_start < motion.t_start - 1e-9 or t_end > motion.t_end + 1e-9:
         raise InputError(
@@ -316,7 +319,8 @@ def plan_regrasp(
     reason = "no candidate path passed: " + " | ".join(attempts[-3:])
     if isinstance(last_error, VerificationError):
         raise VerificationError(reason, finger=f.name, time_s=last_error.time_s)
-    raise PlanningError(reason, finger=f.name, time_s=float(t_start))
+    when = last_error.time_s if last_error is not None else None
+    raise PlanningError(reason, finger=f.name, time_s=float(t_start) if when is None else when)
 
 
 def _schedule(params: RegraspParams) -> list[RegraspParams]:
@@ -360,21 +364,28 @@ def _surface_path(
     d = grid.uv[grid.q_index] - grid.uv[grid.p_index]
     s = np.clip((grid.uv - grid.uv[grid.p_index]) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
     t_nodes = t_start + p.duration_s * _inverse_minimum_jerk(s)
-    T = motion.pose(t_nodes)
-    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips) + T[:, :3, 3]
+    # only nodes in an ellipse around P and Q can be on a sensible path (a detour of up
+    # to twice the straight distance plus 1 cm); the others are never evaluated
+    uvP, uvQ = grid.uv[grid.p_index], grid.uv[grid.q_index]
+    reach = np.linalg.norm(grid.uv - uvP, axis=1) + np.linalg.norm(grid.uv - uvQ, axis=1)
+    near_pq = reach <= 2.0 * float(np.linalg.norm(uvQ - uvP)) + 0.01
+    near_pq[[grid.p_index, grid.q_index]] = True
+    sel = np.flatnonzero(near_pq)
+    T = motion.pose(t_nodes[sel])
+    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips[sel]) + T[:, :3, 3]
     res = f.ik(targets, q0, tol_m=1e-4, max_iter=20, restarts=False)
     margin = f.limit_margin(res.q)
-    cost = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
-    cost[~res.success] = _UNREACHABLE_COST
+    cost = np.full(grid.uv.shape[0], np.inf)
+    cost[sel] = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
+    cost[sel[~res.success]] = _UNREACHABLE_COST
     if q_others is not None:
         gap = _finger_gap(hand, finger, res.q, q_others)
-        near = np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
-        cost += _FINGER_COST * near
+        cost[sel] += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
     if others_tips.size:
         keep = 2 * f.tip_radius + p.contact_keepout_m
         dist = np.linalg.norm(tips[:, None, :] - others_tips[None], axis=2).min(axis=1)
         cost[dist < keep] = np.inf
-        cost[[grid.p_index, grid.q_index]] = np.minimum(cost[[grid.p_index, grid.q_index]], 0.0)
+    cost[[grid.p_index, grid.q_index]] = np.minimum(cost[[grid.p_index, grid.q_index]], 0.0)
     gpath = shortest_grid_path(grid, cost, cost_weight=p.limit_weight)
     tip_path = inflate_path(
         obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
@@ -501,7 +512,7 @@ def _attempt(
         q_full,
         T,
         tip_clearance_m=required,
-        link_clearance_m=p.link_clearance_m,
+        link_clearance_m=np.maximum(required, p.link_clearance_m),
         finger_clearance_m=p.finger_clearance_m,
     )
     stages.lap("verify")

@@ -297,7 +297,7 @@ def verify_finger_motion(
     T_palm_object: np.ndarray,
     *,
     tip_clearance_m: float | np.ndarray,
-    link_clearance_m: float = 0.0,
+    link_clearance_m: float | np.ndarray = 0.0,
     finger_clearance_m: float = 0.0005,
     penetration_tol_m: float = 5e-5,
     max_joint_step_rad: float = 1e-3,
@@ -328,7 +328,8 @@ def verify_finger_motion(
         T_palm_object: Object poses in the palm frame, shape (S, 4, 4).
         tip_clearance_m: Required fingertip clearance [m], a number or shape (S,), >= 0
             (0 in the lift-off and landing zones, where the tip touches).
-        link_clearance_m: Required clearance of the finger's other geometries [m], >= 0.
+        link_clearance_m: Required clearance of the finger's other geometries [m], >= 0,
+            a number or shape (S,) (interpolated like ``tip_clearance_m``).
         finger_clearance_m: Required distance to the other fingers [m], >= 0.
         penetration_tol_m: Tolerance on the object checks [m], >= 0.
         max_joint_step_rad: Largest joint step between dense samples [rad], > 0.
@@ -358,7 +359,14 @@ def verify_finger_motion(
         if np.any(clr < 0):
             raise InputError("tip_clearance_m", f"has a negative value {clr.min():g}",
                              "clearances >= 0 [m]")
-    link_clr = positive(link_clearance_m, "link_clearance_m", allow_zero=True)
+    link_clr = np.asarray(link_clearance_m, dtype=float)
+    if link_clr.ndim == 0:
+        link_clr = np.full(t.size, positive(float(link_clr), "link_clearance_m", allow_zero=True))
+    else:
+        link_clr = as_array(link_clr, "link_clearance_m", (t.size,))
+        if np.any(link_clr < 0):
+            raise InputError("link_clearance_m", f"has a negative value {link_clr.min():g}",
+                             "clearances >= 0 [m]")
     ff_clr = positive(finger_clearance_m, "finger_clearance_m", allow_zero=True)
     tol = positive(penetration_tol_m, "penetration_tol_m", allow_zero=True)
     step = positive(max_joint_step_rad, "max_joint_step_rad")
@@ -380,10 +388,11 @@ def verify_finger_motion(
             t_d, q_d, T_d = _interpolate(t, q, T, motion, counts)
             tip_obj = _tip_in_object(f, q_d, T_d)
     clr_d = np.interp(t_d, t, clr) if t.size > 1 else clr.copy()
+    link_d = np.interp(t_d, t, link_clr) if t.size > 1 else link_clr.copy()
     max_step = float(np.max(np.linalg.norm(np.diff(tip_obj, axis=0), axis=1))) \
         if t_d.size > 1 else 0.0
 
-    pairs = PairDistances(hand, obj, f, q_d, T_d, clr_d - tol, link_clr - tol, ff_clr)
+    pairs = PairDistances(hand, obj, f, q_d, T_d, clr_d - tol, link_d - tol, ff_clr)
     dist, minima_exact = pairs.run()
     joint_fail = _joint_limit_failures(f, t_d, q_d)
     dist_fail = _distance_failures(pairs, t_d)

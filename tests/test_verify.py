@@ -301,9 +301,15 @@ def test_tip_clearance_is_interpolated_in_time(five):
 
 
 def test_link_penetration_is_a_link_failure_with_the_analytic_depth(five):
-    # a box resting 2 mm deep on the straight proximal phalanx (cylinder r = 8 mm)
+    # a box resting 2 mm deep on the straight proximal phalanx (a cylinder of radius r
+    # along x from the MCP joint), read from the model
+    model, data = five.model, five.model.createData()
+    pin.forwardKinematics(model, data, np.zeros(model.nq))
+    mcp = data.oMi[model.getJointId("index_mcp")].translation
+    gid = five.fingers["index"].geometry_ids[0]
+    r = five.collision_model.geometryObjects[gid].geometry.radius
     obj = Box((0.02, 0.02, 0.02))
-    T = pose([0.065, 0.0285, -0.006 + 0.008 - 0.002 + 0.01])
+    T = pose([mcp[0] + 0.0225, mcp[1], mcp[2] + r - 0.002 + 0.01])
     q = line(five, "index", STRAIGHT, STRAIGHT, 2, base=np.zeros(five.model.nq))
     r = verify_finger_motion(five, obj, "index", [0.0, 1.0], q, np.tile(T, (2, 1, 1)),
                              tip_clearance_m=0.0)

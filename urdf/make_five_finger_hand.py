@@ -25,15 +25,15 @@ DEG = math.pi / 180.0
 
 # name: (base xyz in palm frame, (proximal, middle, distal) lengths, radii, abduction limits)
 FINGERS = {
-    "index": ((0.0425, 0.0285, -0.006), (0.045, 0.025, 0.022), (-20 * DEG, 20 * DEG)),
-    "middle": ((0.0450, 0.0095, -0.006), (0.050, 0.029, 0.024), (-20 * DEG, 20 * DEG)),
-    "ring": ((0.0435, -0.0095, -0.006), (0.047, 0.027, 0.023), (-20 * DEG, 20 * DEG)),
-    "little": ((0.0385, -0.0285, -0.006), (0.036, 0.021, 0.020), (-30 * DEG, 20 * DEG)),
+    "index": ((0.0425, 0.0300, -0.006), (0.045, 0.025, 0.022), (-20 * DEG, 20 * DEG)),
+    "middle": ((0.0450, 0.0100, -0.006), (0.050, 0.029, 0.024), (-20 * DEG, 20 * DEG)),
+    "ring": ((0.0435, -0.0100, -0.006), (0.047, 0.027, 0.023), (-20 * DEG, 20 * DEG)),
+    "little": ((0.0385, -0.0300, -0.006), (0.036, 0.021, 0.020), (-30 * DEG, 20 * DEG)),
 }
 MCP_LIMITS = (-15 * DEG, 90 * DEG)
 PIP_LIMITS = (0.0, 100 * DEG)
 DIP_RATIO = 0.75  # DIP = 0.75 * PIP (<mimic>)
-LINK_RADII = (0.0080, 0.0075, 0.0070)
+LINK_RADII = (0.0070, 0.0065, 0.0060)
 
 # Thumb: base on the radial side of the palm. At q = 0 it lies in the palm plane
 # pointing outward (tilted 20 deg toward the fingers); the opposition joint turns it
