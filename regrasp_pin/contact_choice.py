@@ -119,6 +119,7 @@ def choose_new_contact(
     exclude_points_object: np.ndarray | None = None,
     q_hand_arrive: np.ndarray | None = None,
     finger_clearance_m: float = 0.002,
+    exit_tolerance_s: float = 0.0,
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -147,6 +148,9 @@ def choose_new_contact(
             holding); when given, Q must put the finger at least ``finger_clearance_m``
             from the other fingers (Coal).
         finger_clearance_m: See ``q_hand_arrive`` [m].
+        exit_tolerance_s: With a positive value, exit times that differ by less than
+            this are ties, broken by the shorter distance from P and then the margin
+            (instead of the margin first). 0 keeps the paper's order exactly.
 
     Returns:
         The :class:`NewContact`.
@@ -181,7 +185,13 @@ def choose_new_contact(
     t_exit = exit_times(usable[:, idx], manifold.times_s, ka)
     margin = manifold.margin_rad[ka, idx]
     dist = np.linalg.norm(pts[idx] - P_object, axis=1)
-    order = np.lexsort((dist, -margin, -t_exit))  # (b), then margin, then distance
+    if exit_tolerance_s > 0:
+        # exit times within the tolerance of each other count as ties; among them the
+        # shorter move first (a short move is less likely to cross another finger)
+        bins = np.floor((t_exit.max() - t_exit) / exit_tolerance_s)
+        order = np.lexsort((-margin, dist, bins))
+    else:
+        order = np.lexsort((dist, -margin, -t_exit))  # (b), then margin, then distance
 
     other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
     other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)

@@ -390,7 +390,8 @@ def _split_gain(new: np.ndarray, old: np.ndarray) -> np.ndarray:
 def _relocations(
     H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool, count: int
 ) -> list[tuple[float, np.ndarray]]:
-    """The ``count`` best moves of one vertex into another chord: (energy change, state).
+    """The ``count`` best moves of one or two vertices into other chords: (energy change,
+    state), best first.
 
     Removing vertex ``i`` and inserting the best point of a chord not adjacent to it changes
     the energy by the sum of the two exact local changes.
@@ -413,13 +414,51 @@ def _relocations(
     flat = total.ravel()
     count = min(count, flat.shape[0])
     best = np.argpartition(flat, count - 1)[:count] if count < flat.shape[0] else np.arange(count)
-    best = best[np.argsort(flat[best], kind="stable")]
     moves = []
     for k in best.tolist():
-        if not np.isfinite(flat[k]):
+        if np.isfinite(flat[k]):
+            ri, cj = divmod(k, nc)
+            moves.append((float(flat[k]), np.sort(np.append(np.delete(s, ri), x[cj]))))
+    moves += _pair_relocations(H, s, closed, x, gain_ins, count)
+    moves.sort(key=lambda mv: mv[0])
+    return moves[:count]
+
+
+def _pair_relocations(
+    H: np.ndarray,
+    s: np.ndarray,
+    closed: bool,
+    x: np.ndarray,
+    gain_ins: np.ndarray,
+    count: int,
+) -> list[tuple[float, np.ndarray]]:
+    """The ``count`` best moves of two neighbouring vertices into two other chords.
+
+    Removing vertices ``i, i+1`` merges three chords into one; with ``"max"`` a long chord
+    costs little more than a short one, so this is how spare vertices get parked.
+    """
+    m, nc = s.shape[0], gain_ins.shape[0]
+    if m < (4 if closed else 5) or nc < 5:
+        return []
+    i = np.arange(m) if closed else np.arange(1, m - 2)
+    a, b, c, d = s[(i - 1) % m], s[i], s[(i + 1) % m], s[(i + 2) % m]
+    with np.errstate(invalid="ignore"):
+        gain_rem = H[a, d] - H[a, b] - H[b, c] - H[c, d]
+    order = np.argsort(gain_ins, kind="stable")[:5]
+    moves = []
+    for k in np.argsort(np.where(np.isfinite(gain_rem), gain_rem, np.inf))[:count].tolist():
+        if not np.isfinite(gain_rem[k]):
             break
-        ri, cj = divmod(k, nc)
-        moves.append((float(flat[k]), np.sort(np.append(np.delete(s, ri), x[cj]))))
+        r = int(i[k])
+        hit = {(r - 1) % nc, r % nc, (r + 1) % nc}  # chords replaced by the merge
+        free = [j for j in order.tolist() if j not in hit][:2]
+        if len(free) < 2:
+            continue
+        gain = float(gain_rem[k] + gain_ins[free[0]] + gain_ins[free[1]])
+        if not np.isfinite(gain):
+            continue
+        kept = np.delete(s, [r, (r + 1) % m])
+        moves.append((gain, np.sort(np.concatenate([kept, x[free]]))))
     return moves
 
 

@@ -52,6 +52,8 @@ class PlannerParams:
         min_holding: Fewest fingers that must hold while one is in the air.
         mu: Friction coefficient for force closure.
         candidates: How many new contacts Q to try per regrasp before giving up.
+        exit_tolerance_s: New contacts whose exit times differ by less than this are
+            ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
         earlier_starts_s: When no verified regrasp starts at the scheduled time, the
             planner retries this much earlier [s] (0 first).
         fingers: The fingers that take part (default: all). The others stay idle at
@@ -67,9 +69,10 @@ class PlannerParams:
     lead_s: float = 0.02
     min_holding: int = 3
     mu: float = 0.8
-    candidates: int = 4
+    candidates: int = 6
     fingers: tuple[str, ...] | None = None
     earlier_starts_s: tuple[float, ...] = (0.0, 0.1, 0.2)
+    exit_tolerance_s: float = 0.25
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
 
@@ -496,6 +499,7 @@ def _regrasp(
             exclude_points_object=np.array(failed) if failed else None,
             q_hand_arrive=q_hand(np.array([start + duration]))[0],
             finger_clearance_m=0.001,
+            exit_tolerance_s=params.exit_tolerance_s,
         )
 
     for _ in range(params.candidates):

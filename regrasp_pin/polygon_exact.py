@@ -87,7 +87,7 @@ def exact_polygon(
         ub = polygon_energy(H, inc, closed=closed)
     solver = _Solver(H, closed)
     if closed:
-        best, starts = solver.solve_closed(m, ub)
+        best, starts = _solve_closed(solver, m, ub)
     else:
         best, starts = solver.solve(np.array([0]), n - 1, m - 1, ub), 1
     if best is not None:
@@ -98,6 +98,53 @@ def exact_polygon(
         raise InputError("H", "admits no polygon with finite energy", "available chords")
     s = np.sort(np.asarray(s) % n)
     return ExactResult(s, polygon_energy(H, s, closed=closed), starts)
+
+
+def _solve_closed(
+    solver: _Solver, m: int, ub: float
+) -> tuple[tuple[np.ndarray, float] | None, int]:
+    """Best closed polygon better than ``ub``; returns ((positions, energy) or None, starts).
+
+    Starts are solved in runs of consecutive points; after each run the window of starts
+    that a better polygon must hit is recomputed with the improved bound, and chords that
+    can no longer be in a better polygon are dropped.
+    """
+    n = solver.n
+    best: tuple[np.ndarray, float] | None = None
+    if not np.isfinite(ub):  # no incumbent: the best polygon through point 0 first
+        best = solver.solve(np.array([0]), n, m, np.inf)
+        if best is None:
+            return None, 1
+        ub = best[1]
+    tried = np.zeros(n, dtype=bool)
+    tried[0] = best is not None
+    count = int(tried.sum())
+    togo: tuple[int, np.ndarray] | None = None
+    pruned_at = np.inf
+    while True:
+        if ub < pruned_at * (1 - 1e-3):
+            try:
+                solver = _Solver(solver.pruned(m, ub), True)
+            except InputError:  # nothing can beat ub
+                break
+            pruned_at, togo = ub, None
+        window = solver.start_window(m, ub)
+        todo = window[~tried[window % n]]
+        if todo.size == 0:
+            break
+        if togo is None:  # bounds for every start of this window (valid for any subset)
+            togo = (int(window[0]), solver.cost_to_go(int(window[0]), window.size, m))
+        breaks = np.flatnonzero(np.diff(todo) > 1)
+        end = int(breaks[0]) + 1 if breaks.size else todo.size
+        run = todo[: min(end, _RUN)]
+        if togo[0] > run[0] or togo[0] + togo[1].shape[1] - n < run[-1] + 1:
+            togo = (int(run[0]), solver.cost_to_go(int(run[0]), run.size, m))
+        res = solver.solve(run, n, m, ub, togo)
+        tried[run % n] = True
+        count += int(run.size)
+        if res is not None and res[1] < ub:
+            best, ub = res, res[1]
+    return best, count
 
 
 class _Solver:
@@ -140,11 +187,9 @@ class _Solver:
 
     def start_window(self, m: int, ub: float) -> np.ndarray:
         """Smallest window of start points that every polygon better than ``ub`` must hit."""
-        n, W = self.n, self.Lmax - self.Lmin + 1
+        n = self.n
         L = np.arange(self.Lmin, self.Lmax + 1)
-        # forward form: chord (x, L) is B[(x + L) mod n, L]
-        ends = (np.arange(n)[:, None] + L[None, :]) % n
-        fwd = self.B2[ends, np.arange(W)[None, :]]
+        fwd = self.F3[:n]  # chord (x, L) starting at x
         limit = ub * (1 + _RTOL) + 1e-300
         feasible = fwd + self.rest(m - 1)[n - L][None, :] <= limit
         reach = np.where(feasible, L[None, :], 0).max(axis=1)  # longest useful chord from x
@@ -164,43 +209,19 @@ class _Solver:
             return starts[:0]
         return starts[useful[0] : useful[-1] + 1]
 
-    def solve_closed(self, m: int, ub: float) -> tuple[tuple[np.ndarray, float] | None, int]:
-        """Best closed polygon better than ``ub``; returns ((positions, energy) or None, starts).
-
-        Starts are solved in runs of consecutive points; after each run the window of
-        starts that a better polygon must hit is recomputed with the improved bound.
-        """
+    def pruned(self, m: int, ub: float) -> np.ndarray:
+        """H without the chords that cannot be in a closed polygon better than ``ub``."""
         n = self.n
-        best: tuple[np.ndarray, float] | None = None
-        if not np.isfinite(ub):  # no incumbent: the best polygon through point 0 first
-            best = self.solve(np.array([0]), n, m, np.inf)
-            if best is None:
-                return None, 1
-            ub = best[1]
-        tried = np.zeros(n, dtype=bool)
-        tried[0] = best is not None
-        count = int(tried.sum())
-        togo: tuple[int, np.ndarray] | None = None
-        while True:
-            window = self.start_window(m, ub)
-            todo = window[~tried[window % n]]
-            if todo.size == 0:
-                break
-            if togo is None:  # bounds for every start of this window (valid for any subset)
-                togo = (int(window[0]), self._cost_to_go(int(window[0]), window.size, m))
-            breaks = np.flatnonzero(np.diff(todo) > 1)
-            end = int(breaks[0]) + 1 if breaks.size else todo.size
-            run = todo[: min(end, _RUN)]
-            if togo[0] > run[0] or togo[0] + togo[1].shape[1] - n < run[-1] + 1:
-                togo = (int(run[0]), self._cost_to_go(int(run[0]), run.size, m))
-            res = self.solve(run, n, m, ub, togo)
-            tried[run % n] = True
-            count += int(run.size)
-            if res is not None and res[1] < ub:
-                best, ub = res, res[1]
-        return best, count
+        L = np.arange(self.Lmin, self.Lmax + 1)
+        fwd = self.F3[:n]
+        limit = ub * (1 + _RTOL) + 1e-300
+        keep = np.isfinite(fwd) & (fwd + self.rest(m - 1)[n - L][None, :] <= limit)
+        xs, ls = np.nonzero(keep)
+        H = np.full((n, n), np.inf)
+        H[xs, (xs + L[ls]) % n] = fwd[xs, ls]
+        return H
 
-    def _cost_to_go(self, t0: int, count: int, chords: int) -> np.ndarray:
+    def cost_to_go(self, t0: int, count: int, chords: int) -> np.ndarray:
         """Lower bounds ``G[k, u]`` of ``k`` chords from ``t0 + u`` to any end in
         ``[t0 + n, t0 + n + count)`` (a DP backwards from all those ends at once)."""
         n = self.n
@@ -231,7 +252,7 @@ class _Solver:
         """Best path of ``chords`` chords from each start ``t`` to ``t + total``.
 
         ``starts`` must be consecutive (unrolled) integers. ``togo = (t0, G)`` are
-        cost-to-go bounds from :meth:`_cost_to_go` for a window of starts from ``t0`` that
+        cost-to-go bounds from :meth:`cost_to_go` for a window of starts from ``t0`` that
         contains ``starts``.
 
         Returns (vertex positions as absolute unrolled indices, energy) of the best start,
