@@ -260,11 +260,34 @@ def build_manifold(
             anchor[pi[~ok]] = targets[0, pi[~ok]]
         else:
             _retry_failed(finger, lo, hi, targets, ti, pi, q_res, ok, anchor, resid, contact,
-                          max_iter)
+                          2 * max_iter_warm)
+        # the extended box admits other IK branches (e.g. a hyperextended one mirroring
+        # a flexed one): a solution outside the limits is re-solved in the real box from
+        # its reflection about the violated boundary planes, and replaced when that
+        # finds a solution inside
+        out = np.flatnonzero(
+            ok & np.any((q_res < finger.lower) | (q_res > finger.upper), axis=1)
+        )
+        if out.size:
+            q_o = q_res[out]
+            q_refl = np.where(q_o < finger.lower, 2 * finger.lower - q_o, q_o)
+            q_refl = np.where(q_o > finger.upper, 2 * finger.upper - q_o, q_refl)
+            res_in = solve_position_ik(
+                finger.chain,
+                finger.lower,
+                finger.upper,
+                targets[ti[out], pi[out]],
+                q_refl,
+                tol_m=contact.ik_tol_m,
+                max_iter=max_iter_warm,
+                restarts=False,
+            )
+            q_res[out[res_in.success]] = res_in.q[res_in.success]
         q_out[ti, pi] = q_res
         reach[ti, pi] = ok
         last = ti == s1 - 1
         q_prev[pi[last]] = q_res[last]
+        resid[pi[ok]] = 0.0  # reached: retry at once if it fails later
         if ok.any():
             cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
             pad[ti[ok], pi[ok]] = cos >= contact.cos_cone
@@ -319,7 +342,9 @@ def _retry_failed(
     sel = np.flatnonzero(~ok)
     p = pi[sel]
     moved = np.linalg.norm(targets[ti[sel], p] - anchor[p], axis=1)
-    keep = moved >= resid[p] - contact.ik_tol_m
+    first_ok = np.full(targets.shape[1], np.iinfo(np.int64).max)
+    np.minimum.at(first_ok, pi[ok], ti[ok])
+    keep = (moved >= resid[p] - contact.ik_tol_m) | (first_ok[p] < ti[sel])
     sel, p = sel[keep], p[keep]
     if sel.size == 0:
         return

@@ -193,6 +193,7 @@ def plan_manipulation(
     D = params.regrasp.duration_s
 
     history: dict[str, list[_Holding]] = {name: [] for name in active}
+    held_to_end: dict[str, str] = {}
 
     def partial_plan(until: float) -> Plan:
         """The plan up to ``until``: every finger holding its current contact."""
@@ -221,7 +222,7 @@ def plan_manipulation(
         triggers = sorted(
             (h.track.trigger()[0], name)
             for name, h in holding.items()
-            if h.track.trigger()[0] is not None
+            if h.track.trigger()[0] is not None and name not in held_to_end
         )
         triggers = [(t, n) for t, n in triggers if t is not None]
         if not triggers:
@@ -236,9 +237,15 @@ def plan_manipulation(
                 start = t_next - params.lead_s - D
                 why += f", moved earlier so that {next_name} (trigger t={t_next:.3f} s) can follow"
         start = max(start, now, holding[name].t_from)
-        if start + D > t_trig + 1e-9 and start > t_trig - params.lead_s + 1e-9:
-            # cannot start early enough: the finger would pass its trigger in contact
-            pass
+        if start + D > motion.t_end and _holds_to_end(holding[name].track, t_trig, params.contact):
+            # too late to regrasp, but the contact stays inside the joint limits (within
+            # the trigger margin only) and feasible until the motion ends: keep holding
+            held_to_end[name] = (
+                f"{reason_trig} at t={t_trig:.3f} s, too late for a regrasp; held to the end "
+                "inside the joint limits"
+            )
+            log.info("%s: %s", name, held_to_end[name])
+            continue
         if start + D > motion.t_end:
             # too late to regrasp before the end; holding to the trigger is impossible
             raise PlanningError(
@@ -405,6 +412,7 @@ def plan_manipulation(
         regrasps,
         until=motion.t_end,
         params=params,
+        base_q=base_q,
     )
     stage["assembly"] = time.perf_counter() - t0
     plan.summary.update(
@@ -412,10 +420,23 @@ def plan_manipulation(
             "regrasps": len(regrasps),
             "fingers_regrasped": sorted({r.finger for r in regrasps}),
             "initial_epsilon": grasp.epsilon,
+            "held_to_end": held_to_end,
             "stage_s": stage,
         }
     )
     return ManipulationPlan(plan, regrasps, grasp, manifolds, sample, stage)
+
+
+def _holds_to_end(track: ContactTrack, t_from: float, contact: ContactModel) -> bool:
+    """Whether a contact stays reached, inside the joint limits (margin >= 0), pad facing
+    and links clear from ``t_from`` to the end of its track."""
+    sel = track.times_s >= t_from - 1e-9
+    return bool(
+        np.all(track.error_m[sel] <= contact.ik_tol_m)
+        and np.all(track.margin_rad[sel] >= 0.0)
+        and np.all(track.pad_cos[sel] >= contact.cos_cone)
+        and np.all(track.link_clearance_m[sel] >= 0.0)
+    )
 
 
 def _hold(

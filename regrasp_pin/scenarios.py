@@ -53,7 +53,7 @@ class Scenario:
 _SETUP = {
     "five_finger": {
         "rotation": Rotation.from_euler("y", 90, degrees=True),  # prism axis -> palm x
-        "position": (0.06, 0.0, 0.08),
+        "position": (0.055, 0.0, 0.07),
         "fingers": ("thumb", "index", "middle", "ring"),
         "objects": {
             "hexagon": lambda: Prism(6, 0.032, 0.04),
@@ -79,7 +79,7 @@ def make_scenario(
     obj: str = "hexagon",
     *,
     angle_deg: float | None = None,
-    rate_deg_s: float = 30.0,
+    rate_deg_s: float = 20.0,
     dt_s: float = 0.01,
     seed: int = 0,
 ) -> Scenario:
@@ -88,7 +88,7 @@ def make_scenario(
     Args:
         hand: ``"five_finger"`` (bundled) or ``"allegro"`` (example-robot-data).
         obj: ``"hexagon"``, ``"octagon"`` (prisms) or ``"box"``.
-        angle_deg: Total turn [deg]; its sign gives the direction. Default -100.
+        angle_deg: Total turn [deg]; its sign gives the direction. Default 100.
         rate_deg_s: Turning speed [deg/s] (> 0).
         dt_s: Sampling step of the motion [s].
         seed: Seed of the initial-grasp search.
@@ -104,7 +104,7 @@ def make_scenario(
     choice(hand, "hand", HANDS)
     choice(obj, "obj", OBJECTS)
     rate = positive(rate_deg_s, "rate_deg_s")
-    angle = -100.0 if angle_deg is None else float(angle_deg)
+    angle = 100.0 if angle_deg is None else float(angle_deg)
     if not np.isfinite(angle) or angle == 0:
         raise InputError("angle_deg", f"{angle_deg!r} is not allowed", "a finite non-zero angle")
     setup = _SETUP[hand]

@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--object", dest="obj", choices=("hexagon", "octagon", "box"), default="hexagon"
     )
     parser.add_argument("--angle", type=float, default=None, help="total rotation [deg]")
-    parser.add_argument("--rate", type=float, default=30.0, help="rotation speed [deg/s]")
+    parser.add_argument("--rate", type=float, default=20.0, help="rotation speed [deg/s]")
     parser.add_argument("--json", action="store_true", help="print a machine-readable summary")
     parser.add_argument("--no-plots", action="store_true", help="skip the matplotlib figures")
     parser.add_argument("--meshcat", action="store_true", help="show the plan live in meshcat")
