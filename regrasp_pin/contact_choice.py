@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contact import ContactModel, FingerClearance, LinkClearance
-from .exceptions import ContactError
+from .exceptions import ContactError, InputError
 from .grasp_quality import ferrari_canny_epsilon
 from .hand import Hand
 from .manifold import Manifold
@@ -158,11 +158,20 @@ def choose_new_contact(
     Raises:
         ContactError: no candidate satisfies condition (a), or none keeps the other
             fingers' grasp in force closure; the message says which finger, when, why.
+        InputError: ``t_arrive_s`` is NaN or outside the manifold's times.
     """
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
     sep = 2 * finger.tip_radius + 0.001 if min_separation_m is None else min_separation_m
-    ka = manifold.time_index(t_arrive_s)
+    t_arrive = float(t_arrive_s)
+    t0, t1 = float(manifold.times_s[0]), float(manifold.times_s[-1])
+    if not t0 - 1e-9 <= t_arrive <= t1 + 1e-9:  # also rejects NaN
+        raise InputError(
+            "t_arrive_s",
+            f"{t_arrive_s!r} is outside the manifold's times",
+            f"a time in [{t0:.6g}, {t1:.6g}] s",
+        )
+    ka = manifold.time_index(t_arrive)
     usable = manifold.usable(contact.limit_margin_rad)
     cand = manifold.usable(contact.choice_margin_rad)[ka]
     pts = sample.points
@@ -191,7 +200,9 @@ def choose_new_contact(
         bins = np.floor((t_exit.max() - t_exit) / exit_tolerance_s)
         order = np.lexsort((-margin, dist, bins))
     else:
-        order = np.lexsort((dist, -margin, -t_exit))  # (b), then margin, then distance
+        # (b), then margin, then distance; a point usable to the end outlasts one that
+        # leaves at the last grid time (both have exit time times_s[-1])
+        order = np.lexsort((dist, -margin, ~usable[-1, idx], -t_exit))
 
     other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
     other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)

@@ -74,7 +74,8 @@ def deviation_matrix(
             ``inf``. A chord is dropped when a lower bound of its deviation (the distance
             of the arc's middle point for ``"max"``/``"sum"``, the exact value for
             ``"ise"``) plus a lower bound of the cheapest cover of the rest of the curve
-            by the other ``m - 1`` chords (see :func:`rest_lower_bound`) exceeds ``cap``.
+            by the polygon's other chords (``m - 1`` of them if closed, ``m - 2`` if open;
+            see :func:`rest_lower_bound`) exceeds ``cap``.
             Every finite entry is exact. Pass the energy of any feasible polygon (e.g.
             the network's initial state) to get a matrix on which the optimum, and every
             polygon at least as good, is unchanged.
@@ -142,18 +143,18 @@ def chord_deviations(
     P = validate_points(points)
     deviation = choice(deviation, "deviation", DEVIATIONS)
     n = P.shape[0]
-    starts = np.asarray(starts, dtype=np.int64).ravel() % n
-    ends = np.asarray(ends, dtype=np.int64).ravel() % n
-    lengths = (ends - starts) % n if closed else ends - starts
-    out = np.zeros(starts.shape[0])
+    a: np.ndarray = np.asarray(starts, dtype=np.int64).ravel() % n
+    b: np.ndarray = np.asarray(ends, dtype=np.int64).ravel() % n
+    lengths = (b - a) % n if closed else b - a
+    out = np.zeros(a.shape[0])
     out[lengths <= 0] = np.inf
     inner = np.where(lengths > 1, lengths - 1, 0)
     if inner.sum() == 0:
         return out
-    chord = np.repeat(np.arange(starts.shape[0]), inner)
+    chord = np.repeat(np.arange(a.shape[0]), inner)
     first = np.cumsum(inner) - inner
-    z = (starts[chord] + np.arange(chord.shape[0]) - first[chord] + 1) % n
-    d2 = point_line_sq(P[z], P[starts[chord]], P[ends[chord]])
+    z = (a[chord] + np.arange(chord.shape[0]) - first[chord] + 1) % n
+    d2 = point_line_sq(P[z], P[a[chord]], P[b[chord]])
     seg = np.flatnonzero(inner > 0)
     if deviation == "max":
         out[seg] = np.sqrt(np.maximum.reduceat(d2, first[seg]))

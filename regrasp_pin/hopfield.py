@@ -32,11 +32,11 @@ the first and last columns are pinned to the end points.
 
 Closing the gap to the optimum (a departure from the paper): the plain network stops in a
 local minimum. :func:`competitive_hopfield` keeps the plain run from the paper's initial
-state and then tries more initial states (shifted equidistant states on closed curves, a
-greedy bottom-up merge, a greedy top-down split) and perturbations (one column's vertex
-relocated to another chord; several columns removed and greedily re-inserted), each followed
-by re-convergence of the same network. A result is accepted only if its energy is lower, so
-the answer is never worse than the plain network.
+state and then tries more initial states (on closed curves the equidistant state shifted
+by half a spacing, a greedy bottom-up merge, a greedy top-down split) and perturbations
+(one or two columns' vertices relocated to other chords; several columns removed and
+greedily re-inserted), each followed by re-convergence of the same network. A result is
+accepted only if its energy is lower, so the answer is never worse than the plain network.
 """
 
 from __future__ import annotations
@@ -113,7 +113,7 @@ def initial_state(
     """The paper's initial state (step 2): ``m`` points as equidistant as possible.
 
     Targets are spaced evenly in arc length (cumulative chord length, including the closing
-    segment of a closed curve) and snapped to the first point at or after each target; the
+    segment of a closed curve) and snapped to the nearest point along the curve; the
     indices are then made strictly increasing. Open curves keep both end points.
 
     Args:
@@ -124,9 +124,15 @@ def initial_state(
 
     Returns:
         Vertex indices, shape ``(m,)``, strictly increasing.
+
+    Raises:
+        InputError: bad ``points`` or ``m``.
     """
     P = as_array(points, "points", (None, None))
     n = P.shape[0]
+    m = positive_int(m, "m", 3 if closed else 2)
+    if m > n:
+        raise InputError("m", f"{m} exceeds the number of points n={n}", f"m <= {n}")
     seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
     if closed:
         seg = np.append(seg, np.linalg.norm(P[0] - P[-1]))
@@ -135,9 +141,13 @@ def initial_state(
         cum = np.arange(cum.shape[0], dtype=float)
     total = cum[-1]
     if closed:
-        idx = np.searchsorted(cum[:n], (np.arange(m) + phase) / m * total)
+        cum = cum[:n]
+        targets = (np.arange(m) + phase) / m * total
     else:
-        idx = np.searchsorted(cum, np.arange(m) / (m - 1) * total)
+        targets = np.arange(m) / (m - 1) * total
+    after = np.clip(np.searchsorted(cum, targets), 1, n - 1)
+    nearer_before = (targets - cum[after - 1]) < (cum[after] - targets)
+    idx = np.where(nearer_before, after - 1, after)
     return _make_increasing(idx, n, closed)
 
 
@@ -631,8 +641,9 @@ def competitive_hopfield(
 
     First the plain network of the paper runs from its initial state (``initial``, or the
     equidistant state of :func:`initial_state`). Then, to escape its local minimum, the
-    same network is re-converged from further states: shifted equidistant states (closed
-    curves), a greedy bottom-up merge, a greedy top-down split, and ``restarts`` rounds of
+    same network is re-converged from further states: the equidistant state shifted by half
+    a spacing (closed curves), a greedy bottom-up merge, a greedy top-down split, and
+    ``restarts`` rounds of
     perturbation (remove a few vertices, re-insert them greedily). Only strictly better
     results are kept, so the answer is never worse than the plain network.
 
@@ -657,7 +668,7 @@ def competitive_hopfield(
         The best state, the plain network's result and the sweep/energy record.
 
     Raises:
-        InputError: invalid ``H``, ``m``, ``initial`` or ``restarts``.
+        InputError: invalid ``H``, ``m``, ``initial``, ``restarts`` or ``trials``.
     """
     H = check_deviation_matrix(H)
     n = H.shape[0]
@@ -665,6 +676,7 @@ def competitive_hopfield(
     if m > n:
         raise InputError("m", f"{m} exceeds the number of points n={n}", f"m <= {n}")
     restarts = positive_int(restarts, "restarts", 0)
+    trials = positive_int(trials, "trials", 0)
     if points is None:
         points = np.arange(n, dtype=float)[:, None] * np.array([[1.0, 0.0]])
     if initial is None:
@@ -686,9 +698,8 @@ def competitive_hopfield(
         history.append(best_e)
 
     consider(plain.indices)
-    if closed:
-        for phase in (0.5,):
-            consider(initial_state(points, m, closed=True, phase=phase))
+    if closed:  # the equidistant state shifted by half a spacing
+        consider(initial_state(points, m, closed=True, phase=0.5))
     consider(_greedy_merge(H, m, closed))
     consider(_greedy_split(H, HT, m, closed))
     rng = np.random.default_rng(seed)

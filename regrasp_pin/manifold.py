@@ -15,7 +15,12 @@ the manifold crossing the boundary planes). A point is
 
 and its ``margin`` is the signed distance [rad] of its joint coordinates to the nearest
 boundary plane (negative outside). Times are processed in order, each warm-started
-from the previous solution.
+from the previous solution. Two repairs keep the entries equal to a per-point IK: a
+point whose warm start fails is re-solved cold when its target may have come into
+reach (a warm start can stay in a local minimum), and a solution outside the limits
+is re-solved in the real box from its reflection about the violated planes (the
+extended box admits a second branch, e.g. a hyperextended one mirroring a flexed one,
+where the real box has a solution inside).
 
 Points that provably cannot be feasible are not sent to IK: points whose tip target
 lies outside a conservative voxel cover of the finger's workspace, and points on a face
@@ -225,7 +230,7 @@ def build_manifold(
     pad = np.zeros((nt, n), bool)
     q_prev = np.broadcast_to(finger.q_mid, (n, k)).copy()
     q_out[:] = np.nan
-    # per point: target and best IK residual at its last restart solve (see below)
+    # per point: target and IK residual at its last failed cold solve (see _retry_failed)
     anchor = targets[0].copy()
     resid = np.zeros(n)
     # which points are worth solving at each time (vectorized over times and faces)
@@ -259,15 +264,25 @@ def build_manifold(
             resid[pi[~ok]] = res.error_m[~ok]
             anchor[pi[~ok]] = targets[0, pi[~ok]]
         else:
-            _retry_failed(finger, lo, hi, targets, ti, pi, q_res, ok, anchor, resid, contact,
-                          2 * max_iter_warm)
+            _retry_failed(
+                finger,
+                lo,
+                hi,
+                targets,
+                ti,
+                pi,
+                q_res,
+                ok,
+                anchor,
+                resid,
+                contact,
+                2 * max_iter_warm,
+            )
         # the extended box admits other IK branches (e.g. a hyperextended one mirroring
         # a flexed one): a solution outside the limits is re-solved in the real box from
         # its reflection about the violated boundary planes, and replaced when that
         # finds a solution inside
-        out = np.flatnonzero(
-            ok & np.any((q_res < finger.lower) | (q_res > finger.upper), axis=1)
-        )
+        out = np.flatnonzero(ok & np.any((q_res < finger.lower) | (q_res > finger.upper), axis=1))
         if out.size:
             q_o = q_res[out]
             q_refl = np.where(q_o < finger.lower, 2 * finger.lower - q_o, q_o)
@@ -330,14 +345,16 @@ def _retry_failed(
     contact: ContactModel,
     max_iter: int,
 ) -> None:
-    """Retry, with restarts, warm-started points that failed (updates the arrays in place).
+    """Retry cold, from the middle of the box, warm-started points that failed.
 
     A warm start that fails may sit in a local minimum (e.g. on an extended limit) that
-    it would never leave as its target comes into reach. A point is retried once its
-    target has moved from ``anchor`` (where its last restart failed) by at least that
-    restart's residual ``resid``: before that it stays out of the reach the restart
-    found. Times are taken in order, so a point that comes into reach is warm-started
-    at the next time from its new solution.
+    it would not leave as its target comes into reach, or may need more iterations
+    than ``max_iter_warm`` after a fast move. A failed point is retried when it was
+    reached earlier in the chunk or at the previous chunk (``resid`` 0), or once its
+    target has moved from ``anchor`` (where its last cold retry failed) by at least that
+    retry's residual ``resid``: the distance from the target to the reachable set
+    changes by no more than the target moves. Updates ``q_res``, ``ok``, ``anchor``
+    and ``resid`` in place.
     """
     sel = np.flatnonzero(~ok)
     p = pi[sel]

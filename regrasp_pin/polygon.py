@@ -108,6 +108,7 @@ def approximate_polygon(
     method: str = "hopfield",
     seed: int = 0,
     restarts: int = 6,
+    full_matrix: bool = False,
 ) -> PolygonResult:
     """Approximate an ordered curve by ``m`` of its points (Fig. 8).
 
@@ -122,6 +123,10 @@ def approximate_polygon(
         seed: Seed of the network's perturbation rounds.
         restarts: Perturbation rounds of the network (0 = plain network + deterministic
             starts only).
+        full_matrix: Give the network the full H instead of a band of chord spans around
+            the initial gaps. Slower (O(n^3) for ``"max"``/``"sum"``), but the restarts can
+            then use long chords, which the ``"max"`` optimum often does on curves that fold
+            back (spirals, lattice paths). The plain network is the same either way.
 
     Returns:
         The vertices, their indices and energy, and the network record.
@@ -142,7 +147,7 @@ def approximate_polygon(
     clock = time.perf_counter
     t0 = clock()
     s0 = initial_state(P, m, closed=closed)
-    band = network_band(s0, n, closed)
+    band = None if full_matrix else network_band(s0, n, closed)
     H = deviation_matrix(P, deviation, closed=closed, max_span=band)
     t_h, t_net = clock() - t0, 0.0
     t0 = clock()
@@ -151,8 +156,8 @@ def approximate_polygon(
     while band is not None and plain.max_span - 1 > band:
         # the plain network competed over spans outside the band: widen it and rerun, so
         # that the plain network sees exactly the full matrix
-        wider = max(plain.max_span, int(1.5 * band))
-        wider = None if wider >= n - 1 else wider
+        widest = max(plain.max_span, int(1.5 * band))
+        wider = None if widest >= n - 1 else widest
         logger.debug("plain network needed span %d > band %d", plain.max_span - 1, band)
         t_net += clock() - t0
         t0 = clock()

@@ -62,12 +62,13 @@ _SETUP = {
         },
     },
     "allegro": {
-        "rotation": Rotation.from_euler("x", 0, degrees=True),
-        "position": (0.09, 0.0, 0.10),
+        # thumb below, fingers above: the prism axis along the thumb-middle opposition
+        "rotation": Rotation.align_vectors([[-0.1, -0.3, 0.94]], [[0.0, 0.0, 1.0]])[0],
+        "position": (0.115, 0.035, 0.0),
         "fingers": ("thumb", "index", "middle", "ring"),
         "objects": {
-            "hexagon": lambda: Prism(6, 0.040, 0.05),
-            "octagon": lambda: Prism(8, 0.042, 0.05),
+            "hexagon": lambda: Prism(6, 0.036, 0.04),
+            "octagon": lambda: Prism(8, 0.038, 0.04),
             "box": lambda: Box((0.05, 0.06, 0.06)),
         },
     },
@@ -148,6 +149,7 @@ def make_scenario(
     )
     params = PlannerParams(
         fingers=fingers,
+        manifold_dt_s=0.1,
         contact=contact,
         regrasp=RegraspParams(clearance_m=0.003, duration_s=0.4),
     )

@@ -35,6 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--restarts", type=int, default=6, help="network perturbation rounds (default: 6)"
     )
+    parser.add_argument(
+        "--full-matrix",
+        action="store_true",
+        help="give the network the full deviation matrix (slower; helps --deviation max)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--plot", type=Path, metavar="PNG", help="also save a Fig. 8 plot")
 
@@ -94,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method,
         seed=args.seed,
         restarts=args.restarts,
+        full_matrix=args.full_matrix,
     )
     time_ms = (time.perf_counter() - t0) * 1e3
     if args.plot is not None:
