@@ -19,6 +19,7 @@ from regrasp_pin import (
     plan_regrasp,
     track_contact,
 )
+from regrasp_pin.planner import holding_hand
 
 
 def main(out: Path = Path("out/examples")) -> None:
@@ -54,7 +55,7 @@ def main(out: Path = Path("out/examples")) -> None:
     # 3. the new contact Q: inside the limits on arrival, inside longest afterwards
     duration = scen.params.regrasp.duration_s
     others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in fingers if n != "index"}
-    q_hand_at = _holding_hand(hand, motion, grasp, fingers, "index")
+    q_hand_at = holding_hand(hand, motion, grasp, fingers, "index")
     new = choose_new_contact(
         hand,
         obj,
@@ -95,24 +96,6 @@ def main(out: Path = Path("out/examples")) -> None:
     plan = plan_manipulation(hand, obj, motion, grasp=grasp, params=scen.params)
     print(f"{len(plan.regrasps)} regrasps by {sorted({r.finger for r in plan.regrasps})}")
     print(f"plan written to {plan.plan.save(out / 'plan.json')}")
-
-
-def _holding_hand(hand, motion, grasp, fingers, moving):  # noqa: ANN001, ANN202
-    """Full configurations of the hand with every other finger holding its contact."""
-
-    def q_hand(times: np.ndarray) -> np.ndarray:
-        q = np.broadcast_to(hand.neutral(), (len(times), hand.model.nq)).copy()
-        T = motion.pose(times)
-        for n in fingers:
-            if n == moving:
-                continue
-            f = hand.fingers[n]
-            c = grasp.points_object[n] + f.tip_radius * grasp.normals_object[n]
-            res = f.ik(T[:, :3, :3] @ c + T[:, :3, 3], grasp.q[n])
-            q[:, f.q_indices] = res.q
-        return q
-
-    return q_hand
 
 
 if __name__ == "__main__":

@@ -45,7 +45,7 @@ from .objects import (
     object_from_params,
 )
 from .plan import ContactPhase, Plan, RegraspPhase
-from .planner import ManipulationPlan, PlannerParams, plan_manipulation
+from .planner import ManipulationPlan, PlannerParams, holding_hand, plan_manipulation
 from .polygon import PolygonResult, approximate_polygon
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .scenarios import Scenario, make_scenario
@@ -112,6 +112,7 @@ __all__ = [
     "exit_times",
     "ferrari_canny_epsilon",
     "grid_inflation",
+    "holding_hand",
     "inflate_path",
     "inflation_height",
     "initial_grasp",

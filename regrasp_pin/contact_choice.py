@@ -435,6 +435,6 @@ def initial_grasp(
         points_object={n: pts[pick[n]].copy() for n in names},
         normals_object={n: nrm[pick[n]].copy() for n in names},
         q=q_pick,
-        indices=dict(pick),
+        indices={n: pick[n] for n in names},
         epsilon=float(e_full if e_full > 0 else e),
     )

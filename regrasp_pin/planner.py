@@ -35,7 +35,13 @@ from .plan import ContactPhase, Plan, RegraspPhase
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .tracking import ContactTrack, track_contact
 
-__all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation", "rest_configuration"]
+__all__ = [
+    "ManipulationPlan",
+    "PlannerParams",
+    "holding_hand",
+    "plan_manipulation",
+    "rest_configuration",
+]
 
 log = logging.getLogger(__name__)
 
@@ -691,3 +697,29 @@ def rest_configuration(
                 best, best_d = qf, d
         q[f.q_indices] = best
     return q
+
+
+def holding_hand(
+    hand: Hand,
+    motion: ObjectMotion,
+    grasp: Grasp,
+    fingers: tuple[str, ...] | list[str],
+    moving: str,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """A ``q_hand(times) -> (S, nq)`` for :func:`~.regrasp.plan_regrasp`: every finger of
+    ``fingers`` but ``moving`` holds its ``grasp`` contact (exact IK at every time, warm
+    from the grasp configuration); the others stay at the middle of their limits."""
+
+    def q_hand(times: np.ndarray) -> np.ndarray:
+        times = np.atleast_1d(np.asarray(times, float))
+        q = np.broadcast_to(hand.neutral(), (times.size, hand.model.nq)).copy()
+        T = motion.pose(times)
+        for n in fingers:
+            if n == moving:
+                continue
+            f = hand.fingers[n]
+            c = grasp.points_object[n] + f.tip_radius * grasp.normals_object[n]
+            q[:, f.q_indices] = f.ik(T[:, :3, :3] @ c + T[:, :3, 3], grasp.q[n]).q
+        return q
+
+    return q_hand
