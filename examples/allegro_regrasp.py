@@ -1,9 +1,14 @@
-"""The same pipeline on the four-finger Allegro hand from example-robot-data.
+"""The regrasp pipeline on the four-finger Allegro hand from example-robot-data.
 
-Loads the Allegro right hand offline, builds its scenario (a hexagonal prism held
-between the thumb and three fingers, turned about the thumb's contact), follows every
-contact until the first one meets a boundary plane, chooses the new contact Q, and
-plans and verifies that regrasp with Coal while the others keep holding.
+Loads the Allegro right hand offline. A 50 mm cube turns at 20 deg/s in front of the
+palm; the index finger's surface manifold is built, its contact P is followed to its
+trigger, the new contact Q is chosen by the paper's rule (inside the limits on
+arrival, inside longest afterwards), and the regrasp P -> Q is planned on the inflated
+surface, reduced to Hopfield waypoints, synchronized with the motion and verified by
+Coal. The other fingers are bent back, out of the way.
+
+(The whole-hand plan with the Allegro's own fingers holding is not yet found for this
+object by the bundled scenarios; see ``regrasp-pin demo --hand allegro``.)
 """
 
 from __future__ import annotations
@@ -13,84 +18,95 @@ from pathlib import Path
 import numpy as np
 
 from regrasp_pin import (
+    Box,
+    Hand,
+    LinkClearance,
+    ObjectMotion,
     RegraspError,
     build_manifold,
-    choose_new_contact,
-    make_scenario,
+    exit_times,
     plan_regrasp,
     track_contact,
 )
-from regrasp_pin.planner import holding_hand
 
 
 def main(out: Path = Path("out/examples")) -> None:
-    scen = make_scenario("allegro", "hexagon", angle_deg=60)
-    hand, obj, motion, grasp = scen.hand, scen.obj, scen.motion, scen.grasp
-    fingers = scen.params.fingers
-    print(scen.description)
-    grid = np.arange(motion.t_start, motion.t_end, 0.01)
-    tracks = {
-        n: track_contact(
-            hand, n, obj, motion, grid, grasp.points_object[n], grasp.normals_object[n], grasp.q[n]
-        )
-        for n in fingers
-    }
-    for n, tr in tracks.items():
-        t, why = tr.trigger()
-        print(f"{n:7} holds until {'the end' if t is None else f't={t:.2f} s'} {why}")
-    sample = obj.sample_surface(0.002)
-    times = np.linspace(motion.t_start, motion.t_end, 31)
-    duration = scen.params.regrasp.duration_s
-    order = sorted((tr.trigger()[0], n) for n, tr in tracks.items() if tr.trigger()[0] is not None)
-    last_error = None
-    for t_trig, name in order:  # the first finger (in trigger order) with a verified regrasp
-        i0 = max(int(np.searchsorted(grid, t_trig)) - 2, 0)
-        t0 = float(grid[i0])
-        if t0 + duration > motion.t_end:
-            continue  # too late: the regrasp would not end before the motion does
-        q_hand = holding_hand(hand, motion, grasp, fingers, name)
-        manifold = build_manifold(hand.fingers[name], sample, motion, times)
-        others = {
-            n: (grasp.points_object[n], grasp.normals_object[n]) for n in fingers if n != name
-        }
+    hand = Hand.allegro()
+    finger = hand.fingers["index"]
+    q_rest = hand.neutral()
+    for name, f in hand.fingers.items():
+        if name != "index":  # bent back, away from the cube
+            q_rest[f.q_indices] = f.lower
+            if name != "thumb":
+                q_rest[f.q_indices[0]] = 0.0
+    cube = Box((0.05, 0.05, 0.05))
+    T0 = np.eye(4)
+    T0[:3, 3] = [0.07, 0.05, 0.04]
+    motion = ObjectMotion.constant_twist(
+        T0, axis_palm=[0, 1, 0], point_palm=T0[:3, 3], rate_rad_s=np.radians(20), duration_s=2.0
+    )
+    sample = cube.sample_surface(0.002)
+    times = np.linspace(0.0, 2.0, 41)
+    manifold = build_manifold(finger, sample, motion, times)
+    links = LinkClearance(hand, "index", cube)
+
+    def clear(k: int, idx: np.ndarray) -> np.ndarray:
+        q_full = hand.to_full("index", manifold.q[k, idx], q_rest)
+        return links(q_full, manifold.T_palm_object[k]) >= 0.003
+
+    # P: the usable contact at t = 0 with the largest joint margin
+    usable = manifold.usable(0.08)
+    idx = np.flatnonzero(usable[0])
+    idx = idx[clear(0, idx)]
+    p = int(idx[np.argmax(manifold.margin_rad[0, idx])])
+    grid = np.arange(0.0, 2.0, 0.01)
+    track = track_contact(
+        hand, "index", cube, motion, grid, sample.points[p], sample.normals[p], manifold.q[0, p]
+    )
+    t_trig, why = track.trigger()
+    print(
+        f"index holds P={np.round(1e3 * sample.points[p], 1)} mm until "
+        f"{'the end' if t_trig is None else f't={t_trig:.2f} s ({why})'}"
+    )
+
+    # Q: inside the limits on arrival, and inside longest afterwards (the paper's rule)
+    t0 = 0.3 if t_trig is None else max(0.0, min(t_trig, 1.4) - 0.05)
+    duration = 0.5
+    k = manifold.time_index(t0 + duration)
+    cand = np.flatnonzero(
+        usable[k] & (np.linalg.norm(sample.points - sample.points[p], axis=1) > 0.02)
+    )
+    cand = cand[clear(k, cand)]
+    t_exit = exit_times(usable[:, cand], manifold.times_s, k)
+    order = np.lexsort((-manifold.margin_rad[k, cand], -t_exit))
+    i0 = int(np.searchsorted(grid, t0))
+    for j in order[:5]:
+        q = int(cand[j])
         try:
-            new = choose_new_contact(
-                hand,
-                obj,
-                manifold,
-                sample,
-                t0 + duration,
-                P_object=grasp.points_object[name],
-                n_P_object=grasp.normals_object[name],
-                others=others,
-                q_hand_arrive=q_hand(np.array([t0 + duration]))[0],
-                finger_clearance_m=0.001,
-            )
             result = plan_regrasp(
                 hand,
-                obj,
+                cube,
                 motion,
-                name,
-                t0,
-                grasp.points_object[name],
-                grasp.normals_object[name],
-                new.p_object,
-                new.n_object,
-                tracks[name].q[i0],
-                q_hand,
-                params=scen.params.regrasp,
+                "index",
+                float(grid[i0]),
+                sample.points[p],
+                sample.normals[p],
+                sample.points[q],
+                sample.normals[q],
+                track.q[i0],
+                lambda t: np.broadcast_to(q_rest, (len(t), q_rest.size)).copy(),
             )
-        except RegraspError as exc:
-            print(f"{name}: no verified regrasp at t={t0:.2f} s ({exc})")
-            last_error = exc
+        except RegraspError as exc:  # report it and try the next candidate
+            print(f"Q={np.round(1e3 * sample.points[q], 1)} mm: {exc}")
             continue
         print(
-            f"{name} regrasps at t={t0:.2f} s to Q={np.round(1e3 * new.p_object, 1)} mm: "
+            f"regrasp at t={grid[i0]:.2f} s to Q={np.round(1e3 * sample.points[q], 1)} mm "
+            f"(inside until t={t_exit[j]:.2f} s): {result.waypoints_object.shape[0]} waypoints, "
             f"verified by Coal ({result.report.n_samples} samples), min clearance "
             f"{1e3 * result.min_clearance_m:.2f} mm, {result.planning_ms:.0f} ms"
         )
         return
-    raise last_error if last_error is not None else RuntimeError("no finger triggered")
+    raise RuntimeError("no verified regrasp for the five best new contacts")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,10 @@
-"""The paper's scenario step by step: manifolds, trigger, new contact, one regrasp, the plan.
+"""The paper's scenario step by step: manifolds, triggers, the whole plan, one regrasp.
 
-A five-finger hand holds a hexagonal prism; the prism turns like a knob. This script
-walks through the pipeline with the public API, one stage at a time (Figs. 1-4, 8, 9
-of the paper), then plans the whole motion and writes ``out/examples/plan.json``.
+A five-finger hand holds a hexagonal prism, which turns like a knob about the thumb's
+contact. The script maps the surface into each finger's joint space (Fig. 2), finds
+when each held contact meets a boundary plane, plans the whole motion (every regrasp
+verified by Coal) and opens up one regrasp: its new contact, surface path, Hopfield
+waypoints (Fig. 8) and verification. Writes ``out/examples/plan.json``.
 """
 
 from __future__ import annotations
@@ -11,91 +13,52 @@ from pathlib import Path
 
 import numpy as np
 
-from regrasp_pin import (
-    build_manifold,
-    choose_new_contact,
-    make_scenario,
-    plan_manipulation,
-    plan_regrasp,
-    track_contact,
-)
-from regrasp_pin.planner import holding_hand
+from regrasp_pin import build_manifold, make_scenario, plan_manipulation, track_contact
 
 
 def main(out: Path = Path("out/examples")) -> None:
-    scen = make_scenario("five_finger", "hexagon", angle_deg=-100)
+    scen = make_scenario("five_finger", "hexagon")
     hand, obj, motion, grasp = scen.hand, scen.obj, scen.motion, scen.grasp
+    fingers = scen.params.fingers
     print(scen.description)
 
     # 1. the surface seen from each finger's joint space (Fig. 2)
     sample = obj.sample_surface(0.002)
-    times = np.linspace(motion.t_start, motion.t_end, 69)
-    fingers = scen.params.fingers
-    manifolds = {n: build_manifold(hand.fingers[n], sample, motion, times) for n in fingers}
-    for n, m in manifolds.items():
-        print(f"{n:7} feasible surface points at t=0: {int(m.feasible[0].sum())}")
+    times = np.linspace(motion.t_start, motion.t_end, 26)
+    for n in fingers:
+        m = build_manifold(hand.fingers[n], sample, motion, times)
+        print(
+            f"{n:7} feasible surface points at t=0: {int(m.feasible[0].sum()):4d}, "
+            f"at the end: {int(m.feasible[-1].sum()):4d}"
+        )
 
-    # 2. follow the index contact until it meets a boundary plane (the trigger)
+    # 2. follow each initial contact until it meets a boundary plane (the trigger)
     grid = np.arange(motion.t_start, motion.t_end, 0.01)
-    track = track_contact(
-        hand,
-        "index",
-        obj,
-        motion,
-        grid,
-        grasp.points_object["index"],
-        grasp.normals_object["index"],
-        grasp.q["index"],
-    )
-    t_trig, why = track.trigger()
-    print(f"index triggers at t={t_trig} s: {why}")
-    if t_trig is None:
-        return
+    for n in fingers:
+        track = track_contact(
+            hand, n, obj, motion, grid, grasp.points_object[n], grasp.normals_object[n], grasp.q[n]
+        )
+        t, why = track.trigger()
+        print(f"{n:7} {'holds to the end' if t is None else f'must let go at t={t:.2f} s: {why}'}")
 
-    # 3. the new contact Q: inside the limits on arrival, inside longest afterwards
-    duration = scen.params.regrasp.duration_s
-    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in fingers if n != "index"}
-    q_hand_at = holding_hand(hand, motion, grasp, fingers, "index")
-    new = choose_new_contact(
-        hand,
-        obj,
-        manifolds["index"],
-        sample,
-        t_trig + duration,
-        P_object=grasp.points_object["index"],
-        n_P_object=grasp.normals_object["index"],
-        others=others,
-        q_hand_arrive=q_hand_at(np.array([t_trig + duration]))[0],
-    )
-    print(f"Q = {np.round(1e3 * new.p_object, 1)} mm, inside until t={new.exit_time_s:.2f} s")
+    # 3. the whole hand over the whole motion: holds, triggers, verified regrasps
+    result = plan_manipulation(hand, obj, motion, grasp=grasp, params=scen.params)
+    print(f"{len(result.regrasps)} regrasps by {sorted({r.finger for r in result.regrasps})}")
 
-    # 4. one verified regrasp: inflated surface, grid path, Hopfield waypoints, IK, Coal
-    i0 = int(np.searchsorted(grid, t_trig - 0.02))
-    result = plan_regrasp(
-        hand,
-        obj,
-        motion,
-        "index",
-        float(grid[i0]),
-        grasp.points_object["index"],
-        grasp.normals_object["index"],
-        new.p_object,
-        new.n_object,
-        track.q[i0],
-        q_hand_at,
-        params=scen.params.regrasp,
+    # 4. one regrasp opened up (sections 2.1-2.3)
+    r = result.regrasps[0]
+    print(
+        f"{r.finger}: P {np.round(1e3 * r.P_object, 1)} -> Q {np.round(1e3 * r.Q_object, 1)} mm, "
+        f"grid path {1e3 * r.grid_path.length_m:.1f} mm over faces {r.grid.face_chain}, "
+        f"{r.waypoints_object.shape[0]} Hopfield waypoints passed at "
+        f"{np.round(r.waypoint_times_s, 2).tolist()} s"
     )
     print(
-        f"regrasp verified: {result.waypoints_object.shape[0]} waypoints, path "
-        f"{1e3 * result.path_length_m:.1f} mm, "
-        f"min clearance {1e3 * result.min_clearance_m:.2f} mm, "
-        f"{result.planning_ms:.0f} ms"
+        f"Coal: {r.report.n_samples} samples, {r.report.n_distance_queries} distance queries, "
+        f"min clearance in flight {1e3 * r.min_clearance_m:.2f} mm, closest other finger "
+        f"{1e3 * r.report.min_finger_finger_m:.2f} mm"
     )
-
-    # 5. the whole hand over the whole motion
-    plan = plan_manipulation(hand, obj, motion, grasp=grasp, params=scen.params)
-    print(f"{len(plan.regrasps)} regrasps by {sorted({r.finger for r in plan.regrasps})}")
-    print(f"plan written to {plan.plan.save(out / 'plan.json')}")
+    print(f"plan written to {result.plan.save(out / 'plan.json')}")
 
 
 if __name__ == "__main__":

@@ -67,8 +67,8 @@ _SETUP = {
         "position": (0.115, 0.035, 0.0),
         "fingers": ("thumb", "index", "middle", "ring"),
         "objects": {
-            "hexagon": lambda: Prism(6, 0.036, 0.04),
-            "octagon": lambda: Prism(8, 0.038, 0.04),
+            "hexagon": lambda: Prism(6, 0.045, 0.04),
+            "octagon": lambda: Prism(8, 0.046, 0.04),
             "box": lambda: Box((0.05, 0.06, 0.06)),
         },
     },
