@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml | $(PY)
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/regrasp-pin info
+	$(VENV)/bin/regrasp-pin demo --out out
 
 test: $(STAMP)
 	$(PY) -m pytest -q
@@ -23,12 +23,16 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) bench/ik.py
 	$(PY) bench/polygon.py
+	$(PY) bench/manifold.py
+	$(PY) bench/demo.py
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 docs-images: $(STAMP)
-	$(PY) docs/make_screenshots.py
+	$(VENV)/bin/regrasp-pin demo --out out --quiet
+	cp out/fig9_joint_angles.png docs/fig9_joint_angles.png
+	$(PY) docs/make_screenshots.py --plan out/plan.json
 
 clean:
 	rm -rf $(VENV) out .pytest_cache build *.egg-info

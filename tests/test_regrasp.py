@@ -10,7 +10,7 @@ Scenes (palm frame: x toward the fingers, z out of the palm), five-finger hand, 
 40 x 60 x 40 mm, index finger regrasping:
 
 * "upright": the box at (65, 0, 60) mm, axes aligned with the palm. The index reaches
-  around it and touches its +x face; its usable contacts fill y in [19, 29] mm,
+  around it and touches its +x face; its usable contacts fill y in [23, 29] mm,
   z in [-19, -3] mm of that face (object frame).
 * "edge": the box turned -45 deg about z, centre at (60, 20, 50) mm, so that a vertical
   edge points away from the palm; the index has contacts on the two faces around it
@@ -445,54 +445,124 @@ def test_a_move_that_a_straight_joint_line_would_cut_through_the_box_is_solved(
 
 
 # ---------------------------------------------------------------------- 5. neighbour
-def blocking_configuration(hand: Hand, scene: Scene, path: RegraspResult, other: str):
-    """A configuration of ``other`` (held still) that is clear of the box and of the
-    regrasping finger at P and Q, but cuts into the finger along ``path``; searched on a
-    9 x 9 x 9 grid of its joint box (deterministic). None if there is none."""
-    f, o = hand.finger(FINGER), hand.finger(other)
-    model, cm = hand.model, hand.collision_model
-    data, gdata = model.createData(), pin.GeometryData(cm)
-    request, box = coal.DistanceRequest(), coal.Box(*BOX_SIZE)
-    T = scene.motion.pose(path.times_s[[0, -1]])
-    sel = np.linspace(0, len(path.times_s) - 1, 13).round().astype(int)
-    finger_geoms = []  # the regrasping finger along the path (13 samples)
-    for q in full_trajectory(hand, path, scene.q_neutral)[sel]:
-        pin.forwardKinematics(model, data, q)
-        pin.updateGeometryPlacements(model, data, cm, gdata)
-        finger_geoms.append(
-            [(cm.geometryObjects[g].geometry, pin.SE3(gdata.oMg[g])) for g in f.geometry_ids]
+BLOCK_MARGIN_M = 1e-3  # a blocker keeps this from the box and from the finger at P and Q
+
+
+class Placer:
+    """Geometries of the hand placed with Pinocchio, and Coal distances between them."""
+
+    def __init__(self, hand: Hand) -> None:
+        self.hand, self.model, self.cm = hand, hand.model, hand.collision_model
+        self.data, self.gdata = self.model.createData(), pin.GeometryData(self.cm)
+        self.request = coal.DistanceRequest()
+
+    def place(self, q_full: np.ndarray, finger: str) -> list[tuple]:
+        """``(shape, placement)`` of each geometry of ``finger`` at ``q_full``."""
+        pin.forwardKinematics(self.model, self.data, q_full)
+        pin.updateGeometryPlacements(self.model, self.data, self.cm, self.gdata)
+        return [
+            (self.cm.geometryObjects[g].geometry, pin.SE3(self.gdata.oMg[g]))
+            for g in self.hand.finger(finger).geometry_ids
+        ]
+
+    def distance(self, a: list[tuple], b: list[tuple]) -> float:
+        """Smallest distance between two sets of placed geometries [m]."""
+        return min(
+            coal.distance(g1, M1, g2, M2, self.request, coal.DistanceResult())
+            for g1, M1 in a
+            for g2, M2 in b
         )
-    best, best_depth = None, 0.0
-    for q_other in itertools.product(
-        *[np.linspace(lo, hi, 9) for lo, hi in zip(o.lower, o.upper, strict=True)]
-    ):
+
+    def finger_gap(self, q_full: np.ndarray, finger: str, other: str) -> float:
+        return self.distance(self.place(q_full, finger), self.place(q_full, other))
+
+
+def blocking_configuration(hand: Hand, scene: Scene, path: RegraspResult, other: str):
+    """A configuration of ``other`` (held still) that keeps ``BLOCK_MARGIN_M`` from the
+    box and from the regrasping finger at P and Q, but cuts into the finger along
+    ``path`` (13 samples). None if there is none.
+
+    Deterministic search: every constraint is a margin (distance to the box minus
+    ``BLOCK_MARGIN_M``, gaps at P and Q minus ``BLOCK_MARGIN_M``, depth of the cut in
+    flight); their minimum is maximised over a 9 x 9 x 9 grid of the joint box, then by
+    a compass search (halving steps, inside the limits) from the three best grid points.
+    A configuration blocks when that minimum is positive.
+    """
+    o = hand.finger(other)
+    placer = Placer(hand)
+    T = scene.motion.pose(path.times_s[[0, -1]])
+    box = coal.Box(*BOX_SIZE)
+    box_at = [[(box, pin.SE3(Ti[:3, :3], Ti[:3, 3]))] for Ti in T]
+    sel = np.linspace(0, len(path.times_s) - 1, 13).round().astype(int)
+    finger_at = [placer.place(q, FINGER) for q in full_trajectory(hand, path, scene.q_neutral)[sel]]
+
+    def full(q_other: np.ndarray) -> np.ndarray:
         base = hand.neutral()
         base[o.q_indices] = q_other
-        pin.forwardKinematics(model, data, base)
-        pin.updateGeometryPlacements(model, data, cm, gdata)
-        geoms = [(cm.geometryObjects[g].geometry, pin.SE3(gdata.oMg[g])) for g in o.geometry_ids]
-        to_box = min(
-            coal.distance(
-                g, M, box, coal.Transform3s(Ti[:3, :3], Ti[:3, 3]), request, coal.DistanceResult()
-            )
-            for g, M in geoms
-            for Ti in T
+        return base
+
+    def margin(q_other: np.ndarray) -> float:
+        geoms = placer.place(full(q_other), other)
+        to_box = min(placer.distance(geoms, b) for b in box_at)
+        gap = [placer.distance(geoms, sample) for sample in finger_at]
+        return min(
+            to_box - BLOCK_MARGIN_M,
+            gap[0] - BLOCK_MARGIN_M,
+            gap[-1] - BLOCK_MARGIN_M,
+            -min(gap[1:-1]),
         )
-        if to_box < 1e-3:
-            continue
-        gap = np.array(
-            [
-                min(
-                    coal.distance(g1, M1, g2, M2, request, coal.DistanceResult())
-                    for g1, M1 in sample
-                    for g2, M2 in geoms
-                )
-                for sample in finger_geoms
-            ]
+
+    axes = [np.linspace(lo, hi, 9) for lo, hi in zip(o.lower, o.upper, strict=True)]
+    grid = [np.array(q) for q in itertools.product(*axes)]
+    scores = np.array([margin(q) for q in grid])
+    best, best_score = None, -math.inf
+    for k in np.argsort(-scores, kind="stable")[:3]:
+        x, s = grid[k], scores[k]
+        step = (o.upper - o.lower) / 16  # half a grid cell
+        for _ in range(6):
+            while True:
+                moves = [
+                    np.clip(x + sign * step[j] * np.eye(len(x))[j], o.lower, o.upper)
+                    for j in range(len(x))
+                    for sign in (1.0, -1.0)
+                ]
+                m = [margin(y) for y in moves]
+                j = int(np.argmax(m))
+                if m[j] <= s:
+                    break
+                x, s = moves[j], m[j]
+            step = step / 2
+        if s > best_score:
+            best, best_score = x, s
+    return full(best) if best_score > 0.0 else None
+
+
+def landing_next_to(scene: Scene, placer: Placer, other: str):
+    """Lift-off P and landing Q among the feasible contacts (searched): at Q the index
+    comes within ``FINGER_GAP_M`` of ``other`` (and of no other finger), as little
+    inside as possible; P is the contact farthest from Q whose lift-off keeps 2 mm from
+    every other finger. None if there is no such pair."""
+    hand, M, S = scene.hand, scene.manifold, scene.sample
+    rest = [name for name in hand.fingers if name not in (FINGER, other)]
+
+    def gaps(k: int, i: int) -> tuple[float, float]:
+        q = hand.to_full(FINGER, M.q[k, i])
+        return placer.finger_gap(q, FINGER, other), min(
+            placer.finger_gap(q, FINGER, name) for name in rest
         )
-        if gap[0] > 1e-3 and gap[-1] > 1e-3 and gap.min() < best_depth:
-            best, best_depth = base, gap.min()
-    return best
+
+    landing, lift_off = [], []
+    for i in scene.feasible:
+        g_other, g_rest = gaps(1, i)
+        if g_other < FINGER_GAP_M <= g_rest:
+            landing.append((g_other, -i))
+        if min(gaps(0, i)) >= 2e-3:
+            lift_off.append(i)
+    if not landing or not lift_off:
+        return None
+    i_q = -max(landing)[1]
+    d = np.linalg.norm(S.points[lift_off] - S.points[i_q], axis=1)
+    return int(lift_off[int(np.argmax(d))]), int(i_q)
 
 
 def assert_refused_or_verified(scene, checker, i_p, i_q, q_hand, blocker: str):
@@ -512,7 +582,8 @@ def assert_refused_or_verified(scene, checker, i_p, i_q, q_hand, blocker: str):
 
 
 def test_a_finger_in_the_way_in_flight_is_avoided_or_refused(hand, scenes, planned, checker):
-    """The thumb, held still, sits where the unobstructed path of the index passes."""
+    """The thumb, held still (configuration searched), sits where the unobstructed path
+    of the index passes, clear of it at lift-off and landing."""
     scene = scenes["edge-static"]
     p_object, q_object = CASES[4][1:]
     i_p, i_q = scene.contact(p_object), scene.contact(q_object)
@@ -531,14 +602,18 @@ def test_a_finger_in_the_way_in_flight_is_avoided_or_refused(hand, scenes, plann
 
 
 def test_a_landing_next_to_the_middle_finger_is_refused(hand, scenes, checker):
-    """Landing at y = 21 mm puts the index within 0.5 mm of the middle finger (at the
-    middle of its limits), so no path can pass: the planner must refuse."""
+    """A landing spot (searched) where the index comes within 0.5 mm of the middle
+    finger (at the middle of its limits): no path can end there, so the planner must
+    refuse, naming the middle finger."""
     scene = scenes["upright-static"]
-    i_p = scene.contact((0.02, 0.025, -0.019))
-    i_q = scene.contact((0.02, 0.021, -0.003))
-    q_land = hand.to_full(FINGER, scene.manifold.q[1, i_q])[None]
-    _, d_ff, _ = checker.run(q_land, scene.motion.pose(np.array([0.5])))
-    assert d_ff[0] < FINGER_GAP_M
+    placer = Placer(hand)
+    pair = landing_next_to(scene, placer, "middle")
+    assert pair is not None, "no feasible landing next to the middle finger: the scene changed"
+    i_p, i_q = pair
+    q_land = hand.to_full(FINGER, scene.manifold.q[1, i_q])
+    assert placer.finger_gap(q_land, FINGER, "middle") < FINGER_GAP_M
+    _, d_ff, _ = checker.run(q_land[None], scene.motion.pose(np.array([0.5])))
+    assert d_ff[0] < FINGER_GAP_M  # the independent check agrees
     outcome = assert_refused_or_verified(scene, checker, i_p, i_q, scene.q_neutral, "middle")
     assert isinstance(outcome, VerificationError)
 
