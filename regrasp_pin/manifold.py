@@ -125,7 +125,7 @@ class WorkspaceVoxels:
 
 @functools.lru_cache(maxsize=64)
 def workspace_voxels(
-    finger: Finger, extend_rad: float = 0.0, voxel_m: float = 0.004, max_samples: int = 300_000
+    finger: Finger, extend_rad: float = 0.0, voxel_m: float = 0.004, max_samples: int = 60_000
 ) -> WorkspaceVoxels:
     """Voxels that hold every tip-centre position reachable in the (extended) joint box.
 
@@ -235,7 +235,11 @@ def build_manifold(
     resid = np.zeros(n)
     # which points are worth solving at each time (vectorized over times and faces)
     n_palm_faces = np.einsum("tij,fj->tfi", T_all[:, :3, :3], np.array(list(face_normal.values())))
-    best_cos = (pads @ -n_palm_faces.reshape(-1, 3).T).max(axis=0).reshape(n_palm_faces.shape[:2])
+    inward = -n_palm_faces.reshape(-1, 3)
+    pads_T = np.ascontiguousarray(pads.T)
+    best_cos = np.concatenate(  # in blocks of 32 normals, small enough for the cache
+        [(b @ pads_T).max(axis=1) for b in np.array_split(inward, -(-len(inward) // 32))]
+    ).reshape(n_palm_faces.shape[:2])
     can_face = best_cos + slack >= contact.cos_cone
     face_index = np.searchsorted(np.array(list(face_normal)), sample.face_ids)
     solve = can_face[:, face_index] & voxels.contains(targets)

@@ -60,7 +60,7 @@ def test_text_output_3d_without_header_exact(tmp_path, capsys):
     path = tmp_path / "helix.csv"
     t = np.linspace(0, 4 * np.pi, 50)
     np.savetxt(path, np.c_[np.cos(t), np.sin(t), 0.1 * t], delimiter=",")
-    assert cli.main(["approx", str(path), "-m", "5", "--method", "exact"]) == 0
+    assert cli.main(["approx", str(path), "-m", "5", "--method", "exact", "--full-matrix"]) == 0
     out = capsys.readouterr().out
     assert "50 points (open, 3-D) -> 5 vertices, method exact, deviation max" in out
     assert out.count("(") >= 5 + 1  # one line per vertex

@@ -79,6 +79,9 @@ def test_banded_pipeline_matches_the_full_matrix(caplog):
     ex = approximate_polygon(P, 20, closed=True, deviation="max", method="exact")
     assert_close(ex.energy, exact_polygon(H, 20, closed=True).energy, atol=1e-12, rtol=1e-12)
     assert ex.energy <= res.energy
+    full = approximate_polygon(P, 20, closed=True, deviation="max", restarts=2, full_matrix=True)
+    assert full.plain_energy == res.plain_energy, "same plain network with and without band"
+    assert ex.energy <= full.energy <= full.plain_energy
 
 
 def test_straight_path_and_pixels():

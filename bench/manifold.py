@@ -1,0 +1,213 @@
+"""Joint-space manifolds and the choice of Q against a per-point IK loop, in one run.
+
+Scene (palm frame: x toward the fingers, z out of the palm): the five-finger hand, a
+box 40 x 60 x 40 mm at (65, 0, 60) mm turning about the palm y axis through its centre
+at 30 deg/s for 3 s, its surface sampled every 2 mm, 100 object poses. Prints:
+
+- the one-off workspace covers (cached per finger, built on the first manifold);
+- the five manifolds (:func:`regrasp_pin.manifold.build_manifold`), best of 3;
+- the baseline: a per-point loop calling ``Finger.ik`` on one target at a time,
+  warm-started from the same point's previous time, on a random subset of the points
+  (all 100 times), extrapolated to every point of every finger; and the ratio. Once
+  with ``Finger.ik``'s restarts (its default: what the manifold must agree with) and
+  once without (cheaper, but a warm start can stay in a local minimum);
+- the choice of Q (:func:`regrasp_pin.contact_choice.choose_new_contact`) for the
+  first finger of the initial grasp to trigger, best of 5;
+- how many of the manifold's feasible flags differ from the loops' on the subset.
+
+Saves Fig. 1 (object, contacts P and Q) and Fig. 2 (that finger's joint space) into
+``--out``. Usage: ``python bench/manifold.py [--subset 12] [--out out/bench]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from regrasp_pin.contact import ContactModel, pad_cosines, tip_targets
+from regrasp_pin.contact_choice import choose_new_contact, initial_grasp
+from regrasp_pin.hand import Hand
+from regrasp_pin.manifold import build_manifold, workspace_voxels
+from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.objects import Box
+from regrasp_pin.tracking import track_contact
+
+REGRASP_S = 0.3  # time from lift-off to landing used for the arrival time of Q
+
+
+def best_time(fn, repeats):
+    best, result = np.inf, None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, result
+
+
+def loop_manifold(finger, targets, normals_palm, contact, restarts):
+    """Per-point IK loop: one ``Finger.ik`` call per point and time, warm along time.
+
+    Returns the feasible flags ``(T, n)`` (reached in the limits, pad facing).
+    """
+    nt, n, _ = targets.shape
+    feasible = np.zeros((nt, n), bool)
+    for i in range(n):
+        q = finger.q_mid
+        for t in range(nt):
+            res = finger.ik(targets[t, i], q, tol_m=contact.ik_tol_m, restarts=restarts)
+            q = res.q[0]
+            if res.success[0]:
+                cos = pad_cosines(finger, res.q, normals_palm[t, i][None])[0]
+                feasible[t, i] = cos >= contact.cos_cone
+    return feasible
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--spacing", type=float, default=0.002, help="surface spacing [m]")
+    parser.add_argument("--poses", type=int, default=100, help="object poses (grid times)")
+    parser.add_argument("--subset", type=int, default=12, help="points per finger in the loop")
+    parser.add_argument("--out", type=Path, default=Path("out/bench"), help="figure folder")
+    parser.add_argument("--no-figures", action="store_true")
+    args = parser.parse_args()
+
+    hand = Hand.five_finger()
+    box = Box((0.04, 0.06, 0.04))
+    T0 = np.eye(4)
+    T0[:3, 3] = [0.065, 0.0, 0.06]
+    motion = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=[0.0, 1.0, 0.0],
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.radians(30.0),
+        duration_s=3.0,
+        dt_s=0.01,
+    )
+    sample = box.sample_surface(args.spacing)
+    times = np.linspace(motion.t_start, motion.t_end, args.poses)
+    contact = ContactModel()
+    names = hand.finger_names
+
+    t_cover, _ = best_time(lambda: [workspace_voxels(hand.finger(n), 0.3) for n in names], 1)
+
+    def build_all():
+        return {n: build_manifold(hand.finger(n), sample, motion, times) for n in names}
+
+    t_man, manifolds = best_time(build_all, 3)
+
+    # baseline on a random subset of the points, every time, every finger
+    rng = np.random.default_rng(0)
+    subset = rng.choice(len(sample), args.subset, replace=False)
+    T_all = motion.pose(times)
+    normals_palm = np.einsum("tij,nj->tni", T_all[:, :3, :3], sample.normals[subset])
+    t_loop = {True: 0.0, False: 0.0}
+    differ = {True: 0, False: 0}
+    total = 0
+    for n in names:
+        f = hand.finger(n)
+        targets = tip_targets(sample.points[subset], sample.normals[subset], f.tip_radius, T_all)
+        total += targets.shape[0] * targets.shape[1]
+        for restarts in (True, False):
+            t0 = time.perf_counter()
+            feas = loop_manifold(f, targets, normals_palm, contact, restarts)
+            t_loop[restarts] += time.perf_counter() - t0
+            differ[restarts] += int((feas != manifolds[n].feasible[:, subset]).sum())
+    full = {r: t * len(sample) / args.subset for r, t in t_loop.items()}
+
+    # Q for the first finger to trigger, arriving REGRASP_S after the trigger
+    grasp = initial_grasp(hand, box, manifolds, sample)
+    tracks = {
+        n: track_contact(
+            hand,
+            n,
+            box,
+            motion,
+            times,
+            grasp.points_object[n],
+            grasp.normals_object[n],
+            grasp.q[n],
+            contact=contact,
+        )
+        for n in names
+    }
+    trig = {n: tr.trigger()[0] for n, tr in tracks.items() if tr.trigger()[0] is not None}
+    finger = min(trig, key=trig.get)
+    t_arrive = min(trig[finger] + REGRASP_S, motion.t_end)
+    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in names if n != finger}
+
+    def choose():
+        return choose_new_contact(
+            hand,
+            box,
+            manifolds[finger],
+            sample,
+            t_arrive,
+            P_object=grasp.points_object[finger],
+            n_P_object=grasp.normals_object[finger],
+            others=others,
+            contact=contact,
+        )
+
+    t_q, q_new = best_time(choose, 5)
+
+    n_pts = len(sample)
+    print(
+        f"five-finger hand, box 40 x 60 x 40 mm every {args.spacing * 1e3:g} mm: {n_pts} "
+        f"points x {args.poses} poses x {len(names)} fingers "
+        f"= {n_pts * args.poses * len(names):,} entries"
+    )
+    print(f"{'step':44} {'time':>10} {'target':>10}")
+    rows = [
+        ("workspace covers (once per finger, cached)", f"{t_cover:8.2f} s", ""),
+        ("manifolds, 5 fingers (best of 3)", f"{t_man:8.2f} s", "<= 1 s"),
+        ("per-point Finger.ik loop, restarts (extrap.)", f"{full[True]:8.1f} s", "(~90 s)"),
+        ("  speed-up manifolds / loop", f"{full[True] / t_man:8.1f} x", ""),
+        ("per-point loop, no restarts (extrap.)", f"{full[False]:8.1f} s", ""),
+        ("  speed-up manifolds / loop", f"{full[False] / t_man:8.1f} x", ""),
+        (
+            f"choose Q ({finger}, {q_new.n_candidates} candidates, best of 5)",
+            f"{t_q * 1e3:7.1f} ms",
+            "<= 20 ms",
+        ),
+    ]
+    for name, value, target in rows:
+        print(f"{name:44} {value:>10} {target:>10}")
+    print(
+        f"loops on {args.subset} random points per finger, all poses ({total} entries); "
+        f"feasible flags that differ from the manifolds': {differ[True]} with restarts, "
+        f"{differ[False]} without"
+    )
+    print(
+        f"{finger} triggers at {trig[finger]:.2f} s ({tracks[finger].trigger()[1]}); "
+        f"Q at {np.round(q_new.p_object * 1e3, 1)} mm, stays until {q_new.exit_time_s:.2f} s, "
+        f"rank {q_new.rank}"
+    )
+
+    if not args.no_figures:
+        from regrasp_pin.plotting.manifold import plot_manifold
+        from regrasp_pin.plotting.objects import plot_object
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        contacts = np.array([grasp.points_object[n] for n in names] + [q_new.p_object])
+        ax = plot_object(  # a coarser sample than the manifolds', to see the contacts
+            box,
+            box.sample_surface(0.008),
+            contacts,
+            title=f"Initial grasp and the {finger}'s new contact Q (Fig. 1)",
+        )
+        ax.figure.savefig(args.out / "fig1_contacts.png", dpi=110)
+        fig = plot_manifold(
+            manifolds[finger],
+            times_idx=np.linspace(0, args.poses - 1, 4).round().astype(int),
+            track=tracks[finger],
+            q_new=q_new,
+        )
+        fig.savefig(args.out / "fig2_manifold.png", dpi=110)
+        print(f"figures: {args.out / 'fig1_contacts.png'}, {args.out / 'fig2_manifold.png'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,449 @@
+"""Tests of the new-contact choice and the initial grasp (regrasp_pin.contact_choice).
+
+Scenes (palm frame):
+
+* five-finger hand, box 40 x 60 x 40 mm at (65, 0, 60) mm turning about the palm y
+  axis through its centre at 30 deg/s for 3 s (thumb on the -x face, the fingers on
+  the +x face); surface every 4 mm, manifolds on 13 times (every 0.25 s).
+* Allegro hand (fingers along +z of its palm, flexing toward +x), box 40 x 60 x 40 mm
+  at (100, 20, 20) mm turning about the palm z axis through its centre at 20 deg/s for
+  1 s (thumb on the -z face, the fingers curled onto the +z face); surface every 6 mm,
+  manifolds on 5 times.
+
+The choice of Q is checked against a brute force written here from the paper's rules
+and the manifold's joint coordinates (not its masks): condition (a) at arrival, the
+exit time by a loop over the remaining times, the order (exit time, then margin, then
+distance from P), and the grasp tests (force closure with the others, links clear of
+the box by Pinocchio's ``computeDistances``, quality kept).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import assert_close
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from regrasp_pin.contact import ContactModel, tip_targets
+from regrasp_pin.contact_choice import (
+    SCREEN_EDGES,
+    choose_new_contact,
+    exit_times,
+    initial_grasp,
+)
+from regrasp_pin.exceptions import ContactError, InputError
+from regrasp_pin.grasp_quality import ferrari_canny_epsilon, is_force_closure
+from regrasp_pin.hand import Hand
+from regrasp_pin.manifold import build_manifold
+from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.objects import Box
+
+CONTACT = ContactModel()
+MU = 0.8
+SEP_M = 0.018  # passed explicitly: > 2 tip radii (16 mm) of the five-finger hand
+
+
+def _twist(position, size, axis, rate_deg_s, duration_s):
+    box = Box(size)
+    T0 = np.eye(4)
+    T0[:3, 3] = position
+    motion = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=axis,
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.radians(rate_deg_s),
+        duration_s=duration_s,
+        dt_s=0.05,
+    )
+    return box, motion
+
+
+@pytest.fixture(scope="module")
+def five():
+    hand = Hand.five_finger()
+    box, motion = _twist((0.065, 0.0, 0.06), (0.04, 0.06, 0.04), (0, 1, 0), 30.0, 3.0)
+    sample = box.sample_surface(0.004)
+    times = np.linspace(0.0, 3.0, 13)
+    manifolds = {
+        n: build_manifold(hand.finger(n), sample, motion, times) for n in hand.finger_names
+    }
+    grasp = initial_grasp(hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M)
+    return hand, box, motion, sample, manifolds, grasp
+
+
+@pytest.fixture(scope="module")
+def allegro():
+    hand = Hand.allegro()
+    box, motion = _twist((0.1, 0.02, 0.02), (0.04, 0.06, 0.04), (0, 0, 1), 20.0, 1.0)
+    sample = box.sample_surface(0.006)
+    times = np.linspace(0.0, 1.0, 5)
+    manifolds = {
+        n: build_manifold(hand.finger(n), sample, motion, times) for n in hand.finger_names
+    }
+    grasp = initial_grasp(hand, box, manifolds, sample, mu=MU)
+    return hand, box, motion, sample, manifolds, grasp
+
+
+def _link_distance(hand, finger, box, q_finger, T_palm_object) -> float:
+    """Pinocchio computeDistances: the finger's non-tip geometries against the box."""
+    f = hand.finger(finger)
+    gm = pin.GeometryModel()
+    for g in hand.collision_model.geometryObjects:
+        gm.addGeometryObject(pin.GeometryObject(g))
+    placement = pin.SE3(T_palm_object[:3, :3], T_palm_object[:3, 3])
+    oid = gm.addGeometryObject(pin.GeometryObject("box", 0, placement, box.coal_geometry()))
+    for g in f.geometry_ids:
+        if g not in f.tip_geometry_ids:
+            gm.addCollisionPair(pin.CollisionPair(int(g), oid))
+    gdata = pin.GeometryData(gm)
+    q_full = hand.to_full(finger, q_finger)
+    pin.computeDistances(hand.model, hand.model.createData(), gm, gdata, q_full)
+    return min(r.min_distance for r in gdata.distanceResults)
+
+
+def _usable_direct(hand, finger, manifold, sample, t, i, margin_rad) -> bool:
+    """Feasible with a margin, from the manifold's joint coordinates alone."""
+    f = hand.finger(finger)
+    q = manifold.q[t, i]
+    if np.isnan(q).any():
+        return False
+    T = manifold.T_palm_object[t]
+    target = T[:3, :3] @ (sample.points[i] + f.tip_radius * sample.normals[i]) + T[:3, 3]
+    if np.linalg.norm(f.fk(q) - target) > CONTACT.ik_tol_m:
+        return False
+    if min(np.min(q - f.lower), np.min(f.upper - q)) < margin_rad:
+        return False
+    R, _ = f.tip_poses(q)
+    return float((R @ f.pad_axis_tip) @ -(T[:3, :3] @ sample.normals[i])) >= CONTACT.cos_cone
+
+
+# ------------------------------------------------------------------ exit times
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    st.integers(1, 8),
+    st.integers(1, 6),
+    st.integers(0, 7),
+    st.integers(0, 2**32 - 1),
+)
+def test_exit_times_against_a_loop(nt, n, start, seed):
+    start = min(start, nt - 1)
+    rng = np.random.default_rng(seed)
+    usable = rng.random((nt, n)) < 0.7
+    times = np.cumsum(rng.uniform(0.1, 1.0, nt))
+    got = exit_times(usable, times, start)
+    for i in range(n):
+        expected = times[-1]  # usable to the end
+        for t in range(start, nt):
+            if not usable[t, i]:
+                expected = times[t]
+                break
+        assert got[i] == expected
+
+
+# ------------------------------------------------------------------ grasp quality
+def test_force_closure_on_the_box():
+    box = Box((0.04, 0.06, 0.04))
+    scale = box.radius_m
+    one = (np.array([[0.02, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]))
+    assert ferrari_canny_epsilon(*one, MU, torque_scale_m=scale) == 0.0
+    # thumb on -x opposite three fingers spread on +x
+    p = np.array([[-0.02, 0.0, 0.0], [0.02, 0.015, 0.01], [0.02, 0.0, -0.01], [0.02, -0.015, 0.01]])
+    n = np.array([[-1.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0]])
+    assert is_force_closure(p, n, MU, torque_scale_m=scale)
+    assert ferrari_canny_epsilon(p, n, MU, n_edges=SCREEN_EDGES, torque_scale_m=scale) > 0.01
+    # without friction, or all on one face, nothing holds
+    assert not is_force_closure(p, n, 0.0, torque_scale_m=scale)
+    assert not is_force_closure(p[1:], n[1:], MU, torque_scale_m=scale)
+    # an antipodal pinch holds with torsional (soft-finger) friction, not with points
+    pinch = (p[[0, 2]] * [1, 0, 0], n[[0, 2]])
+    assert not is_force_closure(*pinch, MU, torque_scale_m=scale)
+    assert is_force_closure(*pinch, MU, torque_scale_m=scale, torsion_m=0.005)
+
+
+# ------------------------------------------------------------------ initial grasp
+def _check_grasp(hand, box, sample, manifolds, grasp, min_sep):
+    names = list(manifolds)
+    assert list(grasp.points_object) == names
+    assert list(grasp.indices) == names and all(type(k) is str for k in grasp.indices)
+    pts = np.array([grasp.points_object[n] for n in names])
+    nrm = np.array([grasp.normals_object[n] for n in names])
+    for name in names:
+        i = grasp.indices[name]
+        assert_close(grasp.points_object[name], sample.points[i], atol=0.0, what="sample")
+        assert_close(grasp.normals_object[name], sample.normals[i], atol=0.0, what="normal")
+    # on the surface, with the normal of the face it lies on
+    assert_close(box.signed_distance(pts), np.zeros(len(names)), atol=1e-12, what="surface")
+    assert_close(nrm, box.normals[box.supporting_face(pts)], atol=1e-12, what="face normal")
+    # feasible at t = 0 with the choice margin
+    for name in names:
+        f = hand.finger(name)
+        T = manifolds[name].T_palm_object[0]
+        q = grasp.q[name]
+        target = tip_targets(
+            grasp.points_object[name][None], grasp.normals_object[name][None], f.tip_radius, T
+        )[0]
+        assert np.linalg.norm(f.fk(q) - target) <= CONTACT.ik_tol_m, name
+        assert f.limit_margin(q)[0] >= CONTACT.choice_margin_rad, name
+        R, _ = f.tip_poses(q)
+        assert (R @ f.pad_axis_tip) @ -(T[:3, :3] @ grasp.normals_object[name]) >= (
+            CONTACT.cos_cone
+        ), name
+        d = _link_distance(hand, name, box, q, T)
+        assert d >= CONTACT.choice_link_clearance_m, (name, d)
+    # pairwise separated: the tip spheres never overlap
+    gaps = np.linalg.norm(pts[:, None] - pts[None], axis=2)[np.triu_indices(len(names), 1)]
+    assert gaps.min() >= min_sep
+    # force closure, the quality recomputed
+    eps = ferrari_canny_epsilon(pts, nrm, MU, torque_scale_m=box.radius_m)
+    assert grasp.epsilon > 0.0
+    assert_close(grasp.epsilon, eps, atol=1e-12, what="epsilon")
+
+
+def test_initial_grasp_on_the_five_finger_hand(five):
+    hand, box, _, sample, manifolds, grasp = five
+    _check_grasp(hand, box, sample, manifolds, grasp, SEP_M)
+    # the thumb opposes the fingers
+    assert grasp.normals_object["thumb"] @ grasp.normals_object["index"] < -0.99
+
+
+def test_initial_grasp_on_the_allegro_hand(allegro):
+    hand, box, _, sample, manifolds, grasp = allegro
+    r = max(f.tip_radius for f in hand.fingers.values())
+    _check_grasp(hand, box, sample, manifolds, grasp, 2 * r)
+    assert grasp.normals_object["thumb"] @ grasp.normals_object["middle"] < -0.99
+
+
+def test_initial_grasp_lets_fingers_go(five):
+    # the search favours grasps from which a finger can be lifted with the rest still
+    # holding: some leave-one-out subsets are in force closure
+    _, box, _, _, _, grasp = five
+    names = list(grasp.points_object)
+    pts = np.array([grasp.points_object[n] for n in names])
+    nrm = np.array([grasp.normals_object[n] for n in names])
+    held = [
+        is_force_closure(
+            np.delete(pts, j, 0), np.delete(nrm, j, 0), MU, torque_scale_m=box.radius_m
+        )
+        for j in range(len(names))
+    ]
+    assert sum(held) >= 2
+
+
+def test_initial_grasp_is_seeded(five):
+    hand, box, _, sample, manifolds, grasp = five
+    again = initial_grasp(hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M)
+    assert again.indices == grasp.indices
+
+
+def test_no_initial_grasp_names_the_finger(five):
+    hand, box, _, sample, manifolds, _ = five
+    impossible = dataclasses.replace(CONTACT, choice_margin_rad=10.0)
+    with pytest.raises(ContactError, match="finger 'thumb'.*t=0.000 s") as info:
+        initial_grasp(hand, box, manifolds, sample, contact=impossible)
+    assert info.value.finger == "thumb" and info.value.time_s == 0.0
+
+
+# ------------------------------------------------------------------ the new contact Q
+def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONTACT):
+    """The paper's rules plus the grasp tests, written out candidate by candidate."""
+    name = manifold.finger
+    times = manifold.times_s
+    nt = times.size
+    other_p = np.array([p for p, _ in others.values()])
+    other_n = np.array([n for _, n in others.values()])
+    rows = []
+    for i in range(len(sample)):
+        if not _usable_direct(hand, name, manifold, sample, ka, i, contact.choice_margin_rad):
+            continue
+        if np.min(np.linalg.norm(other_p - sample.points[i], axis=1)) < SEP_M:
+            continue
+        exit_index = nt  # usable to the end
+        for t in range(ka, nt):
+            if not _usable_direct(hand, name, manifold, sample, t, i, contact.limit_margin_rad):
+                exit_index = t
+                break
+        q = manifold.q[ka, i]
+        f = hand.finger(name)
+        margin = min(np.min(q - f.lower), np.min(f.upper - q))
+        rows.append((-exit_index, -margin, float(np.linalg.norm(sample.points[i] - P)), i))
+    rows.sort()
+
+    def eps(p, n):
+        return ferrari_canny_epsilon(
+            np.vstack([other_p, p]),
+            np.vstack([other_n, n]),
+            MU,
+            n_edges=SCREEN_EDGES,
+            torque_scale_m=box.radius_m,
+        )
+
+    eps_P = eps(P, n_P)
+    first_fc = None
+    passing = []
+    for rank, (neg_exit, _, _, i) in enumerate(rows):
+        e = eps(sample.points[i], sample.normals[i])
+        if e <= 0:
+            continue
+        d = _link_distance(hand, name, box, manifold.q[ka, i], manifold.T_palm_object[ka])
+        if d < contact.choice_link_clearance_m:
+            continue
+        passing.append((rank, i, -neg_exit, e))
+        if first_fc is None:
+            first_fc = (rank, i, -neg_exit, e)
+        if e >= eps_P:
+            return (rank, i, -neg_exit, e), rows, passing, eps_P
+    return first_fc, rows, passing, eps_P
+
+
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.5), ("little", 1.0), ("thumb", 0.75)])
+def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
+    hand, box, _, sample, manifolds, grasp = five
+    m = manifolds[finger]
+    P, n_P = grasp.points_object[finger], grasp.normals_object[finger]
+    others = {
+        n: (grasp.points_object[n], grasp.normals_object[n])
+        for n in grasp.points_object
+        if n != finger
+    }
+    q = choose_new_contact(
+        hand,
+        box,
+        m,
+        sample,
+        t_arrive,
+        P_object=P,
+        n_P_object=n_P,
+        others=others,
+        mu=MU,
+        min_separation_m=SEP_M,
+        max_checks=10_000,
+    )
+    ka = m.time_index(t_arrive)
+    expected, rows, passing, eps_P = _brute_force_q(hand, box, m, sample, ka, P, n_P, others)
+    rank, i, exit_index, e = expected
+    assert q.index == i and q.rank == rank
+    assert q.n_candidates == len(rows)
+    exit_time = m.times_s[min(exit_index, m.times_s.size - 1)]
+    assert q.exit_time_s == pytest.approx(exit_time)
+    assert q.t_arrive_s == pytest.approx(m.times_s[ka])
+    # the paper's condition (b): no candidate that keeps the grasp outlasts Q
+    keeps = [p for p in passing if p[3] >= eps_P]
+    if q.quality_kept:
+        assert exit_index == max(p[2] for p in keeps)
+    else:  # none keeps the quality: the longest-lasting one in force closure
+        assert not keeps and exit_index == max(p[2] for p in passing)
+    # the reported numbers
+    assert_close(q.p_object, sample.points[i], atol=0.0, what="Q")
+    assert_close(q.q_arrive, m.q[ka, i], atol=0.0, what="q at arrival")
+    assert q.distance_from_P_m == pytest.approx(np.linalg.norm(sample.points[i] - P))
+    assert q.epsilon == pytest.approx(e) and q.epsilon > 0
+    assert q.epsilon_with_P == pytest.approx(eps_P)
+    assert q.quality_kept == (q.epsilon >= eps_P)
+    assert q.margin_rad >= CONTACT.choice_margin_rad
+    # Q is far enough from every other contact
+    for p_other, _ in others.values():
+        assert np.linalg.norm(q.p_object - p_other) >= SEP_M
+
+
+def test_q_skips_candidates_whose_links_touch(five):
+    # demand more link clearance than the paper's first choice has: Q moves down the
+    # order of condition (b) to the first candidate that passes every test
+    hand, box, _, sample, manifolds, grasp = five
+    finger, t_arrive = "ring", 1.25
+    m = manifolds[finger]
+    ka = m.time_index(t_arrive)
+    P, n_P = grasp.points_object[finger], grasp.normals_object[finger]
+    others = {
+        n: (grasp.points_object[n], grasp.normals_object[n])
+        for n in grasp.points_object
+        if n != finger
+    }
+    _, rows, _, _ = _brute_force_q(hand, box, m, sample, ka, P, n_P, others)
+    first = rows[0][3]
+    d_first = _link_distance(hand, finger, box, m.q[ka, first], m.T_palm_object[ka])
+    strict = dataclasses.replace(CONTACT, choice_link_clearance_m=d_first + 1e-4)
+    q = choose_new_contact(
+        hand,
+        box,
+        m,
+        sample,
+        t_arrive,
+        P_object=P,
+        n_P_object=n_P,
+        others=others,
+        contact=strict,
+        mu=MU,
+        min_separation_m=SEP_M,
+        max_checks=10_000,
+    )
+    (rank, i, _, _), _, _, _ = _brute_force_q(hand, box, m, sample, ka, P, n_P, others, strict)
+    assert q.rank == rank >= 1 and q.index == i
+    assert _link_distance(hand, finger, box, q.q_arrive, m.T_palm_object[ka]) > d_first
+
+
+def test_ties_within_an_exit_tolerance_prefer_the_shorter_move(five):
+    hand, box, _, sample, manifolds, grasp = five
+    m = manifolds["middle"]
+    P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]
+    others = {
+        n: (grasp.points_object[n], grasp.normals_object[n])
+        for n in grasp.points_object
+        if n != "middle"
+    }
+    kw = dict(
+        P_object=P, n_P_object=n_P, others=others, mu=MU, min_separation_m=SEP_M, max_checks=10_000
+    )
+    exact = choose_new_contact(hand, box, m, sample, 1.5, **kw)
+    loose = choose_new_contact(hand, box, m, sample, 1.5, exit_tolerance_s=10.0, **kw)
+    # with every exit time tied, the nearest candidate that passes the tests wins
+    assert loose.distance_from_P_m <= exact.distance_from_P_m
+    assert loose.exit_time_s <= exact.exit_time_s
+
+
+def test_no_feasible_q_names_the_finger_and_time(five):
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]
+    others = {
+        n: (grasp.points_object[n], grasp.normals_object[n])
+        for n in grasp.points_object
+        if n != "middle"
+    }
+    impossible = dataclasses.replace(CONTACT, choice_margin_rad=10.0)
+    with pytest.raises(ContactError, match=r"finger 'middle', t=1\.500 s: no surface point") as e:
+        choose_new_contact(
+            hand,
+            box,
+            manifolds["middle"],
+            sample,
+            1.5,
+            P_object=P,
+            n_P_object=n_P,
+            others=others,
+            contact=impossible,
+        )
+    assert e.value.finger == "middle" and e.value.time_s == pytest.approx(1.5)
+    # alone on the object, no candidate is in force closure
+    with pytest.raises(ContactError, match="finger 'middle'.*force closure"):
+        choose_new_contact(
+            hand, box, manifolds["middle"], sample, 1.5, P_object=P, n_P_object=n_P, others={}
+        )
+
+
+@pytest.mark.parametrize("t_arrive", [np.nan, -0.5, 3.5])
+def test_arrival_outside_the_manifold_is_rejected(five, t_arrive):
+    hand, box, _, sample, manifolds, grasp = five
+    with pytest.raises(InputError, match="t_arrive_s"):
+        choose_new_contact(
+            hand,
+            box,
+            manifolds["index"],
+            sample,
+            t_arrive,
+            P_object=grasp.points_object["index"],
+            n_P_object=grasp.normals_object["index"],
+            others={},
+        )

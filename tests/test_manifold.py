@@ -1,0 +1,382 @@
+"""Tests of the joint-space manifolds (regrasp_pin.manifold), the paper's Fig. 2.
+
+Scene (palm frame: x toward the fingers, z out of the palm): the five-finger hand and a
+box 40 x 60 x 40 mm at (65, 0, 60) mm, axes aligned with the palm, turning about the
+palm y axis through its centre at 30 deg/s for 3 s; the surface sampled every 4 mm and
+13 grid times (every 0.25 s, 7.5 deg). Every finger has feasible contacts on it.
+
+The manifold is checked against reasons, not against itself: FK round trips of its
+joint coordinates, the joint box and the pad cone recomputed from those coordinates,
+the same targets solved by ``Finger.ik`` (cold, with restarts, in the real limits),
+a dense brute-force sweep of the joint box for the points the prefilters skip, and
+random configurations for the workspace cover.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import assert_close
+from scipy.spatial.transform import Rotation
+
+from regrasp_pin.contact import ContactModel, tip_targets
+from regrasp_pin.exceptions import InputError
+from regrasp_pin.hand import Finger, Hand
+from regrasp_pin.manifold import build_manifold, pad_directions, workspace_voxels
+from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.objects import Box
+
+EXTEND_RAD = 0.3  # build_manifold's default
+CONTACT = ContactModel()
+
+
+def box_scene() -> tuple[Box, ObjectMotion]:
+    box = Box((0.04, 0.06, 0.04))
+    T0 = np.eye(4)
+    T0[:3, 3] = [0.065, 0.0, 0.06]
+    motion = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=[0.0, 1.0, 0.0],
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.radians(30.0),
+        duration_s=3.0,
+        dt_s=0.05,
+    )
+    return box, motion
+
+
+@pytest.fixture(scope="module")
+def scene():
+    hand = Hand.five_finger()
+    box, motion = box_scene()
+    sample = box.sample_surface(0.004)
+    times = np.linspace(0.0, 3.0, 13)
+    manifolds = {
+        name: build_manifold(hand.finger(name), sample, motion, times) for name in hand.finger_names
+    }
+    return hand, box, motion, sample, times, manifolds
+
+
+def _targets(finger: Finger, sample, manifold) -> np.ndarray:
+    return tip_targets(sample.points, sample.normals, finger.tip_radius, manifold.T_palm_object)
+
+
+def _normals_palm(sample, manifold) -> np.ndarray:
+    return np.einsum("tij,nj->tni", manifold.T_palm_object[:, :3, :3], sample.normals)
+
+
+def _pad_cos(finger: Finger, q: np.ndarray, n_palm: np.ndarray) -> np.ndarray:
+    """Pad cosines from the tip rotations (not via contact.pad_cosines)."""
+    R, _ = finger.tip_poses(q)
+    return -np.einsum("nij,j,ni->n", R, finger.pad_axis_tip, n_palm)
+
+
+def test_every_finger_has_feasible_contacts(scene):
+    hand, _, _, sample, times, manifolds = scene
+    for name, m in manifolds.items():
+        assert m.finger == name
+        assert m.q.shape == (times.size, len(sample), hand.finger(name).k)
+        assert m.usable(CONTACT.choice_margin_rad)[0].sum() >= 3, name
+
+
+def test_reachable_entries_reach_their_targets(scene):
+    hand, _, _, sample, _, manifolds = scene
+    for name, m in manifolds.items():
+        f = hand.finger(name)
+        targets = _targets(f, sample, m)
+        r = m.reachable
+        err = np.linalg.norm(f.fk(m.q[r]) - targets[r], axis=1)
+        assert err.max() <= CONTACT.ik_tol_m * (1 + 1e-9), name
+        # IK ran in the box extended by EXTEND_RAD beyond the limits
+        solved = ~np.isnan(m.q[..., 0])
+        qs = m.q[solved]
+        assert np.all(qs >= f.lower - EXTEND_RAD - 1e-12) and np.all(
+            qs <= f.upper + EXTEND_RAD + 1e-12
+        ), name
+        assert np.all(solved[r]), "a reachable entry has coordinates"
+
+
+def test_inside_margin_and_pad_follow_from_the_coordinates(scene):
+    hand, _, _, sample, _, manifolds = scene
+    for name, m in manifolds.items():
+        f = hand.finger(name)
+        r = m.reachable
+        q = m.q[r]
+        # margin: distance to the nearest of the 2k boundary planes, written out
+        planes = np.concatenate([q - f.lower, f.upper - q], axis=1)
+        assert_close(m.margin_rad[r], planes.min(axis=1), atol=1e-15, what=f"{name} margin")
+        assert np.all(m.margin_rad[~r] == -np.inf)
+        within = np.all((q >= f.lower) & (q <= f.upper), axis=1)
+        assert np.array_equal(m.inside[r], within), name
+        assert not m.inside[~r].any()
+        cos = _pad_cos(f, q, _normals_palm(sample, m)[r])
+        assert np.array_equal(m.pad_ok[r], cos >= CONTACT.cos_cone), name
+        assert not m.pad_ok[~r].any()
+        assert np.array_equal(m.feasible, m.inside & m.pad_ok)
+        for margin in (0.0, 0.05, 0.2):
+            assert np.array_equal(m.usable(margin), m.feasible & (m.margin_rad >= margin))
+
+
+def test_manifold_crosses_the_boundary_planes(scene):
+    # the paper draws the manifold crossing the boundary planes: with the extended box
+    # some reachable points lie outside the limits, by at most EXTEND_RAD
+    _, _, _, _, _, manifolds = scene
+    outside = np.concatenate([m.margin_rad[m.reachable & ~m.inside] for m in manifolds.values()])
+    assert outside.size > 100
+    assert np.all((outside < 0) & (outside >= -EXTEND_RAD - 1e-12))
+
+
+def test_feasible_entries_equal_per_point_ik(scene):
+    """Each time's targets solved by Finger.ik (cold, restarts, real limits) + the pad test.
+
+    A manifold entry that is feasible is one by its own coordinates (tests above). The
+    converse: every target that per-point IK makes feasible is feasible in the manifold,
+    except where the manifold followed (warm-started along time) another IK branch of
+    the same target: a solution (FK checked above) whose pad does not face the surface
+    or that lies beyond a limit (e.g. the thumb's IP hyperextended where per-point IK
+    finds it flexed). Those are rare.
+    """
+    hand, _, _, sample, times, manifolds = scene
+    for name, m in manifolds.items():
+        f = hand.finger(name)
+        targets = _targets(f, sample, m)
+        normals = _normals_palm(sample, m)
+        n_ref = 0
+        other_branch = 0
+        for t in range(times.size):
+            res = f.ik(targets[t], tol_m=CONTACT.ik_tol_m)
+            ref = res.success & (_pad_cos(f, res.q, normals[t]) >= CONTACT.cos_cone)
+            n_ref += int(ref.sum())
+            missing = np.flatnonzero(ref & ~m.feasible[t])
+            for i in missing:
+                assert m.reachable[t, i], (name, t, i)
+                assert np.abs(m.q[t, i] - res.q[i]).max() > 0.05, (name, t, i)
+            other_branch += missing.size
+        assert m.feasible.sum() <= n_ref
+        assert other_branch <= 0.02 * n_ref, (name, other_branch, n_ref)
+
+
+def test_batched_ik_is_per_point_ik(scene):
+    # the reference above solves each time's targets in one batch: the same as one
+    # Finger.ik call per point (the batch is elementwise)
+    hand, _, _, sample, _, manifolds = scene
+    rng = np.random.default_rng(7)
+    f = hand.finger("middle")
+    targets = _targets(f, sample, manifolds["middle"])[4]
+    batch = f.ik(targets)
+    for i in rng.choice(len(sample), 25, replace=False):
+        one = f.ik(targets[i])
+        assert one.success[0] == batch.success[i]
+        assert_close(one.q[0], batch.q[i], atol=1e-12, what=f"point {i}")
+
+
+def _grid(finger: Finger, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A regular grid of about n configurations over the joint box, and its steps."""
+    span = finger.upper - finger.lower
+    h = float((np.prod(span) / n) ** (1.0 / finger.k))
+    counts = np.maximum(np.ceil(span / h).astype(int), 1) + 1
+    axes = [
+        np.linspace(a, b, c) for a, b, c in zip(finger.lower, finger.upper, counts, strict=True)
+    ]
+    q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, finger.k)
+    return q, span / (counts - 1)
+
+
+def _rotation_rates(hand: Hand, finger: Finger) -> np.ndarray:
+    """Per independent joint, the largest rate [rad/rad] at which it turns the tip frame:
+    1 plus the |multiplier| of every joint that mimics it."""
+    rates = np.ones(finger.k)
+    m = hand.model
+    for a, b in zip(m.mimicking_joints, m.mimicked_joints, strict=True):
+        for i, jid in enumerate(finger.chain.joint_ids):
+            if int(b) == int(jid):
+                rates[i] += abs(m.joints[int(a)].extract().scaling)
+    return rates
+
+
+@pytest.mark.parametrize("name", ["thumb", "index", "little"])
+def test_skipped_points_are_infeasible(scene, name):
+    """Points the prefilters skip (NaN) cannot be feasible, by a dense sweep of the box.
+
+    Any configuration is within half a grid step per joint of a grid node, so its tip
+    is within ``Lp = 1.1 max|J| |h/2|`` of that node's tip and its pad within
+    ``La = sum_i rate_i h_i / 2`` [rad] of the node's pad (the 10 % covers the growth
+    of |J| between nodes). A feasible configuration would therefore leave a node
+    within Lp of the target whose pad cosine is at least ``cos(cone) - La``; there is
+    none. The IK in the real limits agrees: it fails, or its solution does not face.
+    """
+    hand, _, _, sample, _, manifolds = scene
+    f = hand.finger(name)
+    m = manifolds[name]
+    q_grid, h = _grid(f, 150_000)
+    p_grid, J = f.chain.positions_jacobians(q_grid)
+    pads = f.pad_normals(q_grid)
+    Lp = 1.1 * np.linalg.norm(J, ord=2, axis=(1, 2)).max() * np.linalg.norm(h / 2)
+    La = float(_rotation_rates(hand, f) @ (h / 2))
+    skipped_t, skipped_i = np.nonzero(np.isnan(m.q[..., 0]))
+    assert skipped_t.size > 0
+    rng = np.random.default_rng(11)
+    pick = rng.choice(skipped_t.size, min(60, skipped_t.size), replace=False)
+    targets = _targets(f, sample, m)
+    normals = _normals_palm(sample, m)
+    for j in pick:
+        t, i = skipped_t[j], skipped_i[j]
+        near = np.linalg.norm(p_grid - targets[t, i], axis=1) <= Lp
+        facing = pads[near] @ -normals[t, i] >= CONTACT.cos_cone - La
+        assert not facing.any(), (name, t, i)
+        res = f.ik(targets[t, i])
+        assert not res.success[0] or _pad_cos(f, res.q, normals[t, i][None])[0] < CONTACT.cos_cone
+
+
+@pytest.mark.parametrize("extend", [0.0, EXTEND_RAD])
+def test_workspace_voxels_cover_every_reachable_tip(scene, extend):
+    hand = scene[0]
+    rng = np.random.default_rng(12)
+    for name in hand.finger_names:
+        f = hand.finger(name)
+        vox = workspace_voxels(f, extend)
+        q = rng.uniform(f.lower - extend, f.upper + extend, (20_000, f.k))
+        assert vox.contains(f.fk(q)).all(), name
+        # corners and faces of the box too (where a sampled grid is sparsest)
+        corners = np.stack(
+            np.meshgrid(
+                *[[a, b] for a, b in zip(f.lower - extend, f.upper + extend, strict=True)],
+                indexing="ij",
+            ),
+            -1,
+        ).reshape(-1, f.k)
+        assert vox.contains(f.fk(corners)).all(), name
+        # and it is a cover, not everything: far points and the palm's back are out
+        assert not vox.contains(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -0.5]])).any()
+        assert vox.occupied.mean() < 0.9
+
+
+def test_pad_direction_samples_bound_every_configuration(scene):
+    """``max(P @ -n) + slack >= cos(cone)`` whenever some configuration faces n.
+
+    For random configurations q and normals n exactly at the cone's edge from q's pad
+    (the hardest case for a sampled maximum), the sampled best plus the slack reaches
+    cos(cone).
+    """
+    hand = scene[0]
+    rng = np.random.default_rng(13)
+    for name in hand.finger_names:
+        f = hand.finger(name)
+        pads, slack = pad_directions(f)
+        assert 0.0 < slack <= 1.0
+        q = rng.uniform(f.lower, f.upper, (500, f.k))
+        d = f.pad_normals(q)
+        # a unit vector at the cone's angle from d, in a random direction around it
+        perp = np.cross(d, rng.normal(size=(500, 3)))
+        perp /= np.linalg.norm(perp, axis=1, keepdims=True)
+        a = np.radians(CONTACT.cone_deg)
+        inward = np.cos(a) * d + np.sin(a) * perp  # = -n
+        best = (inward @ pads.T).max(axis=1)
+        assert np.all(best + slack >= CONTACT.cos_cone), name
+
+
+def test_time_index_is_the_first_grid_time_at_or_after(scene):
+    m = scene[5]["index"]
+    assert m.time_index(0.0) == 0
+    assert m.time_index(0.25) == 1
+    assert m.time_index(0.26) == 2
+    assert m.time_index(2.99) == 12
+    assert m.time_index(5.0) == 12
+
+
+def test_a_static_object_gives_the_same_manifold_at_every_time(scene):
+    hand, box, motion, sample, _, _ = scene
+    T = motion.pose(0.0)
+    static = ObjectMotion.from_poses([0.0, 1.0], [T, T])
+    m = build_manifold(hand.finger("ring"), sample, static, np.linspace(0.0, 1.0, 4))
+    for t in range(1, 4):
+        assert np.array_equal(m.reachable[t], m.reachable[0])
+        assert np.array_equal(m.feasible[t], m.feasible[0])
+        r = m.reachable[0]
+        assert_close(m.q[t][r], m.q[0][r], atol=1e-3, what="same solutions")
+
+
+def test_manifold_of_a_turned_object_is_the_turned_manifold(scene):
+    # turning the object about the tip target's own frame does nothing to a sphere
+    # contact except turning the normals: the same points stay reachable
+    hand, box, motion, sample, _, _ = scene
+    f = hand.finger("middle")
+    T = motion.pose(0.0)
+    flip = np.eye(4)
+    flip[:3, :3] = Rotation.from_euler("z", 180, degrees=True).as_matrix()
+    m1 = build_manifold(f, sample, ObjectMotion.from_poses([0, 1], [T, T]), np.array([0.0]))
+    T2 = T @ flip  # the box is symmetric under this half turn: the same surface
+    m2 = build_manifold(f, sample, ObjectMotion.from_poses([0, 1], [T2, T2]), np.array([0.0]))
+    # point i under the flip lands where its mirror j was
+    p_flipped = sample.points @ flip[:3, :3].T
+    j = np.array([np.argmin(np.linalg.norm(sample.points - p, axis=1)) for p in p_flipped])
+    assert_close(sample.points[j], p_flipped, atol=1e-12, what="the sample is symmetric")
+    assert np.array_equal(m2.feasible[0], m1.feasible[0][j])
+
+
+def test_bad_times_are_rejected(scene):
+    hand, _, motion, sample, _, _ = scene
+    f = hand.finger("index")
+    for times, word in (
+        ([0.0, np.nan, 1.0], "NaN"),
+        ([0.0, 1.0, 1.0], "increasing"),
+        ([1.0, 0.5], "increasing"),
+        ([], "empty"),
+    ):
+        with pytest.raises(InputError, match=word):
+            build_manifold(f, sample, motion, np.array(times))
+    with pytest.raises(InputError, match="outside the motion"):
+        build_manifold(f, sample, motion, np.array([0.0, 4.0]))
+    with pytest.raises(InputError, match="extend_rad"):
+        build_manifold(f, sample, motion, np.array([0.0]), extend_rad=-0.1)
+
+
+def test_a_nan_pose_cannot_make_a_motion():
+    T = np.tile(np.eye(4), (2, 1, 1))
+    T[1, 0, 3] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        ObjectMotion.from_poses([0.0, 1.0], T)
+
+
+def test_fig2_draws_the_box_the_instants_p_and_q(scene):
+    pytest.importorskip("matplotlib")
+    from regrasp_pin.plotting.manifold import plot_manifold
+    from regrasp_pin.tracking import track_contact
+
+    hand, box, motion, sample, times, manifolds = scene
+    m = manifolds["index"]
+    f = hand.finger("index")
+    i = int(np.flatnonzero(m.usable(0.1)[0])[0])
+    track = track_contact(
+        hand, "index", box, motion, times, sample.points[i], sample.normals[i], m.q[0, i]
+    )
+    fig = plot_manifold(m, times_idx=[0, 6, 12], track=track, q_new=f.q_mid, trigger_index=3)
+    ax = fig.axes[0]
+    assert "index" in ax.get_title() and "first 3" not in ax.get_title()
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert sum(lbl.startswith("manifold t =") for lbl in labels) == 3
+    assert {"Q", "P's path (held)", f"trigger t = {times[3]:.2f} s"} <= set(labels)
+    # P's path is drawn up to the trigger: 4 held times
+    (path,) = [ln for ln in ax.get_lines() if ln.get_label() == "P's path (held)"]
+    assert_close(np.radians(path.get_data_3d()[2]), track.q[:4, 2], atol=1e-12, what="path")
+    # the six boundary planes, all inside the drawn limits [deg]
+    fig.canvas.draw()  # 3-D collections project their paths when drawn
+    assert any(len(c.get_paths()) == 6 for c in ax.collections)
+    for get, j in ((ax.get_xlim, 0), (ax.get_ylim, 1), (ax.get_zlim, 2)):
+        a, b = get()
+        assert a < np.degrees(f.lower[j]) and np.degrees(f.upper[j]) < b
+    with pytest.raises(InputError, match="times_idx"):
+        plot_manifold(m, times_idx=[13])
+    # a finger with more joints is drawn in its first three, and says so
+    k4 = dataclasses.replace(
+        m,
+        q=np.concatenate([m.q, m.q[..., :1]], axis=2),
+        lower=np.append(m.lower, 0.0),
+        upper=np.append(m.upper, 1.0),
+    )
+    assert "first 3 of its 4 joints" in plot_manifold(k4).axes[0].get_title()
+    import matplotlib.pyplot as plt
+
+    plt.close("all")

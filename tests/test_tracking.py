@@ -1,0 +1,228 @@
+"""Tests of contact tracking and the regrasp trigger (regrasp_pin.tracking).
+
+Scene (palm frame: x toward the fingers, z out of the palm): the five-finger hand and a
+box 40 x 60 x 40 mm at (65, 0, 60) mm turning about the palm y axis through its centre
+at 30 deg/s for 3 s. Each finger holds the contact of its manifold at t = 0 that stays
+usable longest (then the largest margin), with its links clear of the box.
+
+The trigger is checked against a direct per-step loop written here: one ``Finger.ik``
+call per time (warm-started from the previous time), the joint margin written out,
+the pad cosine from the tip rotation and the link-object distance from Pinocchio's
+``computeDistances`` with the box added to a copy of the hand's GeometryModel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import assert_close
+
+from regrasp_pin.contact import ContactModel, LinkClearance
+from regrasp_pin.contact_choice import exit_times
+from regrasp_pin.exceptions import InputError, UnknownNameError
+from regrasp_pin.hand import Hand
+from regrasp_pin.manifold import build_manifold
+from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.objects import Box
+from regrasp_pin.tracking import track_contact
+
+CONTACT = ContactModel()
+TIMES = np.linspace(0.0, 3.0, 61)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    hand = Hand.five_finger()
+    box = Box((0.04, 0.06, 0.04))
+    T0 = np.eye(4)
+    T0[:3, 3] = [0.065, 0.0, 0.06]
+    motion = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=[0.0, 1.0, 0.0],
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.radians(30.0),
+        duration_s=3.0,
+        dt_s=0.05,
+    )
+    sample = box.sample_surface(0.004)
+    contacts = {}
+    for name in hand.finger_names:
+        m = build_manifold(hand.finger(name), sample, motion, np.linspace(0.0, 3.0, 13))
+        idx = np.flatnonzero(m.usable(CONTACT.choice_margin_rad)[0])
+        last = exit_times(m.usable(CONTACT.limit_margin_rad)[:, idx], m.times_s, 0)
+        lc = LinkClearance(hand, name, box)
+        for j in np.lexsort((-m.margin_rad[0, idx], -last)):
+            i = idx[j]
+            q_full = hand.to_full(name, m.q[0, i])[None]
+            if lc(q_full, m.T_palm_object[0])[0] >= CONTACT.choice_link_clearance_m:
+                contacts[name] = (sample.points[i], sample.normals[i], m.q[0, i])
+                break
+    return hand, box, motion, contacts
+
+
+def _link_distance(hand, finger, box, q_full, T_palm_object) -> float:
+    """Pinocchio computeDistances between the finger's non-tip geometries and the box."""
+    f = hand.finger(finger)
+    gm = pin.GeometryModel()
+    for g in hand.collision_model.geometryObjects:
+        gm.addGeometryObject(pin.GeometryObject(g))
+    placement = pin.SE3(T_palm_object[:3, :3], T_palm_object[:3, 3])
+    oid = gm.addGeometryObject(pin.GeometryObject("box", 0, placement, box.coal_geometry()))
+    for g in f.geometry_ids:
+        if g not in f.tip_geometry_ids:
+            gm.addCollisionPair(pin.CollisionPair(int(g), oid))
+    data = hand.model.createData()
+    gdata = pin.GeometryData(gm)
+    pin.computeDistances(hand.model, data, gm, gdata, q_full)
+    return min(r.min_distance for r in gdata.distanceResults)
+
+
+def _direct(hand, finger, box, motion, times, p, n, q_start, contact=CONTACT, links=True):
+    """Per-step holdability, written out; returns (holdable, kind, q) per time."""
+    f = hand.finger(finger)
+    q_prev = q_start
+    out = []
+    for t in times:
+        T = motion.pose(t)
+        target = T[:3, :3] @ (p + f.tip_radius * n) + T[:3, 3]
+        res = f.ik(target, q_prev, tol_m=contact.ik_tol_m)
+        q = res.q[0]
+        q_prev = q
+        margin = min(np.min(q - f.lower), np.min(f.upper - q))
+        R, _ = f.tip_poses(q)
+        cos = float((R @ f.pad_axis_tip) @ -(T[:3, :3] @ n))
+        if res.error_m[0] > contact.ik_tol_m:
+            kind = "IK"
+        elif margin < contact.limit_margin_rad:
+            kind = "joint"
+        elif cos < contact.cos_cone:
+            kind = "pad"
+        elif links and _link_distance(hand, finger, box, hand.to_full(finger, q), T) < (
+            contact.link_clearance_m
+        ):
+            kind = "link"
+        else:
+            kind = ""
+        out.append((kind, q))
+    return out
+
+
+_REASON_WORDS = {
+    "IK": "IK cannot reach",
+    "joint": "rad of its",
+    "pad": "pad turned",
+    "link": "link of the finger touches",
+}
+
+
+@pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "little"])
+def test_trigger_agrees_with_a_direct_per_step_check(scene, finger):
+    hand, box, motion, contacts = scene
+    p, n, q0 = contacts[finger]
+    track = track_contact(hand, finger, box, motion, TIMES, p, n, q0)
+    direct = _direct(hand, finger, box, motion, TIMES, p, n, q0)
+    kinds = [k for k, _ in direct]
+    first = next((i for i, k in enumerate(kinds) if k), None)
+    assert track.trigger_index() == first, (finger, track.reasons[first or 0])
+    assert first is not None and first > 0, "the contact holds at first and is let go later"
+    t_trig, reason = track.trigger()
+    assert t_trig == pytest.approx(TIMES[first])
+    assert _REASON_WORDS[kinds[first]] in reason, reason
+    # the same configurations up to the trigger: both reach the target within 10 um,
+    # so they agree to about tol / smallest singular value of J (same IK branch)
+    q_direct = np.array([q for _, q in direct[: first + 1]])
+    assert_close(track.q[: first + 1], q_direct, atol=2e-3, what=f"{finger} q")
+
+
+@pytest.mark.parametrize("finger", ["index", "thumb"])
+def test_track_records_what_it_checks(scene, finger):
+    hand, box, motion, contacts = scene
+    f = hand.finger(finger)
+    p, n, q0 = contacts[finger]
+    track = track_contact(hand, finger, box, motion, TIMES, p, n, q0)
+    assert track.finger == finger
+    assert_close(track.p_object, p, atol=0.0, what="P")
+    # q always within the limits; holdable times reach the target
+    assert np.all(f.within_limits(track.q))
+    T = motion.pose(TIMES)
+    targets = T[:, :3, :3] @ (p + f.tip_radius * n) + T[:, :3, 3]
+    err = np.linalg.norm(f.fk(track.q) - targets, axis=1)
+    assert_close(track.error_m, err, atol=1e-12, what="residuals")
+    hold = track.holdable
+    assert np.all(err[hold] <= CONTACT.ik_tol_m)
+    assert_close(track.margin_rad, f.limit_margin(track.q), atol=1e-15, what="margins")
+    assert np.all(track.margin_rad[hold] >= CONTACT.limit_margin_rad)
+    assert np.all(track.pad_cos[hold] >= CONTACT.cos_cone)
+    assert np.all(track.link_clearance_m[hold] >= CONTACT.link_clearance_m)
+    # the numbers in the reasons are the recorded values
+    for i in np.flatnonzero(~hold):
+        r = track.reasons[i]
+        if r.startswith("pad turned"):
+            deg = np.degrees(np.arccos(track.pad_cos[i]))
+            assert f"{deg:.0f} deg" in r
+        elif "rad of its" in r:
+            assert f"{track.margin_rad[i]:.3f} rad" in r
+
+
+def test_a_larger_margin_triggers_earlier_at_a_boundary_plane(scene):
+    hand, box, motion, contacts = scene
+    p, n, q0 = contacts["index"]
+    f = hand.finger("index")
+    base = track_contact(hand, "index", box, motion, TIMES, p, n, q0, check_links=False)
+    wide = dataclasses.replace(CONTACT, limit_margin_rad=0.25)
+    track = track_contact(
+        hand, "index", box, motion, TIMES, p, n, q0, contact=wide, check_links=False
+    )
+    i = track.trigger_index()
+    assert i is not None and i <= base.trigger_index()
+    direct = _direct(hand, "index", box, motion, TIMES, p, n, q0, contact=wide, links=False)
+    assert i == next(j for j, (k, _) in enumerate(direct) if k)
+    if "rad of its" in track.reasons[i]:  # a boundary plane: name the joint and side
+        q = track.q[i]
+        j = int(np.argmin(np.minimum(q - f.lower, f.upper - q)))
+        side = "lower" if q[j] - f.lower[j] < f.upper[j] - q[j] else "upper"
+        assert f"joint {f.joint_names[j]} within" in track.reasons[i]
+        assert f"{side} limit" in track.reasons[i]
+    assert np.all(np.isinf(track.link_clearance_m))
+
+
+def test_a_still_object_never_triggers(scene):
+    hand, box, motion, contacts = scene
+    p, n, q0 = contacts["middle"]
+    T = motion.pose(0.0)
+    still = ObjectMotion.from_poses([0.0, 3.0], [T, T])
+    track = track_contact(hand, "middle", box, still, TIMES, p, n, q0)
+    assert track.trigger() == (None, "")
+    assert track.holdable.all()
+    assert_close(
+        track.q, np.broadcast_to(track.q[0], track.q.shape), atol=1e-5, what="the finger stays put"
+    )
+
+
+def test_an_unreachable_contact_triggers_at_once(scene):
+    hand, box, motion, contacts = scene
+    p, n, q0 = contacts["index"]
+    far = p + np.array([0.0, 0.0, 1.0])  # one metre away
+    track = track_contact(hand, "index", box, motion, TIMES[:5], far, n, q0)
+    assert track.trigger_index() == 0
+    assert "IK cannot reach" in track.reasons[0]
+
+
+def test_bad_input_is_rejected(scene):
+    hand, box, motion, contacts = scene
+    p, n, q0 = contacts["index"]
+    with pytest.raises(InputError, match="NaN"):
+        track_contact(hand, "index", box, motion, np.array([0.0, np.nan]), p, n, q0)
+    with pytest.raises(InputError, match="increasing"):
+        track_contact(hand, "index", box, motion, np.array([0.0, 1.0, 0.5]), p, n, q0)
+    with pytest.raises(InputError, match="p_object"):
+        track_contact(hand, "index", box, motion, TIMES, [np.nan, 0, 0], n, q0)
+    with pytest.raises(InputError, match="q_start"):
+        track_contact(hand, "index", box, motion, TIMES, p, n, q0[:2])
+    with pytest.raises(InputError, match="outside the motion"):
+        track_contact(hand, "index", box, motion, np.array([0.0, 9.0]), p, n, q0)
+    with pytest.raises(UnknownNameError, match="valid names"):
+        track_contact(hand, "pinky", box, motion, TIMES, p, n, q0)
