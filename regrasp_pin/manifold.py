@@ -233,6 +233,7 @@ def build_manifold(
     # per point: target and IK residual at its last failed cold solve (see _retry_failed)
     anchor = targets[0].copy()
     resid = np.zeros(n)
+    stays_out = np.zeros(n, bool)  # reached outside the limits, no inside solution found
     # which points are worth solving at each time (vectorized over times and faces)
     n_palm_faces = np.einsum("tij,fj->tfi", T_all[:, :3, :3], np.array(list(face_normal.values())))
     inward = -n_palm_faces.reshape(-1, 3)
@@ -285,8 +286,10 @@ def build_manifold(
         # the extended box admits other IK branches (e.g. a hyperextended one mirroring
         # a flexed one): a solution outside the limits is re-solved in the real box from
         # its reflection about the violated boundary planes, and replaced when that
-        # finds a solution inside
-        out = np.flatnonzero(ok & np.any((q_res < finger.lower) | (q_res > finger.upper), axis=1))
+        # finds a solution inside (once per stay outside: not while the same point's
+        # re-solve failed at the previous chunk's last time)
+        outside = ok & np.any((q_res < finger.lower) | (q_res > finger.upper), axis=1)
+        out = np.flatnonzero(outside & ~stays_out[pi])
         if out.size:
             q_o = q_res[out]
             q_refl = np.where(q_o < finger.lower, 2 * finger.lower - q_o, q_o)
@@ -306,6 +309,9 @@ def build_manifold(
         reach[ti, pi] = ok
         last = ti == s1 - 1
         q_prev[pi[last]] = q_res[last]
+        stays_out[pi[last]] = ok[last] & np.any(
+            (q_res[last] < finger.lower) | (q_res[last] > finger.upper), axis=1
+        )
         resid[pi[ok]] = 0.0  # reached: retry at once if it fails later
         if ok.any():
             cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])

@@ -201,7 +201,10 @@ def screenshot(
     exe = find_chromium()
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="regrasp-chromium-") as profile:
+    # Chromium's helper processes may still write to the profile while it is removed
+    with tempfile.TemporaryDirectory(
+        prefix="regrasp-chromium-", ignore_cleanup_errors=True
+    ) as profile:
         proc = subprocess.Popen(
             [
                 exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
@@ -223,9 +226,22 @@ def screenshot(
                 _drive(port, url, png, ready_js, before_js, timeout_s, width, height)
             )
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            _stop_group(proc)
+
+
+def _stop_group(proc: subprocess.Popen) -> None:
+    """Stop Chromium and its helper processes (its own process group)."""
+    import os
+    import signal
+
+    for sig, wait_s in ((signal.SIGTERM, 10.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            pass
+        try:
+            proc.wait(timeout=wait_s)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+    time.sleep(0.2)  # let the helpers of the group exit before the profile is removed
