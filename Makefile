@@ -31,7 +31,7 @@ lint: $(STAMP)
 
 docs-images: $(STAMP)
 	$(VENV)/bin/regrasp-pin demo --out out --quiet
-	cp out/fig9_joint_angles.png docs/fig9_joint_angles.png
+	cp out/fig9_joint_angles.png out/fig2_manifold.png docs/
 	$(PY) docs/make_screenshots.py --plan out/plan.json
 
 clean:
