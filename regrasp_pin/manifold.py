@@ -360,11 +360,12 @@ def _retry_failed(
     A warm start that fails may sit in a local minimum (e.g. on an extended limit) that
     it would not leave as its target comes into reach, or may need more iterations
     than ``max_iter_warm`` after a fast move. A failed point is retried when it was
-    reached earlier in the chunk or at the previous chunk (``resid`` 0), or once its
+    reached since its last failed retry (``resid`` 0) or earlier in this chunk, or once its
     target has moved from ``anchor`` (where its last cold retry failed) by at least that
     retry's residual ``resid``: the distance from the target to the reachable set
-    changes by no more than the target moves. Updates ``q_res``, ``ok``, ``anchor``
-    and ``resid`` in place.
+    changes by no more than the target moves (the residual is that distance when the
+    cold solve ended at the nearest reachable point: usual, not guaranteed). Updates
+    ``q_res``, ``ok``, ``anchor`` and ``resid`` in place.
     """
     sel = np.flatnonzero(~ok)
     p = pi[sel]
