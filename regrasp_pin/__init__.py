@@ -28,6 +28,7 @@ from .exceptions import (
 )
 from .grasp_quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
 from .hand import Finger, Hand
+from .holding import holding_hand
 from .ik import IKResult
 from .inflation import TipPath, grid_inflation, inflate_path, inflation_height
 from .kinematics import FingerChain
@@ -45,7 +46,7 @@ from .objects import (
     object_from_params,
 )
 from .plan import ContactPhase, Plan, RegraspPhase
-from .planner import ManipulationPlan, PlannerParams, holding_hand, plan_manipulation
+from .planner import ManipulationPlan, PlannerParams, plan_manipulation
 from .polygon import PolygonResult, approximate_polygon
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .scenarios import Scenario, make_scenario

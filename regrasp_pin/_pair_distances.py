@@ -79,9 +79,17 @@ def _geometry(hand: Hand, gid: int) -> _Geometry:
         a, b, r = _capsule(gobj.geometry)
         centre, support = _support_parameters(gobj.geometry)
         table[gid] = _Geometry(
-            gid=gid, name=gobj.name, shape=gobj.geometry, chain=chain,
-            R_frame_geom=M.rotation.copy(), p_frame_geom=M.translation.copy(),
-            seg_a=a, seg_b=b, radius=r, centre=centre, support=support,
+            gid=gid,
+            name=gobj.name,
+            shape=gobj.geometry,
+            chain=chain,
+            R_frame_geom=M.rotation.copy(),
+            p_frame_geom=M.translation.copy(),
+            seg_a=a,
+            seg_b=b,
+            radius=r,
+            centre=centre,
+            support=support,
         )
     return table[gid]
 
@@ -128,13 +136,15 @@ def _support(u_local: np.ndarray, params: np.ndarray) -> np.ndarray:
     """Support function values ``(...)`` for unit directions ``(..., 3)`` in the geometry
     frames and support parameters ``(..., 6)`` (broadcast)."""
     uz = np.abs(u_local[..., 2])
-    return (np.sum(params[..., :3] * np.abs(u_local), axis=-1) + params[..., 3] * uz
-            + params[..., 4] * np.sqrt(np.maximum(0.0, 1.0 - uz * uz)) + params[..., 5])
+    return (
+        np.sum(params[..., :3] * np.abs(u_local), axis=-1)
+        + params[..., 3] * uz
+        + params[..., 4] * np.sqrt(np.maximum(0.0, 1.0 - uz * uz))
+        + params[..., 5]
+    )
 
 
-def _placements(
-    geoms: list[_Geometry], q: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def _placements(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Geometry placements in the palm frame: ``R (D, G, 3, 3)``, ``p (D, G, 3)``."""
     D, G = q.shape[0], len(geoms)
     R = np.empty((D, G, 3, 3))
@@ -152,8 +162,9 @@ def _placements(
 
 
 # ---------------------------------------------------------------------- lower bounds
-def _segment_distance(a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def _segment_distance(
+    a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Distance between segments ``[a1, b1]`` and ``[a2, b2]``, shapes (N, 3).
 
     Returns:
@@ -174,8 +185,9 @@ def _segment_distance(a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.nda
     a_ok, e_ok = a > eps, e > eps
     a_safe, e_safe = np.where(a_ok, a, 1.0), np.where(e_ok, e, 1.0)
     denom = a * e - b * b
-    s = np.where(denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1.0),
-                                      0.0, 1.0), 0.0)
+    s = np.where(
+        denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1.0), 0.0, 1.0), 0.0
+    )
     s = np.where(a_ok, s, 0.0)
     t = np.where(e_ok, (b * s + f) / e_safe, 0.0)
     # t outside [0, 1] (or the second segment is a point): clamp t and recompute s
@@ -238,9 +250,17 @@ class PairDistances:
     (finger geometry, other finger's geometry) pair.
     """
 
-    def __init__(self, hand: Hand, obj: ConvexObject, f: Finger, q_d: np.ndarray,
-                 T_d: np.ndarray, tip_req: np.ndarray, link_req: float | np.ndarray, ff_req: float
-                 ) -> None:
+    def __init__(
+        self,
+        hand: Hand,
+        obj: ConvexObject,
+        f: Finger,
+        q_d: np.ndarray,
+        T_d: np.ndarray,
+        tip_req: np.ndarray,
+        link_req: float | np.ndarray,
+        ff_req: float,
+    ) -> None:
         """Place the geometries and evaluate every lower bound.
 
         Args:
@@ -256,8 +276,9 @@ class PairDistances:
         """
         moving = [_geometry(hand, g) for g in f.geometry_ids]
         own = set(f.geometry_ids)
-        other_ids = sorted({g for name, o in hand.fingers.items() if name != f.name
-                            for g in o.geometry_ids} - own)
+        other_ids = sorted(
+            {g for name, o in hand.fingers.items() if name != f.name for g in o.geometry_ids} - own
+        )
         others = [_geometry(hand, g) for g in other_ids]
         geoms = moving + others
         R, p = _placements(geoms, q_d)
@@ -270,8 +291,9 @@ class PairDistances:
         self.first = np.concatenate([np.arange(nm), np.repeat(np.arange(nm), no)]).astype(int)
         self.second = np.concatenate([np.full(nm, -1), nm + np.tile(np.arange(no), nm)])
         self.second = self.second.astype(int)
-        self.kind = np.concatenate([[TIP if g.gid in tip else LINK for g in moving],
-                                    np.full(nm * no, FF)]).astype(int)
+        self.kind = np.concatenate(
+            [[TIP if g.gid in tip else LINK for g in moving], np.full(nm * no, FF)]
+        ).astype(int)
         # capsule endpoints and centres in the palm frame, (D, G, 3)
         a_loc = np.array([g.seg_a for g in geoms]).reshape(-1, 3)
         b_loc = np.array([g.seg_b for g in geoms]).reshape(-1, 3)
@@ -283,8 +305,9 @@ class PairDistances:
         # geometry vs object: the face-plane support bound, in the object frame
         R_po = T_d[:, None, :3, :3]
         c_o = np.matmul(c[:, :nm] - T_d[:, None, :3, 3], T_d[:, :3, :3])  # R^T (x - p)
-        lb_obj = _object_lower_bound(obj, c_o, np.matmul(np.swapaxes(R_po, 2, 3), R[:, :nm]),
-                                     params[:nm])
+        lb_obj = _object_lower_bound(
+            obj, c_o, np.matmul(np.swapaxes(R_po, 2, 3), R[:, :nm]), params[:nm]
+        )
         # geometry vs geometry: bounding spheres first; near pairs get the capsule bound
         # and the separating-axis bound along the capsules' nearest-point direction
         i1, i2 = self.first[nm:], self.second[nm:]
@@ -301,22 +324,30 @@ class PairDistances:
         seg, v = _segment_distance(a_[j1], b_[j1], a_[j2], b_[j2])
         lb = seg - rad[g1] - rad[g2]
         u = v / np.where(seg > 1e-12, seg, 1.0)[:, None]  # from geometry 2 towards 1
-        gap = np.einsum("ni,ni->n", u, c_[j1] - c_[j2]) \
-            - _support(np.einsum("ni,nij->nj", u, R_[j1]), params[g1]) \
+        gap = (
+            np.einsum("ni,ni->n", u, c_[j1] - c_[j2])
+            - _support(np.einsum("ni,nij->nj", u, R_[j1]), params[g1])
             - _support(np.einsum("ni,nij->nj", u, R_[j2]), params[g2])
+        )
         lb_ff[d, k] = np.where(seg > 1e-12, np.maximum(lb, gap), lb)
         self.lb = np.concatenate([lb_obj, lb_ff], axis=1)
         # sweep bound: between samples s and s', no point of a geometry moves by more
         # than the sum of its per-step bounds |dc| + rho |dR|_2, so a distance is
         # 1-Lipschitz in the cumulative sum of the two bodies' steps (see _update_sweep)
-        rho = np.array([np.linalg.norm(g.support[:3]) + math.hypot(g.support[3], g.support[4])
-                        + g.support[5] for g in geoms])
+        rho = np.array(
+            [
+                np.linalg.norm(g.support[:3])
+                + math.hypot(g.support[3], g.support[4])
+                + g.support[5]
+                for g in geoms
+            ]
+        )
         step_g = _step_bound(c, R, rho)  # (D - 1, G)
-        step_o = _step_bound(T_d[:, None, :3, 3], T_d[:, None, :3, :3],
-                             np.array([obj.radius_m]))[:, 0]
+        step_o = _step_bound(T_d[:, None, :3, 3], T_d[:, None, :3, :3], np.array([obj.radius_m]))[
+            :, 0
+        ]
         second = np.where(self.second < 0, 0, self.second)
-        step = step_g[:, self.first] + np.where(self.second < 0, step_o[:, None],
-                                                step_g[:, second])
+        step = step_g[:, self.first] + np.where(self.second < 0, step_o[:, None], step_g[:, second])
         self._sweep = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])
         #: Largest per-step bound on the relative motion of two checked bodies [m].
         self.max_step_m = float(step.max()) if step.size else 0.0
@@ -387,7 +418,7 @@ class PairDistances:
                 return best, True
             if n_extra >= MAX_MINIMUM_QUERIES:
                 return float(np.min(low)), False  # bounds every distance left
-            pick = open_[np.argsort(low[open_])[:MAX_MINIMUM_QUERIES - n_extra]]
+            pick = open_[np.argsort(low[open_])[: MAX_MINIMUM_QUERIES - n_extra]]
             sub = cols[pick]
             self._query(rows[pick], sub)
             self._update_sweep(sub)
@@ -396,8 +427,9 @@ class PairDistances:
             ex = self.exact[:, sub] + off[:, pick]
             done = ~np.isnan(ex)
             best = min(best, float(np.min(ex[done])))
-            bound = np.where(done, np.inf,
-                             np.maximum(self.lb[:, sub], self.swept[:, sub]) + off[:, pick])
+            bound = np.where(
+                done, np.inf, np.maximum(self.lb[:, sub], self.swept[:, sub]) + off[:, pick]
+            )
             rows[pick] = np.argmin(bound, axis=0)
             low[pick] = bound[rows[pick], np.arange(pick.size)]
 
@@ -428,8 +460,9 @@ class PairDistances:
         # relative placement of geometry g1 in the frame of the second body (object or g2)
         R1, p1 = self._R[rows, g1], self._p[rows, g1]
         is_obj = g2 < 0
-        R2 = np.where(is_obj[:, None, None], self._T[rows, :3, :3],
-                      self._R[rows, np.maximum(g2, 0)])
+        R2 = np.where(
+            is_obj[:, None, None], self._T[rows, :3, :3], self._R[rows, np.maximum(g2, 0)]
+        )
         p2 = np.where(is_obj[:, None], self._T[rows, :3, 3], self._p[rows, np.maximum(g2, 0)])
         R_rel = np.matmul(np.swapaxes(R2, 1, 2), R1)
         p_rel = np.matmul((p1 - p2)[:, None, :], R2)[:, 0]
@@ -450,13 +483,19 @@ class PairDistances:
             retry.epa_tolerance = 1e-4
             for n in bad.tolist():
                 values[n] = coal.distance(
-                    self._obj_shape if is_obj[n] else self.geoms[g2[n]].shape, identity,
-                    self.geoms[g1[n]].shape, coal.Transform3s(R_rel[n], p_rel[n]), retry,
-                    coal.DistanceResult())
+                    self._obj_shape if is_obj[n] else self.geoms[g2[n]].shape,
+                    identity,
+                    self.geoms[g1[n]].shape,
+                    coal.Transform3s(R_rel[n], p_rel[n]),
+                    retry,
+                    coal.DistanceResult(),
+                )
                 if not values[n] > -_MAX_DEPTH_M:  # keep the (negative) lower bound
                     values[n] = min(self.lb[rows[n], cols[n]], 0.0)
-                    logger.warning("Coal could not measure a penetration depth; using the "
-                                   "broad-phase bound %.6f m", values[n])
+                    logger.warning(
+                        "Coal could not measure a penetration depth; using the "
+                        "broad-phase bound %.6f m",
+                        values[n],
+                    )
         self.exact[rows, cols] = values
         self.n_queries += int(rows.size)
-

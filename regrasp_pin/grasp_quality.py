@@ -75,8 +75,9 @@ def contact_wrenches(
     )
     t1, t2 = _tangents(n)
     phi = 2.0 * np.pi * np.arange(m) / m
-    f = (-n[:, None, :] + mu * (np.cos(phi)[None, :, None] * t1[:, None, :]
-                                + np.sin(phi)[None, :, None] * t2[:, None, :]))  # (k, m, 3)
+    f = -n[:, None, :] + mu * (
+        np.cos(phi)[None, :, None] * t1[:, None, :] + np.sin(phi)[None, :, None] * t2[:, None, :]
+    )  # (k, m, 3)
     tau = np.cross(p[:, None, :], f)  # (k, m, 3) about the centre of mass
     if torsion > 0.0:
         spin = torsion * n[:, None, None, :] * np.array([1.0, -1.0])[None, None, :, None]
@@ -115,8 +116,14 @@ def ferrari_canny_epsilon(
     Raises:
         InputError: for invalid arguments (see :func:`contact_wrenches`).
     """
-    w = contact_wrenches(points_object, normals_object, mu, n_edges=n_edges,
-                         torque_scale_m=torque_scale_m, torsion_m=torsion_m)
+    w = contact_wrenches(
+        points_object,
+        normals_object,
+        mu,
+        n_edges=n_edges,
+        torque_scale_m=torque_scale_m,
+        torsion_m=torsion_m,
+    )
     if w.shape[0] < 7:
         return 0.0
     try:
@@ -156,8 +163,14 @@ def is_force_closure(
         InputError: for invalid arguments.
     """
     tol = positive(tol, "tol", allow_zero=True)
-    eps = ferrari_canny_epsilon(points_object, normals_object, mu, n_edges=n_edges,
-                                torque_scale_m=torque_scale_m, torsion_m=torsion_m)
+    eps = ferrari_canny_epsilon(
+        points_object,
+        normals_object,
+        mu,
+        n_edges=n_edges,
+        torque_scale_m=torque_scale_m,
+        torsion_m=torsion_m,
+    )
     return eps > tol
 
 
@@ -176,8 +189,9 @@ def _check(
     norm = np.linalg.norm(n, axis=1)
     if np.any(np.abs(norm - 1.0) > _NORMAL_TOL):
         i = int(np.argmax(np.abs(norm - 1.0)))
-        raise InputError("normals_object", f"normal {i} has length {norm[i]:.6g}",
-                         "unit outward normals")
+        raise InputError(
+            "normals_object", f"normal {i} has length {norm[i]:.6g}", "unit outward normals"
+        )
     mu = positive(mu, "mu", allow_zero=True)
     m = positive_int(n_edges, "n_edges", minimum=3)
     if torque_scale_m is None:

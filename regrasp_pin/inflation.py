@@ -208,17 +208,32 @@ def inflate_path(
         k = dirs.shape[0]
         face = np.full(k, -1)
         face[0] = _face(grid, piece[j])
-        blocks.append((offsets[j + 1], np.repeat(x_e, k, axis=0), dirs, np.full(k, s0[j + 1]),
-                       face, np.repeat(start[j + 1][None], k, axis=0)))
+        blocks.append(
+            (
+                offsets[j + 1],
+                np.repeat(x_e, k, axis=0),
+                dirs,
+                np.full(k, s0[j + 1]),
+                face,
+                np.repeat(start[j + 1][None], k, axis=0),
+            )
+        )
     x, nrm, s, fid, uv = _insert(blocks, x, nrm, s, fid, uv)
 
     h = inflation_height(s, total - s, clearance_m=c, taper_m=taper)
     tips = x + (r + h)[:, None] * nrm
     return TipPath(
-        points_object=_frozen(tips), surface_points_object=_frozen(x),
-        normals_object=_frozen(nrm), height_m=_frozen(h), arc_length_m=_frozen(s),
-        face_ids=_frozen(fid), uv=_frozen(uv), tip_radius_m=r, clearance_m=c,
-        taper_m=taper, length_m=total,
+        points_object=_frozen(tips),
+        surface_points_object=_frozen(x),
+        normals_object=_frozen(nrm),
+        height_m=_frozen(h),
+        arc_length_m=_frozen(s),
+        face_ids=_frozen(fid),
+        uv=_frozen(uv),
+        tip_radius_m=r,
+        clearance_m=c,
+        taper_m=taper,
+        length_m=total,
     )
 
 
@@ -252,8 +267,13 @@ def _split_at_hinges(
             t = (w[..., 0] * g[None, :, 1] - w[..., 1] * g[None, :, 0]) / denom
             u = (w[..., 0] * d[:, None, 1] - w[..., 1] * d[:, None, 0]) / denom
         scale = np.linalg.norm(d, axis=1)[:, None] * np.linalg.norm(g, axis=1)[None]
-        hit = (np.abs(denom) > 1e-12 * scale) & (t > 1e-12) & (t < 1 - 1e-12) & (
-            u >= -1e-9) & (u <= 1 + 1e-9)
+        hit = (
+            (np.abs(denom) > 1e-12 * scale)
+            & (t > 1e-12)
+            & (t < 1 - 1e-12)
+            & (u >= -1e-9)
+            & (u <= 1 + 1e-9)
+        )
         si, _ = np.nonzero(hit)
         seg.append(si)
         ts.append(t[hit])
@@ -288,7 +308,11 @@ def _arc_directions(n_a: np.ndarray, n_b: np.ndarray, radius_over_step: float) -
 
 
 def _insert(
-    blocks: list, x: np.ndarray, nrm: np.ndarray, s: np.ndarray, fid: np.ndarray,
+    blocks: list,
+    x: np.ndarray,
+    nrm: np.ndarray,
+    s: np.ndarray,
+    fid: np.ndarray,
     uv: np.ndarray,
 ) -> tuple[np.ndarray, ...]:
     """Insert the arc blocks ``(position, x, n, s, face, uv)`` before the given samples."""

@@ -147,8 +147,11 @@ class ObjectMotion:
         t0 = float(as_array(t_start_s, "t_start_s", ()))
         n = max(1, math.ceil(duration / dt - 1e-9))
         if abs(rate) * duration / n >= math.pi:
-            raise InputError("dt_s", f"a step of {duration / n:.4g} s turns >= pi rad",
-                             f"dt_s < {math.pi / max(abs(rate), 1e-300):.4g} s")
+            raise InputError(
+                "dt_s",
+                f"a step of {duration / n:.4g} s turns >= pi rad",
+                f"dt_s < {math.pi / max(abs(rate), 1e-300):.4g} s",
+            )
         tau = np.linspace(0.0, duration, n + 1)
         R_a = Rotation.from_rotvec(np.outer(rate * tau, axis))
         pos = R_a.apply(T0[:3, 3] - c) + c + np.outer(tau, w)
@@ -292,8 +295,11 @@ class ObjectMotion:
         slack = _TIME_SLACK_S * max(1.0, abs(lo), abs(hi))
         if np.any(t < lo - slack) or np.any(t > hi + slack):
             worst = t[np.argmax(np.maximum(lo - t, t - hi))]
-            raise InputError("t_s", f"time {worst:.6g} s is outside the motion",
-                             f"times in [{lo:.6g}, {hi:.6g}] s")
+            raise InputError(
+                "t_s",
+                f"time {worst:.6g} s is outside the motion",
+                f"times in [{lo:.6g}, {hi:.6g}] s",
+            )
         return np.clip(t, lo, hi), scalar
 
     def _interpolate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -306,6 +312,7 @@ class ObjectMotion:
         a = ((t - self._t[i]) / (self._t[i + 1] - self._t[i]))[:, None]
         return (1.0 - a) * self._pos[i] + a * self._pos[i + 1]
 
+
 def _check_times(times_s: np.ndarray) -> np.ndarray:
     t = as_array(times_s, "times_s", (None,))
     if t.size < 2:
@@ -313,8 +320,11 @@ def _check_times(times_s: np.ndarray) -> np.ndarray:
     steps = np.diff(t)
     if np.any(steps <= 0):
         i = int(np.argmin(steps))
-        raise InputError("times_s", f"not strictly increasing at index {i + 1} "
-                         f"({t[i]:.6g} s then {t[i + 1]:.6g} s)", "strictly increasing times")
+        raise InputError(
+            "times_s",
+            f"not strictly increasing at index {i + 1} ({t[i]:.6g} s then {t[i + 1]:.6g} s)",
+            "strictly increasing times",
+        )
     return t
 
 

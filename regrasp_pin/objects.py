@@ -222,8 +222,10 @@ class ConvexObject:
         self._build_distance_tables()
 
     def __repr__(self) -> str:
-        return (f"{type(self).__name__}(kind={self.kind!r}, {len(self.vertices)} vertices, "
-                f"{len(self.faces)} faces)")
+        return (
+            f"{type(self).__name__}(kind={self.kind!r}, {len(self.vertices)} vertices, "
+            f"{len(self.faces)} faces)"
+        )
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -320,8 +322,9 @@ class ConvexObject:
         for face in self.faces:  # per face (few); all points of a face at once
             lo, hi = face.polygon_uv.min(axis=0), face.polygon_uv.max(axis=0)
             n = np.maximum(np.floor((hi - lo) / s + 1e-9).astype(int), 1)
-            axes = [0.5 * (lo[i] + hi[i]) + (np.arange(n[i]) - 0.5 * (n[i] - 1)) * s
-                    for i in range(2)]
+            axes = [
+                0.5 * (lo[i] + hi[i]) + (np.arange(n[i]) - 0.5 * (n[i] - 1)) * s for i in range(2)
+            ]
             gu, gv = np.meshgrid(axes[0], axes[1], indexing="ij")
             grid = np.stack([gu.ravel(), gv.ravel()], axis=1)
             keep = grid[face.contains_uv(grid, 0.5 * s * (1.0 - 1e-9))]
@@ -437,7 +440,7 @@ class ConvexObject:
         near = np.empty_like(p)
         eps = 1e-12 * max(self.radius_m, 1.0)
         for lo in range(0, p.shape[0], chunk):
-            q = p[lo:lo + chunk]
+            q = p[lo : lo + chunk]
             # Feet on face planes, valid where inside the face polygon.
             h = q @ self._normals.T - self._offsets  # (n, F)
             depth = np.einsum("nd,fkd->nfk", q, self._edge_inward) - self._edge_bias
@@ -453,9 +456,9 @@ class ConvexObject:
             rows = np.arange(q.shape[0])
             df, de = d_face[rows, jf], d_edge[rows, je]
             use_face = df <= de
-            dist[lo:lo + chunk] = np.where(use_face, df, de)
+            dist[lo : lo + chunk] = np.where(use_face, df, de)
             p_face = q - h[rows, jf][:, None] * self._normals[jf]
-            near[lo:lo + chunk] = np.where(use_face[:, None], p_face, foot[rows, je])
+            near[lo : lo + chunk] = np.where(use_face[:, None], p_face, foot[rows, je])
         return dist, near
 
 
@@ -562,8 +565,7 @@ def object_from_params(kind: str, params: dict[str, Any]) -> ConvexObject:
     Raises:
         InputError: if ``kind`` is unknown or ``params`` do not fit it.
     """
-    classes = {"box": Box, "prism": Prism, "extrusion": ExtrudedPolygon,
-               "convex_mesh": ConvexMesh}
+    classes = {"box": Box, "prism": Prism, "extrusion": ExtrudedPolygon, "convex_mesh": ConvexMesh}
     if kind not in classes:
         raise InputError("kind", f"{kind!r} is not known", f"one of {tuple(classes)}")
     try:
@@ -607,7 +609,8 @@ def _hull_polygons(pts: np.ndarray, tol: float) -> tuple[np.ndarray, list[np.nda
     a = np.repeat(np.arange(len(n)), 3)
     b = hull.neighbors.ravel()
     same = (np.einsum("ij,ij->i", n[a], n[b]) > math.cos(tol)) & (
-        np.abs(off[a] - off[b]) <= tol * scale)
+        np.abs(off[a] - off[b]) <= tol * scale
+    )
     graph = csr_matrix((np.ones(int(same.sum())), (a[same], b[same])), shape=(len(n), len(n)))
     n_groups, label = connected_components(graph, directed=False)
     used = np.unique(hull.simplices)
@@ -617,14 +620,20 @@ def _hull_polygons(pts: np.ndarray, tol: float) -> tuple[np.ndarray, list[np.nda
     new_id[order] = np.arange(order.size)
     tri = new_id[hull.simplices]
     # Orient every triangle counter-clockwise about its outward normal.
-    flip = np.einsum("ij,ij->i", np.cross(verts[tri[:, 1]] - verts[tri[:, 0]],
-                                          verts[tri[:, 2]] - verts[tri[:, 0]]), n) < 0
+    flip = (
+        np.einsum(
+            "ij,ij->i",
+            np.cross(verts[tri[:, 1]] - verts[tri[:, 0]], verts[tri[:, 2]] - verts[tri[:, 0]]),
+            n,
+        )
+        < 0
+    )
     tri[flip] = tri[flip][:, ::-1]
     by_group = np.argsort(label, kind="stable")
     bounds = np.searchsorted(label[by_group], np.arange(n_groups + 1))
     polys: list[np.ndarray] = []
     for g in range(n_groups):  # per face
-        members = by_group[bounds[g]:bounds[g + 1]]
+        members = by_group[bounds[g] : bounds[g + 1]]
         if members.size == 1:
             ring = tri[members[0]]
         else:
@@ -662,9 +671,14 @@ def _newell_normal(poly: np.ndarray) -> np.ndarray:
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Cross product on the last axis (cheaper than np.cross for small arrays)."""
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+    return np.stack(
+        [
+            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
+        ],
+        axis=-1,
+    )
 
 
 def _make_face(face_id: int, verts: np.ndarray, ids: np.ndarray) -> Face:
@@ -702,8 +716,9 @@ def _adjacency(faces: tuple[Face, ...], verts: np.ndarray) -> tuple[FaceAdjacenc
     """Faces sharing at least two vertices share an edge (convex polytope)."""
     rows = np.concatenate([np.full(len(f.vertex_ids), f.id) for f in faces])
     cols = np.concatenate([f.vertex_ids for f in faces])
-    inc = csr_matrix((np.ones(rows.size, dtype=np.int64), (rows, cols)),
-                     shape=(len(faces), verts.shape[0]))
+    inc = csr_matrix(
+        (np.ones(rows.size, dtype=np.int64), (rows, cols)), shape=(len(faces), verts.shape[0])
+    )
     shared = (inc @ inc.T).tocoo()
     pairs = (shared.row < shared.col) & (shared.data >= 2)
     fa_all, fb_all = shared.row[pairs], shared.col[pairs]
@@ -718,10 +733,14 @@ def _adjacency(faces: tuple[Face, ...], verts: np.ndarray) -> tuple[FaceAdjacenc
         face = faces[fa]
         if _cross(face.normal, verts[b] - verts[a]) @ (face.origin - verts[a]) < 0:
             a, b = b, a
-        out.append(FaceAdjacency(
-            face_a=int(fa), face_b=int(fb),
-            edge=_frozen(verts[[a, b]]), vertex_ids=_frozen(np.array([a, b], dtype=np.int64)),
-        ))
+        out.append(
+            FaceAdjacency(
+                face_a=int(fa),
+                face_b=int(fb),
+                edge=_frozen(verts[[a, b]]),
+                vertex_ids=_frozen(np.array([a, b], dtype=np.int64)),
+            )
+        )
     return tuple(out)
 
 

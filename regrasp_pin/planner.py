@@ -28,20 +28,14 @@ from .contact_choice import Grasp, choose_new_contact, initial_grasp
 from .exceptions import ContactError, PlanningError, RegraspError
 from .grasp_quality import ferrari_canny_epsilon
 from .hand import Hand
+from .holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
 from .manifold import Manifold, build_manifold
 from .motion import ObjectMotion
 from .objects import ConvexObject, SurfaceSample
 from .plan import ContactPhase, Plan, RegraspPhase
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
-from .tracking import ContactTrack, track_contact
 
-__all__ = [
-    "ManipulationPlan",
-    "PlannerParams",
-    "holding_hand",
-    "plan_manipulation",
-    "rest_configuration",
-]
+__all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation"]
 
 log = logging.getLogger(__name__)
 
@@ -81,23 +75,6 @@ class PlannerParams:
     exit_tolerance_s: float = 0.25
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
-
-
-@dataclass
-class _Holding:
-    """A finger holding a contact from ``t_from`` on, with its track."""
-
-    p: np.ndarray
-    n: np.ndarray
-    t_from: float
-    track: ContactTrack
-    t_to: float | None = None
-
-    def q_at(self, finger, times: np.ndarray) -> np.ndarray:
-        tr = self.track
-        return np.stack(
-            [np.interp(times, tr.times_s, tr.q[:, j]) for j in range(tr.q.shape[1])], axis=1
-        )
 
 
 @dataclass
@@ -177,9 +154,9 @@ def plan_manipulation(
     grid[-1] = min(grid[-1], motion.t_end)
 
     t0 = time.perf_counter()
-    holding: dict[str, _Holding] = {}
+    holding: dict[str, Holding] = {}
     for name in active:
-        holding[name] = _hold(
+        holding[name] = start_holding(
             hand,
             obj,
             motion,
@@ -189,7 +166,7 @@ def plan_manipulation(
             grasp.normals_object[name],
             grasp.q[name],
             motion.t_start,
-            params,
+            params.contact,
         )
     phases: dict[str, list] = {name: [] for name in active}
     regrasps: list[RegraspResult] = []
@@ -198,7 +175,7 @@ def plan_manipulation(
     now = motion.t_start  # no regrasp may start before this (one finger in the air)
     D = params.regrasp.duration_s
 
-    history: dict[str, list[_Holding]] = {name: [] for name in active}
+    history: dict[str, list[Holding]] = {name: [] for name in active}
     held_to_end: dict[str, str] = {}
 
     def partial_plan(until: float) -> Plan:
@@ -243,7 +220,7 @@ def plan_manipulation(
                 start = t_next - params.lead_s - D
                 why += f", moved earlier so that {next_name} (trigger t={t_next:.3f} s) can follow"
         start = max(start, now, holding[name].t_from)
-        if start + D > motion.t_end and _holds_to_end(holding[name].track, t_trig, params.contact):
+        if start + D > motion.t_end and holds_to_end(holding[name].track, t_trig, params.contact):
             # too late to regrasp, but the contact stays inside the joint limits (within
             # the trigger margin only) and feasible until the motion ends: keep holding
             held_to_end[name] = (
@@ -383,7 +360,7 @@ def plan_manipulation(
         regrasps.append(res)
         h.t_to = res.t_start
         history[name].append(h)
-        holding[name] = _hold(
+        holding[name] = start_holding(
             hand,
             obj,
             motion,
@@ -393,7 +370,7 @@ def plan_manipulation(
             res.n_Q_object,
             res.q[-1],
             res.t_end,
-            params,
+            params.contact,
         )
         now = res.t_end
         if progress is not None:
@@ -433,53 +410,6 @@ def plan_manipulation(
     return ManipulationPlan(plan, regrasps, grasp, manifolds, sample, stage)
 
 
-def _holds_to_end(track: ContactTrack, t_from: float, contact: ContactModel) -> bool:
-    """Whether a contact stays reached, inside the joint limits (margin >= 0), pad facing
-    and links clear from ``t_from`` to the end of its track."""
-    sel = track.times_s >= t_from - 1e-9
-    return bool(
-        np.all(track.error_m[sel] <= contact.ik_tol_m)
-        and np.all(track.margin_rad[sel] >= 0.0)
-        and np.all(track.pad_cos[sel] >= contact.cos_cone)
-        and np.all(track.link_clearance_m[sel] >= 0.0)
-    )
-
-
-def _hold(
-    hand: Hand,
-    obj: ConvexObject,
-    motion: ObjectMotion,
-    grid: np.ndarray,
-    name: str,
-    p: np.ndarray,
-    n: np.ndarray,
-    q_start: np.ndarray,
-    t_from: float,
-    params: PlannerParams,
-) -> _Holding:
-    times = np.concatenate([[t_from], grid[grid > t_from + 1e-9]])
-    if times.size < 2:
-        times = (
-            np.array([t_from, motion.t_end])
-            if motion.t_end > t_from
-            else np.array([t_from, t_from + 1e-6])
-        )
-    track = track_contact(hand, name, obj, motion, times, p, n, q_start, contact=params.contact)
-    return _Holding(p=np.asarray(p, float), n=np.asarray(n, float), t_from=t_from, track=track)
-
-
-def _exact_holding_q(
-    hand: Hand, motion: ObjectMotion, name: str, h: _Holding, times: np.ndarray, tol_m: float
-) -> np.ndarray:
-    """Exact IK of a holding finger at arbitrary times (warm from its track)."""
-    f = hand.fingers[name]
-    T = motion.pose(times)
-    c = h.p + f.tip_radius * h.n
-    targets = T[:, :3, :3] @ c + T[:, :3, 3]
-    res = f.ik(targets, h.q_at(name, times), tol_m=tol_m)
-    return res.q
-
-
 def _regrasp(
     hand: Hand,
     obj: ConvexObject,
@@ -488,7 +418,7 @@ def _regrasp(
     sample: SurfaceSample,
     name: str,
     start: float,
-    holding: dict[str, _Holding],
+    holding: dict[str, Holding],
     params: PlannerParams,
     base_q: np.ndarray,
 ) -> tuple[RegraspResult, object] | RegraspError:
@@ -496,13 +426,13 @@ def _regrasp(
     h = holding[name]
     stay = {n: (holding[n].p, holding[n].n) for n in holding if n != name}
     # exact IK at the lift-off time so the regrasp starts on P
-    q_start = _exact_holding_q(hand, motion, name, h, np.array([start]), params.contact.ik_tol_m)[0]
+    q_start = holding_q(hand, motion, name, h, np.array([start]), params.contact.ik_tol_m)[0]
     others_tips = np.array([p + hand.fingers[n].tip_radius * nn for n, (p, nn) in stay.items()])
 
     def q_hand(times: np.ndarray) -> np.ndarray:
         q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
         for n in stay:
-            q[:, hand.fingers[n].q_indices] = _exact_holding_q(
+            q[:, hand.fingers[n].q_indices] = holding_q(
                 hand, motion, n, holding[n], times, params.contact.ik_tol_m
             )
         return q
@@ -595,8 +525,8 @@ def _assemble(
     obj: ConvexObject,
     motion: ObjectMotion,
     grid: np.ndarray,
-    history: dict[str, list[_Holding]],
-    holding: dict[str, _Holding],
+    history: dict[str, list[Holding]],
+    holding: dict[str, Holding],
     phases: dict[str, list],
     regrasps: list[RegraspResult],
     *,
@@ -631,7 +561,7 @@ def _assemble(
             b = h.t_to if h.t_to is not None else until
             sel = (times >= h.t_from - 1e-9) & (times <= b + 1e-9) & ~in_air
             if sel.any():
-                q[np.ix_(np.flatnonzero(sel), f.q_indices)] = _exact_holding_q(
+                q[np.ix_(np.flatnonzero(sel), f.q_indices)] = holding_q(
                     hand, motion, name, h, times[sel], params.contact.ik_tol_m
                 )
     hand_dict = {
@@ -668,58 +598,3 @@ def _urdf_entry(hand: Hand) -> str:
         return str(path.relative_to(repo_root()))
     except ValueError:
         return str(path)
-
-
-def rest_configuration(
-    hand: Hand, obj: ConvexObject, motion: ObjectMotion, idle: list[str]
-) -> np.ndarray:
-    """Full configuration ``(nq,)`` with the idle fingers where they stay clearest of
-    the object over the motion (Coal), chosen among a few fixed postures; the other
-    fingers at the middle of their limits.
-    """
-    from .contact import LinkClearance
-
-    q = hand.neutral()
-    if not idle:
-        return q
-    T = motion.pose(np.linspace(motion.t_start, motion.t_end, 7))
-    for name in idle:
-        f = hand.fingers[name]
-        fr = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
-        grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
-        postures = f.lower + grid * (f.upper - f.lower)
-        lc = LinkClearance(hand, name, obj, include_tip=True)
-        best, best_d = f.q_mid, -np.inf
-        for qf in postures:
-            full = hand.to_full(name, qf, q)
-            d = float(lc(np.repeat(full[None], len(T), 0), T).min())
-            if d > best_d + 1e-6:
-                best, best_d = qf, d
-        q[f.q_indices] = best
-    return q
-
-
-def holding_hand(
-    hand: Hand,
-    motion: ObjectMotion,
-    grasp: Grasp,
-    fingers: tuple[str, ...] | list[str],
-    moving: str,
-) -> Callable[[np.ndarray], np.ndarray]:
-    """A ``q_hand(times) -> (S, nq)`` for :func:`~.regrasp.plan_regrasp`: every finger of
-    ``fingers`` but ``moving`` holds its ``grasp`` contact (exact IK at every time, warm
-    from the grasp configuration); the others stay at the middle of their limits."""
-
-    def q_hand(times: np.ndarray) -> np.ndarray:
-        times = np.atleast_1d(np.asarray(times, float))
-        q = np.broadcast_to(hand.neutral(), (times.size, hand.model.nq)).copy()
-        T = motion.pose(times)
-        for n in fingers:
-            if n == moving:
-                continue
-            f = hand.fingers[n]
-            c = grasp.points_object[n] + f.tip_radius * grasp.normals_object[n]
-            q[:, f.q_indices] = f.ik(T[:, :3, :3] @ c + T[:, :3, 3], grasp.q[n]).q
-        return q
-
-    return q_hand

@@ -254,13 +254,17 @@ class SurfaceGrid:
             ids = np.asarray(face_ids, dtype=np.int64)
             if ids.shape != (uv.shape[0],):
                 raise InputError("face_ids", f"has shape {ids.shape}", f"({uv.shape[0]},)")
-            lookup = np.full(max(max(f.face_id for f in self.unfoldings), int(ids.max(
-                initial=0))) + 1, -1)
+            lookup = np.full(
+                max(max(f.face_id for f in self.unfoldings), int(ids.max(initial=0))) + 1, -1
+            )
             lookup[[f.face_id for f in self.unfoldings]] = np.arange(len(self.unfoldings))
             piece = lookup[np.clip(ids, 0, None)]
             if np.any(piece < 0) or np.any(ids < 0):
-                raise InputError("face_ids", "holds a face that is not in the region",
-                                 f"ids among {[f.face_id for f in self.unfoldings]}")
+                raise InputError(
+                    "face_ids",
+                    "holds a face that is not in the region",
+                    f"ids among {[f.face_id for f in self.unfoldings]}",
+                )
         worst = -float(np.min(np.max(depth, axis=1), initial=0.0))
         if worst > ON_SURFACE_TOL_M:
             raise InputError("uv_unfolded", f"a point lies {worst:.3g} m outside the region")
@@ -426,8 +430,9 @@ def _polygons_overlap(a: np.ndarray, b: np.ndarray, tol_m: float = _TOL_M) -> bo
         e = np.roll(poly, -1, axis=0) - poly
         axes = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None]
         pa, pb = a @ axes.T, b @ axes.T
-        if np.any((pa.max(axis=0) <= pb.min(axis=0) + tol_m)
-                  | (pb.max(axis=0) <= pa.min(axis=0) + tol_m)):
+        if np.any(
+            (pa.max(axis=0) <= pb.min(axis=0) + tol_m) | (pb.max(axis=0) <= pa.min(axis=0) + tol_m)
+        ):
             return False
     return True
 
@@ -444,9 +449,7 @@ def _clamp_into(uv: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return foot[int(np.argmin(np.linalg.norm(foot - uv, axis=1)))]
 
 
-def _region_geodesic(
-    p_uv: np.ndarray, q_uv: np.ndarray, pieces: Sequence[FaceUnfolding]
-) -> float:
+def _region_geodesic(p_uv: np.ndarray, q_uv: np.ndarray, pieces: Sequence[FaceUnfolding]) -> float:
     """Shortest P -> Q route inside the region: Dijkstra over the visibility graph of
     P, Q and the endpoints of the hinges (the only possible reflex corners)."""
     if _segments_inside(p_uv[None], q_uv[None], pieces)[0]:
@@ -466,12 +469,18 @@ def _faces_holding(obj: ConvexObject, p: np.ndarray, argument: str) -> list[int]
     """Faces that hold a surface point (several on an edge or a vertex), sorted by id."""
     dist = float(obj.signed_distance(p[None])[0])
     if abs(dist) > ON_SURFACE_TOL_M:
-        raise InputError(argument, f"is not on the object surface (distance {dist:.3g} m)",
-                         f"a point within {ON_SURFACE_TOL_M:g} m of the surface")
+        raise InputError(
+            argument,
+            f"is not on the object surface (distance {dist:.3g} m)",
+            f"a point within {ON_SURFACE_TOL_M:g} m of the surface",
+        )
     tol = 2 * ON_SURFACE_TOL_M
     plane = np.abs(obj.normals @ p - obj.offsets)
-    ids = [f.id for f in obj.faces
-           if plane[f.id] <= tol and bool(f.contains_uv(f.to_uv(p[None]), -tol)[0])]
+    ids = [
+        f.id
+        for f in obj.faces
+        if plane[f.id] <= tol and bool(f.contains_uv(f.to_uv(p[None]), -tol)[0])
+    ]
     return ids or [int(obj.supporting_face(p[None])[0])]
 
 
@@ -492,15 +501,19 @@ def _chains(
             out.append(chain)
             continue
         if len(chain) < max_faces:
-            stack.extend(chain + (n,) for n in sorted(neighbours[chain[-1]], reverse=True)
-                         if n not in chain)
+            stack.extend(
+                chain + (n,) for n in sorted(neighbours[chain[-1]], reverse=True) if n not in chain
+            )
     return out
 
 
 def _chain_overlaps(pieces: Sequence[FaceUnfolding]) -> bool:
     """Whether two faces that are not consecutive in the chain overlap once unfolded."""
-    return any(_polygons_overlap(pieces[i].polygon_uv, pieces[j].polygon_uv)
-               for i in range(len(pieces)) for j in range(i + 2, len(pieces)))
+    return any(
+        _polygons_overlap(pieces[i].polygon_uv, pieces[j].polygon_uv)
+        for i in range(len(pieces))
+        for j in range(i + 2, len(pieces))
+    )
 
 
 def _face_uv(obj: ConvexObject, fid: int, p: np.ndarray) -> np.ndarray:
@@ -559,8 +572,11 @@ def build_surface_grid(
     q_faces = _faces_holding(obj, q, "Q_object")
     gap = float(np.linalg.norm(q - p))
     if gap < 0.5 * s:
-        raise InputError("Q_object", f"is {gap:.3g} m from P_object: P and Q coincide",
-                         f"a point at least spacing_m / 2 = {0.5 * s:g} m from P")
+        raise InputError(
+            "Q_object",
+            f"is {gap:.3g} m from P_object: P and Q coincide",
+            f"a point at least spacing_m / 2 = {0.5 * s:g} m from P",
+        )
 
     # Candidates by their straight unfolded distance, a lower bound of their route.
     candidates = []
@@ -584,7 +600,8 @@ def build_surface_grid(
     if best is None:
         raise GeometryError(
             f"the region cannot be unfolded: no chain of at most {n_max} adjacent faces "
-            f"joins P's face {p_faces} to Q's face {q_faces} without overlapping")
+            f"joins P's face {p_faces} to Q's face {q_faces} without overlapping"
+        )
     geodesic, _, chain = best
     pieces = best_pieces
     if len(chain) == 1 and include_neighbours:
@@ -600,10 +617,19 @@ def build_surface_grid(
     points, normals, face_ids = _lift(pieces, uv, piece)
     log.debug("surface grid: faces %s, %d nodes, %d edges", chain, m, edges.shape[0])
     return SurfaceGrid(
-        uv=_frozen(uv), points_object=_frozen(points), normals_object=_frozen(normals),
-        face_ids=_frozen(face_ids), p_index=0, q_index=m - 1, edges=_frozen(edges),
-        edge_lengths_m=_frozen(lengths), face_chain=tuple(chain), unfoldings=pieces,
-        spacing_m=s, P_object=_frozen(points[0].copy()), Q_object=_frozen(points[m - 1].copy()),
+        uv=_frozen(uv),
+        points_object=_frozen(points),
+        normals_object=_frozen(normals),
+        face_ids=_frozen(face_ids),
+        p_index=0,
+        q_index=m - 1,
+        edges=_frozen(edges),
+        edge_lengths_m=_frozen(lengths),
+        face_chain=tuple(chain),
+        unfoldings=pieces,
+        spacing_m=s,
+        P_object=_frozen(points[0].copy()),
+        Q_object=_frozen(points[m - 1].copy()),
         geodesic_m=float(geodesic),
     )
 
@@ -613,8 +639,11 @@ def _with_neighbours(
 ) -> tuple[FaceUnfolding, ...]:
     """Add the faces adjacent to the single root face that do not overlap the others."""
     root = pieces[0].face_id
-    others = sorted(a.face_b if a.face_a == root else a.face_a for a in obj.face_adjacency
-                    if root in (a.face_a, a.face_b))
+    others = sorted(
+        a.face_b if a.face_a == root else a.face_a
+        for a in obj.face_adjacency
+        if root in (a.face_a, a.face_b)
+    )
     star = unfold_faces(obj, [root, *others], [None] * 1 + [root] * len(others))
     kept = [pieces[0]]
     for cand in star[1:]:  # per neighbour (a handful)
@@ -632,8 +661,7 @@ def _lattice(
     corners = (np.vstack([pc.polygon_uv for pc in pieces]) - p_uv) @ axes.T / s
     lo = np.floor(corners.min(axis=0) - 1e-9).astype(int)
     hi = np.ceil(corners.max(axis=0) + 1e-9).astype(int)
-    ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1),
-                         indexing="ij")
+    ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
     ij = np.stack([ii.ravel(), jj.ravel()], axis=1)
     uv = p_uv + s * (ij @ axes)
     depth = _depths(uv, pieces)  # (N, F)
@@ -655,7 +683,7 @@ def _lattice(
     ni, nj = (int(n) for n in np.shape(index))
     pairs = []
     for di, dj in _STENCIL:  # 8 offsets, each vectorized over the lattice
-        b = padded[2 + di:2 + di + ni, 2 + dj:2 + dj + nj]
+        b = padded[2 + di : 2 + di + ni, 2 + dj : 2 + dj + nj]
         ok = (index >= 0) & (b >= 0)
         pairs.append(np.stack([index[ok], b[ok]], axis=1))
     edges = np.concatenate(pairs)
@@ -672,6 +700,5 @@ def _lattice(
     cross = np.flatnonzero(~same)
     ok = same.copy()
     if cross.size:
-        ok[cross] = _segments_inside(uv_nodes[edges[cross, 0]], uv_nodes[edges[cross, 1]],
-                                     pieces)
+        ok[cross] = _segments_inside(uv_nodes[edges[cross, 0]], uv_nodes[edges[cross, 1]], pieces)
     return uv_nodes, edges[ok].astype(np.int64)

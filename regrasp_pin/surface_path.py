@@ -94,12 +94,18 @@ def edge_weights(
         return length.copy()
     c = as_array(node_cost, "node_cost", (len(grid),), finite=False)
     if np.any(np.isnan(c)):
-        raise InputError("node_cost", f"holds NaN at node {int(np.argmax(np.isnan(c)))}",
-                         "costs >= 0 (inf forbids a node)")
+        raise InputError(
+            "node_cost",
+            f"holds NaN at node {int(np.argmax(np.isnan(c)))}",
+            "costs >= 0 (inf forbids a node)",
+        )
     if np.any(c < 0):
         bad = int(np.argmin(c))
-        raise InputError("node_cost", f"is negative at node {bad} ({c[bad]:.3g})",
-                         "costs >= 0 (inf forbids a node)")
+        raise InputError(
+            "node_cost",
+            f"is negative at node {bad} ({c[bad]:.3g})",
+            "costs >= 0 (inf forbids a node)",
+        )
     mean = 0.5 * (c[grid.edges[:, 0]] + c[grid.edges[:, 1]])
     with np.errstate(invalid="ignore"):  # 0 * inf when cost_weight == 0
         factor = np.where(np.isinf(mean), np.inf, 1.0 + w * np.nan_to_num(mean, posinf=0.0))
@@ -138,7 +144,8 @@ def shortest_grid_path(
         reached = int(np.isfinite(dist).sum())
         raise PlanningError(
             f"Q is unreachable from P on the surface grid ({reached} of {len(grid)} nodes "
-            f"reachable; node costs forbid every route)")
+            f"reachable; node costs forbid every route)"
+        )
     nodes = [q]
     while nodes[-1] != p:  # walk back along the path (its length, not the grid size)
         nodes.append(int(pred[nodes[-1]]))

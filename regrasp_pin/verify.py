@@ -117,8 +117,10 @@ class Failure:
             what = f"{self.value:.6f} rad beyond the {side} limit {self.required:.6f} rad"
         else:
             what = f"distance {self.value * 1e3:.4f} mm < required {self.required * 1e3:.4f} mm"
-        return (f"{self.kind} {self.detail}: {what} at t={self.time_s:.4f} s "
-                f"(failing from {self.t_first_s:.4f} to {self.t_last_s:.4f} s)")
+        return (
+            f"{self.kind} {self.detail}: {what} at t={self.time_s:.4f} s "
+            f"(failing from {self.t_first_s:.4f} to {self.t_last_s:.4f} s)"
+        )
 
 
 @dataclass(frozen=True)
@@ -265,13 +267,19 @@ def _step_counts(t: np.ndarray, q: np.ndarray, T: np.ndarray, step: float) -> np
     need = np.maximum.reduce([dq / step, angle / step, dp / (step * OBJECT_LEVER_M)])
     counts = np.maximum(1, np.ceil(need * (1.0 - 1e-12))).astype(np.int64)
     if counts.sum() + 1 > MAX_DENSE_SAMPLES:
-        raise InputError("max_joint_step_rad", f"{step:g} rad needs {counts.sum() + 1} samples",
-                         f"at most {MAX_DENSE_SAMPLES} dense samples (a larger step)")
+        raise InputError(
+            "max_joint_step_rad",
+            f"{step:g} rad needs {counts.sum() + 1} samples",
+            f"at most {MAX_DENSE_SAMPLES} dense samples (a larger step)",
+        )
     return counts
 
 
 def _interpolate(
-    t: np.ndarray, q: np.ndarray, T: np.ndarray, motion: ObjectMotion | None,
+    t: np.ndarray,
+    q: np.ndarray,
+    T: np.ndarray,
+    motion: ObjectMotion | None,
     counts: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The plan's interpolation at ``counts[i]`` equal steps per interval."""
@@ -357,16 +365,20 @@ def verify_finger_motion(
     else:
         clr = as_array(clr, "tip_clearance_m", (t.size,))
         if np.any(clr < 0):
-            raise InputError("tip_clearance_m", f"has a negative value {clr.min():g}",
-                             "clearances >= 0 [m]")
+            raise InputError(
+                "tip_clearance_m", f"has a negative value {clr.min():g}", "clearances >= 0 [m]"
+            )
     link_clr = np.asarray(link_clearance_m, dtype=float)
     if link_clr.ndim == 0:
         link_clr = np.full(t.size, positive(float(link_clr), "link_clearance_m", allow_zero=True))
     else:
         link_clr = as_array(link_clr, "link_clearance_m", (t.size,))
         if np.any(link_clr < 0):
-            raise InputError("link_clearance_m", f"has a negative value {link_clr.min():g}",
-                             "clearances >= 0 [m]")
+            raise InputError(
+                "link_clearance_m",
+                f"has a negative value {link_clr.min():g}",
+                "clearances >= 0 [m]",
+            )
     ff_clr = positive(finger_clearance_m, "finger_clearance_m", allow_zero=True)
     tol = positive(penetration_tol_m, "penetration_tol_m", allow_zero=True)
     step = positive(max_joint_step_rad, "max_joint_step_rad")
@@ -383,14 +395,18 @@ def verify_finger_motion(
                 break
             counts = np.maximum(counts, np.ceil(counts * per / tip_step)).astype(np.int64)
             if counts.sum() + 1 > MAX_DENSE_SAMPLES:
-                raise InputError("max_tip_step_m", f"{tip_step:g} m needs {counts.sum() + 1} "
-                                 "samples", "a larger step")
+                raise InputError(
+                    "max_tip_step_m",
+                    f"{tip_step:g} m needs {counts.sum() + 1} samples",
+                    "a larger step",
+                )
             t_d, q_d, T_d = _interpolate(t, q, T, motion, counts)
             tip_obj = _tip_in_object(f, q_d, T_d)
     clr_d = np.interp(t_d, t, clr) if t.size > 1 else clr.copy()
     link_d = np.interp(t_d, t, link_clr) if t.size > 1 else link_clr.copy()
-    max_step = float(np.max(np.linalg.norm(np.diff(tip_obj, axis=0), axis=1))) \
-        if t_d.size > 1 else 0.0
+    max_step = (
+        float(np.max(np.linalg.norm(np.diff(tip_obj, axis=0), axis=1))) if t_d.size > 1 else 0.0
+    )
 
     pairs = PairDistances(hand, obj, f, q_d, T_d, clr_d - tol, link_d - tol, ff_clr)
     dist, minima_exact = pairs.run()
@@ -440,8 +456,18 @@ def _joint_limit_failures(f: Finger, t_d: np.ndarray, q_d: np.ndarray) -> list[F
             excess = sign * (qf[:, j] - bound)
             for lo, hi in _runs(excess > JOINT_LIMIT_TOL_RAD):
                 w = lo + int(np.argmax(excess[lo:hi]))
-                out.append(Failure(float(t_d[w]), "joint-limit", name, float(qf[w, j]),
-                                   float(bound), float(t_d[lo]), float(t_d[hi - 1]), hi - lo))
+                out.append(
+                    Failure(
+                        float(t_d[w]),
+                        "joint-limit",
+                        name,
+                        float(qf[w, j]),
+                        float(bound),
+                        float(t_d[lo]),
+                        float(t_d[hi - 1]),
+                        hi - lo,
+                    )
+                )
     return out
 
 
@@ -450,8 +476,9 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     if not mask.any():
         return []
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.nonzero(edges == 1)[0].tolist(), np.nonzero(edges == -1)[0].tolist(),
-                    strict=True))
+    return list(
+        zip(np.nonzero(edges == 1)[0].tolist(), np.nonzero(edges == -1)[0].tolist(), strict=True)
+    )
 
 
 def _distance_failures(pairs: PairDistances, t_d: np.ndarray) -> list[Failure]:
@@ -464,7 +491,16 @@ def _distance_failures(pairs: PairDistances, t_d: np.ndarray) -> list[Failure]:
         margin = pairs.exact[:, col] - pairs.required[:, col]
         for lo, hi in _runs(fail[:, col]):
             w = lo + int(np.argmin(margin[lo:hi]))
-            out.append(Failure(float(t_d[w]), _KINDS[pairs.kind[col]], f"{g1} vs {g2}",
-                               float(pairs.exact[w, col]), float(pairs.required[w, col]),
-                               float(t_d[lo]), float(t_d[hi - 1]), hi - lo))
+            out.append(
+                Failure(
+                    float(t_d[w]),
+                    _KINDS[pairs.kind[col]],
+                    f"{g1} vs {g2}",
+                    float(pairs.exact[w, col]),
+                    float(pairs.required[w, col]),
+                    float(t_d[lo]),
+                    float(t_d[hi - 1]),
+                    hi - lo,
+                )
+            )
     return out

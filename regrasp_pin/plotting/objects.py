@@ -52,12 +52,25 @@ def plot_object(
         ax = fig.add_subplot(projection="3d")
     mm = 1e3  # draw in millimetres
     polys = [f.polygon * mm for f in obj.faces]
-    ax.add_collection3d(Poly3DCollection(polys, facecolors=(0.55, 0.7, 0.9, 0.25),
-                                         edgecolors=(0.2, 0.3, 0.5, 0.9), linewidths=0.8))
+    ax.add_collection3d(
+        Poly3DCollection(
+            polys,
+            facecolors=(0.55, 0.7, 0.9, 0.25),
+            edgecolors=(0.2, 0.3, 0.5, 0.9),
+            linewidths=0.8,
+        )
+    )
     if sample is not None:
         pts = sample.points * mm
-        ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=2, c="0.3", depthshade=False,
-                   label=f"surface points ({len(sample)}, {sample.spacing_m * mm:g} mm)")
+        ax.scatter(
+            pts[:, 0],
+            pts[:, 1],
+            pts[:, 2],
+            s=2,
+            c="0.3",
+            depthshade=False,
+            label=f"surface points ({len(sample)}, {sample.spacing_m * mm:g} mm)",
+        )
     if contacts_object is not None:
         c = as_array(contacts_object, "contacts_object", (None, 3))
         if contact_normals_object is None:
@@ -65,10 +78,25 @@ def plot_object(
         else:
             nrm = as_array(contact_normals_object, "contact_normals_object", (c.shape[0], 3))
         length = (0.3 * obj.radius_m if normal_length_m is None else normal_length_m) * mm
-        ax.scatter(c[:, 0] * mm, c[:, 1] * mm, c[:, 2] * mm, s=80, c="tab:red",
-                   depthshade=False, label="contacts")
-        ax.quiver(c[:, 0] * mm, c[:, 1] * mm, c[:, 2] * mm,
-                  nrm[:, 0], nrm[:, 1], nrm[:, 2], length=length, color="tab:red")
+        ax.scatter(
+            c[:, 0] * mm,
+            c[:, 1] * mm,
+            c[:, 2] * mm,
+            s=80,
+            c="tab:red",
+            depthshade=False,
+            label="contacts",
+        )
+        ax.quiver(
+            c[:, 0] * mm,
+            c[:, 1] * mm,
+            c[:, 2] * mm,
+            nrm[:, 0],
+            nrm[:, 1],
+            nrm[:, 2],
+            length=length,
+            color="tab:red",
+        )
     r = obj.radius_m * mm
     for setter in (ax.set_xlim, ax.set_ylim, ax.set_zlim):
         setter(-r, r)

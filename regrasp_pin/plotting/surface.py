@@ -61,8 +61,7 @@ def plot_unfolded_grid(
         centre = unf.polygon_uv.mean(axis=0) * mm
         ax.annotate(f"face {unf.face_id}", centre, color="0.45", fontsize=8, ha="center")
     for hinge in grid.hinges_uv:
-        ax.plot(hinge[:, 0] * mm, hinge[:, 1] * mm, color="tab:orange", lw=1.5, ls="--",
-                zorder=3)
+        ax.plot(hinge[:, 0] * mm, hinge[:, 1] * mm, color="tab:orange", lw=1.5, ls="--", zorder=3)
     uv = grid.uv * mm
     if heights is not None:
         h = np.asarray(heights, dtype=float)
@@ -73,27 +72,62 @@ def plot_unfolded_grid(
     else:
         ax.scatter(uv[:, 0], uv[:, 1], s=2, c="0.6", zorder=2, label="grid nodes")
     if path is not None:
-        ax.plot(path.uv[:, 0] * mm, path.uv[:, 1] * mm, color="tab:blue", lw=2, zorder=3,
-                label=f"grid path ({path.length_m * mm:.1f} mm)")
+        ax.plot(
+            path.uv[:, 0] * mm,
+            path.uv[:, 1] * mm,
+            color="tab:blue",
+            lw=2,
+            zorder=3,
+            label=f"grid path ({path.length_m * mm:.1f} mm)",
+        )
     if tip_path is not None:
-        ax.plot(tip_path.uv[:, 0] * mm, tip_path.uv[:, 1] * mm, color="tab:cyan", lw=1,
-                ls=":", zorder=3, label="tip path (surface trace)")
+        ax.plot(
+            tip_path.uv[:, 0] * mm,
+            tip_path.uv[:, 1] * mm,
+            color="tab:cyan",
+            lw=1,
+            ls=":",
+            zorder=3,
+            label="tip path (surface trace)",
+        )
     if polygon_indices is not None:
         source = tip_path.uv if tip_path is not None else (path.uv if path is not None else None)
         if source is None:
             raise InputError("polygon_indices", "needs a path or a tip_path to index")
         idx = np.asarray(polygon_indices)
-        if idx.ndim != 1 or idx.size < 2 or not np.issubdtype(idx.dtype, np.integer) or (
-                np.any(idx < 0) or np.any(idx >= source.shape[0])):
-            raise InputError("polygon_indices", "must be >= 2 indices into the path",
-                             f"integers in [0, {source.shape[0]})")
+        if (
+            idx.ndim != 1
+            or idx.size < 2
+            or not np.issubdtype(idx.dtype, np.integer)
+            or (np.any(idx < 0) or np.any(idx >= source.shape[0]))
+        ):
+            raise InputError(
+                "polygon_indices",
+                "must be >= 2 indices into the path",
+                f"integers in [0, {source.shape[0]})",
+            )
         poly = source[idx] * mm
-        ax.plot(poly[:, 0], poly[:, 1], color="tab:red", lw=1.5, marker="o", ms=5, zorder=4,
-                label=f"polygon ({idx.size} waypoints)")
+        ax.plot(
+            poly[:, 0],
+            poly[:, 1],
+            color="tab:red",
+            lw=1.5,
+            marker="o",
+            ms=5,
+            zorder=4,
+            label=f"polygon ({idx.size} waypoints)",
+        )
     for name, i, colour in (("P", grid.p_index, "tab:green"), ("Q", grid.q_index, "tab:red")):
         ax.scatter(*uv[i], s=90, c=colour, marker="*", zorder=5)
-        ax.annotate(name, uv[i], textcoords="offset points", xytext=(6, 6), fontsize=11,
-                    weight="bold", color=colour)
+        ax.annotate(
+            name,
+            uv[i],
+            textcoords="offset points",
+            xytext=(6, 6),
+            fontsize=11,
+            weight="bold",
+            color=colour,
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("unfolded u [mm]")
     ax.set_ylabel("unfolded v [mm]")
