@@ -13,12 +13,16 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._validate import as_array
 from .exceptions import InputError, ModelFileError
+
+if TYPE_CHECKING:  # imported lazily at run time
+    from .hand import Hand
+    from .objects import ConvexObject
 
 __all__ = ["PLAN_FORMAT", "ContactPhase", "Plan", "RegraspPhase", "repo_root"]
 
@@ -246,7 +250,7 @@ class Plan:
         p = Path(self.hand["urdf"])
         return p if p.is_absolute() else repo_root() / p
 
-    def load_hand(self):  # noqa: ANN201 - avoids importing hand at module import
+    def load_hand(self) -> Hand:
         """Rebuild the :class:`~regrasp_pin.hand.Hand` from the URDF and finger table."""
         from .hand import Hand
 
@@ -254,7 +258,7 @@ class Plan:
         radii = {n: float(f["tip_radius"]) for n, f in self.hand["fingers"].items()}
         return Hand.from_urdf(self.urdf_path, fingers, tip_radius=radii, name=self.hand.get("name"))
 
-    def load_object(self):  # noqa: ANN201
+    def load_object(self) -> ConvexObject:
         """Rebuild the object from its kind and parameters."""
         from .objects import object_from_params
 

@@ -7,6 +7,10 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..planner import ManipulationPlan
 
 NAME = "demo"
 HELP = "Plan the canonical regrasping scenario, print a summary, write plan.json and figures."
@@ -27,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def summary_rows(result) -> list[dict]:  # noqa: ANN001 - ManipulationPlan
+def summary_rows(result: ManipulationPlan) -> list[dict]:
     """One row per regrasp: what the demo table prints."""
     rows = []
     for r in result.regrasps:
@@ -174,7 +178,7 @@ def _print_table(rows: list[dict], summary: dict) -> None:
         print(f"figure: {f}")
 
 
-def _figures(result, out: Path) -> list[Path]:  # noqa: ANN001
+def _figures(result: ManipulationPlan, out: Path) -> list[Path]:
     """Fig. 9 (forefinger joint angles), Fig. 2 (one regrasp's manifold), Fig. 8."""
     from ..plotting import require_pyplot
 
