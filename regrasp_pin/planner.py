@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .contact import ContactModel
-from .contact_choice import Grasp, choose_new_contact, initial_grasp
+from .contact_choice import Grasp, NewContact, choose_new_contact, initial_grasp
 from .exceptions import ContactError, PlanningError, RegraspError
 from .grasp_quality import ferrari_canny_epsilon
 from .hand import Hand
@@ -440,7 +440,7 @@ def _regrasp(
     failed: list[np.ndarray] = []
     last: RegraspError | None = None
 
-    def choose(duration: float):
+    def choose(duration: float) -> NewContact:
         return choose_new_contact(
             hand,
             obj,
@@ -459,6 +459,23 @@ def _regrasp(
             exit_tolerance_s=params.exit_tolerance_s,
         )
 
+    def attempt(choice: NewContact, duration: float) -> RegraspResult:
+        return plan_regrasp(
+            hand,
+            obj,
+            motion,
+            name,
+            start,
+            h.p,
+            h.n,
+            choice.p_object,
+            choice.n_object,
+            q_start,
+            q_hand,
+            others_tips_object=others_tips,
+            params=replace(params.regrasp, duration_s=duration),
+        )
+
     for _ in range(params.candidates):
         duration = params.regrasp.duration_s
         try:
@@ -474,46 +491,15 @@ def _regrasp(
         except ContactError as exc:
             return exc if last is None else last
         try:
-            res = plan_regrasp(
-                hand,
-                obj,
-                motion,
-                name,
-                start,
-                h.p,
-                h.n,
-                choice.p_object,
-                choice.n_object,
-                q_start,
-                q_hand,
-                others_tips_object=others_tips,
-                params=replace(params.regrasp, duration_s=duration),
-            )
-            return res, choice
+            return attempt(choice, duration), choice
         except RegraspError as exc:
             log.info("regrasp %s to %s failed: %s", name, choice.p_object.round(4), exc)
             last = exc
             if "rad/s" in str(exc) and start + 1.5 * duration <= motion.t_end:
                 # too fast for the joints: the same start, a longer regrasp, a new Q
                 try:
-                    longer = 1.5 * duration
-                    choice = choose(longer)
-                    res = plan_regrasp(
-                        hand,
-                        obj,
-                        motion,
-                        name,
-                        start,
-                        h.p,
-                        h.n,
-                        choice.p_object,
-                        choice.n_object,
-                        q_start,
-                        q_hand,
-                        others_tips_object=others_tips,
-                        params=replace(params.regrasp, duration_s=longer),
-                    )
-                    return res, choice
+                    choice = choose(1.5 * duration)
+                    return attempt(choice, 1.5 * duration), choice
                 except RegraspError as exc2:
                     last = exc2
             failed.append(choice.p_object)
