@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact import ContactModel
+from .contact import ContactModel, tip_targets
 from .contact_choice import Grasp
 from .hand import Hand
 from .motion import ObjectMotion
@@ -98,11 +98,8 @@ def holding_q(
 ) -> np.ndarray:
     """Exact IK of a holding finger at arbitrary times (warm from its track)."""
     f = hand.fingers[name]
-    T = motion.pose(times)
-    c = h.p + f.tip_radius * h.n
-    targets = T[:, :3, :3] @ c + T[:, :3, 3]
-    res = f.ik(targets, h.q_at(times), tol_m=tol_m)
-    return res.q
+    targets = tip_targets(h.p[None], h.n[None], f.tip_radius, motion.pose(times))[:, 0]
+    return f.ik(targets, h.q_at(times), tol_m=tol_m).q
 
 
 def rest_configuration(
@@ -153,8 +150,8 @@ def holding_hand(
             if n == moving:
                 continue
             f = hand.fingers[n]
-            c = grasp.points_object[n] + f.tip_radius * grasp.normals_object[n]
-            q[:, f.q_indices] = f.ik(T[:, :3, :3] @ c + T[:, :3, 3], grasp.q[n]).q
+            p, nrm = grasp.points_object[n][None], grasp.normals_object[n][None]
+            q[:, f.q_indices] = f.ik(tip_targets(p, nrm, f.tip_radius, T)[:, 0], grasp.q[n]).q
         return q
 
     return q_hand
