@@ -10,6 +10,8 @@ them (the argument, the accepted values, the finger, the time).
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import asdict, dataclass
+from enum import Enum
 from typing import Any
 
 
@@ -67,35 +69,169 @@ class GeometryError(RegraspError, ValueError):
     """An object description is empty, degenerate or not convex where it must be."""
 
 
-class ContactError(RegraspError):
+class FailureKind(str, Enum):
+    """Why a planning step failed: what a caller (or the planner itself) decides on.
+
+    Every :class:`ContactError`, :class:`PlanningError` and :class:`Attempt` carries one.
+    Decisions read the kind and its numbers, never the message text.
+    """
+
+    IK_UNREACHABLE = "ik-unreachable"
+    """The fingertip target is out of reach of IK (residual above tolerance)."""
+    VELOCITY = "velocity"
+    """A joint would exceed its velocity limit [rad/s]."""
+    JOINT_LIMIT = "joint-limit"
+    """A joint would leave its limits [rad]."""
+    FINGER_COLLISION = "finger-collision"
+    """The moving finger comes too close to another finger [m]."""
+    OBJECT_CLEARANCE = "object-clearance"
+    """The moving finger comes too close to (or into) the object [m]."""
+    GRID_UNREACHABLE = "grid-unreachable"
+    """No path on the unfolded surface grid joins P and Q."""
+    NO_CANDIDATE = "no-candidate"
+    """No new contact Q satisfies the conditions (inside the limits at arrival, ...)."""
+    FORCE_CLOSURE = "force-closure"
+    """The fingers that would hold are not in force closure."""
+    TOO_LATE = "too-late"
+    """A regrasp would not end before the motion does."""
+    FINGER_BUSY = "finger-busy"
+    """A finger must let go while another is still in the air."""
+    TOO_FEW_FINGERS = "too-few-fingers"
+    """Fewer fingers than required would hold."""
+    BUDGET = "budget"
+    """The search budget (attempts or seconds) ran out."""
+
+
+# what to change, per kind, for the message of a failed plan
+ADVICE = {
+    FailureKind.IK_UNREACHABLE: "place the object closer to the fingers' common workspace",
+    FailureKind.VELOCITY: "turn the object more slowly (or raise the joint velocity limits)",
+    FailureKind.JOINT_LIMIT: "place the object where the fingers have more joint range",
+    FailureKind.FINGER_COLLISION: "use fingers that are further apart, or fewer fingers",
+    FailureKind.OBJECT_CLEARANCE: "lower RegraspParams.clearance_m or use a larger object",
+    FailureKind.GRID_UNREACHABLE: "lower RegraspParams.grid_spacing_m or the contact keep-out",
+    FailureKind.NO_CANDIDATE: "lower ContactModel.choice_margin_rad or turn more slowly",
+    FailureKind.FORCE_CLOSURE: "use more fingers or a higher friction coefficient mu",
+    FailureKind.TOO_LATE: "shorten RegraspParams.duration_s or extend the motion",
+    FailureKind.FINGER_BUSY: "turn more slowly so that the fingers can take turns",
+    FailureKind.TOO_FEW_FINGERS: "lower PlannerParams.min_holding or use more fingers",
+    FailureKind.BUDGET: "raise the planner's budget (PlannerParams.budget_s, candidates)",
+}
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One failed attempt of a search, as data (JSON-serializable with :meth:`to_dict`).
+
+    Attributes:
+        kind: Why it failed.
+        finger: The finger concerned (or None).
+        time_s: When the failure happened [s] (or None).
+        measured: The measured value (units by kind: m, rad, rad/s, ...), or None.
+        required: The value that was required, or None.
+        what: What was tried (e.g. ``"Q=(0.01, 0.02, 0.0) start=1.90 m=9"``).
+    """
+
+    kind: FailureKind
+    finger: str | None = None
+    time_s: float | None = None
+    measured: float | None = None
+    required: float | None = None
+    what: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["kind"] = self.kind.value
+        return d
+
+
+def _where(finger: str | None, time_s: float | None) -> str:
+    where = []
+    if finger is not None:
+        where.append(f"finger {finger!r}")
+    if time_s is not None:
+        where.append(f"t={time_s:.3f} s")
+    return (", ".join(where) + ": ") if where else ""
+
+
+class _Outcome(RegraspError):
+    """An error with a :class:`FailureKind`, a finger, a time and measured numbers."""
+
+    def __init__(
+        self,
+        reason: str,
+        finger: str | None = None,
+        time_s: float | None = None,
+        *,
+        kind: FailureKind,
+        measured: float | None = None,
+        required: float | None = None,
+        attempts: Iterable[Attempt] = (),
+    ) -> None:
+        self.finger = finger
+        self.time_s = time_s
+        self.reason = reason
+        self.kind = FailureKind(kind)
+        self.measured = None if measured is None else float(measured)
+        self.required = None if required is None else float(required)
+        self.attempts = tuple(attempts)
+        super().__init__(_where(finger, time_s) + reason)
+
+    def as_attempt(self, what: str = "") -> Attempt:
+        """This failure as an :class:`Attempt` record."""
+        return Attempt(
+            kind=self.kind,
+            finger=self.finger,
+            time_s=self.time_s,
+            measured=self.measured,
+            required=self.required,
+            what=what,
+        )
+
+
+class ContactError(_Outcome):
     """No feasible contact could be found (initial grasp or new contact Q).
 
     Attributes:
         finger: The finger concerned (or None for the whole grasp).
         time_s: The time at which it was needed [s] (or None).
         reason: Why no contact could be found.
+        kind: A :class:`FailureKind` (default ``NO_CANDIDATE``).
+        measured, required: The numbers behind the failure, when there are any.
     """
 
-    def __init__(self, reason: str, finger: str | None = None, time_s: float | None = None) -> None:
-        self.finger = finger
-        self.time_s = time_s
-        self.reason = reason
-        where = []
-        if finger is not None:
-            where.append(f"finger {finger!r}")
-        if time_s is not None:
-            where.append(f"t={time_s:.3f} s")
-        prefix = (", ".join(where) + ": ") if where else ""
-        super().__init__(prefix + reason)
+    def __init__(
+        self,
+        reason: str,
+        finger: str | None = None,
+        time_s: float | None = None,
+        *,
+        kind: FailureKind = FailureKind.NO_CANDIDATE,
+        measured: float | None = None,
+        required: float | None = None,
+        attempts: Iterable[Attempt] = (),
+    ) -> None:
+        super().__init__(
+            reason,
+            finger,
+            time_s,
+            kind=kind,
+            measured=measured,
+            required=required,
+            attempts=attempts,
+        )
 
 
-class PlanningError(RegraspError):
+class PlanningError(_Outcome):
     """A regrasp or a whole-hand plan could not be found and verified.
 
     Attributes:
         finger: The finger concerned (or None).
         time_s: When the failure happened [s] (or None).
-        reason: What failed (e.g. which check, by how much).
+        reason: What failed, in plain words.
+        kind: A :class:`FailureKind`: what the failure was.
+        measured, required: The numbers behind it (units by kind), when there are any.
+        attempts: Every failed attempt of the search that led here, as data.
         partial: Whatever was planned before the failure (e.g. a partial plan), or None.
     """
 
@@ -105,18 +241,22 @@ class PlanningError(RegraspError):
         finger: str | None = None,
         time_s: float | None = None,
         partial: Any = None,
+        *,
+        kind: FailureKind = FailureKind.BUDGET,
+        measured: float | None = None,
+        required: float | None = None,
+        attempts: Iterable[Attempt] = (),
     ) -> None:
-        self.finger = finger
-        self.time_s = time_s
-        self.reason = reason
+        super().__init__(
+            reason,
+            finger,
+            time_s,
+            kind=kind,
+            measured=measured,
+            required=required,
+            attempts=attempts,
+        )
         self.partial = partial
-        where = []
-        if finger is not None:
-            where.append(f"finger {finger!r}")
-        if time_s is not None:
-            where.append(f"t={time_s:.3f} s")
-        prefix = (", ".join(where) + ": ") if where else ""
-        super().__init__(prefix + reason)
 
 
 class VerificationError(PlanningError):
