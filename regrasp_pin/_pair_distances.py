@@ -499,3 +499,25 @@ class PairDistances:
                     )
         self.exact[rows, cols] = values
         self.n_queries += int(rows.size)
+
+
+def capsule_gap(hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray) -> np.ndarray:
+    """Lower bound ``(N,)`` [m] on the distance between geometries ``ids_a`` and ``ids_b``
+    of the hand at each configuration row of ``q`` ``(N, nq)``, from capsules that
+    contain the geometries (inf when either list is empty)."""
+    gap = np.full(q.shape[0], np.inf)
+    if not ids_a or not ids_b:
+        return gap
+    ga = [_geometry(hand, g) for g in ids_a]
+    gb = [_geometry(hand, g) for g in ids_b]
+    Ra, pa = _placements(ga, q)
+    Rb, pb = _placements(gb, q)
+    for i, g in enumerate(ga):
+        a1 = pa[:, i] + Ra[:, i] @ g.seg_a
+        b1 = pa[:, i] + Ra[:, i] @ g.seg_b
+        for j, h in enumerate(gb):
+            a2 = pb[:, j] + Rb[:, j] @ h.seg_a
+            b2 = pb[:, j] + Rb[:, j] @ h.seg_b
+            d, _ = _segment_distance(a1, b1, a2, b2)
+            gap = np.minimum(gap, d - g.radius - h.radius)
+    return gap

@@ -45,6 +45,8 @@ class ContactModel:
             is not let go at once).
         choice_link_clearance_m: New and initial contacts must keep the finger's other
             links at least this far from the object [m].
+        finger_trigger_m: A holding finger that comes closer than this to another
+            holding finger triggers a regrasp of one of them [m].
     """
 
     cone_deg: float = 60.0
@@ -53,6 +55,7 @@ class ContactModel:
     limit_margin_rad: float = 0.05
     choice_margin_rad: float = 0.08
     choice_link_clearance_m: float = 0.003
+    finger_trigger_m: float = 0.0015
 
     @property
     def cos_cone(self) -> float:

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contact import ContactModel, FingerClearance, LinkClearance
-from .exceptions import ContactError, InputError
+from .exceptions import ContactError, FailureKind, InputError
 from .grasp_quality import ferrari_canny_epsilon
 from .hand import Hand
 from .manifold import Manifold
@@ -117,6 +117,7 @@ def choose_new_contact(
     max_checks: int = 60,
     exclude_radius_m: float = 0.0,
     exclude_points_object: np.ndarray | None = None,
+    exclude_points_radius_m: float | None = None,
     q_hand_arrive: np.ndarray | None = None,
     finger_clearance_m: float = 0.002,
     exit_tolerance_s: float = 0.0,
@@ -144,6 +145,8 @@ def choose_new_contact(
             ``exclude_points_object``) are ignored [m].
         exclude_points_object: ``(E, 3)`` points to stay away from (e.g. contacts
             for which no verified path was found).
+        exclude_points_radius_m: Radius around each of ``exclude_points_object``
+            [m]; default ``exclude_radius_m``.
         q_hand_arrive: ``(nq,)`` hand configuration at arrival (the other fingers
             holding); when given, Q must put the finger at least ``finger_clearance_m``
             from the other fingers (Coal).
@@ -179,9 +182,10 @@ def choose_new_contact(
         cand &= np.linalg.norm(pts - p_other, axis=1) >= sep
     if exclude_radius_m > 0:
         cand &= np.linalg.norm(pts - P_object, axis=1) >= exclude_radius_m
-        if exclude_points_object is not None:
-            for e in np.asarray(exclude_points_object, float).reshape(-1, 3):
-                cand &= np.linalg.norm(pts - e, axis=1) >= exclude_radius_m
+    if exclude_points_object is not None:
+        r_ex = exclude_radius_m if exclude_points_radius_m is None else exclude_points_radius_m
+        for e in np.asarray(exclude_points_object, float).reshape(-1, 3):
+            cand &= np.linalg.norm(pts - e, axis=1) >= max(r_ex, 1e-12)
     idx = np.flatnonzero(cand)
     if idx.size == 0:
         raise ContactError(
@@ -190,19 +194,24 @@ def choose_new_contact(
             f"contacts at arrival ({int(usable[ka].sum())} usable before the separation test)",
             finger=finger.name,
             time_s=float(manifold.times_s[ka]),
+            kind=FailureKind.NO_CANDIDATE,
+            measured=float(usable[ka].sum()),
+            required=1.0,
         )
     t_exit = exit_times(usable[:, idx], manifold.times_s, ka)
     margin = manifold.margin_rad[ka, idx]
     dist = np.linalg.norm(pts[idx] - P_object, axis=1)
+    # the order must not follow last-bit noise of the IK: keys on a 1e-9 lattice
+    margin_key, dist_key = np.round(margin, 9), np.round(dist, 9)
     if exit_tolerance_s > 0:
         # exit times within the tolerance of each other count as ties; among them the
         # shorter move first (a short move is less likely to cross another finger)
         bins = np.floor((t_exit.max() - t_exit) / exit_tolerance_s)
-        order = np.lexsort((-margin, dist, bins))
+        order = np.lexsort((idx, -margin_key, dist_key, bins))
     else:
         # (b), then margin, then distance; a point usable to the end outlasts one that
         # leaves at the last grid time (both have exit time times_s[-1])
-        order = np.lexsort((dist, -margin, ~usable[-1, idx], -t_exit))
+        order = np.lexsort((idx, dist_key, -margin_key, ~usable[-1, idx], -t_exit))
 
     other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
     other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
@@ -265,11 +274,19 @@ def choose_new_contact(
     if fallback is not None:
         return fallback
     why = ", ".join(f"{n} {k}" for k, n in rejected.items() if n)
+    main = max(rejected, key=lambda k: rejected[k])  # dict order breaks ties
     raise ContactError(
         f"none of the {min(idx.size, max_checks)} best candidates (of {idx.size}) passes "
         f"(rejected for: {why})",
         finger=finger.name,
         time_s=float(manifold.times_s[ka]),
+        kind={
+            "force closure": FailureKind.FORCE_CLOSURE,
+            "link clearance": FailureKind.OBJECT_CLEARANCE,
+            "finger clearance": FailureKind.FINGER_COLLISION,
+        }[main],
+        measured=float(rejected[main]),
+        required=0.0,
     )
 
 

@@ -6,12 +6,18 @@ margin of a boundary plane (or stops being feasible), that finger regrasps -- li
 off, travels around the object and lands on a new contact Q -- while the others keep
 holding. One finger is in the air at a time.
 
-Scheduling. Triggers are taken in time order. A regrasp starts ``lead_s`` before its
-trigger, earlier if the next finger's trigger would otherwise fall inside it (so that
-finger can go right after), and never while the fingers that stay would lose force
-closure or be fewer than ``min_holding``. Each regrasp phase records why it started
-when it did. A motion that cannot be achieved raises :class:`~.exceptions.PlanningError`
-with the finger, the time, the reason and the partial plan up to that time.
+Scheduling. Triggers are taken in time order. A finger may lift off anywhere in its
+window (:mod:`.planning.schedule`): from when it is free (no other finger in the air)
+to the last time its contact is still held inside the joint limits. The preferred
+start is ``lead_s`` before the trigger, earlier if the next finger's trigger would
+otherwise fall inside the regrasp; other starts are tried earlier and later in turn.
+For each start the search (:mod:`.planning.search`) tries new contacts Q and
+durations until one regrasp verifies. When a finger finds none, the planner backs up
+once per failure (at most ``max_backtracks`` times): the previous regrasp is planned
+again to land before this finger's window closes, or, if time was not the problem,
+to land elsewhere. Every search shares one budget (``budget_s``). A motion that cannot
+be achieved raises :class:`~.exceptions.PlanningError` with the finger, the time, the
+kind of the failure, every attempt and the partial plan up to that time.
 """
 
 from __future__ import annotations
@@ -24,8 +30,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .contact import ContactModel
-from .contact_choice import Grasp, NewContact, choose_new_contact, initial_grasp
-from .exceptions import ContactError, PlanningError, RegraspError
+from .contact_choice import Grasp, initial_grasp
+from .exceptions import FailureKind, PlanningError
 from .grasp_quality import ferrari_canny_epsilon
 from .hand import Hand
 from .holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
@@ -33,11 +39,16 @@ from .manifold import Manifold, build_manifold
 from .motion import ObjectMotion
 from .objects import ConvexObject, SurfaceSample
 from .plan import ContactPhase, Plan, RegraspPhase
-from .regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .planning.proximity import holding_proximity
+from .planning.schedule import LiftOffWindow, held_until, lift_off_window, start_times
+from .planning.search import Found, RegraspSearch, SearchBudget
+from .regrasp import RegraspParams, RegraspResult
 
 __all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation"]
 
 log = logging.getLogger(__name__)
+
+_TIME_TOL_S = 1e-9  # times closer than this are the same time
 
 
 @dataclass(frozen=True)
@@ -48,19 +59,23 @@ class PlannerParams:
         dt_s: Time step of the holding phases [s].
         manifold_dt_s: Time step of the joint-space manifolds used to choose Q [s].
         sample_spacing_m: Surface sampling spacing for the manifolds [m].
-        lead_s: A regrasp starts at least this long before its trigger [s].
+        lead_s: A regrasp preferably starts this long before its trigger [s].
         min_holding: Fewest fingers that must hold while one is in the air.
         mu: Friction coefficient for force closure.
-        candidates: How many new contacts Q to try per regrasp before giving up.
+        candidates: How many new contacts Q to try per lift-off time.
+        start_step_s: Spacing of the lift-off times tried in a finger's window [s].
+        max_starts: Most lift-off times tried per regrasp.
+        max_backtracks: Most times the planner re-plans an earlier regrasp.
+        budget_s: Wall-clock budget of the whole search [s]; past it the planner
+            stops with a ``budget`` failure and the partial plan.
         exit_tolerance_s: New contacts whose exit times differ by less than this are
             ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
-        earlier_starts_s: When no verified regrasp starts at the scheduled time, the
-            planner retries this much earlier [s] (0 first).
         fingers: The fingers that take part (default: all). The others stay idle at
             the configuration of :func:`rest_configuration`, as obstacles that every
             regrasp is verified against.
         contact: The contact model (trigger margin, pad cone, tolerances).
-        regrasp: Parameters of each regrasp.
+        regrasp: Parameters of each regrasp (``duration_s`` is the shortest duration;
+            longer ones follow from the joint velocity limits).
     """
 
     dt_s: float = 0.01
@@ -70,8 +85,11 @@ class PlannerParams:
     min_holding: int = 3
     mu: float = 0.8
     candidates: int = 6
+    start_step_s: float = 0.1
+    max_starts: int = 5
+    max_backtracks: int = 8
+    budget_s: float = 60.0
     fingers: tuple[str, ...] | None = None
-    earlier_starts_s: tuple[float, ...] = (0.0, 0.1, 0.2)
     exit_tolerance_s: float = 0.25
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
@@ -96,6 +114,43 @@ class ManipulationPlan:
     manifolds: dict[str, Manifold]
     sample: SurfaceSample
     stage_s: dict[str, float]
+
+
+@dataclass(frozen=True)
+class _State:
+    """Where the plan stands: who holds what since when, and what was done."""
+
+    holding: dict[str, Holding]
+    history: dict[str, tuple[Holding, ...]]
+    phases: dict[str, tuple]
+    regrasps: tuple[RegraspResult, ...]
+    now: float  # no regrasp may start before this (one finger in the air)
+    held_to_end: dict[str, str]
+
+
+@dataclass(frozen=True)
+class _Step:
+    """A regrasp decision that can be revisited: the state before it and its trigger."""
+
+    before: _State
+    trig: _Trigger
+    triggers: list[_Trigger]
+    Q_object: np.ndarray
+    excluded: tuple[np.ndarray, ...] = ()
+
+
+@dataclass
+class _Context:
+    hand: Hand
+    obj: ConvexObject
+    motion: ObjectMotion
+    grid: np.ndarray
+    params: PlannerParams
+    active: tuple[str, ...]
+    search: RegraspSearch
+    budget: SearchBudget
+    base_q: np.ndarray
+    tried: set[tuple[int, str]] = field(default_factory=set)  # backtracking options taken
 
 
 def plan_manipulation(
@@ -123,8 +178,9 @@ def plan_manipulation(
 
     Raises:
         ContactError: no initial grasp.
-        PlanningError: the motion cannot be achieved; ``partial`` holds the plan up to
-            the failure.
+        PlanningError: the motion cannot be achieved; ``kind`` says why, ``attempts``
+            holds every failed attempt of the last search and ``partial`` the plan up
+            to the failure.
     """
     params = params or PlannerParams()
     active = tuple(params.fingers) if params.fingers else hand.finger_names
@@ -148,15 +204,10 @@ def plan_manipulation(
         grasp = initial_grasp(hand, obj, manifolds, sample, contact=params.contact, mu=params.mu)
     stage["initial grasp"] = time.perf_counter() - t0
 
-    grid = np.arange(motion.t_start, motion.t_end + 1e-9, params.dt_s)
-    if grid[-1] < motion.t_end - 1e-9:
-        grid = np.append(grid, motion.t_end)
-    grid[-1] = min(grid[-1], motion.t_end)
-
+    grid = _time_grid(motion, params.dt_s)
     t0 = time.perf_counter()
-    holding: dict[str, Holding] = {}
-    for name in active:
-        holding[name] = start_holding(
+    holding = {
+        name: start_holding(
             hand,
             obj,
             motion,
@@ -168,231 +219,94 @@ def plan_manipulation(
             motion.t_start,
             params.contact,
         )
-    phases: dict[str, list] = {name: [] for name in active}
-    regrasps: list[RegraspResult] = []
+        for name in active
+    }
     stage["tracking"] = time.perf_counter() - t0
-    stage["regrasps"] = 0.0
-    now = motion.t_start  # no regrasp may start before this (one finger in the air)
-    D = params.regrasp.duration_s
-
-    history: dict[str, list[Holding]] = {name: [] for name in active}
-    held_to_end: dict[str, str] = {}
-
-    def partial_plan(until: float) -> Plan:
-        """The plan up to ``until``: every finger holding its current contact."""
-        for n, h in holding.items():
-            if h.t_from < until:
-                phases[n].append(
-                    ContactPhase(
-                        finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n
-                    )
-                )
-        return _assemble(
-            hand,
-            obj,
-            motion,
-            grid,
-            history,
-            holding,
-            phases,
-            regrasps,
-            until=until,
-            params=params,
-            base_q=base_q,
-        )
-
+    search = RegraspSearch(
+        hand,
+        obj,
+        motion,
+        manifolds,
+        sample,
+        regrasp=params.regrasp,
+        contact=params.contact,
+        mu=params.mu,
+        dt_s=params.dt_s,
+        candidates=params.candidates,
+        exit_tolerance_s=params.exit_tolerance_s,
+    )
+    ctx = _Context(
+        hand,
+        obj,
+        motion,
+        grid,
+        params,
+        active,
+        search,
+        SearchBudget.seconds(params.budget_s),
+        base_q,
+    )
+    state = _State(
+        holding=holding,
+        history={n: () for n in active},
+        phases={n: () for n in active},
+        regrasps=(),
+        now=motion.t_start,
+        held_to_end={},
+    )
+    t0 = time.perf_counter()
+    steps: list[_Step] = []
+    backtracks = 0
     while True:
-        triggers = sorted(
-            (h.track.trigger()[0], name)
-            for name, h in holding.items()
-            if h.track.trigger()[0] is not None and name not in held_to_end
-        )
-        triggers = [(t, n) for t, n in triggers if t is not None]
-        if not triggers:
+        triggers = _triggers(ctx, state)
+        trig = _next_trigger(triggers, ctx)
+        if trig is None:
             break
-        t_trig, name = triggers[0]
-        reason_trig = holding[name].track.trigger()[1]
-        start = t_trig - params.lead_s
-        why = f"{reason_trig} at t={t_trig:.3f} s; lift-off {params.lead_s:.3f} s before"
-        if len(triggers) > 1:
-            t_next, next_name = triggers[1]
-            if t_next - params.lead_s < start + D:
-                start = t_next - params.lead_s - D
-                why += f", moved earlier so that {next_name} (trigger t={t_next:.3f} s) can follow"
-        start = max(start, now, holding[name].t_from)
-        if start + D > motion.t_end and holds_to_end(holding[name].track, t_trig, params.contact):
-            # too late to regrasp, but the contact stays inside the joint limits (within
-            # the trigger margin only) and feasible until the motion ends: keep holding
-            held_to_end[name] = (
-                f"{reason_trig} at t={t_trig:.3f} s, too late for a regrasp; held to the end "
-                "inside the joint limits"
-            )
-            log.info("%s: %s", name, held_to_end[name])
-            continue
-        if start + D > motion.t_end:
-            # too late to regrasp before the end; holding to the trigger is impossible
-            raise PlanningError(
-                f"{reason_trig} at t={t_trig:.3f} s, but a regrasp ({D:.2f} s) would not end "
-                "before the motion does",
-                finger=name,
-                time_s=t_trig,
-                partial=partial_plan(min(t_trig, motion.t_end)),
-            )
-        if start > t_trig:
-            raise PlanningError(
-                f"{reason_trig} at t={t_trig:.3f} s while another finger is still in the air "
-                f"(free from t={now:.3f} s)",
-                finger=name,
-                time_s=t_trig,
-                partial=partial_plan(max(start, now)),
-            )
-        stay = [n for n in active if n != name]
-        if len(stay) < params.min_holding:
-            raise PlanningError(
-                f"only {len(stay)} fingers would hold (need {params.min_holding})",
-                finger=name,
-                time_s=start,
-                partial=partial_plan(max(start, now)),
-            )
-        p_stay = np.array([holding[n].p for n in stay])
-        n_stay = np.array([holding[n].n for n in stay])
-        eps_stay = ferrari_canny_epsilon(p_stay, n_stay, params.mu, torque_scale_m=obj.radius_m)
-        if eps_stay <= 0.0:
-            raise PlanningError(
-                f"{reason_trig} at t={t_trig:.3f} s, but without it the other fingers are not "
-                "in force closure",
-                finger=name,
-                time_s=start,
-                partial=partial_plan(max(start, now)),
-            )
-
-        t_r = time.perf_counter()
-        # if no verified regrasp starts there, try lifting off earlier (other contacts
-        # are free then), never before the previous regrasp ended
-        result: tuple[RegraspResult, object] | RegraspError = PlanningError("not tried")
-        for early in params.earlier_starts_s:
-            s_try = start - early
-            if s_try < max(now, holding[name].t_from) - 1e-9:
-                continue
-            result = _regrasp(
-                hand, obj, motion, manifolds[name], sample, name, s_try, holding, params, base_q
-            )
-            if not isinstance(result, RegraspError):
-                if early > 0:
-                    why += (
-                        f"; lifted off {early:.2f} s earlier still: "
-                        "no verified path from the first start"
-                    )
-                break
-        # a regrasp that ends after another finger must let go leaves that finger no
-        # time: lift off earlier by the overlap, if possible
-        if not isinstance(result, RegraspError):
-            others_trig = [holding[n].track.trigger()[0] for n in active if n != name]
-            others_trig = [t for t in others_trig if t is not None]
-            if others_trig:
-                t_other = min(others_trig) - params.lead_s
-                overlap = result[0].t_end - t_other
-                s_try = result[0].t_start - overlap
-                if overlap > 0 and s_try >= max(now, holding[name].t_from) - 1e-9:
-                    earlier = _regrasp(
-                        hand,
-                        obj,
-                        motion,
-                        manifolds[name],
-                        sample,
-                        name,
-                        s_try,
-                        holding,
-                        params,
-                        base_q,
-                    )
-                    if not isinstance(earlier, RegraspError) and earlier[0].t_end <= t_other + 1e-9:
-                        result = earlier
-                        why += (
-                            f"; lifted off {overlap:.2f} s earlier so that the next finger "
-                            "can let go in time"
-                        )
-        stage["regrasps"] += time.perf_counter() - t_r
-        if isinstance(result, RegraspError):
-            raise PlanningError(
-                f"no verified regrasp: {result}",
-                finger=name,
-                time_s=start,
-                partial=partial_plan(max(start, now)),
-            ) from result
-        res, choice = result
-        h = holding[name]
-        phases[name].append(
-            ContactPhase(
-                finger=name, t_start=h.t_from, t_end=res.t_start, p_object=h.p, n_object=h.n
-            )
-        )
-        phases[name].append(
-            RegraspPhase(
-                finger=name,
-                t_start=res.t_start,
-                t_end=res.t_end,
-                P_object=res.P_object,
-                Q_object=res.Q_object,
-                waypoints_object=res.waypoints_object,
-                min_clearance_m=res.min_clearance_m,
-                planning_ms=res.planning_ms,
-                reason=why,
-                extra={
-                    "n_P_object": res.n_P_object.tolist(),
-                    "n_Q_object": res.n_Q_object.tolist(),
-                    "trigger_time_s": t_trig,
-                    "waypoint_times_s": res.waypoint_times_s.tolist(),
-                    "grid_path_object": res.grid_path.points_object.tolist(),
-                    "tip_path_object": res.tip_path.points_object[
-                        :: max(1, len(res.tip_path) // 200)
-                    ].tolist(),
-                    "path_length_m": res.path_length_m,
-                    "m": int(res.waypoints_object.shape[0]),
-                    "q_exit_time_s": choice.exit_time_s,
-                    "quality_kept": choice.quality_kept,
-                    "epsilon": choice.epsilon,
-                    "stage_ms": res.stage_ms,
-                    "attempts": list(res.attempts),
-                },
-            )
-        )
-        regrasps.append(res)
-        h.t_to = res.t_start
-        history[name].append(h)
-        holding[name] = start_holding(
-            hand,
-            obj,
-            motion,
-            grid,
-            name,
-            res.Q_object,
-            res.n_Q_object,
-            res.q[-1],
-            res.t_end,
-            params.contact,
-        )
-        now = res.t_end
+        try:
+            state = _advance(ctx, state, trig, triggers, steps)
+        except PlanningError as exc:
+            redone = None
+            if backtracks < params.max_backtracks and steps:
+                backtracks += 1
+                redone = _backtrack(ctx, steps, exc, state, trig)
+            if redone is None:
+                stage["regrasps"] = time.perf_counter() - t0
+                when = exc.time_s if exc.time_s is not None else trig.time_s
+                until = min(max(min(when, trig.time_s), state.now), motion.t_end)
+                raise PlanningError(
+                    exc.reason,
+                    finger=exc.finger or trig.finger,
+                    time_s=when,
+                    partial=_partial(ctx, state, until),
+                    kind=exc.kind,
+                    measured=exc.measured,
+                    required=exc.required,
+                    attempts=exc.attempts,
+                ) from exc
+            state = redone
         if progress is not None:
-            progress(now)
-        log.info("%s regrasped at t=%.3f s (%s)", name, res.t_start, why)
+            progress(state.now)
+    stage["regrasps"] = time.perf_counter() - t0
 
-    for name, h in holding.items():
-        phases[name].append(
+    phases = {
+        n: [
+            *state.phases[n],
             ContactPhase(
-                finger=name, t_start=h.t_from, t_end=motion.t_end, p_object=h.p, n_object=h.n
-            )
-        )
+                finger=n, t_start=h.t_from, t_end=motion.t_end, p_object=h.p, n_object=h.n
+            ),
+        ]
+        for n, h in state.holding.items()
+    }
     t0 = time.perf_counter()
     plan = _assemble(
         hand,
         obj,
         motion,
         grid,
-        history,
-        holding,
+        state.history,
+        state.holding,
         phases,
-        regrasps,
+        list(state.regrasps),
         until=motion.t_end,
         params=params,
         base_q=base_q,
@@ -400,110 +314,369 @@ def plan_manipulation(
     stage["assembly"] = time.perf_counter() - t0
     plan.summary.update(
         {
-            "regrasps": len(regrasps),
-            "fingers_regrasped": sorted({r.finger for r in regrasps}),
+            "regrasps": len(state.regrasps),
+            "fingers_regrasped": sorted({r.finger for r in state.regrasps}),
             "initial_epsilon": grasp.epsilon,
-            "held_to_end": held_to_end,
+            "held_to_end": dict(state.held_to_end),
+            "backtracks": backtracks,
             "stage_s": stage,
         }
     )
-    return ManipulationPlan(plan, regrasps, grasp, manifolds, sample, stage)
+    return ManipulationPlan(plan, list(state.regrasps), grasp, manifolds, sample, stage)
 
 
-def _regrasp(
-    hand: Hand,
-    obj: ConvexObject,
-    motion: ObjectMotion,
-    manifold: Manifold,
-    sample: SurfaceSample,
-    name: str,
-    start: float,
-    holding: dict[str, Holding],
-    params: PlannerParams,
-    base_q: np.ndarray,
-) -> tuple[RegraspResult, object] | RegraspError:
-    f = hand.fingers[name]
-    h = holding[name]
-    stay = {n: (holding[n].p, holding[n].n) for n in holding if n != name}
-    # exact IK at the lift-off time so the regrasp starts on P
-    q_start = holding_q(hand, motion, name, h, np.array([start]), params.contact.ik_tol_m)[0]
-    others_tips = np.array([p + hand.fingers[n].tip_radius * nn for n, (p, nn) in stay.items()])
+def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:
+    grid = np.arange(motion.t_start, motion.t_end + _TIME_TOL_S, dt_s)
+    if grid[-1] < motion.t_end - _TIME_TOL_S:
+        grid = np.append(grid, motion.t_end)
+    grid[-1] = min(grid[-1], motion.t_end)
+    return grid
+
+
+@dataclass(frozen=True)
+class _Trigger:
+    """A finger that must let go: when, why, and until when it can still hold [s]."""
+
+    time_s: float
+    finger: str
+    reason: str
+    lost_s: float
+
+
+def _triggers(ctx: _Context, state: _State) -> list[_Trigger]:
+    """The pending triggers, earliest first (ties by name): a contact near its joint
+    limits (or infeasible), or a holding finger near another holding finger."""
+    p = ctx.params
+    times = ctx.grid[ctx.grid >= state.now - _TIME_TOL_S]
+    prox = holding_proximity(
+        ctx.hand,
+        state.holding,
+        times,
+        ctx.base_q,
+        trigger_m=p.contact.finger_trigger_m,
+        lost_m=p.regrasp.finger_clearance_m,
+    )
+    out = []
+    for name, h in state.holding.items():
+        if name in state.held_to_end:
+            continue
+        t, why = h.track.trigger()
+        lost = held_until(h.track, p.contact)
+        near = prox.get(name)
+        if near is not None:
+            lost = min(lost, near.lost_s - p.dt_s)
+            if t is None or near.trigger_s < t:
+                t, why = near.trigger_s, near.reason
+        if t is not None:
+            out.append(_Trigger(t, name, why, lost))
+    return sorted(out, key=lambda e: (round(e.time_s, 9), e.finger))
+
+
+def _next_trigger(triggers: list[_Trigger], ctx: _Context) -> _Trigger | None:
+    """The finger that regrasps next: earliest deadline first.
+
+    Among the fingers whose triggers fall within one regrasp (plus the lead) of the
+    first trigger -- they cannot all wait for each other -- the one whose hold is
+    lost first goes first (ties: the earlier trigger, then the name).
+    """
+    if not triggers:
+        return None
+    p = ctx.params
+    horizon = triggers[0].time_s + p.regrasp.duration_s + p.lead_s
+    contenders = [e for e in triggers if e.time_s <= horizon + _TIME_TOL_S]
+    return min(contenders, key=lambda e: (round(e.lost_s, 9), round(e.time_s, 9), e.finger))
+
+
+def _window(
+    ctx: _Context, state: _State, trig: _Trigger, triggers: list[_Trigger]
+) -> tuple[LiftOffWindow, str]:
+    """The finger's lift-off window, with its preferred start and why."""
+    p = ctx.params
+    name, t_trig = trig.finger, trig.time_s
+    h = state.holding[name]
+    D = p.regrasp.duration_s
+    win = lift_off_window(
+        name,
+        h.track,
+        t_trig,
+        earliest_s=max(state.now, h.t_from),
+        lead_s=p.lead_s,
+        contact=p.contact,
+        lost_s=trig.lost_s,
+    )
+    why = f"at t={t_trig:.3f} s; lift-off {p.lead_s:.3f} s before"
+    others = [e for e in triggers if e.finger != name]
+    if others:
+        t_next, next_name = others[0].time_s, others[0].finger
+        if t_next - p.lead_s < win.preferred_s + D:
+            preferred = max(t_next - p.lead_s - D, win.earliest_s)
+            win = replace(win, preferred_s=min(preferred, win.latest_s))
+            why += f", moved earlier so that {next_name} (trigger t={t_next:.3f} s) can follow"
+    return win, why
+
+
+def _advance(
+    ctx: _Context,
+    state: _State,
+    trig: _Trigger,
+    triggers: list[_Trigger],
+    steps: list[_Step],
+    *,
+    end_by_s: float | None = None,
+    exclude: list[np.ndarray] | None = None,
+) -> _State:
+    """The state after ``trig``: its finger held to the end, or one verified regrasp."""
+    p, motion = ctx.params, ctx.motion
+    D = p.regrasp.duration_s
+    name, t_trig, reason = trig.finger, trig.time_s, trig.reason
+    h = state.holding[name]
+    win, why = _window(ctx, state, trig, triggers)
+    why = f"{reason} {why}"
+    if (
+        win.preferred_s + D > motion.t_end
+        and trig.lost_s >= motion.t_end - p.dt_s - _TIME_TOL_S
+        and holds_to_end(h.track, t_trig, p.contact)
+    ):
+        # too late to regrasp, but the contact stays inside the joint limits (within the
+        # trigger margin only) and feasible until the motion ends: keep holding
+        note = (
+            f"{reason} at t={t_trig:.3f} s, too late for a regrasp; held to the end "
+            "inside the joint limits"
+        )
+        log.info("%s: %s", name, note)
+        return replace(state, held_to_end={**state.held_to_end, name: note})
+    stay = [n for n in ctx.active if n != name]
+    if len(stay) < p.min_holding:
+        raise PlanningError(
+            f"only {len(stay)} fingers would hold (need {p.min_holding})",
+            finger=name,
+            time_s=win.preferred_s,
+            kind=FailureKind.TOO_FEW_FINGERS,
+            measured=len(stay),
+            required=p.min_holding,
+        )
+    p_stay = np.array([state.holding[n].p for n in stay])
+    n_stay = np.array([state.holding[n].n for n in stay])
+    eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=ctx.obj.radius_m)
+    if eps_stay <= 0.0:
+        raise PlanningError(
+            f"{reason} at t={t_trig:.3f} s, but without it the other fingers are not "
+            "in force closure",
+            finger=name,
+            time_s=win.preferred_s,
+            kind=FailureKind.FORCE_CLOSURE,
+            measured=eps_stay,
+            required=0.0,
+        )
+    end_by = motion.t_end if end_by_s is None else end_by_s
+    starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
+    if not starts:
+        busy = win.empty
+        raise PlanningError(
+            f"{reason} at t={t_trig:.3f} s, "
+            + (
+                f"while another finger is in the air until t={state.now:.3f} s and the "
+                f"contact is lost at t={win.latest_s:.3f} s"
+                if busy
+                else f"but a regrasp ({D:.2f} s) would not land by t={end_by:.3f} s"
+            ),
+            finger=name,
+            time_s=t_trig,
+            kind=FailureKind.FINGER_BUSY if busy else FailureKind.TOO_LATE,
+            measured=state.now if busy else win.earliest_s + D,
+            required=win.latest_s if busy else end_by,
+        )
+    others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
+    found = ctx.search.find(
+        name,
+        (h.p, h.n),
+        starts,
+        lambda t: holding_q(ctx.hand, motion, name, h, np.array([t]), p.contact.ik_tol_m)[0],
+        others,
+        _q_hand(ctx, state, stay),
+        ctx.budget,
+        end_by_s=end_by_s,
+        exclude=exclude,
+    )
+    if abs(found.result.t_start - starts[0]) > _TIME_TOL_S:
+        why += (
+            f"; lifted off at t={found.result.t_start:.3f} s: "
+            "no verified regrasp at the start times tried before"
+        )
+    steps.append(_Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
+    return _apply(ctx, state, name, t_trig, why, found)
+
+
+def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarray], np.ndarray]:
+    """Hand configurations over time with the ``stay`` fingers holding (exact IK)."""
+    hand, motion, tol, base_q = ctx.hand, ctx.motion, ctx.params.contact.ik_tol_m, ctx.base_q
 
     def q_hand(times: np.ndarray) -> np.ndarray:
         q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
         for n in stay:
             q[:, hand.fingers[n].q_indices] = holding_q(
-                hand, motion, n, holding[n], times, params.contact.ik_tol_m
+                hand, motion, n, state.holding[n], times, tol
             )
         return q
 
-    failed: list[np.ndarray] = []
-    last: RegraspError | None = None
+    return q_hand
 
-    def choose(duration: float) -> NewContact:
-        return choose_new_contact(
-            hand,
-            obj,
-            manifold,
-            sample,
-            start + duration,
-            P_object=h.p,
-            n_P_object=h.n,
-            others=stay,
-            contact=params.contact,
-            mu=params.mu,
-            exclude_radius_m=2 * f.tip_radius,
-            exclude_points_object=np.array(failed) if failed else None,
-            q_hand_arrive=q_hand(np.array([start + duration]))[0],
-            finger_clearance_m=0.001,
-            exit_tolerance_s=params.exit_tolerance_s,
-        )
 
-    def attempt(choice: NewContact, duration: float) -> RegraspResult:
-        return plan_regrasp(
-            hand,
-            obj,
-            motion,
-            name,
-            start,
-            h.p,
-            h.n,
-            choice.p_object,
-            choice.n_object,
-            q_start,
-            q_hand,
-            others_tips_object=others_tips,
-            params=replace(params.regrasp, duration_s=duration),
-        )
+def _apply(
+    ctx: _Context, state: _State, name: str, t_trig: float, why: str, found: Found
+) -> _State:
+    """The state after a verified regrasp of ``name``."""
+    res, choice = found.result, found.choice
+    h = state.holding[name]
+    hold = ContactPhase(
+        finger=name, t_start=h.t_from, t_end=res.t_start, p_object=h.p, n_object=h.n
+    )
+    fly = RegraspPhase(
+        finger=name,
+        t_start=res.t_start,
+        t_end=res.t_end,
+        P_object=res.P_object,
+        Q_object=res.Q_object,
+        waypoints_object=res.waypoints_object,
+        min_clearance_m=res.min_clearance_m,
+        planning_ms=res.planning_ms,
+        reason=why,
+        extra={
+            "n_P_object": res.n_P_object.tolist(),
+            "n_Q_object": res.n_Q_object.tolist(),
+            "trigger_time_s": t_trig,
+            "waypoint_times_s": res.waypoint_times_s.tolist(),
+            "grid_path_object": res.grid_path.points_object.tolist(),
+            "tip_path_object": res.tip_path.points_object[
+                :: max(1, len(res.tip_path) // 200)
+            ].tolist(),
+            "path_length_m": res.path_length_m,
+            "m": int(res.waypoints_object.shape[0]),
+            "q_exit_time_s": choice.exit_time_s,
+            "quality_kept": choice.quality_kept,
+            "epsilon": choice.epsilon,
+            "stage_ms": res.stage_ms,
+            "attempts": [a.to_dict() for a in (*found.attempts, *res.attempts)],
+        },
+    )
+    new_hold = start_holding(
+        ctx.hand,
+        ctx.obj,
+        ctx.motion,
+        ctx.grid,
+        name,
+        res.Q_object,
+        res.n_Q_object,
+        res.q[-1],
+        res.t_end,
+        ctx.params.contact,
+    )
+    log.info("%s regrasped at t=%.3f s (%s)", name, res.t_start, why)
+    return _State(
+        holding={**state.holding, name: new_hold},
+        history={**state.history, name: (*state.history[name], replace(h, t_to=res.t_start))},
+        phases={**state.phases, name: (*state.phases[name], hold, fly)},
+        regrasps=(*state.regrasps, res),
+        now=res.t_end,
+        held_to_end=state.held_to_end,
+    )
 
-    for _ in range(params.candidates):
-        duration = params.regrasp.duration_s
-        try:
-            choice = choose(duration)
-            # long moves take longer: a minimum-jerk profile peaks at 1.875 x the mean
-            # speed; 1.5 more for a path that is not straight in joint space
-            needed = (
-                1.875 * 1.5 * float(np.max(np.abs(choice.q_arrive - q_start) / f.velocity_limit))
+
+_BACKTRACK_DEPTH = 3  # how many earlier regrasps a failure may revisit
+
+
+def _backtrack(
+    ctx: _Context,
+    steps: list[_Step],
+    failure: PlanningError,
+    state: _State,
+    trig: _Trigger,
+) -> _State | None:
+    """Change an earlier decision so that ``trig.finger`` can go; None if none helps.
+
+    The last regrasps are revisited, the latest first (at most ``_BACKTRACK_DEPTH``).
+    If the finger ran out of time (its window closed, or no regrasp landed in time),
+    it regrasps early, before that regrasp; or that regrasp lands one regrasp before
+    the finger's hold is lost. Otherwise that regrasp lands elsewhere than it did.
+    On success the steps after the revisited one are dropped (they are planned again).
+    """
+    timing = failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE)
+    D = ctx.params.regrasp.duration_s
+    h_now = state.holding[trig.finger]
+    for depth in range(1, min(_BACKTRACK_DEPTH, len(steps)) + 1):
+        step = steps[-depth]
+        kept = steps[: len(steps) - depth]
+        options: list[tuple[str, _Trigger, dict]] = []
+        h_then = step.before.holding.get(trig.finger)
+        if (
+            timing
+            and step.trig.finger != trig.finger
+            and h_then is not None
+            and (h_then.t_from == h_now.t_from)
+        ):
+            early = replace(
+                trig,
+                time_s=max(step.before.now, h_then.t_from),
+                reason=f"{trig.reason} at t={trig.time_s:.3f} s (early: no time left after "
+                f"{step.trig.finger}'s regrasp)",
             )
-            if needed > duration and start + needed <= motion.t_end:
-                duration = float(np.ceil(needed / params.dt_s) * params.dt_s)
-                choice = choose(duration)
-        except ContactError as exc:
-            return exc if last is None else last
-        try:
-            return attempt(choice, duration), choice
-        except RegraspError as exc:
-            log.info("regrasp %s to %s failed: %s", name, choice.p_object.round(4), exc)
-            last = exc
-            if "rad/s" in str(exc) and start + 1.5 * duration <= motion.t_end:
-                # too fast for the joints: the same start, a longer regrasp, a new Q
-                try:
-                    choice = choose(1.5 * duration)
-                    return attempt(choice, 1.5 * duration), choice
-                except RegraspError as exc2:
-                    last = exc2
-            failed.append(choice.p_object)
-    return last if last is not None else PlanningError("no candidate", finger=name, time_s=start)
+            options.append((f"{trig.finger} before {step.trig.finger}", early, {}))
+        if timing:
+            end_by = trig.lost_s - D
+            if end_by > step.before.now + D + _TIME_TOL_S:
+                options.append(
+                    (
+                        f"{step.trig.finger} lands by t={end_by:.3f} s",
+                        step.trig,
+                        {"end_by_s": end_by},
+                    )
+                )
+        else:
+            exclude = [*step.excluded, step.Q_object]
+            options.append((f"{step.trig.finger} lands elsewhere", step.trig, {"exclude": exclude}))
+        for what, t_alt, kw in options:
+            if ctx.budget.exhausted:
+                return None
+            if (id(step.before), what) in ctx.tried:
+                continue  # a retry that repeats what already failed is not a search
+            ctx.tried.add((id(step.before), what))
+            log.info("%s failed (%s): %s", trig.finger, failure.kind.value, what)
+            trial = list(kept)
+            try:
+                new_state = _advance(ctx, step.before, t_alt, step.triggers, trial, **kw)
+            except PlanningError:
+                continue
+            steps[:] = trial
+            return new_state
+    return None
+
+
+def _partial(ctx: _Context, state: _State, until: float) -> Plan:
+    """The plan up to ``until``: every finger holding its current contact."""
+    phases = {
+        n: [
+            *state.phases[n],
+            *(
+                [ContactPhase(finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n)]
+                if h.t_from < until
+                else []
+            ),
+        ]
+        for n, h in state.holding.items()
+    }
+    return _assemble(
+        ctx.hand,
+        ctx.obj,
+        ctx.motion,
+        ctx.grid,
+        state.history,
+        state.holding,
+        phases,
+        list(state.regrasps),
+        until=until,
+        params=ctx.params,
+        base_q=ctx.base_q,
+    )
 
 
 def _assemble(
@@ -511,7 +684,7 @@ def _assemble(
     obj: ConvexObject,
     motion: ObjectMotion,
     grid: np.ndarray,
-    history: dict[str, list[Holding]],
+    history: dict[str, tuple[Holding, ...]],
     holding: dict[str, Holding],
     phases: dict[str, list],
     regrasps: list[RegraspResult],

@@ -20,10 +20,15 @@ at ``t_start + duration`` while the object keeps moving:
    landing zones) and against the other fingers, which keep holding and move with
    the object; joint limits and velocity limits are checked too.
 
-If a candidate fails, the planner raises m, inflates more, and reroutes around the
-joint limits more strongly, in that order. It never returns a path that has not
-passed the check; when nothing passes it raises :class:`~.exceptions.VerificationError`
-with the finger, the time and what failed.
+A failed candidate is changed by what failed (its :class:`~.exceptions.FailureKind`):
+a curve that cuts into the clearance gets more waypoints, then more inflation; a finger
+that comes near another finger keeps a wider gap from it on the grid; a finger near
+its joint limits is rerouted more strongly. A failure that only another Q or another
+duration can fix (velocity, no grid path) ends the variants at once, for the caller
+(:mod:`.planning.search`). It never returns a path that has not passed the check;
+when nothing passes it raises :class:`~.exceptions.PlanningError` (or
+:class:`~.exceptions.VerificationError`) with the finger, the time, the kind of the
+failure, its numbers and every attempt.
 """
 
 from __future__ import annotations
@@ -36,9 +41,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from ._pair_distances import capsule_gap
 from ._validate import as_array, positive
 from .contact import LinkClearance
-from .exceptions import InputError, PlanningError, RegraspError, VerificationError
+from .exceptions import Attempt, FailureKind, InputError, PlanningError, VerificationError
 from .hand import Hand
 from .inflation import TipPath, grid_inflation, inflate_path
 from .motion import ObjectMotion
@@ -46,6 +52,7 @@ from .objects import ConvexObject
 from .polygon import PolygonResult, approximate_polygon
 from .surface_grid import SurfaceGrid, build_surface_grid
 from .surface_path import GridPath, shortest_grid_path
+from .timing import inverse_minimum_jerk, minimum_jerk
 from .verify import VerificationReport, verify_finger_motion
 
 __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
@@ -56,6 +63,19 @@ _UNREACHABLE_COST = 20.0  # node cost where IK cannot reach the inflated point
 _PENETRATION_TOL_M = 5e-5  # the verifier's tolerance, applied to the planned curve too
 _FINGER_GAP_M = 0.004  # grid nodes whose finger comes closer than this to another cost more
 _FINGER_COST = 10.0  # cost per unit of (gap deficit / _FINGER_GAP_M)
+_FINGER_GAP_SLACK_M = 0.001  # forbidden-gap threshold below the gap that P and Q have
+_OTHERS_TIMES = 21  # the other fingers are placed at this many times over the regrasp
+_MAX_LIMIT_WEIGHT_FACTOR = 16.0  # the joint-limit weight grows up to this x its start
+_MAX_INFLATION_FACTOR = 2.25  # the inflation grows up to this x its start
+_MAX_FINGER_GAP_M = 0.008  # the hard gap kept from the other fingers grows up to this
+_VERIFIER_KIND = {
+    "tip-object": FailureKind.OBJECT_CLEARANCE,
+    "link-object": FailureKind.OBJECT_CLEARANCE,
+    "finger-finger": FailureKind.FINGER_COLLISION,
+    "joint-limit": FailureKind.JOINT_LIMIT,
+}
+#: failures that no path variant fixes: the caller changes Q or the duration
+CALLER_KINDS = frozenset({FailureKind.VELOCITY, FailureKind.GRID_UNREACHABLE})
 
 
 @dataclass(frozen=True)
@@ -80,9 +100,16 @@ class RegraspParams:
         contact_keepout_m: Extra distance kept from the other fingertips [m].
         link_clearance_m: Clearance of the finger's other links from the object [m].
         finger_clearance_m: Clearance from the other fingers [m].
+        finger_gap_m: Grid nodes where the finger's links (conservative capsules)
+            come closer than this to another finger, at the time the tip passes
+            there, are forbidden [m]; grows when the Coal check finds the fingers
+            too close.
         sample_dt_s: Time step of the returned trajectory [s] (the verifier
             densifies further, to 1 mrad joint steps).
-        ik_tol_m: IK tolerance along the trajectory [m].
+        ik_tol_m: IK tolerance at lift-off and landing (and in their zones) [m].
+        flight_ik_tol_m: IK tolerance in flight [m]: the executed motion, not the
+            planned curve, is what the Coal check verifies.
+        max_variants: Most path variants tried for one P, Q and duration.
     """
 
     duration_s: float = 0.5
@@ -99,8 +126,11 @@ class RegraspParams:
     contact_keepout_m: float = 0.003
     link_clearance_m: float = 0.0
     finger_clearance_m: float = 0.0005
+    finger_gap_m: float = 0.001
     sample_dt_s: float = 0.005
     ik_tol_m: float = 1e-5
+    flight_ik_tol_m: float = 5e-4
+    max_variants: int = 8
 
     def validate(self) -> RegraspParams:
         positive(self.duration_s, "duration_s")
@@ -114,6 +144,13 @@ class RegraspParams:
         if self.taper_m is not None:
             positive(self.taper_m, "taper_m")
         positive(self.limit_margin_rad, "limit_margin_rad")
+        positive(self.ik_tol_m, "ik_tol_m")
+        if self.flight_ik_tol_m < self.ik_tol_m:
+            raise InputError(
+                "flight_ik_tol_m", f"{self.flight_ik_tol_m} < ik_tol_m", "a tolerance >= ik_tol_m"
+            )
+        if not isinstance(self.max_variants, int) or self.max_variants < 1:
+            raise InputError("max_variants", f"{self.max_variants!r}", "an integer >= 1")
         return self
 
 
@@ -143,7 +180,7 @@ class RegraspResult:
             away from the lift-off and landing zones (the middle half of the motion when
             the path is too short to leave them) [m].
         stage_ms: Time spent in each stage [ms].
-        attempts: What was tried before success, and why it failed.
+        attempts: The variants that failed before success, as data.
         params: The parameters that succeeded.
     """
 
@@ -166,7 +203,7 @@ class RegraspResult:
     report: VerificationReport
     min_clearance_m: float
     stage_ms: dict[str, float] = field(default_factory=dict)
-    attempts: tuple[str, ...] = ()
+    attempts: tuple[Attempt, ...] = ()
     params: RegraspParams | None = None
 
     @property
@@ -178,17 +215,6 @@ class RegraspResult:
     def path_length_m(self) -> float:
         """Length of the fingertip-centre trajectory in the object frame [m]."""
         return float(np.linalg.norm(np.diff(self.tip_object, axis=0), axis=1).sum())
-
-
-def minimum_jerk(tau: np.ndarray) -> np.ndarray:
-    """Minimum-jerk progress ``10 tau^3 - 15 tau^4 + 6 tau^5`` for ``tau`` in [0, 1]."""
-    tau = np.clip(tau, 0.0, 1.0)
-    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
-
-
-def _inverse_minimum_jerk(s: np.ndarray) -> np.ndarray:
-    table_tau = np.linspace(0.0, 1.0, 2001)
-    return np.interp(s, minimum_jerk(table_tau), table_tau)
 
 
 class _Stages:
@@ -270,33 +296,41 @@ def plan_regrasp(
         else as_array(others_tips_object, "others_tips_object", (None, 3))
     )
     stages = _Stages()
-    q_mid = np.asarray(q_hand(np.array([t_start + 0.5 * params.duration_s])), float)[0]
     grid = build_surface_grid(obj, P, Q, spacing_m=params.grid_spacing_m)
     stages.lap("grid")
+    # the other fingers over the whole regrasp: they hold, and move with the object
+    t_others = float(t_start) + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
+    q_others = np.asarray(q_hand(t_others), float)
+    stages.lap("others")
 
-    attempts: list[str] = []
-    last_error: RegraspError | None = None
-    schedule = _schedule(params)
-    path_cache: dict[tuple[float, float], tuple[GridPath, TipPath]] = {}
-    for p_try in schedule:
-        key = (p_try.inflation_factor, p_try.limit_weight)
+    attempts: list[Attempt] = []
+    last: PlanningError | None = None
+    tried: set[tuple] = set()
+    paths: dict[tuple, tuple[GridPath, TipPath]] = {}
+    p_try = params
+    for _ in range(params.max_variants):
+        tried.add(_variant_key(p_try))
         try:
-            if key not in path_cache:
-                path_cache[key] = _surface_path(
-                    hand, f.name, obj, motion, grid, t_start, q0, others, p_try, q_mid
+            key = (p_try.inflation_factor, p_try.limit_weight, p_try.finger_gap_m)
+            if key not in paths:
+                paths[key] = _surface_path(
+                    hand, f.name, obj, motion, grid, t_start, q0, others, p_try, t_others, q_others
                 )
-            gpath, tip_path = path_cache[key]
+            gpath, tip_path = paths[key]
             stages.lap("path")
             result = _attempt(
                 hand, obj, motion, f.name, t_start, grid, gpath, tip_path, q0, q_hand, p_try, stages
             )
-        except (PlanningError, VerificationError) as exc:
-            attempts.append(
-                f"m={p_try.m}, inflation x{p_try.inflation_factor:g}, "
-                f"limit weight {p_try.limit_weight:g}: {exc.reason}"
-            )
-            last_error = exc
-            log.debug("regrasp %s attempt failed: %s", f.name, attempts[-1])
+        except PlanningError as exc:
+            attempts.append(exc.as_attempt(_describe(p_try)))
+            last = exc
+            log.debug("regrasp %s variant failed: %s", f.name, exc)
+            if exc.kind in CALLER_KINDS:
+                break
+            nxt = _next_variant(p_try, exc.kind, params)
+            if nxt is None or _variant_key(nxt) in tried:
+                break
+            p_try = nxt
             continue
         log.info(
             "regrasp %s at t=%.3f s verified (m=%d, min clearance %.2f mm, %.0f ms)",
@@ -316,25 +350,54 @@ def plan_regrasp(
             attempts=tuple(attempts),
             params=p_try,
         )
-    reason = "no candidate path passed: " + " | ".join(attempts[-3:])
-    if isinstance(last_error, VerificationError):
-        raise VerificationError(reason, finger=f.name, time_s=last_error.time_s)
-    when = last_error.time_s if last_error is not None else None
-    raise PlanningError(reason, finger=f.name, time_s=float(t_start) if when is None else when)
+    assert last is not None  # max_variants >= 1
+    cls = VerificationError if isinstance(last, VerificationError) else PlanningError
+    raise cls(
+        f"no path variant passed ({len(attempts)} tried); the last: {last.reason}",
+        finger=f.name,
+        time_s=last.time_s if last.time_s is not None else float(t_start),
+        kind=last.kind,
+        measured=last.measured,
+        required=last.required,
+        attempts=attempts,
+    )
 
 
-def _schedule(params: RegraspParams) -> list[RegraspParams]:
-    """Raise m, then the inflation, then the weight of the joint limits."""
-    out = []
-    ms = list(range(params.m, params.max_m + 1, 2)) or [params.m]
-    for infl, weight in (
-        (params.inflation_factor, params.limit_weight),
-        (params.inflation_factor * 1.5, params.limit_weight),
-        (params.inflation_factor * 1.5, params.limit_weight * 4.0),
-    ):
-        for m in ms:
-            out.append(replace(params, m=m, inflation_factor=infl, limit_weight=weight))
-    return out
+def _variant_key(p: RegraspParams) -> tuple:
+    return (p.m, p.inflation_factor, p.limit_weight, p.finger_gap_m)
+
+
+def _describe(p: RegraspParams) -> str:
+    return (
+        f"m={p.m}, inflation x{p.inflation_factor:g}, limit weight {p.limit_weight:g}, "
+        f"finger gap {1e3 * p.finger_gap_m:g} mm"
+    )
+
+
+def _next_variant(p: RegraspParams, kind: FailureKind, base: RegraspParams) -> RegraspParams | None:
+    """The path variant that addresses a failure of ``kind``, or None if none is left.
+
+    Too little clearance from the object: more waypoints (the curve cuts fewer
+    corners), then more inflation. Too close to another finger: a wider forbidden gap
+    around the other fingers on the grid. Near a joint limit or out of reach: a
+    stronger joint-limit cost.
+    """
+    if kind == FailureKind.OBJECT_CLEARANCE:
+        if p.m + 2 <= p.max_m:
+            return replace(p, m=p.m + 2)
+        infl = p.inflation_factor * 1.5
+        if infl <= base.inflation_factor * _MAX_INFLATION_FACTOR + 1e-9:
+            return replace(p, inflation_factor=infl, m=base.m)
+        return None
+    if kind == FailureKind.FINGER_COLLISION:
+        gap = max(2.0 * p.finger_gap_m, 0.002)
+        return replace(p, finger_gap_m=gap) if gap <= _MAX_FINGER_GAP_M + 1e-12 else None
+    if kind in (FailureKind.JOINT_LIMIT, FailureKind.IK_UNREACHABLE):
+        weight = p.limit_weight * 4.0
+        if weight <= base.limit_weight * _MAX_LIMIT_WEIGHT_FACTOR + 1e-9:
+            return replace(p, limit_weight=weight)
+        return None
+    return None
 
 
 def _surface_path(
@@ -347,13 +410,17 @@ def _surface_path(
     q0: np.ndarray,
     others_tips: np.ndarray,
     p: RegraspParams,
-    q_others: np.ndarray | None = None,
+    t_others: np.ndarray,
+    q_others: np.ndarray,
 ) -> tuple[GridPath, TipPath]:
     """Grid path weighing distance, joint limits and the other fingers, lifted onto the
     inflated surface.
 
-    ``q_others`` (nq,) is the hand at mid-regrasp; nodes where the finger's links
-    (conservative capsules) come near another finger's cost more.
+    ``q_others`` ``(T, nq)`` is the hand at times ``t_others`` (the other fingers
+    holding). Each node is judged at the time the tip passes over it: its IK margin
+    costs, and where the finger's links (conservative capsules) come within
+    ``p.finger_gap_m`` of another finger the node is forbidden (outside the lift-off
+    and landing zones); nearer than ``_FINGER_GAP_M`` it costs more.
     """
     f = hand.finger(finger)
     height = p.inflation_factor * p.clearance_m
@@ -361,14 +428,15 @@ def _surface_path(
     h_nodes = grid_inflation(grid, height, taper)
     tips = grid.points_object + (f.tip_radius + h_nodes)[:, None] * grid.normals_object
     # time at which the tip passes over each node: progress along P -> Q (unfolded)
-    d = grid.uv[grid.q_index] - grid.uv[grid.p_index]
-    s = np.clip((grid.uv - grid.uv[grid.p_index]) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
-    t_nodes = t_start + p.duration_s * _inverse_minimum_jerk(s)
+    uvP, uvQ = grid.uv[grid.p_index], grid.uv[grid.q_index]
+    d = uvQ - uvP
+    s = np.clip((grid.uv - uvP) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
+    t_nodes = t_start + p.duration_s * inverse_minimum_jerk(s)
     # only nodes in an ellipse around P and Q can be on a sensible path (a detour of up
     # to twice the straight distance plus 1 cm); the others are never evaluated
-    uvP, uvQ = grid.uv[grid.p_index], grid.uv[grid.q_index]
-    reach = np.linalg.norm(grid.uv - uvP, axis=1) + np.linalg.norm(grid.uv - uvQ, axis=1)
-    near_pq = reach <= 2.0 * float(np.linalg.norm(uvQ - uvP)) + 0.01
+    from_p = np.linalg.norm(grid.uv - uvP, axis=1)
+    from_q = np.linalg.norm(grid.uv - uvQ, axis=1)
+    near_pq = from_p + from_q <= 2.0 * float(np.linalg.norm(d)) + 0.01
     near_pq[[grid.p_index, grid.q_index]] = True
     sel = np.flatnonzero(near_pq)
     T = motion.pose(t_nodes[sel])
@@ -378,14 +446,26 @@ def _surface_path(
     cost = np.full(grid.uv.shape[0], np.inf)
     cost[sel] = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
     cost[sel[~res.success]] = _UNREACHABLE_COST
-    if q_others is not None:
-        gap = _finger_gap(hand, finger, res.q, q_others)
-        cost[sel] += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
+    q_nodes = np.stack(
+        [np.interp(t_nodes[sel], t_others, q_others[:, j]) for j in range(q_others.shape[1])],
+        axis=1,
+    )
+    gap = _finger_gap(hand, finger, res.q, q_nodes)
+    cost[sel] += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
+    # forbidden: nearer than the gap, but never more than P and Q themselves allow (the
+    # capsules are conservative: a finger that holds P may already be "within" them)
+    ends = np.isin(sel, [grid.p_index, grid.q_index])
+    allowed = min(p.finger_gap_m, float(gap[ends].min()) - _FINGER_GAP_SLACK_M)
+    in_flight = (from_p[sel] > taper) & (from_q[sel] > taper)
+    cost[sel[in_flight & (gap < allowed)]] = np.inf
     if others_tips.size:
         keep = 2 * f.tip_radius + p.contact_keepout_m
         dist = np.linalg.norm(tips[:, None, :] - others_tips[None], axis=2).min(axis=1)
         cost[dist < keep] = np.inf
     cost[[grid.p_index, grid.q_index]] = np.minimum(cost[[grid.p_index, grid.q_index]], 0.0)
+    # decisions must not follow last-bit noise: costs on a 1e-9 lattice
+    finite = np.isfinite(cost)
+    cost[finite] = np.round(cost[finite], 9)
     gpath = shortest_grid_path(grid, cost, cost_weight=p.limit_weight)
     tip_path = inflate_path(
         obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
@@ -395,29 +475,12 @@ def _surface_path(
 
 def _finger_gap(hand: Hand, finger: str, q_finger: np.ndarray, q_others: np.ndarray) -> np.ndarray:
     """Lower bound ``(M,)`` on the distance between the finger (at each ``q_finger`` row)
-    and the other fingers (at ``q_others``), from capsules that contain the geometries."""
-    from ._pair_distances import _geometry, _placements, _segment_distance
-
+    and the other fingers (at the matching ``q_others`` row, ``(M, nq)``)."""
     f = hand.finger(finger)
     other_ids = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
-    if not other_ids or not f.geometry_ids:
-        return np.full(q_finger.shape[0], np.inf)
-    q_full = np.broadcast_to(q_others, (q_finger.shape[0], q_others.size)).copy()
+    q_full = np.array(q_others, float)
     q_full[:, f.q_indices] = q_finger
-    mine = [_geometry(hand, g) for g in f.geometry_ids]
-    theirs = [_geometry(hand, g) for g in other_ids]
-    Rm, pm = _placements(mine, q_full)
-    Ro, po = _placements(theirs, q_others[None])
-    gap = np.full(q_finger.shape[0], np.inf)
-    for i, g in enumerate(mine):
-        a1 = pm[:, i] + Rm[:, i] @ g.seg_a
-        b1 = pm[:, i] + Rm[:, i] @ g.seg_b
-        for j, h in enumerate(theirs):
-            a2 = np.broadcast_to(po[0, j] + Ro[0, j] @ h.seg_a, a1.shape)
-            b2 = np.broadcast_to(po[0, j] + Ro[0, j] @ h.seg_b, a1.shape)
-            d, _ = _segment_distance(a1, b1, a2, b2)
-            gap = np.minimum(gap, d - g.radius - h.radius)
-    return gap
+    return capsule_gap(hand, list(f.geometry_ids), other_ids, q_full)
 
 
 def _attempt(
@@ -468,37 +531,31 @@ def _attempt(
             f"{1e3 * required[i]:.2f} mm",
             finger=finger,
             time_s=float(times[i]),
+            kind=FailureKind.OBJECT_CLEARANCE,
+            measured=float(planned[i]),
+            required=float(required[i]),
         )
     waypoint_times = (
         np.interp(np.interp(chord, u_fine, arc) / arc[-1], progress, times - t_start) + t_start
     )
     stages.lap("timing")
 
-    # joint trajectory: palm-frame targets, warm-started IK in chunks
     T = motion.pose(times)
-    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tip_obj) + T[:, :3, 3]
-    q = np.empty((n_t, f.k))
-    prev = q0
-    for s0 in range(0, n_t, 16):
-        res = f.ik(targets[s0 : s0 + 16], prev, tol_m=p.ik_tol_m)
-        if not res.success.all():
-            i = s0 + int(np.argmax(~res.success))
-            raise PlanningError(
-                f"IK cannot follow the path (residual {1e3 * res.error_m.max():.2f} mm)",
-                finger=finger,
-                time_s=float(times[i]),
-            )
-        q[s0 : s0 + 16] = res.q
-        prev = res.q[-1]
+    q = _follow(
+        f, motion, times, T, tip_obj, q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p
+    )
     vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
-    over = vel > f.velocity_limit
-    if over.any():
-        i, j = np.unravel_index(np.argmax(vel / f.velocity_limit), vel.shape)
+    ratio = vel / f.velocity_limit
+    if (ratio > 1.0).any():
+        i, j = np.unravel_index(np.argmax(ratio), vel.shape)
         raise PlanningError(
             f"joint {f.joint_names[j]} would move at {vel[i, j]:.2f} rad/s "
             f"(limit {f.velocity_limit[j]:.2f})",
             finger=finger,
             time_s=float(times[i]),
+            kind=FailureKind.VELOCITY,
+            measured=float(vel[i, j]),
+            required=float(f.velocity_limit[j]),
         )
     stages.lap("ik")
 
@@ -518,20 +575,24 @@ def _attempt(
     stages.lap("verify")
     if not report.ok:
         worst = report.worst_failure
-        what = (
-            f"{worst.kind} {worst.detail}: {1e3 * worst.value:.2f} mm"
-            f" < {1e3 * worst.required:.2f} mm"
-            if worst is not None and worst.kind != "joint-limit"
-            else (str(worst) if worst is not None else "verification failed")
+        if worst is None:  # the report is not ok only with a failure
+            raise AssertionError("verification failed without a failure")
+        raise VerificationError(
+            f"Coal check failed ({worst.describe()})",
+            finger=finger,
+            time_s=report.time_s,
+            kind=_VERIFIER_KIND[worst.kind],
+            measured=worst.value,
+            required=worst.required,
         )
-        raise VerificationError(f"Coal check failed ({what})", finger=finger, time_s=report.time_s)
-    # smallest Coal distance of the whole finger to the object where full clearance is
-    # required (the verifier has already proven the bounds; this is the figure to report)
     # smallest Coal distance of the whole finger to the object in flight (between the
     # lift-off and landing zones; the middle half of the motion if the path is short)
     flight = in_flight if in_flight.any() else (np.abs(progress - 0.5) <= 0.25)
     lc = LinkClearance(hand, finger, obj, include_tip=True)
     min_clear = float(lc(q_full[flight], T[flight]).min())
+    # the tip as executed (within the flight tolerance of the planned curve)
+    tip_palm = f.fk(q)
+    tip_exec = np.einsum("nji,nj->ni", T[:, :3, :3], tip_palm - T[:, :3, 3])
     return RegraspResult(
         finger=finger,
         t_start=float(t_start),
@@ -548,7 +609,45 @@ def _attempt(
         waypoint_times_s=waypoint_times,
         times_s=times,
         q=q,
-        tip_object=tip_obj,
+        tip_object=tip_exec,
         report=report,
         min_clearance_m=min_clear,
     )
+
+
+_IK_CHUNK = 16  # samples solved per IK batch, each warm-started from the previous batch
+
+
+def _follow(
+    f,
+    motion: ObjectMotion,
+    times: np.ndarray,
+    T: np.ndarray,
+    tip_obj: np.ndarray,
+    q0: np.ndarray,
+    tol: np.ndarray,
+    p: RegraspParams,
+) -> np.ndarray:
+    """Joint trajectory ``(S, k)`` whose tip follows ``tip_obj`` (object frame) within
+    ``tol`` ``(S,)`` [m] per sample, by warm-started batched IK in chunks."""
+    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tip_obj) + T[:, :3, 3]
+    q = np.empty((times.size, f.k))
+    prev = q0
+    for s0 in range(0, times.size, _IK_CHUNK):
+        s1 = min(s0 + _IK_CHUNK, times.size)
+        res = f.ik(targets[s0:s1], prev, tol_m=p.ik_tol_m)
+        bad = res.error_m > tol[s0:s1]
+        if bad.any():
+            i = int(np.argmax(res.error_m - tol[s0:s1]))
+            raise PlanningError(
+                f"IK cannot follow the path (residual {1e3 * res.error_m[i]:.2f} mm, "
+                f"tolerance {1e3 * tol[s0 + i]:.3f} mm)",
+                finger=f.name,
+                time_s=float(times[s0 + i]),
+                kind=FailureKind.IK_UNREACHABLE,
+                measured=float(res.error_m[i]),
+                required=float(tol[s0 + i]),
+            )
+        q[s0:s1] = res.q
+        prev = res.q[-1]
+    return q

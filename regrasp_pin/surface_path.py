@@ -25,7 +25,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from ._validate import as_array, positive
-from .exceptions import InputError, PlanningError
+from .exceptions import FailureKind, InputError, PlanningError
 from .surface_grid import SurfaceGrid
 
 __all__ = ["GridPath", "edge_weights", "shortest_grid_path"]
@@ -135,7 +135,10 @@ def shortest_grid_path(
         c = np.asarray(node_cost, dtype=float)
         for name, i in (("P", p), ("Q", q)):
             if np.isinf(c[i]):
-                raise PlanningError(f"{name} has an infinite node cost: no grid path exists")
+                raise PlanningError(
+                    f"{name} has an infinite node cost: no grid path exists",
+                    kind=FailureKind.GRID_UNREACHABLE,
+                )
     ok = np.isfinite(weights)
     e = grid.edges[ok]
     graph = csr_matrix((weights[ok], (e[:, 0], e[:, 1])), shape=(len(grid), len(grid)))
@@ -144,7 +147,10 @@ def shortest_grid_path(
         reached = int(np.isfinite(dist).sum())
         raise PlanningError(
             f"Q is unreachable from P on the surface grid ({reached} of {len(grid)} nodes "
-            f"reachable; node costs forbid every route)"
+            f"reachable; node costs forbid every route)",
+            kind=FailureKind.GRID_UNREACHABLE,
+            measured=float(reached),
+            required=float(len(grid)),
         )
     nodes = [q]
     while nodes[-1] != p:  # walk back along the path (its length, not the grid size)

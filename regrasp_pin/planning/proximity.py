@@ -1,0 +1,158 @@
+"""Holding fingers that come near each other.
+
+Each holding finger follows its own contact; nothing in that keeps two holding
+fingers apart while the object turns. Two fingers that close in on each other must
+not both keep holding: one of them regrasps. For every pair of holding fingers this
+finds the first time their Coal distance falls below the trigger distance (a regrasp
+should start) and below the lost distance (the hold must have ended: a regrasp that
+lifts off later fails its finger-clearance check at once).
+
+Conservative capsule bounds screen all times at once; Coal is called only where the
+bound is below the trigger distance, first on every ``COARSE``-th such time and then
+on the times before the first coarse hit.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from .._pair_distances import capsule_gap
+from ..hand import Hand
+from ..holding import Holding
+
+__all__ = ["Proximity", "holding_proximity"]
+
+COARSE = 5  # Coal on every COARSE-th screened time first
+
+
+@dataclass(frozen=True)
+class Proximity:
+    """When a holding finger comes near another holding finger.
+
+    Attributes:
+        finger: The finger.
+        other: The finger it comes near.
+        trigger_s: First time the distance is below the trigger distance [s].
+        lost_s: First time the distance is below the lost distance [s] (inf: never).
+        distance_m: The Coal distance at ``trigger_s`` [m].
+    """
+
+    finger: str
+    other: str
+    trigger_s: float
+    lost_s: float
+    distance_m: float
+
+    @property
+    def reason(self) -> str:
+        return f"{self.distance_m * 1e3:.2f} mm from the {self.other} finger"
+
+
+class _PairDistance:
+    """Exact Coal distance between two fingers' geometries at full configurations."""
+
+    def __init__(self, hand: Hand) -> None:
+        self.hand = hand
+        self.data = hand.model.createData()
+        self.gdata = pin.GeometryData(hand.collision_model)
+        self.req = coal.DistanceRequest()
+        self.res = coal.DistanceResult()
+
+    def __call__(self, ids_a: list[int], ids_b: list[int], q: np.ndarray) -> float:
+        model, cm = self.hand.model, self.hand.collision_model
+        pin.forwardKinematics(model, self.data, q)
+        pin.updateGeometryPlacements(model, self.data, cm, self.gdata)
+        objs = cm.geometryObjects
+        best = math.inf
+        for a, b in itertools.product(ids_a, ids_b):
+            self.res.clear()
+            d = coal.distance(
+                objs[a].geometry,
+                self.gdata.oMg[a],
+                objs[b].geometry,
+                self.gdata.oMg[b],
+                self.req,
+                self.res,
+            )
+            best = min(best, d)
+        return best
+
+
+def _first_below(
+    dist: _PairDistance,
+    ids: tuple[list[int], list[int]],
+    q: np.ndarray,
+    cand: np.ndarray,
+    limit_m: float,
+) -> tuple[int | None, float]:
+    """First index of ``cand`` (increasing rows of q) whose distance is below
+    ``limit_m``, and that distance; coarse to fine."""
+    prev = -1
+    for c in range(0, cand.size + COARSE - 1, COARSE):
+        c = min(c, cand.size - 1)
+        d = dist(*ids, q[cand[c]])
+        if d < limit_m:
+            for f in range(prev + 1, c):
+                df = dist(*ids, q[cand[f]])
+                if df < limit_m:
+                    return int(cand[f]), df
+            return int(cand[c]), d
+        prev = c
+        if c == cand.size - 1:
+            break
+    return None, math.inf
+
+
+def holding_proximity(
+    hand: Hand,
+    holding: Mapping[str, Holding],
+    times_s: np.ndarray,
+    base_q: np.ndarray,
+    *,
+    trigger_m: float,
+    lost_m: float,
+) -> dict[str, Proximity]:
+    """The earliest proximity of each holding finger to another one over ``times_s``.
+
+    Args:
+        hand: The hand.
+        holding: The fingers that hold, and their holds.
+        times_s: ``(T,)`` increasing times to check [s].
+        base_q: ``(nq,)`` configuration of the fingers that do not hold.
+        trigger_m: A regrasp should start below this distance [m].
+        lost_m: The hold is lost below this distance [m] (< ``trigger_m``).
+
+    Returns:
+        finger -> its earliest :class:`Proximity` (fingers that stay apart are absent).
+    """
+    times = np.asarray(times_s, float)
+    out: dict[str, Proximity] = {}
+    if times.size == 0:
+        return out
+    q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
+    for n, h in holding.items():
+        q[:, hand.fingers[n].q_indices] = h.q_at(times)
+    dist = _PairDistance(hand)
+    for a, b in itertools.combinations(sorted(holding), 2):
+        ids = (list(hand.fingers[a].geometry_ids), list(hand.fingers[b].geometry_ids))
+        cand = np.flatnonzero(capsule_gap(hand, *ids, q) < trigger_m)
+        if cand.size == 0:
+            continue
+        i_trig, d_trig = _first_below(dist, ids, q, cand, trigger_m)
+        if i_trig is None:
+            continue
+        later = cand[cand >= i_trig]
+        i_lost, _ = _first_below(dist, ids, q, later, lost_m)
+        lost = math.inf if i_lost is None else float(times[i_lost])
+        for me, other in ((a, b), (b, a)):
+            p = Proximity(me, other, float(times[i_trig]), lost, d_trig)
+            if me not in out or (p.trigger_s, p.other) < (out[me].trigger_s, out[me].other):
+                out[me] = p
+    return out

@@ -1,0 +1,333 @@
+"""One finger's regrasp as a search over start times, new contacts Q and durations.
+
+For each start time of the finger's lift-off window (:mod:`.schedule`), the new
+contacts Q are taken in the order of the paper's criterion (condition (b), then the
+shorter move; :func:`~regrasp_pin.contact_choice.choose_new_contact`). For each Q:
+
+1. the duration is computed from the joint velocity limits for the move from the
+   lift-off configuration to Q's (:func:`~regrasp_pin.timing.duration_for_move`);
+2. :func:`~regrasp_pin.regrasp.plan_regrasp` plans and verifies the path, changing
+   its own variants by the kind of each failure;
+3. a velocity failure stretches the duration by the measured over-speed (time
+   scaling) and plans the same Q again (or the Q the new arrival time prefers);
+4. any other failure excludes Q, and only the points within ``exclude_radius_m`` of
+   it, from the next choices at this start time.
+
+Every failure is recorded as an :class:`~regrasp_pin.exceptions.Attempt`. The search
+ends with the first verified regrasp, or with a :class:`~regrasp_pin.exceptions.
+PlanningError` of the dominant kind when the start times, the candidates or the budget
+run out.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..contact import ContactModel
+from ..contact_choice import NewContact, choose_new_contact
+from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
+from ..hand import Hand
+from ..manifold import Manifold
+from ..motion import ObjectMotion
+from ..objects import ConvexObject, SurfaceSample
+from ..regrasp import RegraspParams, RegraspResult, plan_regrasp
+from ..timing import duration_for_move, stretched_duration
+from .outcomes import dominant_kind, failure_summary
+
+__all__ = ["Found", "RegraspSearch", "SearchBudget"]
+
+log = logging.getLogger(__name__)
+
+_TIME_TOL_S = 1e-9
+
+
+@dataclass
+class SearchBudget:
+    """What a search may spend: a wall-clock deadline and a number of regrasp plans.
+
+    Attributes:
+        deadline: ``time.perf_counter()`` value after which no new attempt starts.
+        max_plans: Most calls of :func:`~regrasp_pin.regrasp.plan_regrasp`.
+        plans: Calls made so far.
+    """
+
+    deadline: float = float("inf")
+    max_plans: int = 10_000
+    plans: int = 0
+
+    @classmethod
+    def seconds(cls, budget_s: float, max_plans: int = 10_000) -> SearchBudget:
+        return cls(deadline=time.perf_counter() + budget_s, max_plans=max_plans)
+
+    @property
+    def exhausted(self) -> bool:
+        return self.plans >= self.max_plans or time.perf_counter() > self.deadline
+
+
+@dataclass(frozen=True)
+class Found:
+    """A verified regrasp and how it was found.
+
+    Attributes:
+        result: The verified regrasp.
+        choice: The new contact Q.
+        attempts: The attempts that failed before it, in order.
+    """
+
+    result: RegraspResult
+    choice: NewContact
+    attempts: tuple[Attempt, ...] = ()
+
+
+@dataclass
+class RegraspSearch:
+    """The fixed context of the regrasp searches of one manipulation plan.
+
+    Attributes:
+        hand: The hand.
+        obj: The object.
+        motion: The object's motion.
+        manifolds: Joint-space manifolds per finger (to choose Q).
+        sample: The surface sample the manifolds are built on.
+        regrasp: Parameters of one regrasp (its ``duration_s`` is the shortest).
+        contact: The contact model.
+        mu: Friction coefficient.
+        dt_s: Durations are multiples of this step [s].
+        candidates: Most new contacts Q tried per start time.
+        exclude_radius_m: A failed Q excludes the points this close to it [m]
+            (default: the tip radius / 2).
+        exit_tolerance_s: Exit times closer than this are ties (see
+            :func:`~regrasp_pin.contact_choice.choose_new_contact`).
+        stretches: Most duration stretches for one Q after velocity failures.
+    """
+
+    hand: Hand
+    obj: ConvexObject
+    motion: ObjectMotion
+    manifolds: Mapping[str, Manifold]
+    sample: SurfaceSample
+    regrasp: RegraspParams
+    contact: ContactModel
+    mu: float = 0.8
+    dt_s: float = 0.01
+    candidates: int = 6
+    exclude_radius_m: float | None = None
+    exit_tolerance_s: float = 0.25
+    stretches: int = 2
+    stats: dict[str, int] = field(default_factory=dict)
+
+    def find(
+        self,
+        finger: str,
+        P: tuple[np.ndarray, np.ndarray],
+        starts: list[float],
+        q_start_at: Callable[[float], np.ndarray],
+        others: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        q_hand: Callable[[np.ndarray], np.ndarray],
+        budget: SearchBudget,
+        *,
+        end_by_s: float | None = None,
+        exclude: list[np.ndarray] | None = None,
+    ) -> Found:
+        """Search a verified regrasp of ``finger`` (see the module docstring).
+
+        Args:
+            finger: The finger that lets go.
+            P: Its contact ``(point, outward normal)``, object frame.
+            starts: Lift-off times to try, in order [s].
+            q_start_at: The finger's configuration holding P at a time [rad].
+            others: The contacts that keep holding: finger -> (point, normal).
+            q_hand: Maps times ``(S,)`` to hand configurations ``(S, nq)`` with the
+                other fingers holding.
+            budget: What the search may spend.
+            end_by_s: The regrasp must have landed by this time [s] (None: the end of
+                the motion).
+            exclude: Points (object frame) whose neighbourhood Q must avoid.
+
+        Raises:
+            PlanningError: nothing verified; its ``kind`` is the dominant cause, its
+                ``attempts`` every failure.
+        """
+        end_by = self.motion.t_end if end_by_s is None else min(end_by_s, self.motion.t_end)
+        d_min = self.regrasp.duration_s
+        others_tips = np.array(
+            [p + self.hand.finger(n).tip_radius * nn for n, (p, nn) in others.items()]
+        ).reshape(-1, 3)
+        attempts: list[Attempt] = []
+        for start in starts:
+            if start + d_min > end_by + _TIME_TOL_S:
+                attempts.append(
+                    Attempt(
+                        FailureKind.TOO_LATE,
+                        finger,
+                        start,
+                        measured=start + d_min,
+                        required=end_by,
+                        what=f"start {start:.2f} s",
+                    )
+                )
+                continue
+            q0 = q_start_at(start)
+            excluded: list[np.ndarray] = list(exclude or [])
+            for _ in range(self.candidates):
+                if budget.exhausted:
+                    return self._fail(finger, starts, attempts, budget=True)
+                found = self._try_candidate(
+                    finger,
+                    P,
+                    start,
+                    q0,
+                    others,
+                    others_tips,
+                    q_hand,
+                    excluded,
+                    end_by,
+                    attempts,
+                    budget,
+                )
+                if found is None:
+                    break  # no candidate left at this start
+                if isinstance(found, Found):
+                    return found
+        return self._fail(finger, starts, attempts, budget=False)
+
+    # ------------------------------------------------------------------ internals
+    def _choose(
+        self,
+        finger: str,
+        P: tuple[np.ndarray, np.ndarray],
+        t_arrive: float,
+        others: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        q_hand: Callable[[np.ndarray], np.ndarray],
+        excluded: list[np.ndarray],
+    ) -> NewContact:
+        f = self.hand.finger(finger)
+        return choose_new_contact(
+            self.hand,
+            self.obj,
+            self.manifolds[finger],
+            self.sample,
+            t_arrive,
+            P_object=P[0],
+            n_P_object=P[1],
+            others=others,
+            contact=self.contact,
+            mu=self.mu,
+            exclude_radius_m=f.tip_radius,
+            exclude_points_object=np.array(excluded) if excluded else None,
+            exclude_points_radius_m=self._exclude_radius(finger),
+            q_hand_arrive=q_hand(np.array([t_arrive]))[0],
+            finger_clearance_m=0.001,
+            exit_tolerance_s=self.exit_tolerance_s,
+        )
+
+    def _exclude_radius(self, finger: str) -> float:
+        if self.exclude_radius_m is not None:
+            return self.exclude_radius_m
+        return 0.5 * self.hand.finger(finger).tip_radius
+
+    def _try_candidate(
+        self,
+        finger: str,
+        P: tuple[np.ndarray, np.ndarray],
+        start: float,
+        q0: np.ndarray,
+        others: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        others_tips: np.ndarray,
+        q_hand: Callable[[np.ndarray], np.ndarray],
+        excluded: list[np.ndarray],
+        end_by: float,
+        attempts: list[Attempt],
+        budget: SearchBudget,
+    ) -> Found | bool | None:
+        """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q)."""
+        f = self.hand.finger(finger)
+        d_min = self.regrasp.duration_s
+        where = f"start {start:.2f} s"
+        try:
+            choice = self._choose(finger, P, start + d_min, others, q_hand, excluded)
+        except ContactError as exc:
+            attempts.append(exc.as_attempt(where))
+            return None
+        chosen_for = d_min
+        duration = duration_for_move(
+            q0, choice.q_arrive, f.velocity_limit, minimum_s=d_min, dt_s=self.dt_s
+        )
+        for _ in range(self.stretches + 1):
+            what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
+            if start + duration > end_by + _TIME_TOL_S:
+                attempts.append(
+                    Attempt(
+                        FailureKind.TOO_LATE,
+                        finger,
+                        start,
+                        measured=start + duration,
+                        required=end_by,
+                        what=what,
+                    )
+                )
+                break
+            if duration > chosen_for + _TIME_TOL_S:
+                # Q was chosen for an earlier arrival: the arrival time may prefer another
+                chosen_for = duration
+                try:
+                    choice = self._choose(finger, P, start + duration, others, q_hand, excluded)
+                except ContactError as exc:
+                    attempts.append(exc.as_attempt(what))
+                    break
+                what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
+            budget.plans += 1
+            try:
+                result = plan_regrasp(
+                    self.hand,
+                    self.obj,
+                    self.motion,
+                    finger,
+                    start,
+                    P[0],
+                    P[1],
+                    choice.p_object,
+                    choice.n_object,
+                    q0,
+                    q_hand,
+                    others_tips_object=others_tips,
+                    params=replace(self.regrasp, duration_s=duration),
+                )
+            except PlanningError as exc:
+                attempts.append(exc.as_attempt(what))
+                log.debug("regrasp %s: %s", finger, exc)
+                if exc.kind == FailureKind.VELOCITY and exc.measured is not None and exc.required:
+                    duration = stretched_duration(
+                        duration, exc.measured / exc.required, dt_s=self.dt_s
+                    )
+                    continue
+                break
+            return Found(result, choice, tuple(attempts))
+        excluded.append(choice.p_object)
+        return False
+
+    def _fail(
+        self, finger: str, starts: list[float], attempts: list[Attempt], *, budget: bool
+    ) -> Found:
+        kind = FailureKind.BUDGET if budget else dominant_kind(attempts, FailureKind.NO_CANDIDATE)
+        last = next((a for a in reversed(attempts) if a.kind == kind), None)
+        when = starts[0] if starts else None
+        span = (
+            f"lift-off {starts[0]:.2f}-{max(starts):.2f} s" if starts else "no lift-off time left"
+        )
+        raise PlanningError(
+            f"no verified regrasp ({span}): "
+            + ("the search budget ran out; " if budget else "")
+            + failure_summary(attempts, kind),
+            finger=finger,
+            time_s=when,
+            kind=kind,
+            measured=None if last is None else last.measured,
+            required=None if last is None else last.required,
+            attempts=attempts,
+        )

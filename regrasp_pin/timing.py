@@ -1,0 +1,73 @@
+"""Timing of a regrasp: minimum-jerk progress, and durations from joint velocity limits.
+
+A regrasp follows its path with the minimum-jerk progress ``s(tau)``, whose peak speed
+is ``MJ_PEAK = 1.875`` times the mean. A joint that moves ``dq`` [rad] in a duration
+``D`` [s] therefore peaks near ``1.875 |dq| / D`` if the path is straight in joint
+space; a curved path moves further, which ``PATH_FACTOR`` allows for. The duration is
+*computed* from the limits (time scaling), and stretched by the measured ratio when the
+trajectory that was actually solved still moves a joint too fast.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "MJ_PEAK",
+    "PATH_FACTOR",
+    "duration_for_move",
+    "inverse_minimum_jerk",
+    "minimum_jerk",
+    "stretched_duration",
+]
+
+MJ_PEAK = 1.875  # peak / mean speed of the minimum-jerk profile
+PATH_FACTOR = 1.5  # joint-space path length / straight joint distance, allowed for
+STRETCH_MARGIN = 1.05  # a measured over-speed ratio is stretched by this much more
+_TABLE_TAU = np.linspace(0.0, 1.0, 2001)
+
+
+def minimum_jerk(tau: np.ndarray) -> np.ndarray:
+    """Minimum-jerk progress ``10 tau^3 - 15 tau^4 + 6 tau^5`` for ``tau`` in [0, 1]."""
+    tau = np.clip(tau, 0.0, 1.0)
+    return tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+
+
+def inverse_minimum_jerk(s: np.ndarray) -> np.ndarray:
+    """The time fraction ``tau`` at which the progress is ``s`` (both in [0, 1])."""
+    return np.interp(s, minimum_jerk(_TABLE_TAU), _TABLE_TAU)
+
+
+def _round_up(duration_s: float, dt_s: float) -> float:
+    # a duration is a whole number of steps; 1e-9 keeps 0.4 / 0.01 from becoming 41 steps
+    return float(math.ceil(duration_s / dt_s - 1e-9) * dt_s)
+
+
+def duration_for_move(
+    q_from: np.ndarray,
+    q_to: np.ndarray,
+    velocity_limit: np.ndarray,
+    *,
+    minimum_s: float,
+    dt_s: float,
+) -> float:
+    """Shortest regrasp duration [s] that keeps every joint under its velocity limit.
+
+    Args:
+        q_from: ``(k,)`` configuration at lift-off [rad].
+        q_to: ``(k,)`` configuration at landing [rad].
+        velocity_limit: ``(k,)`` joint velocity limits [rad/s].
+        minimum_s: The duration is never shorter than this [s].
+        dt_s: The duration is a multiple of this step [s].
+    """
+    dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
+    needed = MJ_PEAK * PATH_FACTOR * float(np.max(dq / np.asarray(velocity_limit, float)))
+    return _round_up(max(needed, minimum_s), dt_s)
+
+
+def stretched_duration(duration_s: float, speed_ratio: float, *, dt_s: float) -> float:
+    """The duration [s] after which a trajectory that reached ``speed_ratio`` times a
+    joint's velocity limit stays under it (time scaling: speeds fall as 1 / duration)."""
+    return _round_up(duration_s * max(speed_ratio, 1.0) * STRETCH_MARGIN, dt_s)
