@@ -336,6 +336,9 @@ def initial_grasp(
     among force-closure grasps
     whose contacts are ``min_separation_m`` apart.
 
+    ``finger_clearance`` (optional) maps the fingers' configurations to a distance
+    [m]; a grasp where it is <= 0 is refused.
+
     Raises:
         ContactError: a finger has no usable contact, or no combination is in force
             closure.
@@ -455,3 +458,4 @@ def initial_grasp(
         indices={n: pick[n] for n in names},
         epsilon=float(e_full if e_full > 0 else e),
     )
+

@@ -49,6 +49,22 @@ from .exceptions import InputError
 MAX_SWEEPS = 100_000
 
 _ARANGE = np.arange(1 << 12)  # offsets within a column window (reused)
+#: Relative tolerance of the winner-take-all: costs this close are ties, won by the
+#: first row, so that the winners do not follow last-bit noise of the inputs.
+TIE_RTOL = 1e-9
+
+
+def tie_tolerance(cost: np.ndarray) -> np.ndarray:
+    """Per-row tolerance ``(R, 1)`` within which costs are ties (inf rows: 0)."""
+    best = cost.min(axis=1, keepdims=True)
+    return np.where(np.isfinite(best), TIE_RTOL * np.maximum(np.abs(best), 1e-12), 0.0)
+
+
+def winners(cost: np.ndarray) -> np.ndarray:
+    """Per row, the first column whose cost is within :func:`tie_tolerance` of the
+    row's minimum (the winner-take-all of Eq. 6, with deterministic ties)."""
+    best = cost.min(axis=1, keepdims=True)
+    return np.argmax(cost <= best + tie_tolerance(cost), axis=1)
 
 
 @dataclass(frozen=True)
@@ -274,10 +290,11 @@ def _update(H: np.ndarray, HT: np.ndarray, s: np.ndarray, cols: np.ndarray) -> t
     m, n = s.shape[0], H.shape[0]
     p, q = s[(cols - 1) % m], s[(cols + 1) % m]
     x, cost, span = _window_costs(H, HT, p, q)  # -U (Eq. 10) over the interval
-    win = cost.argmin(axis=1)  # winner-take-all (Eq. 6)
+    win = winners(cost)  # winner-take-all (Eq. 6), ties to the first row
     r = np.arange(cols.shape[0])
     cur = (s[cols] - p - 1) % n  # current row's position in the window
-    better = cost[r, win] < cost[r, cur]  # strictly better only: E never rises
+    # better by more than the tie tolerance only: E never rises, and noise never moves
+    better = cost[r, win] < cost[r, cur] - tie_tolerance(cost)[:, 0]
     moved = cols[better]
     s[moved] = x[r, win][better]
     return moved, span

@@ -32,6 +32,7 @@ from .hopfield import (
     check_state,
     initial_state,
     polygon_energy,
+    winners,
 )
 
 logger = logging.getLogger(__name__)
@@ -75,7 +76,7 @@ def _insertion(
     """Best point to insert into every chord: (point, new local cost, current chord cost)."""
     a, b = _chords(s, closed)
     pts, cost, _span = _window_costs(H, HT, a, b)
-    j = cost.argmin(axis=1)
+    j = winners(cost)
     r = np.arange(a.shape[0])
     return pts[r, j], cost[r, j], H[a, b]
 

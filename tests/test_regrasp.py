@@ -40,6 +40,7 @@ from regrasp_pin.hand import Hand
 from regrasp_pin.manifold import build_manifold
 from regrasp_pin.motion import ObjectMotion
 from regrasp_pin.objects import Box
+from regrasp_pin.exceptions import FailureKind
 from regrasp_pin.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
 
 FINGER = "index"
@@ -633,6 +634,11 @@ def test_a_failure_before_verification_reports_when_it_happened(scenes):
     assert 0.0 < exc.time_s < 0.03
     assert str(exc).startswith(f"finger '{FINGER}', t={exc.time_s:.3f} s:")
     assert "rad/s" in exc.reason and "index_" in exc.reason  # the joint and its speed
+    # as data: the kind, and the speed over the joint's limit (what time scaling needs)
+    assert exc.kind == FailureKind.VELOCITY
+    assert exc.measured is not None and exc.required is not None
+    assert exc.measured > exc.required > 0.0
+    assert all(a.kind == FailureKind.VELOCITY for a in exc.attempts)
 
 
 # ---------------------------------------------------------------------- 6. minimum jerk

@@ -1,0 +1,69 @@
+"""The same plan on every machine: numpy's SIMD kernels must not change a decision.
+
+The planner runs twice in fresh processes: once as installed, once with numpy's
+AVX2/AVX-512 kernels turned off (``NPY_DISABLE_CPU_FEATURES``), which changes the
+last bits of many reductions. Both must give the same regrasps: the same fingers at
+the same times, landing on the same contacts (within 0.1 mm).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+_SCRIPT = r"""
+import json
+from regrasp_pin import make_scenario, plan_manipulation
+from regrasp_pin.exceptions import PlanningError
+scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=20)
+try:
+    r = plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    regrasps, failure = r.regrasps, None
+except PlanningError as exc:
+    regrasps = exc.partial.regrasps() if exc.partial is not None else []
+    failure = [exc.kind.value, exc.finger, exc.time_s]
+print(json.dumps({
+    "grasp": {n: p.tolist() for n, p in scen.grasp.points_object.items()},
+    "regrasps": [[g.finger, g.t_start, g.t_end, list(map(float, g.Q_object))] for g in regrasps],
+    "failure": failure,
+}))
+"""
+
+
+def _wide_simd() -> list[str]:
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as feats
+    except ImportError:  # numpy < 2
+        from numpy.core._multiarray_umath import __cpu_features__ as feats
+    wide = ("X86_V3", "X86_V4", "AVX2", "AVX512F", "AVX512CD", "AVX512_SKX", "FMA3")
+    return [f for f in wide if feats.get(f)]
+
+
+def _run(env_extra: dict[str, str]) -> dict:
+    env = {**os.environ, **env_extra}
+    out = subprocess.run(
+        [sys.executable, "-c", _SCRIPT], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_plan_does_not_change_without_the_wide_simd_kernels():
+    wide = _wide_simd()
+    if not wide:
+        pytest.skip("this CPU has no AVX2/AVX-512 kernels to turn off")
+    a = _run({})
+    b = _run({"NPY_DISABLE_CPU_FEATURES": " ".join(wide)})
+    assert a["failure"] == b["failure"]
+    for n in a["grasp"]:
+        np.testing.assert_allclose(a["grasp"][n], b["grasp"][n], atol=1e-4)
+    assert [r[0] for r in a["regrasps"]] == [r[0] for r in b["regrasps"]]
+    assert len(a["regrasps"]) >= 1
+    for ra, rb in zip(a["regrasps"], b["regrasps"], strict=True):
+        assert abs(ra[1] - rb[1]) < 1e-6 and abs(ra[2] - rb[2]) < 1e-6, (ra, rb)
+        np.testing.assert_allclose(ra[3], rb[3], atol=1e-4)

@@ -1,0 +1,63 @@
+"""Lift-off windows and the start times tried in them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from regrasp_pin.contact import ContactModel
+from regrasp_pin.planning.schedule import LiftOffWindow, held_until, lift_off_window, start_times
+from regrasp_pin.tracking import ContactTrack
+
+
+def _track(margin: np.ndarray, error: np.ndarray | None = None) -> ContactTrack:
+    n = margin.size
+    return ContactTrack(
+        finger="index",
+        times_s=np.linspace(0.0, 0.1 * (n - 1), n),
+        p_object=np.zeros(3),
+        n_object=np.array([0.0, 0.0, 1.0]),
+        q=np.zeros((n, 3)),
+        error_m=np.zeros(n) if error is None else error,
+        margin_rad=margin,
+        pad_cos=np.ones(n),
+        link_clearance_m=np.full(n, np.inf),
+        reasons=tuple("" for _ in range(n)),
+    )
+
+
+def test_held_until_is_the_last_time_inside_the_limits_without_a_break():
+    margin = np.array([0.3, 0.2, 0.1, 0.04, 0.01, -0.01, 0.2])  # leaves at index 5
+    assert held_until(_track(margin), ContactModel()) == pytest.approx(0.4)
+    err = np.zeros(7)
+    err[2] = 1.0  # IK loses the contact at index 2
+    assert held_until(_track(margin, err), ContactModel()) == pytest.approx(0.1)
+    assert held_until(_track(np.full(4, 0.3)), ContactModel()) == pytest.approx(0.3)
+
+
+def test_window_reaches_past_the_trigger_to_the_limits_themselves():
+    margin = np.array([0.3, 0.2, 0.1, 0.04, 0.01, -0.01])
+    win = lift_off_window(
+        "index", _track(margin), 0.3, earliest_s=0.0, lead_s=0.02, contact=ContactModel()
+    )
+    assert win.preferred_s == pytest.approx(0.28)
+    assert win.latest_s == pytest.approx(0.4) and not win.empty
+    lost = lift_off_window(
+        "index", _track(margin), 0.3, earliest_s=0.0, lead_s=0.02, contact=ContactModel(),
+        lost_s=0.25,
+    )
+    assert lost.latest_s == pytest.approx(0.25) and lost.preferred_s == pytest.approx(0.25)
+
+
+def test_start_times_go_outwards_from_the_preferred_one_within_the_window():
+    win = LiftOffWindow("index", 1.0, earliest_s=0.75, latest_s=1.3, preferred_s=0.98)
+    got = start_times(win, step_s=0.1, max_starts=5)
+    np.testing.assert_allclose(got, [0.98, 0.88, 1.08, 0.78, 1.18])
+    assert all(0.75 <= t <= 1.3 for t in got)
+    # a further bound (the motion's end less the duration) cuts the later ones
+    np.testing.assert_allclose(start_times(win, latest_s=1.0, step_s=0.1), [0.98, 0.88, 0.78])
+
+
+def test_an_empty_window_has_no_start():
+    win = LiftOffWindow("index", 1.0, earliest_s=1.2, latest_s=1.1, preferred_s=1.1)
+    assert win.empty and start_times(win) == []

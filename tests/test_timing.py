@@ -1,0 +1,63 @@
+"""Regrasp timing: minimum-jerk progress and durations from joint velocity limits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from regrasp_pin.timing import (
+    MJ_PEAK,
+    PATH_FACTOR,
+    duration_for_move,
+    inverse_minimum_jerk,
+    minimum_jerk,
+    stretched_duration,
+)
+
+
+def _peak_speed(dq: np.ndarray, duration: float) -> np.ndarray:
+    """Peak joint speeds [rad/s] of a straight joint move with minimum-jerk timing,
+    by finite differences of the sampled trajectory."""
+    t = np.linspace(0.0, duration, 20001)
+    q = minimum_jerk(t / duration)[:, None] * dq[None]
+    return np.abs(np.diff(q, axis=0) / np.diff(t)[:, None]).max(axis=0)
+
+
+def test_mj_peak_is_the_peak_over_mean_speed_of_minimum_jerk():
+    v = _peak_speed(np.array([1.0]), 1.0)[0]
+    assert v == pytest.approx(MJ_PEAK, rel=1e-6)
+
+
+def test_inverse_minimum_jerk_round_trips():
+    tau = np.linspace(0.0, 1.0, 101)
+    np.testing.assert_allclose(inverse_minimum_jerk(minimum_jerk(tau)), tau, atol=2e-3)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_duration_for_move_keeps_a_path_factor_longer_move_under_the_limits(seed):
+    rng = np.random.default_rng(seed)
+    dq = rng.uniform(-1.5, 1.5, 4)
+    vmax = rng.uniform(1.0, 4.0, 4)
+    D = duration_for_move(np.zeros(4), dq, vmax, minimum_s=0.1, dt_s=0.01)
+    assert D >= 0.1 and abs(D / 0.01 - round(D / 0.01)) < 1e-9  # a whole number of steps
+    # a joint path PATH_FACTOR longer than the straight move still respects the limits
+    assert np.all(_peak_speed(PATH_FACTOR * dq, D) <= vmax * (1 + 1e-6))
+    # and one step shorter would not, unless the minimum decided
+    if D > 0.1 + 1e-9:
+        assert np.any(_peak_speed(PATH_FACTOR * dq, D - 0.01) > vmax)
+
+
+def test_duration_for_move_is_exact_on_a_step_boundary():
+    # 1.875 * 1.5 * 0.32 / 1.2 = 0.75 exactly: no spurious extra step from rounding noise
+    D = duration_for_move(np.zeros(1), np.array([0.32]), np.array([1.2]), minimum_s=0.1, dt_s=0.01)
+    assert D == pytest.approx(0.75, abs=1e-12)
+
+
+@pytest.mark.parametrize("ratio", [1.0, 1.3, 2.7])
+def test_stretched_duration_brings_a_measured_overspeed_under_the_limit(ratio):
+    D = 0.4
+    dq = np.array([ratio * 1.0 * D / MJ_PEAK])  # peaks at `ratio` x a 1 rad/s limit
+    assert _peak_speed(dq, D)[0] == pytest.approx(ratio, rel=1e-5)
+    D2 = stretched_duration(D, ratio, dt_s=0.01)
+    assert _peak_speed(dq, D2)[0] <= 1.0
+    assert D2 >= D
