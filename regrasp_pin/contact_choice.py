@@ -323,6 +323,7 @@ def initial_grasp(
     trials: int = 80,
     seed: int = 0,
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
+    min_finger_gap_m: float = 0.001,
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
 
@@ -336,8 +337,10 @@ def initial_grasp(
     among force-closure grasps
     whose contacts are ``min_separation_m`` apart.
 
-    ``finger_clearance`` (optional) maps the fingers' configurations to a distance
-    [m]; a grasp where it is <= 0 is refused.
+    The grasping fingers must be at least ``min_finger_gap_m`` apart (Coal; idle fingers
+    are parked later and not checked). ``finger_clearance`` (optional) maps the
+    fingers' configurations to a further distance [m]; a grasp where it is <= 0 is
+    refused.
 
     Raises:
         ContactError: a finger has no usable contact, or no combination is in force
@@ -346,6 +349,7 @@ def initial_grasp(
     contact = contact or ContactModel()
     rng = np.random.default_rng(seed)
     names = list(manifolds)
+    apart = _fingers_apart(hand, names, min_finger_gap_m) if len(names) > 1 else None
     pts, nrm = sample.points, sample.normals
     per_finger: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name in names:
@@ -438,6 +442,8 @@ def initial_grasp(
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
                 continue
+            if apart is not None and apart(q_pick) < 0.0:
+                continue
             best_score, best = score, (dict(pick), e, q_pick)
     if best is None:
         raise ContactError(
@@ -459,3 +465,20 @@ def initial_grasp(
         epsilon=float(e_full if e_full > 0 else e),
     )
 
+
+def _fingers_apart(
+    hand: Hand, names: list[str], distance_m: float
+) -> Callable[[dict[str, np.ndarray]], float]:
+    """``q_fingers -> (smallest Coal distance among these fingers) - distance_m`` [m]."""
+    ids = {g for n in names for g in hand.finger(n).geometry_ids}
+    checks = [FingerClearance(hand, n) for n in names[:-1]]
+    for fc in checks:  # only the grasping fingers: idle ones are parked later
+        fc.pairs = [(a, b) for a, b in fc.pairs if b in ids]
+
+    def apart(q_fingers: dict[str, np.ndarray]) -> float:
+        q = hand.neutral()
+        for n, qf in q_fingers.items():
+            q[hand.finger(n).q_indices] = qf
+        return min(fc(q) for fc in checks) - distance_m
+
+    return apart

@@ -150,7 +150,7 @@ class _Context:
     search: RegraspSearch
     budget: SearchBudget
     base_q: np.ndarray
-    tried: set[tuple[int, str]] = field(default_factory=set)  # backtracking options taken
+    tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
 
 
 def plan_manipulation(
@@ -259,16 +259,19 @@ def plan_manipulation(
     backtracks = 0
     while True:
         triggers = _triggers(ctx, state)
-        trig = _next_trigger(triggers, ctx)
-        if trig is None:
+        contenders = _contenders(triggers, ctx)
+        if not contenders:
             break
+        trig = contenders[0]
         try:
             state = _advance(ctx, state, trig, triggers, steps)
         except PlanningError as exc:
             redone = None
-            if backtracks < params.max_backtracks and steps:
+            if backtracks < params.max_backtracks:
                 backtracks += 1
-                redone = _backtrack(ctx, steps, exc, state, trig)
+                redone = _another_first(ctx, state, contenders, triggers, steps)
+                if redone is None and steps:
+                    redone = _backtrack(ctx, steps, exc, state, trig)
             if redone is None:
                 stage["regrasps"] = time.perf_counter() - t0
                 when = exc.time_s if exc.time_s is not None else trig.time_s
@@ -372,19 +375,19 @@ def _triggers(ctx: _Context, state: _State) -> list[_Trigger]:
     return sorted(out, key=lambda e: (round(e.time_s, 9), e.finger))
 
 
-def _next_trigger(triggers: list[_Trigger], ctx: _Context) -> _Trigger | None:
-    """The finger that regrasps next: earliest deadline first.
+def _contenders(triggers: list[_Trigger], ctx: _Context) -> list[_Trigger]:
+    """The fingers that may regrasp next, the first to go first: earliest deadline first.
 
     Among the fingers whose triggers fall within one regrasp (plus the lead) of the
     first trigger -- they cannot all wait for each other -- the one whose hold is
     lost first goes first (ties: the earlier trigger, then the name).
     """
     if not triggers:
-        return None
+        return []
     p = ctx.params
     horizon = triggers[0].time_s + p.regrasp.duration_s + p.lead_s
     contenders = [e for e in triggers if e.time_s <= horizon + _TIME_TOL_S]
-    return min(contenders, key=lambda e: (round(e.lost_s, 9), round(e.time_s, 9), e.finger))
+    return sorted(contenders, key=lambda e: (round(e.lost_s, 9), round(e.time_s, 9), e.finger))
 
 
 def _window(
@@ -582,6 +585,43 @@ def _apply(
     )
 
 
+def _signature(state: _State) -> tuple:
+    """What identifies a state for the backtracking: who holds what since when."""
+    return (
+        round(state.now, 9),
+        tuple(
+            (n, round(h.t_from, 9), tuple(np.round(h.p, 6)))
+            for n, h in sorted(state.holding.items())
+        ),
+        tuple(sorted(state.held_to_end)),
+    )
+
+
+def _another_first(
+    ctx: _Context,
+    state: _State,
+    contenders: list[_Trigger],
+    triggers: list[_Trigger],
+    steps: list[_Step],
+) -> _State | None:
+    """When the first contender finds no regrasp, let another contender go first
+    (e.g. the other finger of two that close in on each other); None if none can."""
+    for alt in contenders[1:]:
+        key = (_signature(state), f"{alt.finger} first")
+        if key in ctx.tried or ctx.budget.exhausted:
+            continue
+        ctx.tried.add(key)
+        log.info("%s failed: %s regrasps first", contenders[0].finger, alt.finger)
+        trial = list(steps)
+        try:
+            new_state = _advance(ctx, state, alt, triggers, trial)
+        except PlanningError:
+            continue
+        steps[:] = trial
+        return new_state
+    return None
+
+
 _BACKTRACK_DEPTH = 3  # how many earlier regrasps a failure may revisit
 
 
@@ -637,9 +677,10 @@ def _backtrack(
         for what, t_alt, kw in options:
             if ctx.budget.exhausted:
                 return None
-            if (id(step.before), what) in ctx.tried:
+            key = (_signature(step.before), what)
+            if key in ctx.tried:
                 continue  # a retry that repeats what already failed is not a search
-            ctx.tried.add((id(step.before), what))
+            ctx.tried.add(key)
             log.info("%s failed (%s): %s", trig.finger, failure.kind.value, what)
             trial = list(kept)
             try:

@@ -54,8 +54,18 @@ def test_start_times_go_outwards_from_the_preferred_one_within_the_window():
     got = start_times(win, step_s=0.1, max_starts=5)
     np.testing.assert_allclose(got, [0.98, 0.88, 1.08, 0.78, 1.18])
     assert all(0.75 <= t <= 1.3 for t in got)
-    # a further bound (the motion's end less the duration) cuts the later ones
-    np.testing.assert_allclose(start_times(win, latest_s=1.0, step_s=0.1), [0.98, 0.88, 0.78])
+    # a further bound (the motion's end less the duration) leaves [0.75, 1.0]: shorter
+    # than 4 steps, so sampled finer, 5 times across it (step 0.25 / 4)
+    got = start_times(win, latest_s=1.0, step_s=0.1)
+    np.testing.assert_allclose(got, [0.98, 0.9175, 0.855, 0.7925])
+    assert all(0.75 <= t <= 1.0 for t in got)
+
+
+def test_a_window_at_one_instant_gives_one_start_and_a_tiny_one_is_not_oversampled():
+    win = LiftOffWindow("index", 1.0, earliest_s=0.5, latest_s=0.5, preferred_s=0.5)
+    assert start_times(win) == [0.5]
+    tiny = LiftOffWindow("index", 1.0, earliest_s=0.5, latest_s=0.53, preferred_s=0.5)
+    np.testing.assert_allclose(start_times(tiny, min_step_s=0.02), [0.5, 0.52])
 
 
 def test_an_empty_window_has_no_start():

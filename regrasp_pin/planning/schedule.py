@@ -83,20 +83,26 @@ def start_times(
     latest_s: float | None = None,
     step_s: float = 0.1,
     max_starts: int = 5,
+    min_step_s: float = 0.02,
 ) -> list[float]:
     """Start times to try [s]: the preferred one, then earlier and later in turn.
 
     Args:
         window: The finger's window.
         latest_s: A further upper bound (e.g. the motion's end minus the duration).
-        step_s: Spacing of the tried times [s].
+        step_s: Spacing of the tried times [s]; finer in a window shorter than
+            ``(max_starts - 1) * step_s``, down to ``min_step_s``.
         max_starts: Most start times returned.
+        min_step_s: Finest spacing [s].
     """
     lo = window.earliest_s
     hi = window.latest_s if latest_s is None else min(window.latest_s, latest_s)
     if hi < lo - TIME_TOL_S:
         return []
     first = min(max(window.preferred_s, lo), hi)
+    # a short window is sampled more finely: max_starts times across it if it can be
+    if max_starts > 1 and hi - lo < step_s * (max_starts - 1):
+        step_s = max((hi - lo) / (max_starts - 1), min_step_s)
     out = [first]
     k = 1
     while len(out) < max_starts:
