@@ -15,8 +15,21 @@ from enum import Enum
 from typing import Any
 
 
+def _rebuild(cls: type, args: tuple, state: dict) -> RegraspError:
+    err = cls.__new__(cls)
+    Exception.__init__(err, *args)
+    err.__dict__.update(state)
+    return err
+
+
 class RegraspError(Exception):
-    """Base class of every error raised by regrasp_pin."""
+    """Base class of every error raised by regrasp_pin.
+
+    Errors pickle with all their data (for worker processes and distributed runs).
+    """
+
+    def __reduce__(self) -> tuple:
+        return (_rebuild, (type(self), self.args, dict(self.__dict__)))
 
 
 class InputError(RegraspError, ValueError):
