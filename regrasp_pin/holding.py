@@ -72,10 +72,13 @@ def start_holding(
     """Follow a new contact from ``t_from`` over the later times of ``grid``."""
     times = np.concatenate([[t_from], grid[grid > t_from + 1e-9]])
     if times.size < 2:
+        # a hold that starts at (or within float noise of) the motion's end: a two-sample
+        # track that stays inside the motion
+        t_from = min(t_from, motion.t_end)
         times = (
             np.array([t_from, motion.t_end])
-            if motion.t_end > t_from
-            else np.array([t_from, t_from + 1e-6])
+            if motion.t_end > t_from + 1e-9
+            else np.array([t_from - 1e-6, t_from])
         )
     track = track_contact(hand, name, obj, motion, times, p, n, q_start, contact=contact)
     return Holding(p=np.asarray(p, float), n=np.asarray(n, float), t_from=t_from, track=track)

@@ -635,7 +635,8 @@ def _follow(
     prev = q0
     for s0 in range(0, times.size, _IK_CHUNK):
         s1 = min(s0 + _IK_CHUNK, times.size)
-        res = f.ik(targets[s0:s1], prev, tol_m=p.ik_tol_m)
+        # warm start only: a restart may jump to another IK branch (a joint flip)
+        res = f.ik(targets[s0:s1], prev, tol_m=p.ik_tol_m, restarts=False)
         bad = res.error_m > tol[s0:s1]
         if bad.any():
             i = int(np.argmax(res.error_m - tol[s0:s1]))
