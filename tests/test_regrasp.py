@@ -35,12 +35,11 @@ from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin.contact import LinkClearance
-from regrasp_pin.exceptions import InputError, PlanningError, VerificationError
+from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, VerificationError
 from regrasp_pin.hand import Hand
 from regrasp_pin.manifold import build_manifold
 from regrasp_pin.motion import ObjectMotion
 from regrasp_pin.objects import Box
-from regrasp_pin.exceptions import FailureKind
 from regrasp_pin.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
 
 FINGER = "index"

@@ -1,0 +1,110 @@
+"""The plain-text report of a suite's results."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from ..scenarios import HANDS
+from .run import ScenarioResult
+from .specs import MOTION_KINDS, OBJECT_KINDS
+
+__all__ = ["summarize"]
+
+
+def _rate(results: Sequence[ScenarioResult]) -> str:
+    if not results:
+        return "-"
+    k = sum(r.ok for r in results)
+    return f"{k}/{len(results)} {k / len(results):4.0%}"
+
+
+def _stats(values: Iterable[float], unit: str, scale: float = 1.0) -> str:
+    v = np.array([x for x in values if x is not None], float) * scale
+    if v.size == 0:
+        return "n/a"
+    med, p95 = np.percentile(v, [50, 95])
+    return f"median {med:.3g} {unit}, p95 {p95:.3g} {unit}, max {v.max():.3g} {unit} (n={v.size})"
+
+
+def summarize(results: Sequence[ScenarioResult]) -> str:
+    """A plain-text report of a suite's results.
+
+    Success rates per hand x object kind and per motion kind, failures by kind (with
+    the stage and the fingers), planning time per regrasp and per scenario (median and
+    95th percentile), and how many full plans passed the independent re-check.
+
+    Args:
+        results: The results (every one counts; leave skipped specs out).
+
+    Returns:
+        The report (several lines, no trailing newline).
+    """
+    res = list(results)
+    lines = [f"scenarios: {len(res)}, full plans: {_rate(res)}"]
+    if not res:
+        return "\n".join(lines)
+    hands = [h for h in HANDS if any(r.hand == h for r in res)]
+    hands += sorted({r.hand for r in res} - set(hands))
+    kinds = [k for k in OBJECT_KINDS if any(r.object_kind == k for r in res)]
+    kinds += sorted({r.object_kind for r in res} - set(kinds))
+    lines.append("")
+    lines.append("full plans by hand x object:")
+    lines.append(f"  {'':14}" + "".join(f"{k:>12}" for k in [*kinds, "all"]))
+    for h in hands:
+        row = [_rate([r for r in res if r.hand == h and r.object_kind == k]) for k in kinds]
+        row.append(_rate([r for r in res if r.hand == h]))
+        lines.append(f"  {h:14}" + "".join(f"{c:>12}" for c in row))
+    lines.append(
+        f"  {'all':14}"
+        + "".join(f"{_rate([r for r in res if r.object_kind == k]):>12}" for k in kinds)
+        + f"{_rate(res):>12}"
+    )
+    lines.append("full plans by motion:")
+    motions = [m for m in MOTION_KINDS if any(r.motion_kind == m for r in res)]
+    motions += sorted({r.motion_kind for r in res} - set(motions))
+    for m in motions:
+        lines.append(f"  {m:18}{_rate([r for r in res if r.motion_kind == m]):>12}")
+    failed = [r for r in res if not r.ok]
+    lines.append(f"failures by kind: {len(failed)}")
+    for kind, count in Counter(r.failure_kind for r in failed).most_common():
+        group = [r for r in failed if r.failure_kind == kind]
+        stages = Counter(r.failed_stage for r in group)
+        fingers = Counter(r.finger for r in group if r.finger)
+        detail = ", ".join(f"{s} {c}" for s, c in sorted(stages.items(), key=str))
+        if fingers:
+            detail += "; " + ", ".join(f"{f} {c}" for f, c in fingers.most_common())
+        lines.append(f"  {kind!s:24}{count:4d}   ({detail})")
+    in_plan = [r for r in failed if r.failed_stage == "plan"]
+    if in_plan:
+        first = sum(r.n_regrasps == 0 for r in in_plan)
+        lines.append(f"planning failures before any verified regrasp: {first}/{len(in_plan)}")
+    planned = [r for r in res if r.plan_s is not None]
+    lines.append(
+        "planning time per regrasp: " + _stats((ms for r in planned for ms in r.regrasp_ms), "ms")
+    )
+    lines.append("planning time per scenario: " + _stats((r.plan_s for r in planned), "s"))
+    lines.append("build time per scenario: " + _stats((r.build_s for r in res), "s"))
+    got = [r for r in planned if r.planned_until_s is not None and r.duration_s]
+    if got:
+        reached = np.mean([r.planned_until_s / r.duration_s for r in got])
+        lines.append(f"motion planned before success or failure: {reached:.0%} on average")
+    touching = [
+        r
+        for r in res
+        if r.initial_finger_clearance_m is not None and r.initial_finger_clearance_m <= 0.0
+    ]
+    if touching:
+        lines.append(
+            f"initial grasps with fingers inside each other: {len(touching)} "
+            f"(full plans among them: {_rate(touching)})"
+        )
+    full = [r for r in res if r.ok]
+    passed = sum(r.recheck_ok is True for r in full)
+    lines.append(f"re-check of the full plans: {passed}/{len(full)} passed")
+    for r in full:
+        if r.recheck_ok is False:
+            lines.append(f"  {r.name}: {'; '.join(r.recheck_problems[:3])}")
+    return "\n".join(lines)

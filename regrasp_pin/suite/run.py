@@ -1,0 +1,251 @@
+"""Running one spec: build, plan, save, re-check, and the outcome as data."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import tempfile
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._validate import positive
+from ..exceptions import ContactError, FailureKind, PlanningError
+from ..plan import Plan
+from ..plan_check import recheck_plan
+from ..planner import plan_manipulation
+from .build import _finger_clearance, build_scenario
+from .specs import ScenarioSpec, _known
+
+__all__ = ["ScenarioResult", "load_results", "run_scenario"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ScenarioResult:
+    """The outcome of :func:`run_scenario` (JSON-able with :meth:`to_dict`).
+
+    Attributes:
+        name: The spec's name.
+        hand: The hand.
+        object_kind: ``"prism"``, ``"box"`` or ``"mesh"``.
+        motion_kind: One of :data:`MOTION_KINDS`.
+        ok: A full plan was found.
+        failure_kind: The failure's :class:`~regrasp_pin.exceptions.FailureKind` value (e.g.
+            ``"velocity"``), ``"exception:<Type>"`` for an unexpected error, or None.
+        failure: The failure's message (for an unexpected error, with its traceback's
+            last lines), or None.
+        failed_stage: ``"grasp"`` (no initial grasp: the spec is skipped by the suite),
+            ``"build"`` (another error while building), ``"plan"``, or None.
+        finger: The finger of the failure, if any.
+        time_s: When in the motion the failure happened [s], if known.
+        measured: The failure's measured value (units by kind), if any.
+        required: The value that was required, if any.
+        attempts: The failed attempts behind the failure (``Attempt.to_dict()``).
+        n_regrasps: Verified regrasps (of the partial plan, for a failure).
+        regrasp_ms: Planning time of each verified regrasp [ms].
+        plan_s: Wall time of :func:`~regrasp_pin.planner.plan_manipulation` [s].
+        build_s: Wall time of :func:`build_scenario` [s].
+        duration_s: Duration of the motion [s].
+        planned_until_s: End of the (partial) plan [s]; None without a plan.
+        min_clearance_m: Smallest regrasp clearance reported by the planner [m].
+        initial_finger_clearance_m: Smallest Coal distance between two fingers at the
+            initial grasp (idle fingers at their rest posture) [m]; negative when the
+            scenario starts with fingers inside each other.
+        recheck_ok: Full plans: :func:`~regrasp_pin.plan_check.recheck_plan` of the saved and
+            reloaded plan file passed; None otherwise.
+        recheck_problems: Its problems.
+        recheck_s: Its wall time [s].
+        plan_path: Where the plan (or partial plan) was saved, if it was.
+        stage_s: The planner's time per stage [s] (full plans).
+        spec: The spec (``ScenarioSpec.to_dict()``), to rebuild the scenario.
+    """
+
+    name: str
+    hand: str
+    object_kind: str
+    motion_kind: str
+    ok: bool
+    failure_kind: str | None = None
+    failure: str | None = None
+    failed_stage: str | None = None
+    finger: str | None = None
+    time_s: float | None = None
+    measured: float | None = None
+    required: float | None = None
+    attempts: list[dict[str, Any]] = field(default_factory=list)
+    n_regrasps: int = 0
+    regrasp_ms: list[float] = field(default_factory=list)
+    plan_s: float | None = None
+    build_s: float | None = None
+    duration_s: float | None = None
+    planned_until_s: float | None = None
+    min_clearance_m: float | None = None
+    initial_finger_clearance_m: float | None = None
+    recheck_ok: bool | None = None
+    recheck_problems: list[str] = field(default_factory=list)
+    recheck_s: float | None = None
+    plan_path: str | None = None
+    stage_s: dict[str, float] = field(default_factory=dict)
+    spec: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON values (non-finite numbers become None)."""
+        return _json_safe(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ScenarioResult:
+        """Rebuild a result from :meth:`to_dict` (e.g. a line of ``results.jsonl``)."""
+        _known(d, cls, "result")
+        return cls(**d)
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, FailureKind):
+        return value.value
+    return value
+
+
+def _attempts_of(exc: BaseException) -> list[dict[str, Any]]:
+    """The attempts of an outcome error, else of its cause (as dicts)."""
+    for e in (exc, exc.__cause__):
+        attempts = getattr(e, "attempts", ())
+        if attempts:
+            return [_json_safe(a.to_dict()) for a in attempts]
+    return []
+
+
+def _record_failure(result: ScenarioResult, exc: Exception, stage: str) -> None:
+    kind = getattr(exc, "kind", None)
+    result.failed_stage = stage
+    if isinstance(kind, FailureKind) and isinstance(exc, (ContactError, PlanningError)):
+        result.failure_kind = kind.value
+        result.failure = str(exc)
+    else:
+        result.failure_kind = f"exception:{type(exc).__name__}"
+        tb = traceback.format_exception(type(exc), exc, exc.__traceback__)
+        result.failure = f"{type(exc).__name__}: {exc} | " + " | ".join(
+            line.strip().replace("\n", " ") for line in tb[-3:-1]
+        )
+    result.finger = getattr(exc, "finger", None)
+    time_s = getattr(exc, "time_s", None)
+    result.time_s = None if time_s is None else float(time_s)
+    result.measured = getattr(exc, "measured", None)
+    result.required = getattr(exc, "required", None)
+    result.attempts = _attempts_of(exc)
+
+
+def run_scenario(
+    spec: ScenarioSpec, *, out_dir: str | Path | None = None, budget_s: float = 60.0
+) -> ScenarioResult:
+    """Build and plan one spec; re-check a full plan from its saved file.
+
+    Never raises for an outcome: a :class:`~regrasp_pin.exceptions.ContactError`
+    while building (no initial grasp) or a :class:`~regrasp_pin.exceptions.PlanningError`
+    / ContactError while planning is recorded with its kind, numbers and attempts; any
+    other exception is recorded as ``"exception:<Type>"`` with the end of its
+    traceback (a re-check that raises, as a re-check problem), so that a suite runs on.
+
+    Args:
+        spec: The spec.
+        out_dir: Folder for ``<name>.json`` (a full plan) or ``<name>.partial.json``
+            (the plan up to a failure); default: a temporary folder for the re-check
+            only, removed afterwards.
+        budget_s: Planning budget [s], passed as ``PlannerParams.budget_s`` when the
+            planner has that field (otherwise ignored).
+
+    Returns:
+        The :class:`ScenarioResult`.
+    """
+    budget = positive(budget_s, "budget_s")
+    result = ScenarioResult(
+        name=spec.name,
+        hand=spec.hand,
+        object_kind=spec.object.kind,
+        motion_kind=spec.motion.kind,
+        ok=False,
+        duration_s=spec.motion.duration_s,
+        spec=spec.to_dict(),
+    )
+    t0 = time.perf_counter()
+    try:
+        scen = build_scenario(spec)
+    except Exception as exc:  # no initial grasp ("grasp"), or a bug ("build")
+        result.build_s = time.perf_counter() - t0
+        _record_failure(result, exc, "grasp" if isinstance(exc, ContactError) else "build")
+        return result
+    result.build_s = time.perf_counter() - t0
+    fingers = tuple(scen.grasp.q)
+    result.initial_finger_clearance_m = float(
+        _finger_clearance(scen.hand, scen.obj, scen.motion, fingers, 0.0)(scen.grasp.q)
+    )
+    params = scen.params
+    if any(f.name == "budget_s" for f in dataclasses.fields(params)):
+        params = dataclasses.replace(params, budget_s=budget)
+
+    t0 = time.perf_counter()
+    try:
+        planned = plan_manipulation(
+            scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=params
+        )
+    except Exception as exc:  # every outcome is data; see the docstring
+        result.plan_s = time.perf_counter() - t0
+        _record_failure(result, exc, "plan")
+        partial = getattr(exc, "partial", None)
+        if isinstance(partial, Plan):
+            phases = partial.regrasps()
+            result.n_regrasps = len(phases)
+            result.regrasp_ms = [float(p.planning_ms) for p in phases]
+            result.min_clearance_m = min((p.min_clearance_m for p in phases), default=None)
+            result.planned_until_s = float(partial.t[-1])
+            if out_dir is not None:
+                path = partial.save(Path(out_dir) / f"{spec.name}.partial.json")
+                result.plan_path = str(path)
+        log.info("suite: %s failed: %s", spec.name, result.failure)
+        return result
+    result.plan_s = time.perf_counter() - t0
+    result.ok = True
+    result.n_regrasps = len(planned.regrasps)
+    result.regrasp_ms = [float(r.planning_ms) for r in planned.regrasps]
+    result.min_clearance_m = min((r.min_clearance_m for r in planned.regrasps), default=None)
+    result.planned_until_s = float(planned.plan.t[-1])
+    result.stage_s = {k: float(v) for k, v in planned.stage_s.items()}
+
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(out_dir) if out_dir is not None else Path(tmp)
+        path = planned.plan.save(folder / f"{spec.name}.json")
+        if out_dir is not None:
+            result.plan_path = str(path)
+        try:
+            check = recheck_plan(Plan.load(path))
+            result.recheck_ok = check.ok
+            result.recheck_problems = list(check.problems)
+        except Exception as exc:  # a plan file the re-check cannot read is a problem too
+            result.recheck_ok = False
+            result.recheck_problems = [f"the re-check raised {type(exc).__name__}: {exc}"]
+    result.recheck_s = time.perf_counter() - t0
+    return result
+
+
+def load_results(path: str | Path) -> list[ScenarioResult]:
+    """Read a ``results.jsonl`` written by ``bench/suite.py``."""
+    lines = Path(path).read_text().splitlines()
+    return [ScenarioResult.from_dict(json.loads(line)) for line in lines if line.strip()]

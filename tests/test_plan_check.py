@@ -1,0 +1,216 @@
+"""The independent plan re-check passes a clean plan and reports what a corrupted one breaks.
+
+The clean plan is built by hand (no planner): the canonical scenario's grasp, the first
+0.6 s of its motion, every finger holding by IK but the index, which lifts 10 mm off
+its contact along the contact normal and lands on it again. Corruptions are then made
+in ``q`` or the phases, and each must be reported with its numbers.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from regrasp_pin import ContactPhase, Plan, RegraspPhase, make_scenario
+from regrasp_pin.contact import tip_targets
+from regrasp_pin.exceptions import InputError, ModelFileError
+from regrasp_pin.holding import holding_hand, rest_configuration
+from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.plan_check import recheck_plan
+
+T_END = 0.6
+LIFT = (0.1, 0.5)  # the index regrasp [s]
+LIFT_M = 0.010  # how far the index tip rises off its contact at mid-regrasp [m]
+
+
+def hand_made_plan() -> tuple[Plan, object, np.ndarray]:
+    """The clean plan, the hand, and the index's lift ``(S, k)`` [rad] added to its hold."""
+    scen = make_scenario("five_finger", "hexagon", rate_deg_s=40)
+    hand, obj, grasp = scen.hand, scen.obj, scen.grasp
+    t = np.round(np.arange(0.0, T_END + 1e-9, 0.01), 9)
+    motion = ObjectMotion.from_poses(t, scen.motion.pose(t))
+    fingers = tuple(grasp.points_object)
+    idle = [n for n in hand.finger_names if n not in fingers]
+    q = holding_hand(hand, motion, grasp, fingers, moving="")(t)
+    q[:, :] = np.where(
+        np.isin(np.arange(hand.model.nq), [i for n in idle for i in hand.fingers[n].q_indices]),
+        rest_configuration(hand, obj, motion, idle),
+        q,
+    )
+    # the index: lift along the contact normal and land on the same contact
+    f = hand.fingers["index"]
+    p, n = grasp.points_object["index"], grasp.normals_object["index"]
+    t_mid = 0.5 * sum(LIFT)
+    k_mid = int(np.argmin(np.abs(t - t_mid)))
+    above = tip_targets((p + LIFT_M * n)[None], n[None], f.tip_radius, motion.pose(t_mid))[0]
+    res = f.ik(above, q[k_mid, f.q_indices])
+    assert res.success[0]
+    delta = res.q[0] - q[k_mid, f.q_indices]
+    s = np.clip((t - LIFT[0]) / (LIFT[1] - LIFT[0]), 0.0, 1.0)
+    lift = np.sin(np.pi * s)[:, None] ** 2 * delta  # (S, k) [rad]
+    q[:, f.q_indices] += lift
+    verts, tris = obj.mesh()
+    phases = {
+        name: [
+            ContactPhase(
+                finger=name,
+                t_start=0.0,
+                t_end=T_END,
+                p_object=grasp.points_object[name],
+                n_object=grasp.normals_object[name],
+            )
+        ]
+        for name in fingers
+        if name != "index"
+    }
+    phases["index"] = [
+        ContactPhase(finger="index", t_start=0.0, t_end=LIFT[0], p_object=p, n_object=n),
+        RegraspPhase(
+            finger="index",
+            t_start=LIFT[0],
+            t_end=LIFT[1],
+            P_object=p,
+            Q_object=p,
+            waypoints_object=np.array([p + LIFT_M * n]),
+            min_clearance_m=0.0,
+            planning_ms=0.0,
+        ),
+        ContactPhase(finger="index", t_start=LIFT[1], t_end=T_END, p_object=p, n_object=n),
+    ]
+    plan = Plan(
+        hand={
+            "name": hand.name,
+            "urdf": str(hand.urdf_path),
+            "fingers": {
+                name: {
+                    "tip_frame": fi.tip_frame,
+                    "tip_radius": fi.tip_radius,
+                    "joints": list(fi.joint_names),
+                }
+                for name, fi in hand.fingers.items()
+            },
+        },
+        object={
+            "kind": obj.kind,
+            "params": obj.params,
+            "vertices": verts.tolist(),
+            "faces": tris.tolist(),
+        },
+        t=t,
+        q=q,
+        T_palm_object=motion.as_xyzquat(t),
+        phases=phases,
+    )
+    return plan, hand, lift
+
+
+@pytest.fixture(scope="module")
+def clean():
+    return hand_made_plan()
+
+
+def _with_q(plan: Plan, q: np.ndarray) -> Plan:
+    out = copy.deepcopy(plan)
+    out.q = q
+    return out
+
+
+def test_clean_plan_passes(clean, tmp_path):
+    plan, _, _ = clean
+    chk = recheck_plan(Plan.load(plan.save(tmp_path / "plan.json")))
+    assert chk.ok, chk.problems
+    assert chk.min_holding == 3
+    assert len(chk.regrasps) == 1
+    r = chk.regrasps[0]
+    # the index touches the object at lift-off and landing, never closer
+    assert -1e-4 <= r.min_object_distance_m <= 1e-4
+    assert r.min_finger_distance_m > 0.0
+    assert chk.max_contact_error_m <= 1e-4
+    # densified: no joint moves more than 1 mrad between two checked samples
+    sel = (plan.t >= LIFT[0] - 1e-9) & (plan.t <= LIFT[1] + 1e-9)
+    assert r.n_samples >= np.abs(np.diff(plan.q[sel], axis=0)).max(axis=1).sum() / 1e-3
+
+
+def test_a_finger_pushed_into_the_object_is_reported(clean):
+    plan, hand, lift = clean
+    f = hand.fingers["index"]
+    q = plan.q.copy()
+    # around mid-regrasp, the lift reversed: the tip goes about 10 mm into the object
+    k = np.flatnonzero(np.abs(plan.t - 0.3) <= 0.02 + 1e-9)
+    q[k[:, None], f.q_indices] -= 2 * lift[k]
+    chk = recheck_plan(_with_q(plan, q))
+    assert not chk.ok
+    r = chk.regrasps[0]
+    assert r.penetration_m > 1e-3, r
+    assert 0.26 <= r.t_min_object_s <= 0.34
+    assert any("penetrates the object" in p and "index" in p for p in chk.problems)
+    # nothing else is blamed
+    assert chk.max_contact_error_m <= 1e-4 and chk.min_holding == 3
+
+
+def test_a_finger_off_its_contact_is_reported(clean):
+    plan, hand, _ = clean
+    f = hand.fingers["ring"]
+    q = plan.q.copy()
+    q[40, f.q_indices[1]] += 0.05  # 50 mrad at one joint: a few mm at the tip
+    chk = recheck_plan(_with_q(plan, q))
+    assert not chk.ok
+    assert chk.contact_error_finger == "ring"
+    assert chk.t_max_contact_error_s == pytest.approx(plan.t[40])
+    assert 1e-3 < chk.max_contact_error_m < 1e-2
+    assert any("ring" in p and "from its contact" in p for p in chk.problems)
+
+
+def test_joint_limits_and_holding_count_are_reported(clean):
+    plan, hand, _ = clean
+    f = hand.fingers["middle"]
+    q = plan.q.copy()
+    q[5, f.q_indices[0]] = f.upper[0] + 0.1
+    bad = _with_q(plan, q)
+    # the thumb also lets go for 0.1 s while the index is in the air: two fingers hold
+    thumb = bad.phases["thumb"][0]
+    bad.phases["thumb"] = [
+        ContactPhase("thumb", 0.0, 0.2, thumb.p_object, thumb.n_object),
+        ContactPhase("thumb", 0.3, T_END, thumb.p_object, thumb.n_object),
+    ]
+    chk = recheck_plan(bad)
+    assert not chk.ok
+    (v,) = chk.joint_limit_violations
+    assert v.joint == f.joint_names[0] and v.excess_rad == pytest.approx(0.1)
+    assert v.t_s == pytest.approx(plan.t[5])
+    assert chk.min_holding == 2 and 0.2 < chk.t_min_holding_s < 0.3
+    assert any("thumb" in p and "0.300" in p for p in chk.problems)  # the gap
+    assert any("only 2 fingers hold" in p for p in chk.problems)
+
+
+def test_bad_arguments_name_themselves(clean):
+    plan, _, _ = clean
+    with pytest.raises(ValueError, match="max_step_rad"):
+        recheck_plan(plan, max_step_rad=0.0)
+    bad = _with_q(plan, plan.q[:, :-1])
+    with pytest.raises(ValueError, match="plan.q"):
+        recheck_plan(bad)
+    bad = copy.deepcopy(plan)
+    bad.hand["urdf"] = "/nonexistent/hand.urdf"
+    with pytest.raises(ModelFileError, match="nonexistent"):
+        recheck_plan(bad)
+    bad = copy.deepcopy(plan)
+    bad.hand["fingers"]["index"]["joints"] = ["no_such_joint"]
+    with pytest.raises(InputError, match="no_such_joint"):
+        recheck_plan(bad)
+
+
+def test_holding_fingers_that_touch_are_reported(clean):
+    plan, hand, _ = clean
+    q = plan.q.copy()
+    k = np.flatnonzero(plan.t >= 0.55 - 1e-9)  # after the regrasp: every finger holds
+    q[k, hand.fingers["middle"].q_indices[0]] += 0.3  # abduct the middle into the index
+    chk = recheck_plan(_with_q(plan, q))
+    assert not chk.ok
+    assert chk.regrasps[0].min_finger_distance_m > 0.0  # the regrasp itself is clean
+    assert chk.min_finger_distance_samples_m < 0.0
+    assert set(chk.finger_pair_samples) == {"index", "middle"}
+    assert chk.t_min_finger_samples_s >= 0.55 - 1e-9
+    assert any(p.startswith("index and middle touch at t=") for p in chk.problems)

@@ -1,0 +1,291 @@
+"""The scenario suite: deterministic balanced specs, exact rebuilds, and the summary's counts.
+
+Only fast checks here (a build or two); the suite itself runs in ``bench/suite.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections import Counter
+
+import numpy as np
+import pytest
+from conftest import assert_close
+from scipy.spatial.transform import Rotation
+
+import regrasp_pin.suite
+from regrasp_pin import ferrari_canny_epsilon, make_scenario
+from regrasp_pin.exceptions import ContactError, FailureKind, InputError, UnknownNameError
+from regrasp_pin.scenarios import setup_pose
+from regrasp_pin.suite import (
+    MOTION_KINDS,
+    OBJECT_KINDS,
+    MotionSpec,
+    ObjectSpec,
+    ScenarioResult,
+    ScenarioSpec,
+    build_scenario,
+    generate_specs,
+    neighbour_specs,
+    run_scenario,
+    summarize,
+)
+from regrasp_pin.suite.build import _finger_clearance
+
+
+@pytest.fixture(scope="module")
+def specs():
+    return generate_specs(36, seed=0)
+
+
+def test_specs_are_deterministic_and_prefix_stable(specs):
+    assert generate_specs(36, seed=0) == specs
+    assert generate_specs(7, seed=0) == specs[:7]
+    other = generate_specs(36, seed=1)
+    assert all(a != b for a, b in zip(specs, other, strict=True))
+    assert len({s.name for s in specs + other}) == 72
+
+
+def test_every_prefix_is_balanced(specs):
+    for k in range(1, len(specs) + 1):
+        for attr, values in (
+            (lambda s: s.hand, ("five_finger", "allegro")),
+            (lambda s: s.object.kind, OBJECT_KINDS),
+            (lambda s: s.motion.kind, MOTION_KINDS),
+        ):
+            count = Counter(attr(s) for s in specs[:k])
+            assert max(count[v] for v in values) - min(count[v] for v in values) <= 1, k
+    # every 18 consecutive specs (aligned) hold each hand x object x motion once
+    for block in (specs[:18], specs[18:36]):
+        combos = {(s.hand, s.object.kind, s.motion.kind) for s in block}
+        assert len(combos) == 18
+
+
+def test_spec_values_are_in_range(specs):
+    signs = set()
+    for s in specs:
+        m = s.motion
+        assert 60.0 <= abs(m.angle_deg) <= 270.0 and 10.0 <= m.rate_deg_s <= 45.0
+        signs.add(np.sign(m.angle_deg))
+        axis = np.asarray(m.axis_object)
+        tilt = np.degrees(np.arccos(np.clip(axis[2] / np.linalg.norm(axis), -1, 1)))
+        assert tilt <= 10.0 + 1e-3
+        if m.kind == "contact-axis":
+            assert axis.tolist() == [0.0, 0.0, 1.0]
+        drift = np.linalg.norm(m.translation_m)
+        if m.kind == "rotate-translate":
+            assert 0.003 - 1e-5 <= drift <= 0.010 + 1e-5
+        else:
+            assert drift == 0.0
+        # the grasp search: about 2 deg per manifold step, over 120 deg at most
+        assert 0.05 <= s.grasp_dt_s <= 0.2
+        horizon = m.duration_s if s.grasp_horizon_s is None else s.grasp_horizon_s
+        assert horizon <= m.duration_s and horizon * m.rate_deg_s <= 120.0 + 0.1
+        assert np.linalg.norm(s.position_offset_m) <= 0.003 + 1e-5
+        assert np.degrees(np.linalg.norm(s.rotation_offset_rotvec)) <= 15.0
+        # sizes within +-10 % (plus rounding) of the hand's canonical objects
+        r0 = {"five_finger": 0.033, "allegro": 0.0455}[s.hand]
+        o = s.object
+        if o.kind == "prism":
+            assert 3 <= o.n_sides <= 8
+            assert 0.9 * r0 - 1e-4 <= o.circumradius_m <= 1.1 * r0 + 1e-4
+            assert 0.036 - 1e-4 <= o.height_m <= 0.044 + 1e-4
+        elif o.kind == "mesh":
+            assert 12 <= o.n_points <= 20
+            assert_close(o.size_m, [2 * r0, 2 * r0, 0.04], atol=1e-4, rtol=0.1, what="extents")
+    assert signs == {-1.0, 1.0}
+    assert {s.object.n_sides for s in specs if s.object.kind == "prism"} != {6}
+
+
+def test_specs_round_trip_through_json(specs):
+    for s in specs[:6] + neighbour_specs()[:2]:
+        back = ScenarioSpec.from_dict(json.loads(json.dumps(s.to_dict())))
+        assert back == s
+        assert back.to_dict() == s.to_dict()
+
+
+def test_bad_specs_name_the_field():
+    with pytest.raises(InputError, match="object.n_sides"):
+        ObjectSpec("prism", circumradius_m=0.03, height_m=0.04)
+    with pytest.raises(InputError, match="object.size_m"):
+        ObjectSpec("prism", n_sides=6, circumradius_m=0.03, height_m=0.04, size_m=(1, 1, 1))
+    with pytest.raises(UnknownNameError):
+        ObjectSpec("sphere")
+    d = generate_specs(1)[0].to_dict()
+    with pytest.raises(InputError, match="unknown field"):
+        ScenarioSpec.from_dict({**d, "colour": "red"})
+    with pytest.raises(InputError, match="motion.angle_deg"):
+        ScenarioSpec.from_dict({**d, "motion": {**d["motion"], "angle_deg": 0.0}})
+
+
+def test_random_meshes_are_seeded_convex_objects():
+    spec = next(s for s in generate_specs(6) if s.object.kind == "mesh")
+    a, b = spec.object.build(), spec.object.build()
+    assert np.array_equal(a.vertices, b.vertices)
+    assert 4 <= len(a.vertices) <= spec.object.n_points
+    extent = a.vertices.max(axis=0) - a.vertices.min(axis=0)
+    assert np.all(extent <= np.asarray(spec.object.size_m) * 1.05 + 1e-12)
+    # convex and centred at its centre of mass: every vertex inside every face plane
+    assert np.all(a.vertices @ a.normals.T - a.offsets <= 1e-12)
+
+
+def test_neighbours_cover_the_grid():
+    specs = neighbour_specs()
+    combos = {(s.hand, s.motion.angle_deg, s.motion.rate_deg_s) for s in specs}
+    assert len(specs) == len(combos) == 30
+    assert {a for _, a, _ in combos} == {60.0, 100.0, 140.0, 180.0, -100.0}
+    assert {r for _, _, r in combos} == {10.0, 20.0, 40.0}
+    for s in specs:
+        assert s.motion.kind == "contact-axis" and s.object.label == "prism6"
+        assert s.position_offset_m == (0.0, 0.0, 0.0) == s.rotation_offset_rotvec
+
+
+def test_a_neighbour_builds_the_same_scenario_as_make_scenario():
+    spec = next(
+        s
+        for s in neighbour_specs()
+        if s.hand == "five_finger" and s.motion.angle_deg == 60.0 and s.motion.rate_deg_s == 40
+    )
+    got = build_scenario(spec)
+    want = make_scenario("five_finger", "hexagon", angle_deg=60.0, rate_deg_s=40.0)
+    assert_close(got.obj.vertices, want.obj.vertices, atol=0.0, what="object")
+    assert_close(got.motion.times_s, want.motion.times_s, atol=0.0, what="times")
+    assert_close(got.motion.T_palm_object, want.motion.T_palm_object, atol=1e-12, what="poses")
+    assert got.grasp.points_object.keys() == want.grasp.points_object.keys()
+    for n in want.grasp.points_object:
+        assert_close(got.grasp.points_object[n], want.grasp.points_object[n], atol=0.0, what=n)
+        assert_close(got.grasp.q[n], want.grasp.q[n], atol=1e-12, what=n)
+    assert got.params == want.params
+
+
+def test_a_built_spec_starts_in_force_closure_with_its_offsets():
+    # a short tilted object-axis turn of a moved hexagon, with the fingers kept apart
+    spec = ScenarioSpec(
+        name="offsets",
+        hand="five_finger",
+        object=ObjectSpec("prism", n_sides=6, circumradius_m=0.033, height_m=0.041),
+        motion=MotionSpec("object-axis", -80.0, 40.0, axis_object=(0.05, 0.0, 0.9987)),
+        position_offset_m=(0.001, -0.0015, 0.0005),
+        rotation_offset_rotvec=(0.0, 0.05, 0.02),
+        grasp_dt_s=0.1,
+        grasp_clearance_m=0.0,
+    )
+    scen = build_scenario(spec)
+    g = scen.grasp
+    names = list(g.points_object)
+    eps = ferrari_canny_epsilon(
+        np.array([g.points_object[n] for n in names]),
+        np.array([g.normals_object[n] for n in names]),
+        scen.params.mu,
+        torque_scale_m=scen.obj.radius_m,
+    )
+    assert eps > 0.0
+    # the object starts at the canonical pose moved by the spec's offsets
+    T0 = scen.motion.T_palm_object[0]
+    canonical = setup_pose(spec.hand)
+    R_off = Rotation.from_rotvec(spec.rotation_offset_rotvec).as_matrix()
+    assert_close(T0[:3, 3], canonical[:3, 3] + spec.position_offset_m, atol=1e-12, what="pos")
+    assert_close(T0[:3, :3], R_off @ canonical[:3, :3], atol=1e-12, what="rotation")
+    # an object-axis turn: the object's centre stays put, it turns by the angle
+    centres = scen.motion.T_palm_object[:, :3, 3]
+    assert_close(centres, np.broadcast_to(T0[:3, 3], centres.shape), atol=1e-12, what="centre")
+    turn = Rotation.from_matrix(scen.motion.T_palm_object[-1, :3, :3] @ T0[:3, :3].T)
+    assert turn.magnitude() == pytest.approx(np.radians(80.0))
+    assert scen.motion.duration_s == pytest.approx(spec.motion.duration_s)
+    # the contacts lie on the object's surface
+    pts = np.array([g.points_object[n] for n in names])
+    assert np.all(np.abs(scen.obj.signed_distance(pts)) <= 1e-9)
+
+
+def _result(name, hand, obj, motion, ok, kind=None, stage=None, regrasp_ms=(), plan_s=1.0):
+    return ScenarioResult(
+        name=name,
+        hand=hand,
+        object_kind=obj,
+        motion_kind=motion,
+        ok=ok,
+        failure_kind=kind,
+        failed_stage=stage,
+        regrasp_ms=list(regrasp_ms),
+        n_regrasps=len(regrasp_ms),
+        plan_s=plan_s,
+        build_s=0.5,
+        recheck_ok=True if ok else None,
+    )
+
+
+def test_summary_counts():
+    results = [
+        _result("a", "five_finger", "prism", "object-axis", True, regrasp_ms=[100, 200]),
+        _result("b", "five_finger", "prism", "contact-axis", False, "velocity", "plan", [300]),
+        _result("c", "five_finger", "box", "object-axis", False, "velocity", "plan"),
+        _result("d", "allegro", "mesh", "rotate-translate", False, "no-candidate", "plan"),
+        _result("e", "allegro", "mesh", "rotate-translate", True, regrasp_ms=[400]),
+    ]
+    results[-1].recheck_ok = False
+    results[-1].recheck_problems = ["index penetrates the object by 1.000 mm"]
+    text = summarize(results)
+    assert "full plans: 2/5" in text
+    rows = {ln.split()[0]: ln for ln in text.splitlines() if ln.startswith("  ")}
+    assert rows["five_finger"].split()[1:] == ["1/2", "50%", "0/1", "0%", "-", "1/3", "33%"]
+    assert rows["allegro"].split()[1:] == ["-", "-", "1/2", "50%", "1/2", "50%"]
+    assert "1/2" in rows["object-axis"] and "0/1" in rows["contact-axis"]
+    assert rows["velocity"].split()[1] == "2" and rows["no-candidate"].split()[1] == "1"
+    assert "failures by kind: 3" in text
+    assert "planning failures before any verified regrasp: 2/3" in text
+    # per regrasp: 100, 200, 300, 400 ms -> median 250
+    assert "planning time per regrasp: median 250 ms" in text
+    assert "re-check of the full plans: 1/2 passed" in text
+    assert "e: index penetrates" in text
+
+
+def test_results_round_trip_through_json():
+    r = _result("a", "allegro", "box", "object-axis", False, "velocity", "plan", [1.5])
+    r.time_s, r.min_clearance_m = 2.5, float("inf")
+    d = json.loads(json.dumps(r.to_dict()))
+    assert d["min_clearance_m"] is None
+    back = ScenarioResult.from_dict(d)
+    assert back.failure_kind == "velocity" and back.regrasp_ms == [1.5]
+
+
+def test_grasp_clearance_keeps_the_initial_fingers_apart():
+    # make_scenario's grasp for this neighbour has the index inside the middle finger;
+    # asking for clearance gives another grasp whose fingers are apart, or none
+    spec = dataclasses.replace(
+        next(
+            s
+            for s in neighbour_specs()
+            if s.hand == "five_finger" and s.motion.angle_deg == 60.0 and s.motion.rate_deg_s == 40
+        ),
+        grasp_clearance_m=0.0,
+    )
+    try:
+        scen = build_scenario(spec)
+    except ContactError as exc:
+        assert exc.kind is FailureKind.NO_CANDIDATE
+        return
+    clearance = _finger_clearance(scen.hand, scen.obj, scen.motion, tuple(scen.grasp.q), 0.0)
+    assert clearance(scen.grasp.q) > 0.0
+
+
+def test_run_scenario_records_a_missing_grasp_as_data():
+    # a 6 mm cube is far too small for the five-finger hand: no initial grasp
+    spec = ScenarioSpec(
+        name="tiny",
+        hand="five_finger",
+        object=ObjectSpec("box", size_m=(0.006, 0.006, 0.006)),
+        motion=MotionSpec("object-axis", 60.0, 45.0),
+        grasp_dt_s=0.2,
+    )
+    r = run_scenario(spec)
+    assert not r.ok and r.failed_stage == "grasp" and r.failure_kind == "no-candidate"
+    assert r.failure and r.plan_s is None and r.build_s > 0.0
+    d = json.loads(json.dumps(r.to_dict()))
+    assert ScenarioSpec.from_dict(d["spec"]) == spec
+    assert "failures by kind: 1" in summarize([r])
+
+
+def test_every_exported_name_imports():
+    for name in regrasp_pin.suite.__all__:
+        assert getattr(regrasp_pin.suite, name) is not None, name
