@@ -388,6 +388,7 @@ def initial_grasp(
     sep = sep_default if min_separation_m is None else min_separation_m
     best = None
     best_score = -np.inf
+    refused_clearance, closest = 0, -np.inf
     for trial in range(trials):
         order_f = rng.permutation(names) if trial else names
         pick: dict[str, int] = {}
@@ -441,14 +442,34 @@ def initial_grasp(
         if score > best_score:
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
+                refused_clearance += 1
                 continue
-            if apart is not None and apart(q_pick) < 0.0:
-                continue
+            if apart is not None:
+                gap = apart(q_pick)
+                if gap < 0.0:
+                    refused_clearance += 1
+                    closest = max(closest, gap + min_finger_gap_m)
+                    continue
             best_score, best = score, (dict(pick), e, q_pick)
+    if best is None and refused_clearance:
+        known = bool(np.isfinite(closest))
+        raise ContactError(
+            f"every force-closure grasp found ({refused_clearance}) puts two fingers too "
+            "close"
+            + (
+                f" (the best {closest * 1e3:.2f} mm apart, need {min_finger_gap_m * 1e3:.2f} mm)"
+                if known
+                else " (finger_clearance refused them)"
+            ),
+            kind=FailureKind.FINGER_COLLISION,
+            measured=closest if known else None,
+            required=min_finger_gap_m if known else None,
+        )
     if best is None:
         raise ContactError(
             f"no combination of the usable contacts is in force closure (mu={mu}) with the "
-            f"contacts {sep * 1e3:.0f} mm apart"
+            f"contacts {sep * 1e3:.0f} mm apart",
+            kind=FailureKind.FORCE_CLOSURE,
         )
     pick, e, q_pick = best
     e_full = ferrari_canny_epsilon(

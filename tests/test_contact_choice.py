@@ -20,6 +20,7 @@ the box by Pinocchio's ``computeDistances``, quality kept).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pinocchio as pin
@@ -35,7 +36,7 @@ from regrasp_pin.contact_choice import (
     exit_times,
     initial_grasp,
 )
-from regrasp_pin.exceptions import ContactError, InputError
+from regrasp_pin.exceptions import ContactError, FailureKind, InputError
 from regrasp_pin.grasp_quality import ferrari_canny_epsilon, is_force_closure
 from regrasp_pin.hand import Hand
 from regrasp_pin.manifold import build_manifold
@@ -102,6 +103,24 @@ def _link_distance(hand, finger, box, q_finger, T_palm_object) -> float:
     gdata = pin.GeometryData(gm)
     q_full = hand.to_full(finger, q_finger)
     pin.computeDistances(hand.model, hand.model.createData(), gm, gdata, q_full)
+    return min(r.min_distance for r in gdata.distanceResults)
+
+
+def _finger_distance(hand, names, q_fingers) -> float:
+    """Pinocchio computeDistances: smallest distance between the named fingers' geometries
+    (the other fingers at the neutral configuration play no part)."""
+    gm = pin.GeometryModel()
+    for g in hand.collision_model.geometryObjects:
+        gm.addGeometryObject(pin.GeometryObject(g))
+    for a_name, b_name in itertools.combinations(names, 2):
+        for a in hand.finger(a_name).geometry_ids:
+            for b in hand.finger(b_name).geometry_ids:
+                gm.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+    gdata = pin.GeometryData(gm)
+    q = hand.neutral()
+    for n in names:
+        q[hand.finger(n).q_indices] = q_fingers[n]
+    pin.computeDistances(hand.model, hand.model.createData(), gm, gdata, q)
     return min(r.min_distance for r in gdata.distanceResults)
 
 
@@ -197,6 +216,8 @@ def _check_grasp(hand, box, sample, manifolds, grasp, min_sep):
     # pairwise separated: the tip spheres never overlap
     gaps = np.linalg.norm(pts[:, None] - pts[None], axis=2)[np.triu_indices(len(names), 1)]
     assert gaps.min() >= min_sep
+    # the grasping fingers' links keep 1 mm from each other (Pinocchio computeDistances)
+    assert _finger_distance(hand, names, grasp.q) >= 0.001 - 1e-9
     # force closure, the quality recomputed
     eps = ferrari_canny_epsilon(pts, nrm, MU, torque_scale_m=box.radius_m)
     assert grasp.epsilon > 0.0
@@ -237,6 +258,20 @@ def test_initial_grasp_is_seeded(five):
     hand, box, _, sample, manifolds, grasp = five
     again = initial_grasp(hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M)
     assert again.indices == grasp.indices
+
+
+def test_grasps_with_fingers_too_close_are_refused_with_the_closest_distance(five):
+    hand, box, _, sample, manifolds, grasp = five
+    names = list(manifolds)
+    d = _finger_distance(hand, names, grasp.q)
+    # ask for more than any grasp of this box offers: refused, with the best found
+    with pytest.raises(ContactError) as info:
+        initial_grasp(
+            hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M, min_finger_gap_m=0.2
+        )
+    err = info.value
+    assert err.kind == FailureKind.FINGER_COLLISION and err.required == 0.2
+    assert d - 1e-9 <= err.measured < 0.2  # at least as far apart as the chosen grasp
 
 
 def test_no_initial_grasp_names_the_finger(five):
