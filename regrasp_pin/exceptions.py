@@ -170,13 +170,15 @@ def _where(finger: str | None, time_s: float | None) -> str:
 class _Outcome(RegraspError):
     """An error with a :class:`FailureKind`, a finger, a time and measured numbers."""
 
+    default_kind = FailureKind.BUDGET
+
     def __init__(
         self,
         reason: str,
         finger: str | None = None,
         time_s: float | None = None,
         *,
-        kind: FailureKind,
+        kind: FailureKind | None = None,
         measured: float | None = None,
         required: float | None = None,
         attempts: Iterable[Attempt] = (),
@@ -184,7 +186,7 @@ class _Outcome(RegraspError):
         self.finger = finger
         self.time_s = time_s
         self.reason = reason
-        self.kind = FailureKind(kind)
+        self.kind = FailureKind(self.default_kind if kind is None else kind)
         self.measured = None if measured is None else float(measured)
         self.required = None if required is None else float(required)
         self.attempts = tuple(attempts)
@@ -211,28 +213,10 @@ class ContactError(_Outcome):
         reason: Why no contact could be found.
         kind: A :class:`FailureKind` (default ``NO_CANDIDATE``).
         measured, required: The numbers behind the failure, when there are any.
+        attempts: Failed attempts that led here, as data.
     """
 
-    def __init__(
-        self,
-        reason: str,
-        finger: str | None = None,
-        time_s: float | None = None,
-        *,
-        kind: FailureKind = FailureKind.NO_CANDIDATE,
-        measured: float | None = None,
-        required: float | None = None,
-        attempts: Iterable[Attempt] = (),
-    ) -> None:
-        super().__init__(
-            reason,
-            finger,
-            time_s,
-            kind=kind,
-            measured=measured,
-            required=required,
-            attempts=attempts,
-        )
+    default_kind = FailureKind.NO_CANDIDATE
 
 
 class PlanningError(_Outcome):
@@ -242,7 +226,7 @@ class PlanningError(_Outcome):
         finger: The finger concerned (or None).
         time_s: When the failure happened [s] (or None).
         reason: What failed, in plain words.
-        kind: A :class:`FailureKind`: what the failure was.
+        kind: A :class:`FailureKind`: what the failure was (default ``BUDGET``).
         measured, required: The numbers behind it (units by kind), when there are any.
         attempts: Every failed attempt of the search that led here, as data.
         partial: Whatever was planned before the failure (e.g. a partial plan), or None.
@@ -254,21 +238,9 @@ class PlanningError(_Outcome):
         finger: str | None = None,
         time_s: float | None = None,
         partial: Any = None,
-        *,
-        kind: FailureKind = FailureKind.BUDGET,
-        measured: float | None = None,
-        required: float | None = None,
-        attempts: Iterable[Attempt] = (),
+        **outcome: Any,
     ) -> None:
-        super().__init__(
-            reason,
-            finger,
-            time_s,
-            kind=kind,
-            measured=measured,
-            required=required,
-            attempts=attempts,
-        )
+        super().__init__(reason, finger, time_s, **outcome)
         self.partial = partial
 
 

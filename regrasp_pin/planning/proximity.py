@@ -19,11 +19,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-import coal
 import numpy as np
-import pinocchio as pin
 
 from .._pair_distances import capsule_gap
+from ..contact import FingerClearance
 from ..hand import Hand
 from ..holding import Holding
 
@@ -59,35 +58,21 @@ class _PairDistance:
     """Exact Coal distance between two fingers' geometries at full configurations."""
 
     def __init__(self, hand: Hand) -> None:
+        self.checks: dict[tuple[str, str], FingerClearance] = {}
         self.hand = hand
-        self.data = hand.model.createData()
-        self.gdata = pin.GeometryData(hand.collision_model)
-        self.req = coal.DistanceRequest()
-        self.res = coal.DistanceResult()
 
-    def __call__(self, ids_a: list[int], ids_b: list[int], q: np.ndarray) -> float:
-        model, cm = self.hand.model, self.hand.collision_model
-        pin.forwardKinematics(model, self.data, q)
-        pin.updateGeometryPlacements(model, self.data, cm, self.gdata)
-        objs = cm.geometryObjects
-        best = math.inf
-        for a, b in itertools.product(ids_a, ids_b):
-            self.res.clear()
-            d = coal.distance(
-                objs[a].geometry,
-                self.gdata.oMg[a],
-                objs[b].geometry,
-                self.gdata.oMg[b],
-                self.req,
-                self.res,
-            )
-            best = min(best, d)
-        return best
+    def __call__(self, a: str, b: str, q: np.ndarray) -> float:
+        fc = self.checks.get((a, b))
+        if fc is None:
+            fc = self.checks[(a, b)] = FingerClearance(self.hand, a)
+            theirs = set(self.hand.finger(b).geometry_ids)
+            fc.pairs = [(ga, gb) for ga, gb in fc.pairs if gb in theirs]
+        return fc(q)
 
 
 def _first_below(
     dist: _PairDistance,
-    ids: tuple[list[int], list[int]],
+    pair: tuple[str, str],
     q: np.ndarray,
     cand: np.ndarray,
     limit_m: float,
@@ -97,10 +82,10 @@ def _first_below(
     prev = -1
     for c in range(0, cand.size + COARSE - 1, COARSE):
         c = min(c, cand.size - 1)
-        d = dist(*ids, q[cand[c]])
+        d = dist(*pair, q[cand[c]])
         if d < limit_m:
             for f in range(prev + 1, c):
-                df = dist(*ids, q[cand[f]])
+                df = dist(*pair, q[cand[f]])
                 if df < limit_m:
                     return int(cand[f]), df
             return int(cand[c]), d
@@ -145,11 +130,11 @@ def holding_proximity(
         cand = np.flatnonzero(capsule_gap(hand, *ids, q) < trigger_m)
         if cand.size == 0:
             continue
-        i_trig, d_trig = _first_below(dist, ids, q, cand, trigger_m)
+        i_trig, d_trig = _first_below(dist, (a, b), q, cand, trigger_m)
         if i_trig is None:
             continue
         later = cand[cand >= i_trig]
-        i_lost, _ = _first_below(dist, ids, q, later, lost_m)
+        i_lost, _ = _first_below(dist, (a, b), q, later, lost_m)
         lost = math.inf if i_lost is None else float(times[i_lost])
         for me, other in ((a, b), (b, a)):
             p = Proximity(me, other, float(times[i_trig]), lost, d_trig)

@@ -1,0 +1,89 @@
+"""Holding fingers that close in on each other, against Pinocchio's computeDistances."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from regrasp_pin import make_scenario
+from regrasp_pin.holding import rest_configuration, start_holding
+from regrasp_pin.planning.proximity import holding_proximity
+
+TRIGGER_M, LOST_M = 0.0015, 0.0005
+
+
+@pytest.fixture(scope="module")
+def holds():
+    """The demo's initial grasp, every finger holding its contact over the whole turn
+    (no regrasp): the middle and ring fingers run into each other."""
+    scen = make_scenario("five_finger", "hexagon")
+    hand, p = scen.hand, scen.params
+    grid = np.round(np.arange(0.0, scen.motion.t_end + 1e-9, 0.01), 9)
+    idle = [n for n in hand.finger_names if n not in p.fingers]
+    base = rest_configuration(hand, scen.obj, scen.motion, idle)
+    holding = {
+        n: start_holding(
+            hand,
+            scen.obj,
+            scen.motion,
+            grid,
+            n,
+            scen.grasp.points_object[n],
+            scen.grasp.normals_object[n],
+            scen.grasp.q[n],
+            0.0,
+            p.contact,
+        )
+        for n in p.fingers
+    }
+    return hand, holding, grid, base
+
+
+def _distance(hand, holding, base, a, b, t):
+    """computeDistances over every geometry pair of fingers a and b at time t."""
+    gm = pin.GeometryModel()
+    for g in hand.collision_model.geometryObjects:
+        gm.addGeometryObject(pin.GeometryObject(g))
+    for ga, gb in itertools.product(hand.finger(a).geometry_ids, hand.finger(b).geometry_ids):
+        gm.addCollisionPair(pin.CollisionPair(int(ga), int(gb)))
+    gdata = pin.GeometryData(gm)
+    q = base.copy()
+    for n, h in holding.items():
+        q[hand.finger(n).q_indices] = h.q_at(np.array([t]))[0]
+    pin.computeDistances(hand.model, hand.model.createData(), gm, gdata, q)
+    return min(r.min_distance for r in gdata.distanceResults)
+
+
+def test_proximity_finds_the_first_time_below_each_distance(holds):
+    hand, holding, grid, base = holds
+    prox = holding_proximity(hand, holding, grid, base, trigger_m=TRIGGER_M, lost_m=LOST_M)
+    assert "middle" in prox and "ring" in prox
+    p = prox["ring"]
+    assert p.other == "middle"
+    # the middle finger is nearer the index from the start (1.4 mm): its earliest
+    # proximity is that one
+    assert prox["middle"].other == "index" and prox["middle"].trigger_s == 0.0
+    assert prox["index"].other == "middle"
+    i = int(np.flatnonzero(np.isclose(grid, p.trigger_s))[0])
+    j = int(np.flatnonzero(np.isclose(grid, p.lost_s))[0])
+    assert 0 < i < j
+    d = lambda t: _distance(hand, holding, base, "ring", "middle", t)  # noqa: E731
+    assert d(grid[i]) < TRIGGER_M <= d(grid[i - 1])
+    assert d(grid[j]) < LOST_M <= d(grid[j - 1])
+    assert p.distance_m == pytest.approx(d(grid[i]), abs=1e-6)  # GJK tolerances differ
+    # fingers that stay apart are absent, and the thumb is one of them
+    assert "thumb" not in prox
+
+
+def test_no_proximity_when_the_fingers_stay_apart(holds):
+    hand, holding, grid, base = holds
+    prox = holding_proximity(hand, holding, grid[:50], base, trigger_m=TRIGGER_M, lost_m=LOST_M)
+    # in the first half second the ring stays ~1.9 mm from the middle: only the index
+    # and middle pair is near
+    assert set(prox) == {"index", "middle"}
+    assert _distance(hand, holding, base, "ring", "middle", grid[49]) >= TRIGGER_M
+    # the index and middle never come within the lost distance in that half second
+    assert prox["index"].lost_s == np.inf
