@@ -22,9 +22,10 @@ at ``t_start + duration`` while the object keeps moving:
 
 A failed candidate is changed by what failed (its :class:`~.exceptions.FailureKind`):
 a curve that cuts into the clearance gets more waypoints, then more inflation; a finger
-that comes near another finger keeps a wider gap from it on the grid; a finger near
-its joint limits is rerouted more strongly. A failure that only another Q or another
-duration can fix (velocity, no grid path) ends the variants at once, for the caller
+that comes near another finger keeps a wider gap from it on the grid (and a grid with
+no route keeps a narrower one); a finger near its joint limits is rerouted more
+strongly. A failure that only another duration can fix (velocity) ends the variants at
+once, for the caller
 (:mod:`.planning.search`). It never returns a path that has not passed the check;
 when nothing passes it raises :class:`~.exceptions.PlanningError` (or
 :class:`~.exceptions.VerificationError`) with the finger, the time, the kind of the
@@ -75,7 +76,7 @@ _VERIFIER_KIND = {
     "joint-limit": FailureKind.JOINT_LIMIT,
 }
 #: failures that no path variant fixes: the caller changes Q or the duration
-CALLER_KINDS = frozenset({FailureKind.VELOCITY, FailureKind.GRID_UNREACHABLE})
+CALLER_KINDS = frozenset({FailureKind.VELOCITY})
 
 
 @dataclass(frozen=True)
@@ -380,7 +381,8 @@ def _next_variant(p: RegraspParams, kind: FailureKind, base: RegraspParams) -> R
     Too little clearance from the object: more waypoints (the curve cuts fewer
     corners), then more inflation. Too close to another finger: a wider forbidden gap
     around the other fingers on the grid. Near a joint limit or out of reach: a
-    stronger joint-limit cost.
+    stronger joint-limit cost. No route on the grid: only the other fingers' capsules
+    themselves stay forbidden.
     """
     if kind == FailureKind.OBJECT_CLEARANCE:
         if p.m + 2 <= p.max_m:
@@ -392,6 +394,10 @@ def _next_variant(p: RegraspParams, kind: FailureKind, base: RegraspParams) -> R
     if kind == FailureKind.FINGER_COLLISION:
         gap = max(2.0 * p.finger_gap_m, 0.002)
         return replace(p, finger_gap_m=gap) if gap <= _MAX_FINGER_GAP_M + 1e-12 else None
+    if kind == FailureKind.GRID_UNREACHABLE:
+        # the forbidden gap around the other fingers may close every route: keep only
+        # the capsules' overlap forbidden (the soft cost and Coal still keep them apart)
+        return replace(p, finger_gap_m=0.0) if p.finger_gap_m > 0.0 else None
     if kind in (FailureKind.JOINT_LIMIT, FailureKind.IK_UNREACHABLE):
         weight = p.limit_weight * 4.0
         if weight <= base.limit_weight * _MAX_LIMIT_WEIGHT_FACTOR + 1e-9:
@@ -459,8 +465,11 @@ def _surface_path(
     in_flight = (from_p[sel] > taper) & (from_q[sel] > taper)
     cost[sel[in_flight & (gap < allowed)]] = np.inf
     if others_tips.size:
-        keep = 2 * f.tip_radius + p.contact_keepout_m
+        # under another fingertip: forbidden, but never more than P and Q themselves are
+        # (a P right beside another finger would otherwise be walled in)
         dist = np.linalg.norm(tips[:, None, :] - others_tips[None], axis=2).min(axis=1)
+        at_ends = float(dist[[grid.p_index, grid.q_index]].min())
+        keep = min(2 * f.tip_radius + p.contact_keepout_m, at_ends - _FINGER_GAP_SLACK_M)
         cost[dist < keep] = np.inf
     cost[[grid.p_index, grid.q_index]] = np.minimum(cost[[grid.p_index, grid.q_index]], 0.0)
     # decisions must not follow last-bit noise: costs on a 1e-9 lattice
