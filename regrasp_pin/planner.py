@@ -66,8 +66,9 @@ class PlannerParams:
         start_step_s: Spacing of the lift-off times tried in a finger's window [s].
         max_starts: Most lift-off times tried per regrasp.
         max_backtracks: Most times the planner re-plans an earlier regrasp.
-        budget_s: Wall-clock budget of the whole search [s]; past it the planner
-            stops with a ``budget`` failure and the partial plan.
+        budget_s: Wall-clock budget of the whole call [s] (manifolds and tracking
+            included); past it no new regrasp attempt starts, and the planner stops
+            with a ``budget`` failure and the partial plan.
         exit_tolerance_s: New contacts whose exit times differ by less than this are
             ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
         fingers: The fingers that take part (default: all). The others stay idle at
@@ -183,6 +184,7 @@ def plan_manipulation(
             to the failure.
     """
     params = params or PlannerParams()
+    budget = SearchBudget.seconds(params.budget_s)  # the whole call, manifolds included
     active = tuple(params.fingers) if params.fingers else hand.finger_names
     for name in active:
         hand.finger(name)  # raises UnknownNameError listing the valid names
@@ -243,7 +245,7 @@ def plan_manipulation(
         params,
         active,
         search,
-        SearchBudget.seconds(params.budget_s),
+        budget,
         base_q,
     )
     state = _State(
