@@ -134,3 +134,15 @@ def test_a_neighbour_that_cannot_be_planned_ends_typed_with_a_verified_partial_p
     check = recheck_plan(exc.partial, max_step_rad=1e-3)
     assert not check.joint_limit_violations
     assert all(r.min_object_distance_m >= -1e-4 for r in check.regrasps)
+
+
+def test_an_exhausted_budget_ends_typed_with_the_partial_plan():
+    from dataclasses import replace
+
+    scen = make_scenario("five_finger", "hexagon")
+    params = replace(scen.params, budget_s=0.0)
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=params)
+    exc = err.value
+    assert exc.kind == FailureKind.BUDGET
+    assert exc.partial is not None and not exc.partial.regrasps()
