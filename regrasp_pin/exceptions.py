@@ -15,7 +15,7 @@ from enum import Enum
 from typing import Any
 
 
-def _rebuild(cls: type, args: tuple, state: dict) -> RegraspError:
+def _rebuild(cls: type[RegraspError], args: tuple, state: dict) -> RegraspError:
     err = cls.__new__(cls)
     Exception.__init__(err, *args)
     err.__dict__.update(state)
