@@ -121,6 +121,7 @@ def choose_new_contact(
     q_hand_arrive: np.ndarray | None = None,
     finger_clearance_m: float = 0.002,
     exit_tolerance_s: float = 0.0,
+    rerank: int = 12,
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -203,15 +204,29 @@ def choose_new_contact(
     dist = np.linalg.norm(pts[idx] - P_object, axis=1)
     # the order must not follow last-bit noise of the IK: keys on a 1e-9 lattice
     margin_key, dist_key = np.round(margin, 9), np.round(dist, 9)
-    if exit_tolerance_s > 0:
-        # exit times within the tolerance of each other count as ties; among them the
-        # shorter move first (a short move is less likely to cross another finger)
-        bins = np.floor((t_exit.max() - t_exit) / exit_tolerance_s)
-        order = np.lexsort((idx, -margin_key, dist_key, bins))
-    else:
+
+    def rank(t_exit: np.ndarray, lasts: np.ndarray) -> np.ndarray:
+        if exit_tolerance_s > 0:
+            # exit times within the tolerance of each other count as ties; among them the
+            # shorter move first (a short move is less likely to cross another finger)
+            bins = np.floor((t_exit.max() - t_exit) / exit_tolerance_s)
+            return np.lexsort((idx, -margin_key, dist_key, bins))
         # (b), then margin, then distance; a point usable to the end outlasts one that
         # leaves at the last grid time (both have exit time times_s[-1])
-        order = np.lexsort((idx, dist_key, -margin_key, ~usable[-1, idx], -t_exit))
+        return np.lexsort((idx, dist_key, -margin_key, ~lasts, -t_exit))
+
+    lasts = usable[-1, idx].copy()
+    order = rank(t_exit, lasts)
+    if link_check and rerank > 0:
+        # the manifold knows nothing of the finger's other links: the first candidates'
+        # exit times are cut where a link would come within the trigger distance of the
+        # object (Coal, at the manifold's times), and those candidates ranked again
+        top = order[:rerank]
+        t_exit, lasts = t_exit.copy(), lasts.copy()
+        t_exit[top], last = _link_exit(hand, finger.name, obj, manifold, idx[top], ka, contact)
+        lasts[top] &= last
+        head = rank(t_exit, lasts)
+        order = np.concatenate([head[np.isin(head, top)], order[rerank:]])
 
     other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
     other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
@@ -503,3 +518,28 @@ def _fingers_apart(
         return min(fc(q) for fc in checks) - distance_m
 
     return apart
+
+
+def _link_exit(
+    hand: Hand,
+    finger: str,
+    obj: ConvexObject,
+    manifold: Manifold,
+    points: np.ndarray,
+    ka: int,
+    contact: ContactModel,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exit times ``(C,)`` [s] of the manifold points ``points`` from grid index ``ka``,
+    cut where another link of the finger comes within ``contact.link_clearance_m`` of the
+    object (Coal, at the manifold's times), and whether each stays usable to the end."""
+    usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
+    times = manifold.times_s
+    lc = LinkClearance(hand, finger, obj)
+    T = manifold.T_palm_object[ka:]
+    K = T.shape[0]
+    q = manifold.q[ka:, points]  # (K, C, k); NaN where IK did not reach (not usable)
+    q = np.where(np.isfinite(q), q, hand.finger(finger).q_mid)
+    full = hand.to_full(finger, q.transpose(1, 0, 2).reshape(-1, q.shape[-1]))
+    d = lc(full, np.tile(T, (points.size, 1, 1))).reshape(points.size, K).T
+    ok = usable & (d >= contact.link_clearance_m)
+    return exit_times(ok, times[ka:], 0), ok.all(axis=0)

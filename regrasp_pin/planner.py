@@ -492,17 +492,36 @@ def _advance(
             required=win.latest_s if busy else end_by,
         )
     others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
-    found = ctx.search.find(
-        name,
-        (h.p, h.n),
-        starts,
-        lambda t: holding_q(ctx.hand, motion, name, h, np.array([t]), p.contact.ik_tol_m)[0],
-        others,
-        _q_hand(ctx, state, stay),
-        ctx.budget,
-        end_by_s=end_by_s,
-        exclude=exclude,
-    )
+
+    def search(starts: list[float], end_by: float | None) -> Found:
+        return ctx.search.find(
+            name,
+            (h.p, h.n),
+            starts,
+            lambda t: holding_q(ctx.hand, motion, name, h, np.array([t]), p.contact.ik_tol_m)[0],
+            others,
+            _q_hand(ctx, state, stay),
+            ctx.budget,
+            end_by_s=end_by,
+            exclude=exclude,
+        )
+
+    found = None
+    nxt = _next_deadline(ctx, triggers, trig, win) if end_by_s is None else None
+    if nxt is not None:
+        # first, land before the next finger's hold is lost (earliest deadline first)
+        deadline, other = nxt
+        early = start_times(
+            win, latest_s=deadline - D, step_s=p.start_step_s, max_starts=p.max_starts
+        )
+        if early:
+            try:
+                found = search(early, deadline)
+                why += f"; lands by t={deadline:.3f} s, before {other}'s hold is lost"
+            except PlanningError:
+                found = None
+    if found is None:
+        found = search(starts, end_by_s)
     if abs(found.result.t_start - starts[0]) > _TIME_TOL_S:
         why += (
             f"; lifted off at t={found.result.t_start:.3f} s: "
@@ -510,6 +529,25 @@ def _advance(
         )
     steps.append(_Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
     return _apply(ctx, state, name, t_trig, why, found)
+
+
+def _next_deadline(
+    ctx: _Context, triggers: list[_Trigger], trig: _Trigger, win: LiftOffWindow
+) -> tuple[float, str] | None:
+    """When the next finger's hold is lost, if that falls within two regrasps of this
+    finger's preferred start (and after one regrasp from its earliest): the time this
+    regrasp should have landed by, and that finger."""
+    p = ctx.params
+    D = p.regrasp.duration_s
+    soon = [
+        (e.lost_s, e.finger)
+        for e in triggers
+        if e.finger != trig.finger
+        and e.lost_s < ctx.motion.t_end - _TIME_TOL_S
+        and e.lost_s <= win.preferred_s + 2 * D + p.lead_s
+        and e.lost_s >= win.earliest_s + D + _TIME_TOL_S
+    ]
+    return min(soon) if soon else None
 
 
 def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarray], np.ndarray]:

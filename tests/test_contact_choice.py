@@ -356,6 +356,7 @@ def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
         mu=MU,
         min_separation_m=SEP_M,
         max_checks=10_000,
+        rerank=0,  # the paper's order exactly (the re-rank by links is tested below)
     )
     ka = m.time_index(t_arrive)
     expected, rows, passing, eps_P = _brute_force_q(hand, box, m, sample, ka, P, n_P, others)
@@ -482,3 +483,36 @@ def test_arrival_outside_the_manifold_is_rejected(five, t_arrive):
             n_P_object=grasp.normals_object["index"],
             others={},
         )
+
+
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.5), ("thumb", 0.75), ("index", 0.5)])
+def test_q_exit_time_counts_the_other_links_of_the_finger(five, finger, t_arrive):
+    """The manifold does not model the finger's other links: the chosen Q's exit time
+    must, so that a new contact is not lost to a link touching the object at once.
+    Until its exit time, every link stays clear (Pinocchio computeDistances)."""
+    hand, box, _, sample, manifolds, grasp = five
+    m = manifolds[finger]
+    others = {
+        n: (grasp.points_object[n], grasp.normals_object[n])
+        for n in grasp.points_object
+        if n != finger
+    }
+    q = choose_new_contact(
+        hand,
+        box,
+        m,
+        sample,
+        t_arrive,
+        P_object=grasp.points_object[finger],
+        n_P_object=grasp.normals_object[finger],
+        others=others,
+        mu=MU,
+        min_separation_m=SEP_M,
+    )
+    ka = m.time_index(t_arrive)
+    for k in range(ka, m.times_s.size):
+        if m.times_s[k] >= q.exit_time_s - 1e-9:
+            break
+        d = _link_distance(hand, finger, box, m.q[k, q.index], m.T_palm_object[k])
+        assert d >= CONTACT.link_clearance_m, (finger, m.times_s[k], d)
+
