@@ -515,4 +515,3 @@ def test_q_exit_time_counts_the_other_links_of_the_finger(five, finger, t_arrive
             break
         d = _link_distance(hand, finger, box, m.q[k, q.index], m.T_palm_object[k])
         assert d >= CONTACT.link_clearance_m, (finger, m.times_s[k], d)
-
