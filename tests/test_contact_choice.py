@@ -334,6 +334,29 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
     return first_fc, rows, passing, eps_P
 
 
+def _choose_from_grasp(five, finger, t_arrive, **kwargs):
+    """choose_new_contact for ``finger`` of the fixture's grasp, the others holding."""
+    hand, box, _, sample, manifolds, grasp = five
+    others = {
+        n: (grasp.points_object[n], grasp.normals_object[n])
+        for n in grasp.points_object
+        if n != finger
+    }
+    return choose_new_contact(
+        hand,
+        box,
+        manifolds[finger],
+        sample,
+        t_arrive,
+        P_object=grasp.points_object[finger],
+        n_P_object=grasp.normals_object[finger],
+        others=others,
+        mu=MU,
+        min_separation_m=SEP_M,
+        **kwargs,
+    )
+
+
 @pytest.mark.parametrize("finger, t_arrive", [("middle", 1.5), ("little", 1.0), ("thumb", 0.75)])
 def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
     hand, box, _, sample, manifolds, grasp = five
@@ -344,20 +367,8 @@ def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
         for n in grasp.points_object
         if n != finger
     }
-    q = choose_new_contact(
-        hand,
-        box,
-        m,
-        sample,
-        t_arrive,
-        P_object=P,
-        n_P_object=n_P,
-        others=others,
-        mu=MU,
-        min_separation_m=SEP_M,
-        max_checks=10_000,
-        rerank=0,  # the paper's order exactly (the re-rank by links is tested below)
-    )
+    # the paper's order exactly (the re-rank by the finger's links is tested below)
+    q = _choose_from_grasp(five, finger, t_arrive, max_checks=10_000, rerank=0)
     ka = m.time_index(t_arrive)
     expected, rows, passing, eps_P = _brute_force_q(hand, box, m, sample, ka, P, n_P, others)
     rank, i, exit_index, e = expected
@@ -490,25 +501,9 @@ def test_q_exit_time_counts_the_other_links_of_the_finger(five, finger, t_arrive
     """The manifold does not model the finger's other links: the chosen Q's exit time
     must, so that a new contact is not lost to a link touching the object at once.
     Until its exit time, every link stays clear (Pinocchio computeDistances)."""
-    hand, box, _, sample, manifolds, grasp = five
+    hand, box, _, _, manifolds, _ = five
     m = manifolds[finger]
-    others = {
-        n: (grasp.points_object[n], grasp.normals_object[n])
-        for n in grasp.points_object
-        if n != finger
-    }
-    q = choose_new_contact(
-        hand,
-        box,
-        m,
-        sample,
-        t_arrive,
-        P_object=grasp.points_object[finger],
-        n_P_object=grasp.normals_object[finger],
-        others=others,
-        mu=MU,
-        min_separation_m=SEP_M,
-    )
+    q = _choose_from_grasp(five, finger, t_arrive)
     ka = m.time_index(t_arrive)
     for k in range(ka, m.times_s.size):
         if m.times_s[k] >= q.exit_time_s - 1e-9:
