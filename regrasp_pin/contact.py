@@ -17,6 +17,7 @@ Frames: contact points and normals in the object frame; the object pose
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import coal
@@ -168,16 +169,18 @@ class FingerClearance:
     Args:
         hand: The hand.
         finger: Finger name.
+        others: The fingers to measure against (default: every other finger).
     """
 
-    def __init__(self, hand: Hand, finger: str):
+    def __init__(self, hand: Hand, finger: str, others: Iterable[str] | None = None):
         self.hand = hand
         self.finger = hand.finger(finger)
         mine = set(self.finger.geometry_ids)
+        keep = set(hand.finger_names if others is None else others) - {finger}
         self.pairs = [
             (a, b)
             for name, other in hand.fingers.items()
-            if name != finger
+            if name in keep
             for a in self.finger.geometry_ids
             for b in other.geometry_ids
             if b not in mine

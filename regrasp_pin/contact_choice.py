@@ -506,10 +506,8 @@ def _fingers_apart(
     hand: Hand, names: list[str], distance_m: float
 ) -> Callable[[dict[str, np.ndarray]], float]:
     """``q_fingers -> (smallest Coal distance among these fingers) - distance_m`` [m]."""
-    ids = {g for n in names for g in hand.finger(n).geometry_ids}
-    checks = [FingerClearance(hand, n) for n in names[:-1]]
-    for fc in checks:  # only the grasping fingers: idle ones are parked later
-        fc.pairs = [(a, b) for a, b in fc.pairs if b in ids]
+    # only the grasping fingers: idle ones are parked later
+    checks = [FingerClearance(hand, n, others=names) for n in names[:-1]]
 
     def apart(q_fingers: dict[str, np.ndarray]) -> float:
         q = hand.neutral()

@@ -46,7 +46,7 @@ from ._pair_distances import capsule_gap
 from ._validate import as_array, positive
 from .contact import LinkClearance
 from .exceptions import Attempt, FailureKind, InputError, PlanningError, VerificationError
-from .hand import Hand
+from .hand import Finger, Hand
 from .inflation import TipPath, grid_inflation, inflate_path
 from .motion import ObjectMotion
 from .objects import ConvexObject
@@ -550,9 +550,7 @@ def _attempt(
     stages.lap("timing")
 
     T = motion.pose(times)
-    q = _follow(
-        f, motion, times, T, tip_obj, q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p
-    )
+    q = _follow(f, times, T, tip_obj, q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p)
     vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
     ratio = vel / f.velocity_limit
     if (ratio > 1.0).any():
@@ -628,8 +626,7 @@ _IK_CHUNK = 16  # samples solved per IK batch, each warm-started from the previo
 
 
 def _follow(
-    f,
-    motion: ObjectMotion,
+    f: Finger,
     times: np.ndarray,
     T: np.ndarray,
     tip_obj: np.ndarray,

@@ -64,9 +64,7 @@ class _PairDistance:
     def __call__(self, a: str, b: str, q: np.ndarray) -> float:
         fc = self.checks.get((a, b))
         if fc is None:
-            fc = self.checks[(a, b)] = FingerClearance(self.hand, a)
-            theirs = set(self.hand.finger(b).geometry_ids)
-            fc.pairs = [(ga, gb) for ga, gb in fc.pairs if gb in theirs]
+            fc = self.checks[(a, b)] = FingerClearance(self.hand, a, others=[b])
         return fc(q)
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -119,7 +119,6 @@ class RegraspSearch:
     exclude_radius_m: float | None = None
     exit_tolerance_s: float = 0.25
     stretches: int = 2
-    stats: dict[str, int] = field(default_factory=dict)
 
     def find(
         self,
