@@ -48,6 +48,10 @@ class ContactModel:
             links at least this far from the object [m].
         finger_trigger_m: A holding finger that comes closer than this to another
             holding finger triggers a regrasp of one of them [m].
+        tip_penetration_m: The fingertip link's geometries may press at most this far
+            into the object at a contact [m] (the pad touches; a distal link shaped
+            other than the pad, such as the Allegro's box, must not sink in when the
+            pad tilts).
     """
 
     cone_deg: float = 60.0
@@ -57,6 +61,7 @@ class ContactModel:
     choice_margin_rad: float = 0.08
     choice_link_clearance_m: float = 0.003
     finger_trigger_m: float = 0.0015
+    tip_penetration_m: float = 5e-5
 
     @property
     def cos_cone(self) -> float:
@@ -110,15 +115,27 @@ class LinkClearance:
         finger: Finger name.
         obj: The object (its Coal geometry, object frame at the centre of mass).
         include_tip: Also measure the fingertip link's geometries.
+        tip_only: Measure only the fingertip link's geometries.
     """
 
-    def __init__(self, hand: Hand, finger: str, obj: ConvexObject, *, include_tip: bool = False):
+    def __init__(
+        self,
+        hand: Hand,
+        finger: str,
+        obj: ConvexObject,
+        *,
+        include_tip: bool = False,
+        tip_only: bool = False,
+    ):
         self.hand = hand
         self.finger = hand.finger(finger)
         self.obj_geom = obj.coal_geometry()
         ids = self.finger.geometry_ids
-        if not include_tip:
-            ids = tuple(g for g in ids if g not in self.finger.tip_geometry_ids)
+        tip = self.finger.tip_geometry_ids
+        if tip_only:
+            ids = tuple(g for g in ids if g in tip)
+        elif not include_tip:
+            ids = tuple(g for g in ids if g not in tip)
         self.geometry_ids = ids
         self._data = hand.model.createData()
         self._gdata = pin.GeometryData(hand.collision_model)

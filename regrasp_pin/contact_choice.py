@@ -242,7 +242,7 @@ def choose_new_contact(
         )
 
     eps_P = eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
-    lc = LinkClearance(hand, finger.name, obj) if link_check else None
+    lc = _ObjectClearance(hand, finger.name, obj, contact) if link_check else None
     fc = FingerClearance(hand, finger.name) if q_hand_arrive is not None else None
     T_arrive = None
     fallback = None
@@ -257,7 +257,7 @@ def choose_new_contact(
             if T_arrive is None:
                 T_arrive = manifold.T_palm_object[ka]
             q_full = hand.to_full(finger.name, manifold.q[ka, i])
-            if lc(q_full[None], T_arrive)[0] < contact.choice_link_clearance_m:
+            if not lc(q_full[None], T_arrive)[0]:
                 rejected["link clearance"] += 1
                 continue
         if fc is not None:
@@ -334,7 +334,7 @@ def initial_grasp(
     contact: ContactModel | None = None,
     mu: float = 0.8,
     min_separation_m: float | None = None,
-    candidates_per_finger: int = 20,
+    candidates_per_finger: int = 40,
     trials: int = 80,
     seed: int = 0,
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
@@ -344,18 +344,18 @@ def initial_grasp(
 
     Each finger's candidates are its usable points at ``t_index`` (margin >=
     ``contact.limit_margin_rad``, pad facing, links clear), ranked by how long they stay
-    usable and then by margin; the best ``candidates_per_finger`` (spread over the
-    surface) enter a seeded randomized search for the combination that maximizes
+    usable and then by margin; up to ``candidates_per_finger`` of them are kept, first
+    two tip radii apart (covering the surface), then one radius apart (filling in).
+    Each of ``trials`` seeded trials (the first greedy, the others with the fingers
+    shuffled and the rankings perturbed) searches depth first, with forward checking,
+    for a combination whose contacts are ``min_separation_m`` apart and whose fingers
+    are ``min_finger_gap_m`` apart (Coal, pairwise; idle fingers are parked later and
+    not checked). Among the force-closure combinations found, the one kept maximizes
     first the number of fingers that can let go with the others still in force closure
     (so that fingers can regrasp later), then twice the shortest lasting fraction, the
-    smallest of those leave-one-out epsilons, the mean lasting fraction and the epsilon,
-    among force-closure grasps
-    whose contacts are ``min_separation_m`` apart.
-
-    The grasping fingers must be at least ``min_finger_gap_m`` apart (Coal; idle fingers
-    are parked later and not checked). ``finger_clearance`` (optional) maps the
-    fingers' configurations to a further distance [m]; a grasp where it is <= 0 is
-    refused.
+    smallest of those leave-one-out epsilons, the mean lasting fraction and the epsilon.
+    ``finger_clearance`` (optional) maps the fingers' configurations to a further
+    distance [m]; a grasp where it is <= 0 is refused.
 
     Raises:
         ContactError: a finger has no usable contact, or no combination is in force
@@ -364,7 +364,7 @@ def initial_grasp(
     contact = contact or ContactModel()
     rng = np.random.default_rng(seed)
     names = list(manifolds)
-    apart = _fingers_apart(hand, names, min_finger_gap_m) if len(names) > 1 else None
+    gap = _PairGaps(hand, {n: manifolds[n].q[t_index] for n in names})
     pts, nrm = sample.points, sample.normals
     per_finger: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name in names:
@@ -381,20 +381,21 @@ def initial_grasp(
         last = exit_times(usable[:, idx], man.times_s, t_index)
         frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
         order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
-        chosen: list[int] = []
-        spread = 2 * finger.tip_radius
-        lc = LinkClearance(hand, name, obj)
+        clear = _ObjectClearance(hand, name, obj, contact)
+        q_rows = hand.to_full(name, man.q[t_index, idx])
         T0 = man.T_palm_object[t_index]
-        for j in order:
-            i = idx[j]
-            if any(np.linalg.norm(pts[i] - pts[idx[c]]) < spread for c in chosen):
-                continue
-            q_i = hand.to_full(name, man.q[t_index, i])[None]
-            if lc(q_i, T0)[0] < contact.choice_link_clearance_m:
-                continue
-            chosen.append(j)
-            if len(chosen) == candidates_per_finger:
-                break
+
+        def link_clear(j: int, clear=clear, q_rows=q_rows, T0=T0) -> bool:
+            return bool(clear(q_rows[j : j + 1], T0)[0])
+
+        # spread over the surface first (two tip radii apart), then denser (one radius)
+        chosen = _spread_out(
+            pts[idx],
+            order,
+            (2 * finger.tip_radius, finger.tip_radius),
+            candidates_per_finger,
+            link_clear,
+        )
         if not chosen:
             raise ContactError("every usable contact makes a link touch the object", finger=name)
         per_finger[name] = (idx[chosen], frac[chosen])
@@ -403,28 +404,26 @@ def initial_grasp(
     sep = sep_default if min_separation_m is None else min_separation_m
     best = None
     best_score = -np.inf
-    refused_clearance, closest = 0, -np.inf
+    search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
     for trial in range(trials):
-        order_f = rng.permutation(names) if trial else names
-        pick: dict[str, int] = {}
-        score_frac = 0.0
-        min_frac = 1.0
-        for name in order_f:
-            ids, frac = per_finger[name]
-            ok = [
-                c
-                for c in range(ids.size)
-                if all(np.linalg.norm(pts[ids[c]] - pts[pick[o]]) >= sep for o in pick)
-            ]
-            if not ok:
-                break
-            # trial 0 is greedy; later trials sample, favouring the long-lasting ones
-            c = ok[0] if trial == 0 else ok[int(rng.integers(0, min(len(ok), 4)))]
-            pick[name] = int(ids[c])
-            score_frac += float(frac[c])
-            min_frac = min(min_frac, float(frac[c]))
-        if len(pick) != len(names):
+        # trial 0 is greedy; later trials shuffle the fingers and perturb each finger's
+        # ranking, still favouring the long-lasting contacts
+        order_f = list(rng.permutation(names)) if trial else names
+        ranks = {
+            n: np.arange(per_finger[n][0].size)
+            if trial == 0
+            else np.argsort(
+                np.arange(per_finger[n][0].size) + rng.uniform(0.0, 4.0, per_finger[n][0].size),
+                kind="stable",
+            )
+            for n in order_f
+        }
+        chosen_c = search.complete(order_f, ranks)
+        if chosen_c is None:
             continue
+        pick = {n: int(per_finger[n][0][c]) for n, c in chosen_c.items()}
+        fracs = [float(per_finger[n][1][c]) for n, c in chosen_c.items()]
+        score_frac, min_frac = sum(fracs), min(fracs)
         ii = np.array([pick[n] for n in names])
         e = ferrari_canny_epsilon(
             pts[ii], nrm[ii], mu, n_edges=SCREEN_EDGES, torque_scale_m=obj.radius_m
@@ -457,20 +456,14 @@ def initial_grasp(
         if score > best_score:
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
-                refused_clearance += 1
+                search.refused += 1
                 continue
-            if apart is not None:
-                gap = apart(q_pick)
-                if gap < 0.0:
-                    refused_clearance += 1
-                    closest = max(closest, gap + min_finger_gap_m)
-                    continue
             best_score, best = score, (dict(pick), e, q_pick)
-    if best is None and refused_clearance:
+    closest = search.closest
+    if best is None and search.refused:
         known = bool(np.isfinite(closest))
         raise ContactError(
-            f"every force-closure grasp found ({refused_clearance}) puts two fingers too "
-            "close"
+            f"every grasp tried ({search.refused}) puts two fingers too close"
             + (
                 f" (the best {closest * 1e3:.2f} mm apart, need {min_finger_gap_m * 1e3:.2f} mm)"
                 if known
@@ -502,20 +495,172 @@ def initial_grasp(
     )
 
 
-def _fingers_apart(
-    hand: Hand, names: list[str], distance_m: float
-) -> Callable[[dict[str, np.ndarray]], float]:
-    """``q_fingers -> (smallest Coal distance among these fingers) - distance_m`` [m]."""
-    # only the grasping fingers: idle ones are parked later
-    checks = [FingerClearance(hand, n, others=names) for n in names[:-1]]
+class _ObjectClearance:
+    """Whether a finger at a candidate contact clears the object: its other links by
+    ``contact.choice_link_clearance_m``, its fingertip link not sunk in by more than
+    ``contact.tip_penetration_m`` (Coal)."""
 
-    def apart(q_fingers: dict[str, np.ndarray]) -> float:
-        q = hand.neutral()
-        for n, qf in q_fingers.items():
-            q[hand.finger(n).q_indices] = qf
-        return min(fc(q) for fc in checks) - distance_m
+    def __init__(self, hand: Hand, finger: str, obj: ConvexObject, contact: ContactModel):
+        self.links = LinkClearance(hand, finger, obj)
+        self.tip = LinkClearance(hand, finger, obj, tip_only=True)
+        self.contact = contact
 
-    return apart
+    def __call__(self, q_full: np.ndarray, T_palm_object: np.ndarray) -> np.ndarray:
+        """``(N,)`` bool for the ``(N, nq)`` configurations at the object pose(s)."""
+        c = self.contact
+        return (self.links(q_full, T_palm_object) >= c.choice_link_clearance_m) & (
+            self.tip(q_full, T_palm_object) >= -c.tip_penetration_m
+        )
+
+
+def _spread_out(
+    points: np.ndarray,
+    order: np.ndarray,
+    spacings: tuple[float, ...],
+    limit: int,
+    admit: Callable[[int], bool],
+) -> list[int]:
+    """Up to ``limit`` indices into ``points``, in ``order``, each at least the pass's
+    spacing [m] from those chosen before; one pass per spacing (widest first), so the
+    first candidates cover the surface and the later ones fill in. ``admit`` filters."""
+    chosen: list[int] = []
+    refused: set[int] = set()
+    for spacing in spacings:
+        for j in order:
+            j = int(j)
+            if len(chosen) == limit:
+                return chosen
+            if j in refused or j in chosen:
+                continue
+            if chosen and np.min(np.linalg.norm(points[chosen] - points[j], axis=1)) < spacing:
+                continue
+            if not admit(j):
+                refused.add(j)
+                continue
+            chosen.append(j)
+    return chosen
+
+
+class _CombinationSearch:
+    """Depth-first search for one contact per finger under the pairwise constraints.
+
+    Contacts of two fingers must be ``sep`` apart and the two fingers' links
+    ``min_gap_m`` apart (:class:`_PairGaps`); a finger with no admissible candidate sends
+    the search back to the previous finger's next candidate, up to ``max_nodes``
+    candidates per call.
+
+    Attributes:
+        refused: Dead ends where every spaced candidate was too close to a picked finger.
+        closest: The largest finger distance [m] among those refused (-inf: none).
+    """
+
+    def __init__(
+        self,
+        per_finger: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        points: np.ndarray,
+        sep: float,
+        gaps: _PairGaps,
+        min_gap_m: float,
+        max_nodes: int = 2000,
+    ):
+        self.per_finger, self.points, self.sep = per_finger, points, sep
+        self.gaps, self.min_gap_m, self.max_nodes = gaps, min_gap_m, max_nodes
+        self.refused, self.closest = 0, -np.inf
+
+    def complete(self, order: list[str], ranks: Mapping[str, np.ndarray]) -> dict[str, int] | None:
+        """Candidate positions ``finger -> c`` (fingers in ``order``, candidates in
+        ``ranks[finger]`` order), the first admissible combination; None if none is
+        found within the node budget."""
+        budget = [self.max_nodes]
+        return self._extend(order, ranks, {}, {}, budget)
+
+    def _gap(self, name: str, i: int, picked: Mapping[str, int]) -> float | None:
+        """Smallest finger distance [m] of ``name`` at point ``i`` to the picked fingers;
+        None if the contact is closer than ``sep`` to a picked contact."""
+        if any(np.linalg.norm(self.points[i] - self.points[j]) < self.sep for j in picked.values()):
+            return None
+        return self.gaps.smallest(name, i, picked)
+
+    def _dead_end(self, gaps: list[float]) -> None:
+        """Record a finger whose spaced candidates (``gaps`` [m]) were all too close."""
+        if gaps:
+            self.refused += 1
+            self.closest = max(self.closest, max(gaps))
+
+    def _admissible(self, name: str, picked: Mapping[str, int]) -> bool:
+        """Whether some candidate of ``name`` is spaced from and clear of ``picked``."""
+        too_close = []
+        for i in self.per_finger[name][0]:
+            g = self._gap(name, int(i), picked)
+            if g is not None and g >= self.min_gap_m:
+                return True
+            if g is not None:
+                too_close.append(g)
+        self._dead_end(too_close)
+        return False
+
+    def _extend(
+        self,
+        order: list[str],
+        ranks: Mapping[str, np.ndarray],
+        chosen: dict[str, int],
+        picked: dict[str, int],
+        budget: list[int],
+    ) -> dict[str, int] | None:
+        if len(chosen) == len(order):
+            return dict(chosen)
+        name = order[len(chosen)]
+        ids = self.per_finger[name][0]
+        too_close = []
+        for c in ranks[name]:
+            if budget[0] <= 0:
+                return None
+            budget[0] -= 1
+            i = int(ids[c])
+            g = self._gap(name, i, picked)
+            if g is None or g < self.min_gap_m:
+                too_close += [] if g is None else [g]
+                continue
+            chosen[name], picked[name] = int(c), i
+            # forward check: every finger still to pick keeps an admissible candidate
+            if all(self._admissible(r, picked) for r in order[len(chosen) :]):
+                found = self._extend(order, ranks, chosen, picked, budget)
+                if found is not None:
+                    return found
+            del chosen[name], picked[name]
+        self._dead_end(too_close)
+        return None
+
+
+class _PairGaps:
+    """Coal distances [m] between two grasping fingers at their candidate contacts.
+
+    Each finger's configuration at candidate ``i`` is ``q[finger][i]``; the others sit
+    at neutral (only the pair is measured). Distances are cached per pair of candidates.
+    """
+
+    def __init__(self, hand: Hand, q: Mapping[str, np.ndarray]):
+        self.hand, self.q = hand, q
+        self._checks: dict[tuple[str, str], FingerClearance] = {}
+        self._cache: dict[tuple[str, int, str, int], float] = {}
+
+    def pair(self, a: str, ia: int, b: str, ib: int) -> float:
+        """Distance [m] between finger ``a`` at candidate ``ia`` and ``b`` at ``ib``."""
+        if b < a:
+            a, ia, b, ib = b, ib, a, ia
+        key = (a, ia, b, ib)
+        if key not in self._cache:
+            if (a, b) not in self._checks:
+                self._checks[(a, b)] = FingerClearance(self.hand, a, others=[b])
+            q = self.hand.neutral()
+            q[self.hand.finger(a).q_indices] = self.q[a][ia]
+            q[self.hand.finger(b).q_indices] = self.q[b][ib]
+            self._cache[key] = self._checks[(a, b)](q)
+        return self._cache[key]
+
+    def smallest(self, finger: str, i: int, picked: Mapping[str, int]) -> float:
+        """Smallest distance [m] from ``finger`` at ``i`` to the picked fingers (inf: none)."""
+        return min((self.pair(finger, i, o, j) for o, j in picked.items()), default=np.inf)
 
 
 def _link_exit(
@@ -529,15 +674,17 @@ def _link_exit(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exit times ``(C,)`` [s] of the manifold points ``points`` from grid index ``ka``,
     cut where another link of the finger comes within ``contact.link_clearance_m`` of the
-    object (Coal, at the manifold's times), and whether each stays usable to the end."""
+    object or the fingertip link sinks in by more than ``contact.tip_penetration_m``
+    (Coal, at the manifold's times), and whether each stays usable to the end."""
     usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
     times = manifold.times_s
-    lc = LinkClearance(hand, finger, obj)
     T = manifold.T_palm_object[ka:]
     K = T.shape[0]
     q = manifold.q[ka:, points]  # (K, C, k); NaN where IK did not reach (not usable)
     q = np.where(np.isfinite(q), q, hand.finger(finger).q_mid)
     full = hand.to_full(finger, q.transpose(1, 0, 2).reshape(-1, q.shape[-1]))
-    d = lc(full, np.tile(T, (points.size, 1, 1))).reshape(points.size, K).T
-    ok = usable & (d >= contact.link_clearance_m)
+    T_all = np.tile(T, (points.size, 1, 1))
+    d = LinkClearance(hand, finger, obj)(full, T_all).reshape(points.size, K).T
+    d_tip = LinkClearance(hand, finger, obj, tip_only=True)(full, T_all).reshape(points.size, K).T
+    ok = usable & (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
     return exit_times(ok, times[ka:], 0), ok.all(axis=0)

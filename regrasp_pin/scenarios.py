@@ -77,12 +77,12 @@ _SETUP = {
     "allegro": {
         # thumb below, fingers above: the prism axis along the thumb-middle opposition
         "rotation": Rotation.align_vectors([[-0.1, -0.3, 0.94]], [[0.0, 0.0, 1.0]])[0],
-        "position": (0.115, 0.035, 0.0),
+        "position": (0.100, 0.010, 0.0),
         "fingers": ("thumb", "index", "middle", "ring"),
         "objects": {
             "hexagon": lambda: Prism(6, 0.045, 0.04),
             "octagon": lambda: Prism(8, 0.046, 0.04),
-            "box": lambda: Box((0.05, 0.06, 0.06)),
+            "box": lambda: Box((0.05, 0.08, 0.05)),
         },
     },
 }

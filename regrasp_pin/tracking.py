@@ -40,6 +40,8 @@ class ContactTrack:
         pad_cos: ``(T,)`` cosine between the pad direction and the inward normal.
         link_clearance_m: ``(T,)`` Coal distance of the finger's non-tip links to the
             object [m] (``inf`` where not computed).
+        tip_clearance_m: ``(T,)`` Coal distance of the fingertip link's geometries to
+            the object [m] (about 0 at a contact; ``inf`` where not computed).
         reasons: ``(T,)`` why each time is not holdable ("" where it is).
     """
 
@@ -53,6 +55,7 @@ class ContactTrack:
     pad_cos: np.ndarray
     link_clearance_m: np.ndarray
     reasons: tuple[str, ...]
+    tip_clearance_m: np.ndarray | None = None
 
     @property
     def holdable(self) -> np.ndarray:
@@ -125,9 +128,11 @@ def track_contact(
     n_palm = T_all[:, :3, :3] @ n
     pad_cos = pad_cosines(f, q, n_palm)
     clearance = np.full(times.size, np.inf)
+    tip_clear = np.full(times.size, np.inf)
     if check_links:
-        lc = LinkClearance(hand, finger, obj)
-        clearance = lc(hand.to_full(finger, q), T_all)
+        q_full = hand.to_full(finger, q)
+        clearance = LinkClearance(hand, finger, obj)(q_full, T_all)
+        tip_clear = LinkClearance(hand, finger, obj, tip_only=True)(q_full, T_all)
     reasons = []
     for i in range(times.size):
         if err[i] > contact.ik_tol_m:
@@ -143,6 +148,10 @@ def track_contact(
             reasons.append(f"pad turned {ang:.0f} deg from the surface normal")
         elif clearance[i] < contact.link_clearance_m:
             reasons.append(f"a link of the finger touches the object ({clearance[i] * 1e3:.2f} mm)")
+        elif tip_clear[i] < -contact.tip_penetration_m:
+            reasons.append(
+                f"the fingertip link sinks into the object ({-tip_clear[i] * 1e3:.2f} mm)"
+            )
         else:
             reasons.append("")
     return ContactTrack(
@@ -156,4 +165,5 @@ def track_contact(
         pad_cos=pad_cos,
         link_clearance_m=clearance,
         reasons=tuple(reasons),
+        tip_clearance_m=tip_clear,
     )

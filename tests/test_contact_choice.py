@@ -32,6 +32,8 @@ from hypothesis import strategies as st
 from regrasp_pin.contact import ContactModel, tip_targets
 from regrasp_pin.contact_choice import (
     SCREEN_EDGES,
+    _CombinationSearch,
+    _spread_out,
     choose_new_contact,
     exit_times,
     initial_grasp,
@@ -89,8 +91,9 @@ def allegro():
     return hand, box, motion, sample, manifolds, grasp
 
 
-def _link_distance(hand, finger, box, q_finger, T_palm_object) -> float:
-    """Pinocchio computeDistances: the finger's non-tip geometries against the box."""
+def _link_distance(hand, finger, box, q_finger, T_palm_object, tip=False) -> float:
+    """Pinocchio computeDistances: the finger's non-tip geometries (``tip``: its
+    fingertip link's geometries) against the box."""
     f = hand.finger(finger)
     gm = pin.GeometryModel()
     for g in hand.collision_model.geometryObjects:
@@ -98,7 +101,7 @@ def _link_distance(hand, finger, box, q_finger, T_palm_object) -> float:
     placement = pin.SE3(T_palm_object[:3, :3], T_palm_object[:3, 3])
     oid = gm.addGeometryObject(pin.GeometryObject("box", 0, placement, box.coal_geometry()))
     for g in f.geometry_ids:
-        if g not in f.tip_geometry_ids:
+        if (g in f.tip_geometry_ids) == tip:
             gm.addCollisionPair(pin.CollisionPair(int(g), oid))
     gdata = pin.GeometryData(gm)
     q_full = hand.to_full(finger, q_finger)
@@ -213,6 +216,8 @@ def _check_grasp(hand, box, sample, manifolds, grasp, min_sep):
         ), name
         d = _link_distance(hand, name, box, q, T)
         assert d >= CONTACT.choice_link_clearance_m, (name, d)
+        d_tip = _link_distance(hand, name, box, q, T, tip=True)
+        assert d_tip >= -CONTACT.tip_penetration_m, (name, d_tip)
     # pairwise separated: the tip spheres never overlap
     gaps = np.linalg.norm(pts[:, None] - pts[None], axis=2)[np.triu_indices(len(names), 1)]
     assert gaps.min() >= min_sep
@@ -323,8 +328,10 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
         e = eps(sample.points[i], sample.normals[i])
         if e <= 0:
             continue
-        d = _link_distance(hand, name, box, manifold.q[ka, i], manifold.T_palm_object[ka])
-        if d < contact.choice_link_clearance_m:
+        q_i, T_i = manifold.q[ka, i], manifold.T_palm_object[ka]
+        if _link_distance(hand, name, box, q_i, T_i) < contact.choice_link_clearance_m:
+            continue
+        if _link_distance(hand, name, box, q_i, T_i, tip=True) < -contact.tip_penetration_m:
             continue
         passing.append((rank, i, -neg_exit, e))
         if first_fc is None:
@@ -357,7 +364,7 @@ def _choose_from_grasp(five, finger, t_arrive, **kwargs):
     )
 
 
-@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.5), ("little", 1.0), ("thumb", 0.75)])
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.25), ("little", 1.0), ("thumb", 0.75)])
 def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
     hand, box, _, sample, manifolds, grasp = five
     m = manifolds[finger]
@@ -444,8 +451,8 @@ def test_ties_within_an_exit_tolerance_prefer_the_shorter_move(five):
     kw = dict(
         P_object=P, n_P_object=n_P, others=others, mu=MU, min_separation_m=SEP_M, max_checks=10_000
     )
-    exact = choose_new_contact(hand, box, m, sample, 1.5, **kw)
-    loose = choose_new_contact(hand, box, m, sample, 1.5, exit_tolerance_s=10.0, **kw)
+    exact = choose_new_contact(hand, box, m, sample, 1.25, **kw)
+    loose = choose_new_contact(hand, box, m, sample, 1.25, exit_tolerance_s=10.0, **kw)
     # with every exit time tied, the nearest candidate that passes the tests wins
     assert loose.distance_from_P_m <= exact.distance_from_P_m
     assert loose.exit_time_s <= exact.exit_time_s
@@ -496,11 +503,12 @@ def test_arrival_outside_the_manifold_is_rejected(five, t_arrive):
         )
 
 
-@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.5), ("thumb", 0.75), ("index", 0.5)])
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.25), ("thumb", 0.75), ("index", 0.5)])
 def test_q_exit_time_counts_the_other_links_of_the_finger(five, finger, t_arrive):
     """The manifold does not model the finger's other links: the chosen Q's exit time
     must, so that a new contact is not lost to a link touching the object at once.
-    Until its exit time, every link stays clear (Pinocchio computeDistances)."""
+    Until its exit time, every link stays clear and the fingertip link does not sink in
+    (Pinocchio computeDistances)."""
     hand, box, _, _, manifolds, _ = five
     m = manifolds[finger]
     q = _choose_from_grasp(five, finger, t_arrive)
@@ -510,3 +518,69 @@ def test_q_exit_time_counts_the_other_links_of_the_finger(five, finger, t_arrive
             break
         d = _link_distance(hand, finger, box, m.q[k, q.index], m.T_palm_object[k])
         assert d >= CONTACT.link_clearance_m, (finger, m.times_s[k], d)
+        d = _link_distance(hand, finger, box, m.q[k, q.index], m.T_palm_object[k], tip=True)
+        assert d >= -CONTACT.tip_penetration_m, (finger, m.times_s[k], d)
+
+
+# ------------------------------------------------------------------ grasp search parts
+def test_spread_out_covers_the_surface_first_then_fills_in():
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(-0.05, 0.05, (400, 3))
+    order = rng.permutation(400)
+    refused = set(order[::7].tolist())
+    chosen = _spread_out(pts, order, (0.03, 0.01), 60, lambda j: j not in refused)
+    assert len(chosen) == len(set(chosen)) == 60 and not refused & set(chosen)
+    d = np.linalg.norm(pts[chosen][:, None] - pts[chosen][None], axis=-1)
+    first = next(k for k in range(1, 60) if d[k, :k].min() < 0.03)  # start of pass 2
+    assert first > 1
+    # pass 1 is every admissible point of `order` at least 30 mm from those before it
+    greedy = []
+    for j in order:
+        if j not in refused and all(np.linalg.norm(pts[j] - pts[g]) >= 0.03 for g in greedy):
+            greedy.append(int(j))
+    assert chosen[:first] == greedy
+    # pass 2: every later point at least 10 mm from all chosen before it
+    assert all(d[k, :k].min() >= 0.01 for k in range(first, 60))
+
+
+class _TableGaps:
+    """Pairwise finger distances from a table: (finger, point, finger, point) -> [m]."""
+
+    def __init__(self, table):
+        self.table = table
+
+    def smallest(self, finger, i, picked):
+        return min((self.table[finger, i, o, j] for o, j in picked.items()), default=np.inf)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
+    rng = np.random.default_rng(seed)
+    names = ["a", "b", "c", "d"]
+    n = 6
+    ids = {f: np.arange(k * n, (k + 1) * n) for k, f in enumerate(names)}
+    per_finger = {f: (ids[f], np.ones(n)) for f in names}
+    pts = rng.uniform(-0.04, 0.04, (4 * n, 3))
+    table = {}
+    for f, g in itertools.permutations(names, 2):
+        for i in ids[f]:
+            for j in ids[g]:
+                v = table.get((g, j, f, i), rng.uniform(-0.004, 0.003))
+                table[f, i, g, j] = v
+    gap_m, sep = 0.001, 0.02
+
+    def admissible(combo):
+        pairs = itertools.combinations(zip(names, combo, strict=True), 2)
+        return all(
+            np.linalg.norm(pts[i] - pts[j]) >= sep and table[f, i, g, j] >= gap_m
+            for (f, i), (g, j) in pairs
+        )
+
+    exists = any(admissible(c) for c in itertools.product(*(ids[f] for f in names)))
+    search = _CombinationSearch(per_finger, pts, sep, _TableGaps(table), gap_m, max_nodes=10**6)
+    found = search.complete(names, {f: np.arange(n) for f in names})
+    assert (found is not None) == exists
+    if found is not None:
+        assert admissible([int(ids[f][found[f]]) for f in names])
+    else:
+        assert search.refused > 0 and search.closest < gap_m

@@ -54,17 +54,23 @@ def scene():
         idx = np.flatnonzero(m.usable(CONTACT.choice_margin_rad)[0])
         last = exit_times(m.usable(CONTACT.limit_margin_rad)[:, idx], m.times_s, 0)
         lc = LinkClearance(hand, name, box)
+        tip = LinkClearance(hand, name, box, tip_only=True)
         for j in np.lexsort((-m.margin_rad[0, idx], -last)):
             i = idx[j]
             q_full = hand.to_full(name, m.q[0, i])[None]
-            if lc(q_full, m.T_palm_object[0])[0] >= CONTACT.choice_link_clearance_m:
+            T = m.T_palm_object[0]
+            if (
+                lc(q_full, T)[0] >= CONTACT.choice_link_clearance_m
+                and tip(q_full, T)[0] >= -CONTACT.tip_penetration_m
+            ):
                 contacts[name] = (sample.points[i], sample.normals[i], m.q[0, i])
                 break
     return hand, box, motion, contacts
 
 
-def _link_distance(hand, finger, box, q_full, T_palm_object) -> float:
-    """Pinocchio computeDistances between the finger's non-tip geometries and the box."""
+def _link_distance(hand, finger, box, q_full, T_palm_object, tip=False) -> float:
+    """Pinocchio computeDistances between the finger's non-tip geometries (``tip``: its
+    fingertip link's geometries) and the box."""
     f = hand.finger(finger)
     gm = pin.GeometryModel()
     for g in hand.collision_model.geometryObjects:
@@ -72,7 +78,7 @@ def _link_distance(hand, finger, box, q_full, T_palm_object) -> float:
     placement = pin.SE3(T_palm_object[:3, :3], T_palm_object[:3, 3])
     oid = gm.addGeometryObject(pin.GeometryObject("box", 0, placement, box.coal_geometry()))
     for g in f.geometry_ids:
-        if g not in f.tip_geometry_ids:
+        if (g in f.tip_geometry_ids) == tip:
             gm.addCollisionPair(pin.CollisionPair(int(g), oid))
     data = hand.model.createData()
     gdata = pin.GeometryData(gm)
@@ -104,6 +110,10 @@ def _direct(hand, finger, box, motion, times, p, n, q_start, contact=CONTACT, li
             contact.link_clearance_m
         ):
             kind = "link"
+        elif links and _link_distance(hand, finger, box, hand.to_full(finger, q), T, tip=True) < (
+            -contact.tip_penetration_m
+        ):
+            kind = "tip"
         else:
             kind = ""
         out.append((kind, q))
@@ -115,6 +125,7 @@ _REASON_WORDS = {
     "joint": "rad of its",
     "pad": "pad turned",
     "link": "link of the finger touches",
+    "tip": "fingertip link sinks into",
 }
 
 
@@ -157,6 +168,7 @@ def test_track_records_what_it_checks(scene, finger):
     assert np.all(track.margin_rad[hold] >= CONTACT.limit_margin_rad)
     assert np.all(track.pad_cos[hold] >= CONTACT.cos_cone)
     assert np.all(track.link_clearance_m[hold] >= CONTACT.link_clearance_m)
+    assert np.all(track.tip_clearance_m[hold] >= -CONTACT.tip_penetration_m)
     # the numbers in the reasons are the recorded values
     for i in np.flatnonzero(~hold):
         r = track.reasons[i]

@@ -47,12 +47,18 @@ class LiftOffWindow:
 
 def held_until(track: ContactTrack, contact: ContactModel) -> float:
     """Last track time [s] up to which the contact is held inside the joint limits
-    (margin >= 0), reached, pad facing and with the links clear, without a break."""
+    (margin >= 0), reached, pad facing, with the links clear and the fingertip link
+    not sunk in, without a break."""
     ok = (
         (track.error_m <= contact.ik_tol_m)
         & (track.margin_rad >= 0.0)
         & (track.pad_cos >= contact.cos_cone)
         & (track.link_clearance_m >= 0.0)
+        & (
+            True
+            if track.tip_clearance_m is None
+            else track.tip_clearance_m >= -contact.tip_penetration_m
+        )
     )
     bad = np.flatnonzero(~ok)
     if bad.size == 0:
