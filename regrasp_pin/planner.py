@@ -367,14 +367,29 @@ def _triggers(ctx: _Context, state: _State) -> list[_Trigger]:
             continue
         t, why = h.track.trigger()
         lost = held_until(h.track, p.contact)
+        loss = _loss_reason(h, lost)
         near = prox.get(name)
         if near is not None:
-            lost = min(lost, near.lost_s - p.dt_s)
+            if near.lost_s - p.dt_s < lost:
+                lost, loss = near.lost_s - p.dt_s, near.reason
             if t is None or near.trigger_s < t:
                 t, why = near.trigger_s, near.reason
+        # a hold that will be lost triggers at least one regrasp (and the lead) before:
+        # a margin that closes fast (a link nearing the object) leaves no time otherwise
+        due = lost - p.regrasp.duration_s - p.lead_s
+        if lost < ctx.motion.t_end - p.dt_s - _TIME_TOL_S and (t is None or due < t):
+            t = max(due, state.now, h.t_from)
+            why = f"its hold is lost after t={lost:.3f} s ({loss})"
         if t is not None:
             out.append(_Trigger(t, name, why, lost))
     return sorted(out, key=lambda e: (round(e.time_s, 9), e.finger))
+
+
+def _loss_reason(h: Holding, lost_s: float) -> str:
+    """Why the hold ends right after ``lost_s`` [s] (the track's reason there)."""
+    k = int(np.searchsorted(h.track.times_s, lost_s + _TIME_TOL_S))
+    reasons = h.track.reasons
+    return reasons[min(k, len(reasons) - 1)] or "it leaves the joint limits"
 
 
 def _contenders(triggers: list[_Trigger], ctx: _Context) -> list[_Trigger]:
