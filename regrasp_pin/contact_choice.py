@@ -122,6 +122,7 @@ def choose_new_contact(
     finger_clearance_m: float = 0.002,
     exit_tolerance_s: float = 0.0,
     rerank: int = 12,
+    lasting: Callable[[np.ndarray, int], np.ndarray] | None = None,
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -155,6 +156,12 @@ def choose_new_contact(
         exit_tolerance_s: With a positive value, exit times that differ by less than
             this are ties, broken by the shorter distance from P and then the margin
             (instead of the margin first). 0 keeps the paper's order exactly.
+        rerank: How many of the first candidates get their exit times cut by what the
+            manifold does not model (the finger's other links, ``lasting``) and are
+            ranked again.
+        lasting: Optional ``(points (C,), ka) -> (K, C)`` bool over the manifold's times
+            from index ``ka`` on: False where something else ends the contact (e.g.
+            another holding finger comes too near); applied in the re-rank.
 
     Returns:
         The :class:`NewContact`.
@@ -223,7 +230,9 @@ def choose_new_contact(
         # object (Coal, at the manifold's times), and those candidates ranked again
         top = order[:rerank]
         t_exit, lasts = t_exit.copy(), lasts.copy()
-        t_exit[top], last = _link_exit(hand, finger.name, obj, manifold, idx[top], ka, contact)
+        t_exit[top], last = _link_exit(
+            hand, finger.name, obj, manifold, idx[top], ka, contact, lasting
+        )
         lasts[top] &= last
         head = rank(t_exit, lasts)
         order = np.concatenate([head[np.isin(head, top)], order[rerank:]])
@@ -671,11 +680,13 @@ def _link_exit(
     points: np.ndarray,
     ka: int,
     contact: ContactModel,
+    lasting: Callable[[np.ndarray, int], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exit times ``(C,)`` [s] of the manifold points ``points`` from grid index ``ka``,
     cut where another link of the finger comes within ``contact.link_clearance_m`` of the
     object or the fingertip link sinks in by more than ``contact.tip_penetration_m``
-    (Coal, at the manifold's times), and whether each stays usable to the end."""
+    (Coal, at the manifold's times) or ``lasting`` says so, and whether each stays
+    usable to the end."""
     usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
     times = manifold.times_s
     T = manifold.T_palm_object[ka:]
@@ -687,4 +698,6 @@ def _link_exit(
     d = LinkClearance(hand, finger, obj)(full, T_all).reshape(points.size, K).T
     d_tip = LinkClearance(hand, finger, obj, tip_only=True)(full, T_all).reshape(points.size, K).T
     ok = usable & (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
+    if lasting is not None:
+        ok &= lasting(points, ka)
     return exit_times(ok, times[ka:], 0), ok.all(axis=0)

@@ -10,7 +10,7 @@ import pytest
 
 from regrasp_pin import make_scenario
 from regrasp_pin.holding import rest_configuration, start_holding
-from regrasp_pin.planning.proximity import holding_proximity
+from regrasp_pin.planning.proximity import clear_of_fingers, holding_proximity
 
 TRIGGER_M, LOST_M = 0.0015, 0.0005
 
@@ -87,3 +87,43 @@ def test_no_proximity_when_the_fingers_stay_apart(holds):
     assert _distance(hand, holding, base, "ring", "middle", grid[49]) >= TRIGGER_M
     # the index and middle never come within the lost distance in that half second
     assert prox["index"].lost_s == np.inf
+
+
+def test_candidates_stay_clear_until_a_finger_comes_near(holds):
+    """clear_of_fingers against computeDistances at every time: the mask is False
+    from the first time the candidate finger is within the limit of another one."""
+    hand, holding, grid, base = holds
+    times = grid[::25]
+    rng = np.random.default_rng(0)
+    f = hand.finger("middle")
+    # the middle finger's own hold plus random configurations near it
+    q_own = holding["middle"].q_at(times)
+    q_finger = np.stack(
+        [q_own, *[q_own + rng.normal(0.0, 0.15, q_own.shape) for _ in range(3)]], axis=1
+    )
+    q_finger = np.clip(q_finger, f.lower, f.upper)
+    q_hand = np.broadcast_to(base, (times.size, base.size)).copy()
+    for n, h in holding.items():
+        q_hand[:, hand.finger(n).q_indices] = h.q_at(times)
+    others = ["index", "ring"]
+    ok = clear_of_fingers(hand, "middle", q_finger, q_hand, others, TRIGGER_M)
+    assert ok.shape == (times.size, 4)
+    for c in range(4):
+        per_time = []
+        for k in range(times.size):
+            gm = pin.GeometryModel()
+            for g in hand.collision_model.geometryObjects:
+                gm.addGeometryObject(pin.GeometryObject(g))
+            for o in others:
+                for ga, gb in itertools.product(f.geometry_ids, hand.finger(o).geometry_ids):
+                    gm.addCollisionPair(pin.CollisionPair(int(ga), int(gb)))
+            gdata = pin.GeometryData(gm)
+            q = q_hand[k].copy()
+            q[f.q_indices] = q_finger[k, c]
+            pin.computeDistances(hand.model, hand.model.createData(), gm, gdata, q)
+            per_time.append(min(r.min_distance for r in gdata.distanceResults))
+        below = np.flatnonzero(np.array(per_time) < TRIGGER_M)
+        first = below[0] if below.size else times.size
+        assert np.all(ok[:first, c]) and not np.any(ok[first:, c]), (c, first)
+    # the held middle finger runs into the ring finger during the turn (see holds)
+    assert not ok[:, 0].all()

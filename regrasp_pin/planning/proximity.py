@@ -26,7 +26,7 @@ from ..contact import FingerClearance
 from ..hand import Hand
 from ..holding import Holding
 
-__all__ = ["Proximity", "holding_proximity"]
+__all__ = ["Proximity", "clear_of_fingers", "holding_proximity"]
 
 COARSE = 5  # Coal on every COARSE-th screened time first
 
@@ -139,3 +139,47 @@ def holding_proximity(
             if me not in out or (p.trigger_s, p.other) < (out[me].trigger_s, out[me].other):
                 out[me] = p
     return out
+
+
+def clear_of_fingers(
+    hand: Hand,
+    finger: str,
+    q_finger: np.ndarray,
+    q_hand: np.ndarray,
+    others: list[str],
+    limit_m: float,
+) -> np.ndarray:
+    """Where a finger's candidate contacts stay clear of the other fingers over time.
+
+    Args:
+        hand: The hand.
+        finger: The finger.
+        q_finger: ``(K, C, k)`` the finger's configurations at ``K`` times for ``C``
+            candidates [rad] (NaN rows count as clear: they are not usable anyway).
+        q_hand: ``(K, nq)`` the hand at those times (the others holding).
+        others: The fingers to keep clear of.
+        limit_m: Smallest distance [m].
+
+    Returns:
+        ``(K, C)`` bool: False from the first time (per candidate) at which the finger
+        comes closer than ``limit_m`` to one of ``others`` (capsule screen, then Coal).
+    """
+    K, C, _ = q_finger.shape
+    f = hand.fingers[finger]
+    q = np.repeat(q_hand[None], C, axis=0)  # (C, K, nq)
+    qf = np.transpose(q_finger, (1, 0, 2))
+    q[..., f.q_indices] = np.where(np.isfinite(qf), qf, f.q_mid)
+    rows = q.reshape(C * K, -1)
+    ok = np.ones((C, K), bool)
+    dist = _PairDistance(hand)
+    for o in others:
+        ids = (list(f.geometry_ids), list(hand.fingers[o].geometry_ids))
+        near = (capsule_gap(hand, *ids, rows) < limit_m).reshape(C, K)
+        for c in np.flatnonzero(near.any(axis=1)):
+            cand = np.flatnonzero(near[c] & ok[c])
+            if cand.size == 0:
+                continue
+            i, _ = _first_below(dist, (finger, o), q[c], cand, limit_m)
+            if i is not None:
+                ok[c, i:] = False
+    return ok.T

@@ -21,6 +21,7 @@ run out.
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from collections.abc import Callable, Mapping
@@ -38,6 +39,7 @@ from ..objects import ConvexObject, SurfaceSample
 from ..regrasp import RegraspParams, RegraspResult, plan_regrasp
 from ..timing import duration_for_move, stretched_duration
 from .outcomes import dominant_kind, failure_summary
+from .proximity import clear_of_fingers
 
 __all__ = ["Found", "RegraspSearch", "SearchBudget"]
 
@@ -223,6 +225,27 @@ class RegraspSearch:
             q_hand_arrive=q_hand(np.array([t_arrive]))[0],
             finger_clearance_m=0.001,
             exit_tolerance_s=self.exit_tolerance_s,
+            lasting=functools.partial(self._clear_of_others, finger, list(others), q_hand),
+        )
+
+    def _clear_of_others(
+        self,
+        finger: str,
+        others: list[str],
+        q_hand: Callable[[np.ndarray], np.ndarray],
+        points: np.ndarray,
+        ka: int,
+    ) -> np.ndarray:
+        """``(K, C)``: the candidates ``points`` stay clear of the holding fingers (by
+        the trigger distance) at the manifold's times from index ``ka`` on."""
+        m = self.manifolds[finger]
+        return clear_of_fingers(
+            self.hand,
+            finger,
+            m.q[ka:, points],
+            q_hand(m.times_s[ka:]),
+            others,
+            self.contact.finger_trigger_m,
         )
 
     def _exclude_radius(self, finger: str) -> float:
