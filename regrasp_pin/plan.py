@@ -5,7 +5,7 @@ A plan stores, at strictly increasing times ``t`` [s], the full hand configurati
 ``T_palm_object`` as ``[x, y, z, qx, qy, qz, qw]`` (palm frame). Linear interpolation of
 ``q`` and slerp of the pose between consecutive samples *is* the motion that was
 verified. ``phases`` says, per finger, when it held which contact and when it
-regrasped. See ``docs/plan_format.md`` for every field.
+regrasped or let go. See ``docs/plan_format.md`` for every field.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ if TYPE_CHECKING:  # imported lazily at run time
     from .hand import Hand
     from .objects import ConvexObject
 
-__all__ = ["PLAN_FORMAT", "ContactPhase", "Plan", "RegraspPhase", "repo_root"]
+__all__ = ["PLAN_FORMAT", "ContactPhase", "Plan", "RegraspPhase", "ReleasePhase", "repo_root"]
 
 PLAN_FORMAT = "regrasp_pin.plan/1"
 
@@ -111,7 +111,43 @@ class RegraspPhase:
         return d
 
 
-Phase = ContactPhase | RegraspPhase
+@dataclass(frozen=True)
+class ReleasePhase:
+    """A finger lets go of contact P at ``t_start`` and stays off to ``t_end`` [s].
+
+    Its fingertip backs off along the contact normal and the finger then stays still
+    (:mod:`~regrasp_pin.planning.release`); the other fingers hold the object.
+
+    Attributes:
+        finger: Finger name.
+        t_start: Release time [s].
+        t_end: End of the plan [s].
+        P_object: The contact let go, object frame ``(3,)`` [m].
+        min_clearance_m: Smallest finger-object distance after the back-off [m].
+        reason: Why the finger let go.
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    P_object: np.ndarray
+    min_clearance_m: float
+    reason: str = ""
+    kind: str = field(default="release", init=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "finger": self.finger,
+            "kind": self.kind,
+            "t_start": self.t_start,
+            "t_end": self.t_end,
+            "P_object": np.asarray(self.P_object).tolist(),
+            "min_clearance_m": self.min_clearance_m,
+            "reason": self.reason,
+        }
+
+
+Phase = ContactPhase | RegraspPhase | ReleasePhase
 
 
 def _phase_from_dict(d: dict[str, Any]) -> Phase:
@@ -148,7 +184,18 @@ def _phase_from_dict(d: dict[str, Any]) -> Phase:
             reason=str(d.get("reason", "")),
             extra={k: v for k, v in d.items() if k not in known},
         )
-    raise InputError("phases", f"unknown phase kind {d.get('kind')!r}", "'contact' or 'regrasp'")
+    if d.get("kind") == "release":
+        return ReleasePhase(
+            finger=d["finger"],
+            t_start=float(d["t_start"]),
+            t_end=float(d["t_end"]),
+            P_object=np.asarray(d["P_object"], float),
+            min_clearance_m=float(d["min_clearance_m"]),
+            reason=str(d.get("reason", "")),
+        )
+    raise InputError(
+        "phases", f"unknown phase kind {d.get('kind')!r}", "'contact', 'regrasp' or 'release'"
+    )
 
 
 @dataclass
@@ -277,4 +324,9 @@ class Plan:
     def regrasps(self) -> list[RegraspPhase]:
         """All regrasp phases, in time order."""
         out = [p for ps in self.phases.values() for p in ps if isinstance(p, RegraspPhase)]
+        return sorted(out, key=lambda p: p.t_start)
+
+    def releases(self) -> list[ReleasePhase]:
+        """All release phases, in time order."""
+        out = [p for ps in self.phases.values() for p in ps if isinstance(p, ReleasePhase)]
         return sorted(out, key=lambda p: p.t_start)

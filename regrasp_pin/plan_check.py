@@ -8,10 +8,10 @@ would hide. What it checks (the motion between two samples is linear interpolati
 ``q`` and of the object position, slerp of its rotation, as ``docs/plan_format.md``
 says):
 
-* every regrasp, re-sampled so that no joint moves more than ``max_step_rad`` between
-  two samples: the moving finger's collision geometries against the object (the
-  worst penetration must stay within ``penetration_tol_m``) and the geometries of
-  every pair of different fingers (they must not touch);
+* every regrasp and every release, re-sampled so that no joint moves more than
+  ``max_step_rad`` between two samples: the moving finger's collision geometries
+  against the object (the worst penetration must stay within ``penetration_tol_m``)
+  and the geometries of every pair of different fingers (they must not touch);
 * at every sample of the plan (not densified), the geometries of every pair of
   different fingers apart (fingers that hold can also collide);
 * every sample inside the joint limits (linear interpolation between samples inside
@@ -116,7 +116,8 @@ class PlanCheck:
 
     Attributes:
         ok: True when no problem was found.
-        regrasps: One :class:`RegraspCheck` per regrasp phase, in time order.
+        regrasps: One :class:`RegraspCheck` per regrasp phase (time order), then one per
+            release phase.
         joint_limit_violations: The joints that leave their limits (worst sample each).
         min_holding: Fewest fingers holding a contact at any instant of the plan.
         t_min_holding_s: A time when that happens [s].
@@ -232,19 +233,19 @@ def recheck_plan(
         )
 
     checks = []
-    for phase in plan.regrasps():
+    for phase in [*plan.regrasps(), *plan.releases()]:
         rc = _check_regrasp(scene, phase, max_step)
         checks.append(rc)
         if rc.min_object_distance_m < -pen_tol:
             problems.append(
-                f"{rc.finger} (regrasp at {rc.t_start:.3f} s) penetrates the object by "
+                f"{rc.finger} ({phase.kind} at {rc.t_start:.3f} s) penetrates the object by "
                 f"{rc.penetration_m * 1e3:.3f} mm at t={rc.t_min_object_s:.3f} s "
                 f"(tolerance {pen_tol * 1e3:.3f} mm)"
             )
         if rc.min_finger_distance_m <= 0.0:
             a, b = rc.finger_pair
             problems.append(
-                f"{a} and {b} touch during the regrasp of {rc.finger} at {rc.t_start:.3f} s "
+                f"{a} and {b} touch during the {phase.kind} of {rc.finger} at {rc.t_start:.3f} s "
                 f"(distance {rc.min_finger_distance_m * 1e3:.3f} mm at "
                 f"t={rc.t_min_finger_s:.3f} s)"
             )

@@ -38,8 +38,9 @@ from .holding import Holding, holding_q, holds_to_end, rest_configuration, start
 from .manifold import Manifold, build_manifold
 from .motion import ObjectMotion
 from .objects import ConvexObject, SurfaceSample
-from .plan import ContactPhase, Plan, RegraspPhase
+from .plan import ContactPhase, Plan, RegraspPhase, ReleasePhase
 from .planning.proximity import holding_proximity
+from .planning.release import Release, plan_release
 from .planning.schedule import LiftOffWindow, held_until, lift_off_window, start_times
 from .planning.search import Found, RegraspSearch, SearchBudget
 from .regrasp import RegraspParams, RegraspResult
@@ -77,6 +78,10 @@ class PlannerParams:
         contact: The contact model (trigger margin, pad cone, tolerances).
         regrasp: Parameters of each regrasp (``duration_s`` is the shortest duration;
             longer ones follow from the joint velocity limits).
+        release: Let a finger go for the rest of the motion when its hold is lost with
+            no regrasp possible before the end, if the others hold in force closure to
+            the end (:mod:`.planning.release`).
+        release_back_off_s: Duration of a release's back-off move [s].
     """
 
     dt_s: float = 0.01
@@ -94,6 +99,8 @@ class PlannerParams:
     exit_tolerance_s: float = 0.25
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
+    release: bool = True
+    release_back_off_s: float = 0.1
 
 
 @dataclass
@@ -127,6 +134,7 @@ class _State:
     regrasps: tuple[RegraspResult, ...]
     now: float  # no regrasp may start before this (one finger in the air)
     held_to_end: dict[str, str]
+    released: dict[str, Release] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -152,6 +160,7 @@ class _Context:
     budget: SearchBudget
     base_q: np.ndarray
     tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
+    parks: dict[str, np.ndarray] = field(default_factory=dict)  # where let-go fingers go
 
 
 def plan_manipulation(
@@ -293,15 +302,18 @@ def plan_manipulation(
             progress(state.now)
     stage["regrasps"] = time.perf_counter() - t0
 
-    phases = {
-        n: [
-            *state.phases[n],
-            ContactPhase(
-                finger=n, t_start=h.t_from, t_end=motion.t_end, p_object=h.p, n_object=h.n
-            ),
-        ]
-        for n, h in state.holding.items()
-    }
+    phases = {n: list(state.phases[n]) for n in state.released}
+    phases.update(
+        {
+            n: [
+                *state.phases[n],
+                ContactPhase(
+                    finger=n, t_start=h.t_from, t_end=motion.t_end, p_object=h.p, n_object=h.n
+                ),
+            ]
+            for n, h in state.holding.items()
+        }
+    )
     t0 = time.perf_counter()
     plan = _assemble(
         hand,
@@ -311,7 +323,7 @@ def plan_manipulation(
         state.history,
         state.holding,
         phases,
-        list(state.regrasps),
+        [*state.regrasps, *state.released.values()],
         until=motion.t_end,
         params=params,
         base_q=base_q,
@@ -323,6 +335,7 @@ def plan_manipulation(
             "fingers_regrasped": sorted({r.finger for r in state.regrasps}),
             "initial_epsilon": grasp.epsilon,
             "held_to_end": dict(state.held_to_end),
+            "released": {n: r.t_start for n, r in state.released.items()},
             "backtracks": backtracks,
             "stage_s": stage,
         }
@@ -465,7 +478,7 @@ def _advance(
         )
         log.info("%s: %s", name, note)
         return replace(state, held_to_end={**state.held_to_end, name: note})
-    stay = [n for n in ctx.active if n != name]
+    stay = [n for n in ctx.active if n != name and n in state.holding]
     if len(stay) < p.min_holding:
         raise PlanningError(
             f"only {len(stay)} fingers would hold (need {p.min_holding})",
@@ -492,6 +505,9 @@ def _advance(
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
     if not starts:
         busy = win.empty
+        released = None if busy else _try_release(ctx, state, trig, triggers, win, stay, why)
+        if released is not None:
+            return released
         raise PlanningError(
             f"{reason} at t={t_trig:.3f} s, "
             + (
@@ -536,7 +552,13 @@ def _advance(
             except PlanningError:
                 found = None
     if found is None:
-        found = search(starts, end_by_s)
+        try:
+            found = search(starts, end_by_s)
+        except PlanningError:
+            released = _try_release(ctx, state, trig, triggers, win, stay, why)
+            if released is None:
+                raise
+            return released
     if abs(found.result.t_start - starts[0]) > _TIME_TOL_S:
         why += (
             f"; lifted off at t={found.result.t_start:.3f} s: "
@@ -544,6 +566,123 @@ def _advance(
         )
     steps.append(_Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
     return _apply(ctx, state, name, t_trig, why, found)
+
+
+def _try_release(
+    ctx: _Context,
+    state: _State,
+    trig: _Trigger,
+    triggers: list[_Trigger],
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> _State | None:
+    """The state after ``trig.finger`` lets go for the rest of the motion, or None.
+
+    Only when releases are allowed, the hold is lost before the end, and every finger
+    that stays holds to the end (no regrasp can follow: it would leave too few). The
+    release times tried are the latest in the window first, then earlier ones.
+    """
+    p, motion = ctx.params, ctx.motion
+    name = trig.finger
+    end = motion.t_end - p.dt_s - _TIME_TOL_S
+    if not p.release or win.empty or trig.lost_s >= end:
+        return None
+    if any(
+        e.lost_s < end for e in triggers if e.finger in stay and e.finger not in state.held_to_end
+    ):
+        return None
+    h = state.holding[name]
+    q_hand = _q_hand(ctx, state, stay)
+    tried = []
+    for k in range(p.max_starts):
+        t_r = win.latest_s - k * p.start_step_s
+        if t_r < win.earliest_s - _TIME_TOL_S or ctx.budget.exhausted:
+            break
+        t_r = max(t_r, win.earliest_s)
+        q_r = holding_q(ctx.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
+        for park in (None, _park(ctx, name)):
+            rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
+            if rel is not None:
+                log.info("%s lets go at t=%.3f s", name, t_r)
+                note = (
+                    f"{why}; no regrasp can land before the end: let go (the others hold "
+                    "to the end)"
+                )
+                return _apply_release(state, name, rel, note)
+    log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
+    return None
+
+
+def _park(ctx: _Context, name: str) -> np.ndarray:
+    """Where ``name`` goes after letting go: its posture clearest of the object over the
+    motion (:func:`~.holding.rest_configuration`), computed once."""
+    if name not in ctx.parks:
+        q = rest_configuration(ctx.hand, ctx.obj, ctx.motion, [name])
+        ctx.parks[name] = q[ctx.hand.fingers[name].q_indices]
+    return ctx.parks[name]
+
+
+def _release_at(
+    ctx: _Context,
+    state: _State,
+    name: str,
+    t_r: float,
+    q_r: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    park: np.ndarray | None,
+    tried: list[str],
+) -> Release | None:
+    """A verified release of ``name`` at ``t_r`` (``park``: see plan_release), or None
+    (the failure noted in ``tried``)."""
+    p, h = ctx.params, state.holding[name]
+    try:
+        return plan_release(
+            ctx.hand,
+            ctx.obj,
+            ctx.motion,
+            name,
+            t_r,
+            (h.p, h.n),
+            q_r,
+            q_hand,
+            clearance_m=p.regrasp.clearance_m,
+            back_off_s=p.release_back_off_s,
+            dt_s=p.dt_s,
+            link_clearance_m=p.regrasp.link_clearance_m,
+            finger_clearance_m=p.regrasp.finger_clearance_m,
+            ik_tol_m=p.contact.ik_tol_m,
+            q_park=park,
+            park_s=p.regrasp.duration_s,
+        )
+    except PlanningError as exc:
+        tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {exc.kind.value}")
+        return None
+
+
+def _apply_release(state: _State, name: str, rel: Release, why: str) -> _State:
+    """The state after a verified release of ``name``."""
+    h = state.holding[name]
+    hold = ContactPhase(
+        finger=name, t_start=h.t_from, t_end=rel.t_start, p_object=h.p, n_object=h.n
+    )
+    off = ReleasePhase(
+        finger=name,
+        t_start=rel.t_start,
+        t_end=rel.t_end,
+        P_object=rel.P_object,
+        min_clearance_m=rel.min_clearance_m,
+        reason=why,
+    )
+    return _State(
+        holding={n: x for n, x in state.holding.items() if n != name},
+        history={**state.history, name: (*state.history[name], replace(h, t_to=rel.t_start))},
+        phases={**state.phases, name: (*state.phases[name], hold, off)},
+        regrasps=state.regrasps,
+        now=max(state.now, rel.t_start),
+        held_to_end=state.held_to_end,
+        released={**state.released, name: rel},
+    )
 
 
 def _next_deadline(
@@ -575,6 +714,10 @@ def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarr
             q[:, hand.fingers[n].q_indices] = holding_q(
                 hand, motion, n, state.holding[n], times, tol
             )
+        for n, rel in state.released.items():  # let go: still, after the back-off
+            idx = hand.fingers[n].q_indices
+            for j in range(idx.size):
+                q[:, idx[j]] = np.interp(times, rel.times_s, rel.q[:, j])
         return q
 
     return q_hand
@@ -637,6 +780,7 @@ def _apply(
         regrasps=(*state.regrasps, res),
         now=res.t_end,
         held_to_end=state.held_to_end,
+        released=state.released,
     )
 
 
@@ -649,6 +793,7 @@ def _signature(state: _State) -> tuple:
             for n, h in sorted(state.holding.items())
         ),
         tuple(sorted(state.held_to_end)),
+        tuple(sorted(state.released)),
     )
 
 
@@ -749,17 +894,24 @@ def _backtrack(
 
 def _partial(ctx: _Context, state: _State, until: float) -> Plan:
     """The plan up to ``until``: every finger holding its current contact."""
-    phases = {
-        n: [
-            *state.phases[n],
-            *(
-                [ContactPhase(finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n)]
-                if h.t_from < until
-                else []
-            ),
-        ]
-        for n, h in state.holding.items()
-    }
+    phases = {n: list(state.phases[n]) for n in state.released}
+    phases.update(
+        {
+            n: [
+                *state.phases[n],
+                *(
+                    [
+                        ContactPhase(
+                            finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n
+                        )
+                    ]
+                    if h.t_from < until
+                    else []
+                ),
+            ]
+            for n, h in state.holding.items()
+        }
+    )
     return _assemble(
         ctx.hand,
         ctx.obj,
@@ -768,7 +920,7 @@ def _partial(ctx: _Context, state: _State, until: float) -> Plan:
         state.history,
         state.holding,
         phases,
-        list(state.regrasps),
+        [*state.regrasps, *state.released.values()],
         until=until,
         params=ctx.params,
         base_q=ctx.base_q,
@@ -783,14 +935,14 @@ def _assemble(
     history: dict[str, tuple[Holding, ...]],
     holding: dict[str, Holding],
     phases: dict[str, list],
-    regrasps: list[RegraspResult],
+    regrasps: list[RegraspResult | Release],
     *,
     until: float,
     params: PlannerParams,
     base_q: np.ndarray,
 ) -> Plan:
-    """Sample the whole hand: grid times outside the regrasps, the regrasps' own samples
-    inside them (so linear interpolation between samples is what was verified).
+    """Sample the whole hand: grid times outside the regrasps (and releases), their own
+    samples inside them (so linear interpolation between samples is what was verified).
 
     Holding fingers are placed by exact IK on their contact at every sample (warm from
     their track), which is exactly what the regrasp verification used for them.
@@ -803,7 +955,7 @@ def _assemble(
     if times.size < 2:
         times = np.array([motion.t_start, max(until, motion.t_start + params.dt_s)])
     q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
-    for name in holding:
+    for name in history:
         f = hand.fingers[name]
         in_air = np.zeros(times.size, bool)
         for r in regrasps:
@@ -812,7 +964,7 @@ def _assemble(
                 for j in range(f.k):
                     q[sel, f.q_indices[j]] = np.interp(times[sel], r.times_s, r.q[:, j])
                 in_air |= sel
-        for h in [*history[name], holding[name]]:
+        for h in [*history[name], *([holding[name]] if name in holding else [])]:
             b = h.t_to if h.t_to is not None else until
             sel = (times >= h.t_from - 1e-9) & (times <= b + 1e-9) & ~in_air
             if sel.any():

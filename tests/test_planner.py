@@ -146,3 +146,32 @@ def test_an_exhausted_budget_ends_typed_with_the_partial_plan():
     exc = err.value
     assert exc.kind == FailureKind.BUDGET
     assert exc.partial is not None and not exc.partial.regrasps()
+
+
+def test_a_finger_lets_go_when_no_regrasp_can_land_before_the_end(tmp_path):
+    """Fast (60 deg at 40 deg/s): a contact is lost too close to the end for any
+    regrasp; the others hold to the end, so the finger lets go. The release is in the
+    plan file and passes the same independent re-check as the regrasps."""
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
+    result = plan_manipulation(
+        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
+    )
+    plan = Plan.load(result.plan.save(tmp_path / "plan.json"))
+    releases = plan.releases()
+    assert len(releases) == 1
+    rel = releases[0]
+    phases = plan.phases[rel.finger]
+    # it held until it let go, and stays off to the end
+    assert phases[-1].kind == "release"
+    assert phases[-2].kind == "contact" and phases[-2].t_end == pytest.approx(rel.t_start)
+    assert rel.t_end == pytest.approx(plan.t[-1])
+    # nobody regrasps after it: every other finger holds from before the release to the end
+    for name, ps in plan.phases.items():
+        if name != rel.finger:
+            assert ps[-1].kind == "contact" and ps[-1].t_start <= rel.t_start + 1e-9
+    check = recheck_plan(plan, max_step_rad=1e-3)
+    assert check.ok, check.problems
+    assert check.min_holding >= 3
+    (after,) = [r for r in check.regrasps if r.t_start == pytest.approx(rel.t_start)]
+    assert after.finger == rel.finger and after.min_object_distance_m >= -1e-4
+    assert Plan.from_dict(plan.to_dict()).to_dict() == plan.to_dict()

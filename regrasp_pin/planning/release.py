@@ -1,0 +1,181 @@
+"""Letting a finger go for the rest of the motion.
+
+Near the end of a motion a contact may be lost with no time left for a regrasp
+(lift-off, flight and landing take at least ``RegraspParams.duration_s``). If the
+other fingers hold the object in force closure to the end, the finger can simply let
+go: from the release time ``t_r`` its fingertip backs off along the contact normal
+(fixed in the palm frame: ``clearance`` from where the pad touched) over a short
+minimum-jerk move; the finger then stays still or, given a parking configuration,
+moves there (minimum jerk, joint space) and stays. The motion is verified with Coal
+like every regrasp (:func:`~regrasp_pin.verify.verify_finger_motion`: the fingertip
+clear of the object, allowed to touch only at the release, the other links and the
+other fingers clear, joints within their limits).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..contact import LinkClearance, tip_targets
+from ..exceptions import FailureKind, PlanningError
+from ..hand import Hand
+from ..motion import ObjectMotion
+from ..objects import ConvexObject
+from ..timing import minimum_jerk
+from ..verify import verify_finger_motion
+
+__all__ = ["Release", "plan_release"]
+
+_KIND = {
+    "tip-object": FailureKind.OBJECT_CLEARANCE,
+    "link-object": FailureKind.OBJECT_CLEARANCE,
+    "finger-finger": FailureKind.FINGER_COLLISION,
+    "joint-limit": FailureKind.JOINT_LIMIT,
+}
+
+
+@dataclass(frozen=True)
+class Release:
+    """A verified release of ``finger`` at ``t_start`` to the end of the motion.
+
+    Attributes:
+        finger: Finger name.
+        t_start: Release time [s] (the pad touches its contact there).
+        t_end: End of the motion [s].
+        P_object: The contact let go, object frame ``(3,)`` [m].
+        times_s: ``(S,)`` sample times [s].
+        q: ``(S, k)`` the finger's configurations [rad].
+        min_clearance_m: Smallest distance of the finger to the object after the
+            back-off [m] (Coal).
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    P_object: np.ndarray
+    times_s: np.ndarray
+    q: np.ndarray
+    min_clearance_m: float
+
+
+def plan_release(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    finger: str,
+    t_release_s: float,
+    P: tuple[np.ndarray, np.ndarray],
+    q_release: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    *,
+    clearance_m: float,
+    back_off_s: float,
+    dt_s: float,
+    link_clearance_m: float,
+    finger_clearance_m: float,
+    ik_tol_m: float,
+    q_park: np.ndarray | None = None,
+    park_s: float = 0.4,
+) -> Release:
+    """Plan and verify the release of ``finger`` at ``t_release_s`` (module docstring).
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        motion: Its motion.
+        finger: The finger that lets go.
+        t_release_s: Release time [s] (before the end of the motion).
+        P: Its contact ``(point, outward normal)``, object frame.
+        q_release: ``(k,)`` the finger's configuration holding P at ``t_release_s``.
+        q_hand: Maps times ``(S,)`` to hand configurations ``(S, nq)`` with the other
+            fingers holding.
+        clearance_m: How far the fingertip backs off along the normal [m].
+        back_off_s: Duration of the back-off [s] (shorter if the motion ends first).
+        dt_s: Sampling step after the back-off [s].
+        link_clearance_m: Clearance of the finger's other links from the object [m].
+        finger_clearance_m: Clearance from the other fingers [m].
+        ik_tol_m: IK tolerance of the backed-off configuration [m].
+        q_park: ``(k,)`` where the finger goes after the back-off (None: it stays).
+        park_s: Duration of the move to ``q_park`` [s] (shorter if the motion ends).
+
+    Returns:
+        The verified :class:`Release`.
+
+    Raises:
+        PlanningError: the backed-off position is out of reach (``ik-unreachable``)
+            or the motion fails the Coal check (its kind, measured and required value).
+    """
+    f = hand.finger(finger)
+    t_r, t_end = float(t_release_s), float(motion.t_end)
+    T_r = motion.pose(np.array([t_r]))[0]
+    p, n = np.asarray(P[0], float), np.asarray(P[1], float)
+    target = tip_targets(p[None], n[None], f.tip_radius + clearance_m, T_r[None])[0, 0]
+    res = f.ik(target[None], q_release, tol_m=ik_tol_m)
+    if res.error_m[0] > ik_tol_m:
+        raise PlanningError(
+            f"cannot back off {clearance_m * 1e3:.1f} mm from the contact "
+            f"(residual {res.error_m[0] * 1e3:.2f} mm)",
+            finger=finger,
+            time_s=t_r,
+            kind=FailureKind.IK_UNREACHABLE,
+            measured=float(res.error_m[0]),
+            required=ik_tol_m,
+        )
+    q_off = res.q[0]
+    d = min(back_off_s, t_end - t_r)
+    n_move = max(int(np.ceil(d / dt_s * 4)), 2)
+    t_move = t_r + d * np.linspace(0.0, 1.0, n_move + 1)
+    t_still = np.arange(t_move[-1] + dt_s, t_end + 1e-9, dt_s)
+    if t_still.size and t_still[-1] < t_end - 1e-9:
+        t_still = np.append(t_still, t_end)
+    times = np.concatenate([t_move, t_still[t_still > t_move[-1] + 1e-9]])
+    s = minimum_jerk((times - t_r) / max(d, 1e-9))
+    q = q_release[None] + s[:, None] * (q_off - q_release)[None]
+    if q_park is not None and t_move[-1] < t_end - 1e-9:
+        d_park = min(park_s, t_end - t_move[-1])
+        s_park = minimum_jerk((times - t_move[-1]) / d_park)
+        q = q + s_park[:, None] * (np.asarray(q_park, float) - q_off)[None]
+    q_full = q_hand(times)
+    q_full[:, f.q_indices] = q
+    T = motion.pose(times)
+    report = verify_finger_motion(
+        hand,
+        obj,
+        finger,
+        times,
+        q_full,
+        T,
+        tip_clearance_m=0.0,
+        link_clearance_m=link_clearance_m,
+        finger_clearance_m=finger_clearance_m,
+    )
+    if not report.ok:
+        worst = report.worst_failure
+        kind = (
+            FailureKind.JOINT_LIMIT
+            if worst is None
+            else _KIND.get(worst.kind, FailureKind.OBJECT_CLEARANCE)
+        )
+        raise PlanningError(
+            "the release fails the Coal check"
+            + ("" if worst is None else f" ({worst.kind}, {worst.value * 1e3:.2f} mm)"),
+            finger=finger,
+            time_s=report.time_s,
+            kind=kind,
+            measured=None if worst is None else worst.value,
+            required=None if worst is None else worst.required,
+        )
+    after = times >= t_move[-1] - 1e-9
+    clear = LinkClearance(hand, finger, obj, include_tip=True)(q_full[after], T[after])
+    return Release(
+        finger=finger,
+        t_start=t_r,
+        t_end=t_end,
+        P_object=p.copy(),
+        times_s=times,
+        q=q,
+        min_clearance_m=float(clear.min()),
+    )

@@ -1,0 +1,144 @@
+"""Letting a finger go (regrasp_pin.planning.release), against FK and computeDistances."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import assert_close
+
+from regrasp_pin import make_scenario
+from regrasp_pin.exceptions import FailureKind, PlanningError
+from regrasp_pin.holding import holding_q, rest_configuration, start_holding
+from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.planning.release import plan_release
+
+T_RELEASE_S = 1.0
+CLEARANCE_M = 0.003
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """The demo's initial grasp held over the first 1.5 s of the turn; the index finger
+    lets go at 1 s, while it still holds."""
+    scen = make_scenario("five_finger", "hexagon")
+    t = np.round(np.arange(0.0, 1.5 + 1e-9, 0.01), 9)
+    scen = dataclasses.replace(scen, motion=ObjectMotion.from_poses(t, scen.motion.pose(t)))
+    hand, p = scen.hand, scen.params
+    grid = np.round(np.arange(0.0, scen.motion.t_end + 1e-9, 0.01), 9)
+    idle = [n for n in hand.finger_names if n not in p.fingers]
+    base = rest_configuration(hand, scen.obj, scen.motion, idle)
+    holding = {
+        n: start_holding(
+            hand,
+            scen.obj,
+            scen.motion,
+            grid,
+            n,
+            scen.grasp.points_object[n],
+            scen.grasp.normals_object[n],
+            scen.grasp.q[n],
+            0.0,
+            p.contact,
+        )
+        for n in p.fingers
+    }
+
+    def q_hand(times):
+        q = np.broadcast_to(base, (times.size, base.size)).copy()
+        for n, h in holding.items():
+            if n != "index":
+                q[:, hand.finger(n).q_indices] = holding_q(
+                    hand, scen.motion, n, h, times, p.contact.ik_tol_m
+                )
+        return q
+
+    h = holding["index"]
+    q_r = holding_q(hand, scen.motion, "index", h, np.array([T_RELEASE_S]), 1e-5)[0]
+    return scen, q_hand, h, q_r
+
+
+def _release(scene, **kw):
+    scen, q_hand, h, q_r = scene
+    args = dict(
+        clearance_m=CLEARANCE_M,
+        back_off_s=0.1,
+        dt_s=0.01,
+        link_clearance_m=0.0,
+        finger_clearance_m=0.0005,
+        ik_tol_m=1e-5,
+    )
+    args.update(kw)
+    return plan_release(
+        scen.hand,
+        scen.obj,
+        scen.motion,
+        "index",
+        T_RELEASE_S,
+        (h.p, h.n),
+        q_r,
+        q_hand,
+        **args,
+    )
+
+
+def _distance_to_object(hand, obj, finger, q_full, T):
+    """computeDistances: every geometry of the finger against the object."""
+    gm = pin.GeometryModel()
+    for g in hand.collision_model.geometryObjects:
+        gm.addGeometryObject(pin.GeometryObject(g))
+    placement = pin.SE3(T[:3, :3], T[:3, 3])
+    oid = gm.addGeometryObject(pin.GeometryObject("obj", 0, placement, obj.coal_geometry()))
+    for g in hand.finger(finger).geometry_ids:
+        gm.addCollisionPair(pin.CollisionPair(int(g), oid))
+    gdata = pin.GeometryData(gm)
+    pin.computeDistances(hand.model, hand.model.createData(), gm, gdata, q_full)
+    return min(r.min_distance for r in gdata.distanceResults)
+
+
+def test_the_finger_backs_off_along_the_normal_and_stays(scene):
+    scen, q_hand, h, q_r = scene
+    rel = _release(scene)
+    f = scen.hand.finger("index")
+    assert rel.t_start == T_RELEASE_S and rel.t_end == scen.motion.t_end
+    assert rel.times_s[0] == T_RELEASE_S and rel.times_s[-1] == pytest.approx(rel.t_end)
+    assert np.all(np.diff(rel.times_s) > 0)
+    assert_close(rel.q[0], q_r, atol=1e-12, what="starts where it held")
+    # after the back-off the tip centre is `clearance` further out along the normal,
+    # fixed in the palm frame (FK of the planned configurations)
+    T_r = scen.motion.pose(np.array([T_RELEASE_S]))[0]
+    c_touch = T_r[:3, :3] @ (h.p + f.tip_radius * h.n) + T_r[:3, 3]
+    c_off = c_touch + CLEARANCE_M * (T_r[:3, :3] @ h.n)
+    still = rel.times_s >= T_RELEASE_S + 0.1 - 1e-9
+    assert still.sum() > 10
+    assert_close(f.fk(rel.q[still]), np.tile(c_off, (still.sum(), 1)), atol=2e-5, what="tip")
+    # its clearance is the smallest computeDistances over the still samples
+    T = scen.motion.pose(rel.times_s[still])
+    q_full = q_hand(rel.times_s[still])
+    q_full[:, f.q_indices] = rel.q[still]
+    d = [
+        _distance_to_object(scen.hand, scen.obj, "index", q, Tk)
+        for q, Tk in zip(q_full, T, strict=True)
+    ]
+    assert_close(rel.min_clearance_m, min(d), atol=1e-6, what="clearance")
+    assert rel.min_clearance_m > 0.0
+
+
+def test_a_parking_configuration_is_reached(scene):
+    scen, _, _, _ = scene
+    f = scen.hand.finger("index")
+    park = rest_configuration(scen.hand, scen.obj, scen.motion, ["index"])[f.q_indices]
+    rel = _release(scene, q_park=park, park_s=0.2)
+    done = rel.times_s >= T_RELEASE_S + 0.1 + 0.2 - 1e-9
+    assert done.any()
+    assert_close(rel.q[done], np.tile(park, (done.sum(), 1)), atol=1e-9, what="parked")
+
+
+def test_an_unreachable_back_off_is_a_typed_failure(scene):
+    with pytest.raises(PlanningError) as info:
+        _release(scene, clearance_m=0.5)
+    err = info.value
+    assert err.kind == FailureKind.IK_UNREACHABLE and err.finger == "index"
+    assert err.measured > err.required == 1e-5
