@@ -347,22 +347,24 @@ def initial_grasp(
     trials: int = 80,
     seed: int = 0,
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
-    min_finger_gap_m: float = 0.001,
+    min_finger_gap_m: float | None = None,
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
 
     Each finger's candidates are its usable points at ``t_index`` (margin >=
     ``contact.limit_margin_rad``, pad facing, links clear), ranked by how long they stay
     usable and then by margin; up to ``candidates_per_finger`` of them are kept, first
-    two tip radii apart (covering the surface), then one radius apart (filling in).
-    Each of ``trials`` seeded trials (the first greedy, the others with the fingers
-    shuffled and the rankings perturbed) searches depth first, with forward checking,
-    for a combination whose contacts are ``min_separation_m`` apart and whose fingers
-    are ``min_finger_gap_m`` apart (Coal, pairwise; idle fingers are parked later and
-    not checked). Among the force-closure combinations found, the one kept maximizes
-    first the number of fingers that can let go with the others still in force closure
-    (so that fingers can regrasp later), then twice the shortest lasting fraction, the
-    smallest of those leave-one-out epsilons, the mean lasting fraction and the epsilon.
+    two tip radii apart (covering the surface), then one radius apart (filling in). Each
+    of ``trials`` seeded trials (the first greedy, the others with the fingers shuffled
+    and the rankings perturbed) searches depth first, with forward checking, for a
+    combination whose contacts are ``min_separation_m`` apart and whose fingers are
+    ``min_finger_gap_m`` apart (Coal, pairwise; default ``contact.finger_trigger_m`` +
+    0.5 mm, so that no two fingers start close enough to trigger a regrasp; idle fingers
+    are parked later and not checked). Among the force-closure combinations found, the
+    one kept maximizes first the number of fingers that can let go with the others still
+    in force closure (so that fingers can regrasp later), then twice the shortest
+    lasting fraction, the smallest of those leave-one-out epsilons, the mean lasting
+    fraction and the epsilon.
     ``finger_clearance`` (optional) maps the fingers' configurations to a further
     distance [m]; a grasp where it is <= 0 is refused.
 
@@ -413,6 +415,8 @@ def initial_grasp(
     sep = sep_default if min_separation_m is None else min_separation_m
     best = None
     best_score = -np.inf
+    if min_finger_gap_m is None:
+        min_finger_gap_m = contact.finger_trigger_m + 0.0005
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
     for trial in range(trials):
         # trial 0 is greedy; later trials shuffle the fingers and perturb each finger's

@@ -5,7 +5,7 @@ Scenes (palm frame):
 * five-finger hand, box 40 x 60 x 40 mm at (65, 0, 60) mm turning about the palm y
   axis through its centre at 30 deg/s for 3 s (thumb on the -x face, the fingers on
   the +x face); surface every 4 mm, manifolds on 13 times (every 0.25 s).
-* Allegro hand (fingers along +z of its palm, flexing toward +x), box 40 x 60 x 40 mm
+* Allegro hand (fingers along +z of its palm, flexing toward +x), box 40 x 80 x 40 mm
   at (100, 20, 20) mm turning about the palm z axis through its centre at 20 deg/s for
   1 s (thumb on the -z face, the fingers curled onto the +z face); surface every 6 mm,
   manifolds on 5 times.
@@ -81,7 +81,7 @@ def five():
 @pytest.fixture(scope="module")
 def allegro():
     hand = Hand.allegro()
-    box, motion = _twist((0.1, 0.02, 0.02), (0.04, 0.06, 0.04), (0, 0, 1), 20.0, 1.0)
+    box, motion = _twist((0.1, 0.02, 0.02), (0.04, 0.08, 0.04), (0, 0, 1), 20.0, 1.0)
     sample = box.sample_surface(0.006)
     times = np.linspace(0.0, 1.0, 5)
     manifolds = {
