@@ -348,6 +348,7 @@ def initial_grasp(
     seed: int = 0,
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
     min_finger_gap_m: float | None = None,
+    gap_horizon_s: float = 1.0,
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
 
@@ -358,13 +359,14 @@ def initial_grasp(
     of ``trials`` seeded trials (the first greedy, the others with the fingers shuffled
     and the rankings perturbed) searches depth first, with forward checking, for a
     combination whose contacts are ``min_separation_m`` apart and whose fingers are
-    ``min_finger_gap_m`` apart (Coal, pairwise; default ``contact.finger_trigger_m`` +
-    0.5 mm, so that no two fingers start close enough to trigger a regrasp; idle fingers
-    are parked later and not checked). Among the force-closure combinations found, the
-    one kept maximizes first the number of fingers that can let go with the others still
-    in force closure (so that fingers can regrasp later), then twice the shortest
-    lasting fraction, the smallest of those leave-one-out epsilons, the mean lasting
-    fraction and the epsilon.
+    ``min_finger_gap_m`` apart (Coal, pairwise, at up to 5 of the manifolds' times over
+    the first ``gap_horizon_s`` [s]; default ``contact.finger_trigger_m`` + 0.5 mm, so
+    that no two fingers start close enough to trigger a regrasp; idle fingers are parked
+    later and not checked). Among the force-closure combinations found, the one kept
+    maximizes first the number of fingers that can let go with the others still in force
+    closure (so that fingers can regrasp later), then twice the shortest lasting
+    fraction, the smallest of those leave-one-out epsilons, the mean lasting fraction
+    and the epsilon.
     ``finger_clearance`` (optional) maps the fingers' configurations to a further
     distance [m]; a grasp where it is <= 0 is refused.
 
@@ -375,7 +377,14 @@ def initial_grasp(
     contact = contact or ContactModel()
     rng = np.random.default_rng(seed)
     names = list(manifolds)
-    gap = _PairGaps(hand, {n: manifolds[n].q[t_index] for n in names})
+    # finger gaps at a few times over the first ``gap_horizon_s``: two fingers that
+    # start apart but close in at once would trigger a regrasp right away
+    times = manifolds[names[0]].times_s
+    soon = np.flatnonzero(
+        (times >= times[t_index] - 1e-9) & (times <= times[t_index] + gap_horizon_s + 1e-9)
+    )
+    ks = soon[:: max(1, -(-soon.size // 5))]
+    gap = _PairGaps(hand, {n: manifolds[n].q[ks] for n in names})
     pts, nrm = sample.points, sample.normals
     per_finger: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name in names:
@@ -648,8 +657,10 @@ class _CombinationSearch:
 class _PairGaps:
     """Coal distances [m] between two grasping fingers at their candidate contacts.
 
-    Each finger's configuration at candidate ``i`` is ``q[finger][i]``; the others sit
-    at neutral (only the pair is measured). Distances are cached per pair of candidates.
+    Each finger's configurations at candidate ``i`` are ``q[finger][:, i]`` (a few
+    times); a pair's distance is the smallest over the times where both reach their
+    contacts. The others sit at neutral (only the pair is measured). Distances are
+    cached per pair of candidates.
     """
 
     def __init__(self, hand: Hand, q: Mapping[str, np.ndarray]):
@@ -665,10 +676,16 @@ class _PairGaps:
         if key not in self._cache:
             if (a, b) not in self._checks:
                 self._checks[(a, b)] = FingerClearance(self.hand, a, others=[b])
-            q = self.hand.neutral()
-            q[self.hand.finger(a).q_indices] = self.q[a][ia]
-            q[self.hand.finger(b).q_indices] = self.q[b][ib]
-            self._cache[key] = self._checks[(a, b)](q)
+            qa, qb = self.q[a][:, ia], self.q[b][:, ib]
+            both = np.isfinite(qa).all(axis=1) & np.isfinite(qb).all(axis=1)
+            both[0] = True  # the start always counts
+            d = np.inf
+            for k in np.flatnonzero(both):
+                q = self.hand.neutral()
+                q[self.hand.finger(a).q_indices] = qa[k]
+                q[self.hand.finger(b).q_indices] = qb[k]
+                d = min(d, self._checks[(a, b)](q))
+            self._cache[key] = d
         return self._cache[key]
 
     def smallest(self, finger: str, i: int, picked: Mapping[str, int]) -> float:

@@ -7,6 +7,7 @@ import json
 import pytest
 
 from regrasp_pin.cli import build_parser, main
+from regrasp_pin.plan import Plan
 
 
 def test_help_lists_every_command(capsys):
@@ -32,11 +33,17 @@ def test_demo_json_writes_plan_and_figures(tmp_path, capsys):
     assert (tmp_path / "plan.json").is_file()
     for f in doc["figures"]:
         assert (tmp_path / f.split("/")[-1]).stat().st_size > 5000
-    assert {"finger", "trigger_s", "P_object_mm", "Q_object_mm", "min_clearance_mm"} <= set(
-        doc["rows"][0]
-        if doc["rows"]
-        else {"finger", "trigger_s", "P_object_mm", "Q_object_mm", "min_clearance_mm"}
-    )
+    # the summary is the plan file's: one row per regrasp phase, one entry per release
+    plan = Plan.load(tmp_path / "plan.json")
+    phases = plan.regrasps()
+    assert len(doc["rows"]) == len(phases) >= 3
+    for row, ph in zip(doc["rows"], phases, strict=True):
+        assert row["finger"] == ph.finger and row["t_start_s"] == pytest.approx(ph.t_start)
+        assert row["Q_object_mm"] == pytest.approx(1e3 * ph.Q_object, abs=0.051)
+        assert row["min_clearance_mm"] == pytest.approx(1e3 * ph.min_clearance_m)
+    assert [(r["finger"], r["t_s"]) for r in doc["releases"]] == [
+        (p.finger, p.t_start) for p in plan.releases()
+    ]
 
 
 def test_bad_arguments_are_reported(capsys):

@@ -74,7 +74,10 @@ def five():
     manifolds = {
         n: build_manifold(hand.finger(n), sample, motion, times) for n in hand.finger_names
     }
-    grasp = initial_grasp(hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M)
+    # all five fingers on a 60 mm face: they may start 1 mm apart (not the default)
+    grasp = initial_grasp(
+        hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M, min_finger_gap_m=0.001
+    )
     return hand, box, motion, sample, manifolds, grasp
 
 
@@ -243,6 +246,19 @@ def test_initial_grasp_on_the_allegro_hand(allegro):
     assert grasp.normals_object["thumb"] @ grasp.normals_object["middle"] < -0.99
 
 
+def test_initial_fingers_stay_apart_over_the_first_second(allegro):
+    # default gap: the proximity trigger + 0.5 mm, at every manifold time of the first
+    # 1 s (all five here) where both fingers still reach their contacts
+    hand, _, _, _, manifolds, grasp = allegro
+    need = CONTACT.finger_trigger_m + 0.0005
+    for a, b in itertools.combinations(grasp.indices, 2):
+        for k in range(manifolds[a].times_s.size):
+            qa, qb = manifolds[a].q[k, grasp.indices[a]], manifolds[b].q[k, grasp.indices[b]]
+            if np.isfinite(qa).all() and np.isfinite(qb).all():
+                d = _finger_distance(hand, [a, b], {a: qa, b: qb})
+                assert d >= need - 1e-9, (a, b, manifolds[a].times_s[k], d)
+
+
 def test_initial_grasp_lets_fingers_go(five):
     # the search favours grasps from which a finger can be lifted with the rest still
     # holding: some leave-one-out subsets are in force closure
@@ -261,7 +277,9 @@ def test_initial_grasp_lets_fingers_go(five):
 
 def test_initial_grasp_is_seeded(five):
     hand, box, _, sample, manifolds, grasp = five
-    again = initial_grasp(hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M)
+    again = initial_grasp(
+        hand, box, manifolds, sample, mu=MU, min_separation_m=SEP_M, min_finger_gap_m=0.001
+    )
     assert again.indices == grasp.indices
 
 

@@ -122,6 +122,10 @@ def run(args: argparse.Namespace) -> int:
         "fingers_regrasped": sorted({r["finger"] for r in rows}),
         "all_verified": all(r["verified"] for r in rows),
         "rows": rows,
+        "releases": [
+            {"finger": p.finger, "t_s": p.t_start, "min_clearance_mm": 1e3 * p.min_clearance_m}
+            for p in result.plan.releases()
+        ],
         "stage_s": result.stage_s,
         "total_s": elapsed,
         "plan": str(plan_path),
@@ -170,6 +174,12 @@ def _print_table(rows: list[dict], summary: dict) -> None:
             f"total path {sum(r['path_length_mm'] for r in rows):.0f} mm, "
             f"min clearance {min(r['min_clearance_mm'] for r in rows):.2f} mm, "
             f"planning {sum(r['planning_ms'] for r in rows):.0f} ms"
+        )
+    for rel in summary["releases"]:
+        print(
+            f"{rel['finger']} lets go at t={rel['t_s']:.2f} s (no regrasp can land before "
+            f"the end; the others hold), verified by Coal, {rel['min_clearance_mm']:.2f} mm "
+            "clear after backing off"
         )
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in summary["stage_s"].items())
     print(f"stages: {stages}; total {summary['total_s']:.2f} s")
