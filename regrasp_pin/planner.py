@@ -6,7 +6,8 @@ margin of a boundary plane (or stops being feasible), that finger regrasps -- li
 off, travels around the object and lands on a new contact Q -- while the others keep
 holding. One finger is in the air at a time.
 
-Scheduling. Triggers are taken in time order. A finger may lift off anywhere in its
+Scheduling. Triggers are taken in time order; a hold that will be lost triggers at
+least one regrasp duration before it is. A finger may lift off anywhere in its
 window (:mod:`.planning.schedule`): from when it is free (no other finger in the air)
 to the last time its contact is still held inside the joint limits. The preferred
 start is ``lead_s`` before the trigger, earlier if the next finger's trigger would
@@ -15,9 +16,12 @@ For each start the search (:mod:`.planning.search`) tries new contacts Q and
 durations until one regrasp verifies. When a finger finds none, the planner backs up
 once per failure (at most ``max_backtracks`` times): the previous regrasp is planned
 again to land before this finger's window closes, or, if time was not the problem,
-to land elsewhere. Every search shares one budget (``budget_s``). A motion that cannot
-be achieved raises :class:`~.exceptions.PlanningError` with the finger, the time, the
-kind of the failure, every attempt and the partial plan up to that time.
+to land elsewhere. Every search shares one budget (``budget_s``). A hold that is lost
+too close to the end for any regrasp, while the others hold in force closure to the
+end, is let go (:mod:`.planning.release`: a verified back-off; a ``release`` phase).
+A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
+finger, the time, the kind of the failure, every attempt and the partial plan up to
+that time.
 """
 
 from __future__ import annotations
