@@ -1,7 +1,7 @@
 """The independent plan re-check passes a clean plan and reports what a corrupted one breaks.
 
 The clean plan is built by hand (no planner): the canonical scenario's grasp, the first
-0.6 s of its motion, every finger holding by IK but the index, which lifts 10 mm off
+0.6 s of its motion, every finger holding by IK but the ring finger, which lifts 10 mm off
 its contact along the contact normal and lands on it again. Corruptions are then made
 in ``q`` or the phases, and each must be reported with its numbers.
 """
@@ -21,13 +21,13 @@ from regrasp_pin.motion import ObjectMotion
 from regrasp_pin.plan_check import recheck_plan
 
 T_END = 0.6
-LIFT = (0.1, 0.5)  # the index regrasp [s]
-LIFT_M = 0.010  # how far the index tip rises off its contact at mid-regrasp [m]
+LIFT = (0.1, 0.5)  # the ring regrasp [s]
+LIFT_M = 0.010  # how far the ring tip rises off its contact at mid-regrasp [m]
 
 
 def hand_made_plan() -> tuple[Plan, object, np.ndarray]:
-    """The clean plan, the hand, and the index's lift ``(S, k)`` [rad] added to its hold."""
-    scen = make_scenario("five_finger", "hexagon", rate_deg_s=40)
+    """The clean plan, the hand, and the ring's lift ``(S, k)`` [rad] added to its hold."""
+    scen = make_scenario("five_finger", "hexagon", rate_deg_s=20)
     hand, obj, grasp = scen.hand, scen.obj, scen.grasp
     t = np.round(np.arange(0.0, T_END + 1e-9, 0.01), 9)
     motion = ObjectMotion.from_poses(t, scen.motion.pose(t))
@@ -39,9 +39,9 @@ def hand_made_plan() -> tuple[Plan, object, np.ndarray]:
         rest_configuration(hand, obj, motion, idle),
         q,
     )
-    # the index: lift along the contact normal and land on the same contact
-    f = hand.fingers["index"]
-    p, n = grasp.points_object["index"], grasp.normals_object["index"]
+    # the ring finger: lift along the contact normal and land on the same contact
+    f = hand.fingers["ring"]
+    p, n = grasp.points_object["ring"], grasp.normals_object["ring"]
     t_mid = 0.5 * sum(LIFT)
     k_mid = int(np.argmin(np.abs(t - t_mid)))
     above = tip_targets((p + LIFT_M * n)[None], n[None], f.tip_radius, motion.pose(t_mid))[0]
@@ -63,12 +63,12 @@ def hand_made_plan() -> tuple[Plan, object, np.ndarray]:
             )
         ]
         for name in fingers
-        if name != "index"
+        if name != "ring"
     }
-    phases["index"] = [
-        ContactPhase(finger="index", t_start=0.0, t_end=LIFT[0], p_object=p, n_object=n),
+    phases["ring"] = [
+        ContactPhase(finger="ring", t_start=0.0, t_end=LIFT[0], p_object=p, n_object=n),
         RegraspPhase(
-            finger="index",
+            finger="ring",
             t_start=LIFT[0],
             t_end=LIFT[1],
             P_object=p,
@@ -77,7 +77,7 @@ def hand_made_plan() -> tuple[Plan, object, np.ndarray]:
             min_clearance_m=0.0,
             planning_ms=0.0,
         ),
-        ContactPhase(finger="index", t_start=LIFT[1], t_end=T_END, p_object=p, n_object=n),
+        ContactPhase(finger="ring", t_start=LIFT[1], t_end=T_END, p_object=p, n_object=n),
     ]
     plan = Plan(
         hand={
@@ -124,7 +124,7 @@ def test_clean_plan_passes(clean, tmp_path):
     assert chk.min_holding == 3
     assert len(chk.regrasps) == 1
     r = chk.regrasps[0]
-    # the index touches the object at lift-off and landing, never closer
+    # the ring touches the object at lift-off and landing, never closer
     assert -1e-4 <= r.min_object_distance_m <= 1e-4
     assert r.min_finger_distance_m > 0.0
     assert chk.max_contact_error_m <= 1e-4
@@ -135,7 +135,7 @@ def test_clean_plan_passes(clean, tmp_path):
 
 def test_a_finger_pushed_into_the_object_is_reported(clean):
     plan, hand, lift = clean
-    f = hand.fingers["index"]
+    f = hand.fingers["ring"]
     q = plan.q.copy()
     # around mid-regrasp, the lift reversed: the tip goes about 10 mm into the object
     k = np.flatnonzero(np.abs(plan.t - 0.3) <= 0.02 + 1e-9)
@@ -145,22 +145,22 @@ def test_a_finger_pushed_into_the_object_is_reported(clean):
     r = chk.regrasps[0]
     assert r.penetration_m > 1e-3, r
     assert 0.26 <= r.t_min_object_s <= 0.34
-    assert any("penetrates the object" in p and "index" in p for p in chk.problems)
+    assert any("penetrates the object" in p and "ring" in p for p in chk.problems)
     # nothing else is blamed
     assert chk.max_contact_error_m <= 1e-4 and chk.min_holding == 3
 
 
 def test_a_finger_off_its_contact_is_reported(clean):
     plan, hand, _ = clean
-    f = hand.fingers["ring"]
+    f = hand.fingers["middle"]  # it holds throughout
     q = plan.q.copy()
     q[40, f.q_indices[1]] += 0.05  # 50 mrad at one joint: a few mm at the tip
     chk = recheck_plan(_with_q(plan, q))
     assert not chk.ok
-    assert chk.contact_error_finger == "ring"
+    assert chk.contact_error_finger == "middle"
     assert chk.t_max_contact_error_s == pytest.approx(plan.t[40])
     assert 1e-3 < chk.max_contact_error_m < 1e-2
-    assert any("ring" in p and "from its contact" in p for p in chk.problems)
+    assert any("middle" in p and "from its contact" in p for p in chk.problems)
 
 
 def test_joint_limits_and_holding_count_are_reported(clean):
@@ -169,7 +169,7 @@ def test_joint_limits_and_holding_count_are_reported(clean):
     q = plan.q.copy()
     q[5, f.q_indices[0]] = f.upper[0] + 0.1
     bad = _with_q(plan, q)
-    # the thumb also lets go for 0.1 s while the index is in the air: two fingers hold
+    # the thumb also lets go for 0.1 s while the ring is in the air: two fingers hold
     thumb = bad.phases["thumb"][0]
     bad.phases["thumb"] = [
         ContactPhase("thumb", 0.0, 0.2, thumb.p_object, thumb.n_object),

@@ -15,16 +15,16 @@ from regrasp_pin.holding import holding_q, rest_configuration, start_holding
 from regrasp_pin.motion import ObjectMotion
 from regrasp_pin.planning.release import plan_release
 
-T_RELEASE_S = 1.0
+T_RELEASE_S = 0.3
 CLEARANCE_M = 0.003
 
 
 @pytest.fixture(scope="module")
 def scene():
-    """The demo's initial grasp held over the first 1.5 s of the turn; the index finger
-    lets go at 1 s, while it still holds."""
+    """The demo's initial grasp held over the first 0.8 s of the turn; the index finger
+    lets go at 0.3 s, while it still holds."""
     scen = make_scenario("five_finger", "hexagon")
-    t = np.round(np.arange(0.0, 1.5 + 1e-9, 0.01), 9)
+    t = np.round(np.arange(0.0, 0.8 + 1e-9, 0.01), 9)
     scen = dataclasses.replace(scen, motion=ObjectMotion.from_poses(t, scen.motion.pose(t)))
     hand, p = scen.hand, scen.params
     grid = np.round(np.arange(0.0, scen.motion.t_end + 1e-9, 0.01), 9)
