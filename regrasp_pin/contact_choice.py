@@ -256,7 +256,7 @@ def choose_new_contact(
     T_arrive = None
     fallback = None
     rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}
-    for rank, j in enumerate(order[:max_checks]):
+    for position, j in enumerate(order[:max_checks]):
         i = idx[j]
         e = eps(pts[i], sample.normals[i])
         if e <= 0.0:
@@ -289,7 +289,7 @@ def choose_new_contact(
             epsilon_with_P=float(eps_P),
             quality_kept=bool(e >= eps_P),
             n_candidates=int(idx.size),
-            rank=rank,
+            rank=position,
         )
         if result.quality_kept:
             return result

@@ -598,7 +598,7 @@ def _try_release(
         return None
     h = state.holding[name]
     q_hand = _q_hand(ctx, state, stay)
-    tried = []
+    tried: list[str] = []
     for k in range(p.max_starts):
         t_r = win.latest_s - k * p.start_step_s
         if t_r < win.earliest_s - _TIME_TOL_S or ctx.budget.exhausted:
