@@ -295,7 +295,7 @@ def plan_manipulation(
                     exc.reason,
                     finger=exc.finger or trig.finger,
                     time_s=when,
-                    partial=_partial(ctx, state, until),
+                    partial=_plan_until(ctx, state, until),
                     kind=exc.kind,
                     measured=exc.measured,
                     required=exc.required,
@@ -306,32 +306,8 @@ def plan_manipulation(
             progress(state.now)
     stage["regrasps"] = time.perf_counter() - t0
 
-    phases = {n: list(state.phases[n]) for n in state.released}
-    phases.update(
-        {
-            n: [
-                *state.phases[n],
-                ContactPhase(
-                    finger=n, t_start=h.t_from, t_end=motion.t_end, p_object=h.p, n_object=h.n
-                ),
-            ]
-            for n, h in state.holding.items()
-        }
-    )
     t0 = time.perf_counter()
-    plan = _assemble(
-        hand,
-        obj,
-        motion,
-        grid,
-        state.history,
-        state.holding,
-        phases,
-        [*state.regrasps, *state.released.values()],
-        until=motion.t_end,
-        params=params,
-        base_q=base_q,
-    )
+    plan = _plan_until(ctx, state, motion.t_end, final=True)
     stage["assembly"] = time.perf_counter() - t0
     plan.summary.update(
         {
@@ -896,26 +872,13 @@ def _backtrack(
     return None
 
 
-def _partial(ctx: _Context, state: _State, until: float) -> Plan:
-    """The plan up to ``until``: every finger holding its current contact."""
+def _plan_until(ctx: _Context, state: _State, until: float, *, final: bool = False) -> Plan:
+    """The plan up to ``until``: every finger holding its current contact to then (the
+    whole plan with ``final``, which keeps a hold that starts at the very end)."""
     phases = {n: list(state.phases[n]) for n in state.released}
-    phases.update(
-        {
-            n: [
-                *state.phases[n],
-                *(
-                    [
-                        ContactPhase(
-                            finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n
-                        )
-                    ]
-                    if h.t_from < until
-                    else []
-                ),
-            ]
-            for n, h in state.holding.items()
-        }
-    )
+    for n, h in state.holding.items():
+        hold = ContactPhase(finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n)
+        phases[n] = [*state.phases[n], *([hold] if final or h.t_from < until else [])]
     return _assemble(
         ctx.hand,
         ctx.obj,

@@ -69,12 +69,6 @@ _OTHERS_TIMES = 21  # the other fingers are placed at this many times over the r
 _MAX_LIMIT_WEIGHT_FACTOR = 16.0  # the joint-limit weight grows up to this x its start
 _MAX_INFLATION_FACTOR = 2.25  # the inflation grows up to this x its start
 _MAX_FINGER_GAP_M = 0.008  # the hard gap kept from the other fingers grows up to this
-_VERIFIER_KIND = {
-    "tip-object": FailureKind.OBJECT_CLEARANCE,
-    "link-object": FailureKind.OBJECT_CLEARANCE,
-    "finger-finger": FailureKind.FINGER_COLLISION,
-    "joint-limit": FailureKind.JOINT_LIMIT,
-}
 #: failures that no path variant fixes: the caller changes Q or the duration
 CALLER_KINDS = frozenset({FailureKind.VELOCITY})
 
@@ -588,7 +582,7 @@ def _attempt(
             f"Coal check failed ({worst.describe()})",
             finger=finger,
             time_s=report.time_s,
-            kind=_VERIFIER_KIND[worst.kind],
+            kind=worst.failure_kind,
             measured=worst.value,
             required=worst.required,
         )

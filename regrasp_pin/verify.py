@@ -57,7 +57,7 @@ from scipy.spatial.transform import Rotation
 
 from ._pair_distances import BROAD_PHASE_MARGIN_M, MAX_MINIMUM_QUERIES, PairDistances
 from ._validate import as_array, positive
-from .exceptions import InputError, VerificationError
+from .exceptions import FailureKind, InputError, VerificationError
 from .hand import Finger, Hand
 from .motion import ObjectMotion
 from .objects import ConvexObject
@@ -81,6 +81,12 @@ OBJECT_LEVER_M = 0.1
 MAX_DENSE_SAMPLES = 2_000_000
 
 _KINDS = ("tip-object", "link-object", "finger-finger")  # by PairDistances.kind
+_FAILURE_KIND = {
+    "tip-object": FailureKind.OBJECT_CLEARANCE,
+    "link-object": FailureKind.OBJECT_CLEARANCE,
+    "finger-finger": FailureKind.FINGER_COLLISION,
+    "joint-limit": FailureKind.JOINT_LIMIT,
+}
 
 
 @dataclass(frozen=True)
@@ -109,6 +115,12 @@ class Failure:
     t_first_s: float = math.nan
     t_last_s: float = math.nan
     n_samples: int = 1
+
+    @property
+    def failure_kind(self) -> FailureKind:
+        """The planner's kind of this failure (object clearance, finger collision or
+        joint limit)."""
+        return _FAILURE_KIND[self.kind]
 
     def describe(self) -> str:
         """One line: kind, detail, value vs requirement and the time span."""

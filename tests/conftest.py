@@ -1,4 +1,5 @@
-"""Shared test helpers: one ``assert_close`` with an explicit tolerance."""
+"""Shared test helpers: ``assert_close`` with an explicit tolerance, and a scenario's
+initial grasp held without regrasping."""
 
 from __future__ import annotations
 
@@ -17,3 +18,35 @@ def assert_close(actual, expected, *, atol: float, rtol: float = 0.0, what: str 
         f"{what}: max error {float(np.max(err)):.3e} exceeds tolerance "
         f"(atol={atol:g}, rtol={rtol:g}; worst excess {worst:.3e})"
     )
+
+
+def held_grasp(scen):
+    """Every finger of ``scen`` holding its initial-grasp contact from t=0 over the
+    whole motion (no regrasp), on a 10 ms grid.
+
+    Returns:
+        ``(grid, base_q, holding)``: the times [s], the hand configuration of the idle
+        fingers, and finger -> :class:`~regrasp_pin.holding.Holding`.
+    """
+    from regrasp_pin.holding import rest_configuration, start_holding
+
+    hand, p = scen.hand, scen.params
+    grid = np.round(np.arange(0.0, scen.motion.t_end + 1e-9, 0.01), 9)
+    idle = [n for n in hand.finger_names if n not in p.fingers]
+    base = rest_configuration(hand, scen.obj, scen.motion, idle)
+    holding = {
+        n: start_holding(
+            hand,
+            scen.obj,
+            scen.motion,
+            grid,
+            n,
+            scen.grasp.points_object[n],
+            scen.grasp.normals_object[n],
+            scen.grasp.q[n],
+            0.0,
+            p.contact,
+        )
+        for n in p.fingers
+    }
+    return grid, base, holding

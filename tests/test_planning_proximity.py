@@ -7,9 +7,9 @@ import itertools
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import held_grasp
 
 from regrasp_pin import make_scenario
-from regrasp_pin.holding import rest_configuration, start_holding
 from regrasp_pin.planning.proximity import clear_of_fingers, holding_proximity
 
 TRIGGER_M, LOST_M = 0.0015, 0.0005
@@ -20,26 +20,8 @@ def holds():
     """The demo's initial grasp, every finger holding its contact over the whole turn
     (no regrasp), so that fingers close in on each other."""
     scen = make_scenario("five_finger", "hexagon")
-    hand, p = scen.hand, scen.params
-    grid = np.round(np.arange(0.0, scen.motion.t_end + 1e-9, 0.01), 9)
-    idle = [n for n in hand.finger_names if n not in p.fingers]
-    base = rest_configuration(hand, scen.obj, scen.motion, idle)
-    holding = {
-        n: start_holding(
-            hand,
-            scen.obj,
-            scen.motion,
-            grid,
-            n,
-            scen.grasp.points_object[n],
-            scen.grasp.normals_object[n],
-            scen.grasp.q[n],
-            0.0,
-            p.contact,
-        )
-        for n in p.fingers
-    }
-    return hand, holding, grid, base
+    grid, base, holding = held_grasp(scen)
+    return scen.hand, holding, grid, base
 
 
 def _distance(hand, holding, base, a, b, t):

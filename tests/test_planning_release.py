@@ -7,11 +7,11 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import assert_close
+from conftest import assert_close, held_grasp
 
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import FailureKind, PlanningError
-from regrasp_pin.holding import holding_q, rest_configuration, start_holding
+from regrasp_pin.holding import holding_q, rest_configuration
 from regrasp_pin.motion import ObjectMotion
 from regrasp_pin.planning.release import plan_release
 
@@ -27,24 +27,7 @@ def scene():
     t = np.round(np.arange(0.0, 0.8 + 1e-9, 0.01), 9)
     scen = dataclasses.replace(scen, motion=ObjectMotion.from_poses(t, scen.motion.pose(t)))
     hand, p = scen.hand, scen.params
-    grid = np.round(np.arange(0.0, scen.motion.t_end + 1e-9, 0.01), 9)
-    idle = [n for n in hand.finger_names if n not in p.fingers]
-    base = rest_configuration(hand, scen.obj, scen.motion, idle)
-    holding = {
-        n: start_holding(
-            hand,
-            scen.obj,
-            scen.motion,
-            grid,
-            n,
-            scen.grasp.points_object[n],
-            scen.grasp.normals_object[n],
-            scen.grasp.q[n],
-            0.0,
-            p.contact,
-        )
-        for n in p.fingers
-    }
+    _, base, holding = held_grasp(scen)
 
     def q_hand(times):
         q = np.broadcast_to(base, (times.size, base.size)).copy()

@@ -29,13 +29,6 @@ from ..verify import verify_finger_motion
 
 __all__ = ["Release", "plan_release"]
 
-_KIND = {
-    "tip-object": FailureKind.OBJECT_CLEARANCE,
-    "link-object": FailureKind.OBJECT_CLEARANCE,
-    "finger-finger": FailureKind.FINGER_COLLISION,
-    "joint-limit": FailureKind.JOINT_LIMIT,
-}
-
 
 @dataclass(frozen=True)
 class Release:
@@ -131,7 +124,7 @@ def plan_release(
     t_still = np.arange(t_move[-1] + dt_s, t_end + 1e-9, dt_s)
     if t_still.size and t_still[-1] < t_end - 1e-9:
         t_still = np.append(t_still, t_end)
-    times = np.concatenate([t_move, t_still[t_still > t_move[-1] + 1e-9]])
+    times = np.concatenate([t_move, t_still])
     s = minimum_jerk((times - t_r) / max(d, 1e-9))
     q = q_release[None] + s[:, None] * (q_off - q_release)[None]
     if q_park is not None and t_move[-1] < t_end - 1e-9:
@@ -154,11 +147,7 @@ def plan_release(
     )
     if not report.ok:
         worst = report.worst_failure
-        kind = (
-            FailureKind.JOINT_LIMIT
-            if worst is None
-            else _KIND.get(worst.kind, FailureKind.OBJECT_CLEARANCE)
-        )
+        kind = FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind
         raise PlanningError(
             "the release fails the Coal check"
             + ("" if worst is None else f" ({worst.kind}, {worst.value * 1e3:.2f} mm)"),
