@@ -1,7 +1,8 @@
 """Choosing the new contact Q (the paper's conditions (a) and (b)) and the initial grasp.
 
 Condition (a): Q lies inside the boundary planes (and is feasible) at the time the
-finger can arrive, ``t_arrive`` = trigger time + regrasp duration. Condition (b): among
+finger can arrive, ``t_arrive`` = trigger time + regrasp duration (between two
+manifold times, at both: the pad may turn away between them). Condition (b): among
 those, Q stays inside longest over the rest of the motion. Ties are broken by the
 larger joint margin at arrival, then by the shorter distance from P.
 
@@ -184,7 +185,10 @@ def choose_new_contact(
         )
     ka = manifold.time_index(t_arrive)
     usable = manifold.usable(contact.limit_margin_rad)
-    cand = manifold.usable(contact.choice_margin_rad)[ka]
+    choice = manifold.usable(contact.choice_margin_rad)
+    # the landing falls between two manifold times: Q must be usable at both
+    kb = max(int(np.searchsorted(manifold.times_s, t_arrive + 1e-9)) - 1, 0)
+    cand = choice[ka] & choice[min(kb, ka)]
     pts = sample.points
     for p_other, _ in others.values():
         cand &= np.linalg.norm(pts - p_other, axis=1) >= sep

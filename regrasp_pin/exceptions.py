@@ -107,6 +107,8 @@ class FailureKind(str, Enum):
     """The fingers that would hold are not in force closure."""
     TOO_LATE = "too-late"
     """A regrasp would not end before the motion does."""
+    SHORT_HOLD = "short-hold"
+    """The new contact would be lost sooner after landing than a regrasp takes [s]."""
     FINGER_BUSY = "finger-busy"
     """A finger must let go while another is still in the air."""
     TOO_FEW_FINGERS = "too-few-fingers"
@@ -126,6 +128,7 @@ ADVICE = {
     FailureKind.NO_CANDIDATE: "lower ContactModel.choice_margin_rad or turn more slowly",
     FailureKind.FORCE_CLOSURE: "use more fingers or a higher friction coefficient mu",
     FailureKind.TOO_LATE: "shorten RegraspParams.duration_s or extend the motion",
+    FailureKind.SHORT_HOLD: "turn more slowly or place the object deeper in the fingers' workspace",
     FailureKind.FINGER_BUSY: "turn more slowly so that the fingers can take turns",
     FailureKind.TOO_FEW_FINGERS: "lower PlannerParams.min_holding or use more fingers",
     FailureKind.BUDGET: "raise the planner's budget (PlannerParams.budget_s, candidates)",

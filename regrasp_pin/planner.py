@@ -12,13 +12,15 @@ window (:mod:`.planning.schedule`): from when it is free (no other finger in the
 to the last time its contact is still held inside the joint limits. The preferred
 start is ``lead_s`` before the trigger, earlier if the next finger's trigger would
 otherwise fall inside the regrasp; other starts are tried earlier and later in turn.
-For each start the search (:mod:`.planning.search`) tries new contacts Q and
-durations until one regrasp verifies. When a finger finds none, the planner backs up
-once per failure (at most ``max_backtracks`` times): the previous regrasp is planned
-again to land before this finger's window closes, or, if time was not the problem,
-to land elsewhere. Every search shares one budget (``budget_s``). A hold that is lost
-too close to the end for any regrasp, while the others hold in force closure to the
-end, is let go (:mod:`.planning.release`: a verified back-off; a ``release`` phase).
+For each start the search (:mod:`.planning.search`) tries new contacts Q and durations
+until one regrasp verifies and the contact it lands on is held (followed by IK from the
+landing) at least as long as the shortest regrasp takes, or to the end. When a finger
+finds none, the planner backs up once per failure (at most ``max_backtracks`` times):
+the previous regrasp is planned again to land before this finger's window closes, or, if
+time was not the problem, to land elsewhere. Every search shares one budget
+(``budget_s``). A hold that is lost too close to the end for any regrasp, while the
+others hold in force closure to the end, is let go (:mod:`.planning.release`: a verified
+back-off; a ``release`` phase).
 A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
 finger, the time, the kind of the failure, every attempt and the partial plan up to
 that time.
@@ -35,7 +37,7 @@ import numpy as np
 
 from .contact import ContactModel
 from .contact_choice import Grasp, initial_grasp
-from .exceptions import FailureKind, PlanningError
+from .exceptions import Attempt, FailureKind, PlanningError
 from .grasp_quality import ferrari_canny_epsilon
 from .hand import Hand
 from .holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
@@ -503,6 +505,7 @@ def _advance(
             required=win.latest_s if busy else end_by,
         )
     others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
+    landed: dict[int, Holding] = {}  # id(verified regrasp) -> the hold after it
 
     def search(starts: list[float], end_by: float | None) -> Found:
         return ctx.search.find(
@@ -515,6 +518,7 @@ def _advance(
             ctx.budget,
             end_by_s=end_by,
             exclude=exclude,
+            landing_check=lambda res: _check_landing(ctx, name, res, landed),
         )
 
     found = None
@@ -545,7 +549,50 @@ def _advance(
             "no verified regrasp at the start times tried before"
         )
     steps.append(_Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
-    return _apply(ctx, state, name, t_trig, why, found)
+    return _apply(ctx, state, name, t_trig, why, found, landed.get(id(found.result)))
+
+
+def _check_landing(
+    ctx: _Context, name: str, res: RegraspResult, landed: dict[int, Holding]
+) -> Attempt | None:
+    """Follow the contact a verified regrasp lands on (kept in ``landed``); a
+    ``short-hold`` attempt if it is lost sooner after landing than the shortest regrasp
+    takes (no other finger could take its turn before this one must go again), unless
+    it is held to the end of the motion."""
+    p = ctx.params
+    hold = _landing_hold(ctx, name, res)
+    landed[id(res)] = hold
+    lost = held_until(hold.track, p.contact)
+    need = min(res.t_end + p.regrasp.duration_s, ctx.motion.t_end - p.dt_s)
+    if lost >= need - _TIME_TOL_S:
+        return None
+    return Attempt(
+        FailureKind.SHORT_HOLD,
+        name,
+        res.t_start,
+        measured=lost - res.t_end,
+        required=need - res.t_end,
+        what=(
+            f"start {res.t_start:.2f} s, Q={np.round(res.Q_object, 4).tolist()}: "
+            f"held {lost - res.t_end:.2f} s after landing ({_loss_reason(hold, lost)})"
+        ),
+    )
+
+
+def _landing_hold(ctx: _Context, name: str, res: RegraspResult) -> Holding:
+    """The hold that follows a regrasp's landing."""
+    return start_holding(
+        ctx.hand,
+        ctx.obj,
+        ctx.motion,
+        ctx.grid,
+        name,
+        res.Q_object,
+        res.n_Q_object,
+        res.q[-1],
+        res.t_end,
+        ctx.params.contact,
+    )
 
 
 def _try_release(
@@ -704,9 +751,16 @@ def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarr
 
 
 def _apply(
-    ctx: _Context, state: _State, name: str, t_trig: float, why: str, found: Found
+    ctx: _Context,
+    state: _State,
+    name: str,
+    t_trig: float,
+    why: str,
+    found: Found,
+    new_hold: Holding | None = None,
 ) -> _State:
-    """The state after a verified regrasp of ``name``."""
+    """The state after a verified regrasp of ``name`` (``new_hold``: the hold after its
+    landing, if already followed)."""
     res, choice = found.result, found.choice
     h = state.holding[name]
     hold = ContactPhase(
@@ -740,18 +794,8 @@ def _apply(
             "attempts": [a.to_dict() for a in (*found.attempts, *res.attempts)],
         },
     )
-    new_hold = start_holding(
-        ctx.hand,
-        ctx.obj,
-        ctx.motion,
-        ctx.grid,
-        name,
-        res.Q_object,
-        res.n_Q_object,
-        res.q[-1],
-        res.t_end,
-        ctx.params.contact,
-    )
+    if new_hold is None:
+        new_hold = _landing_hold(ctx, name, res)
     log.info("%s regrasped at t=%.3f s (%s)", name, res.t_start, why)
     return _State(
         holding={**state.holding, name: new_hold},

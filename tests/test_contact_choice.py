@@ -306,8 +306,9 @@ def test_no_initial_grasp_names_the_finger(five):
 
 
 # ------------------------------------------------------------------ the new contact Q
-def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONTACT):
-    """The paper's rules plus the grasp tests, written out candidate by candidate."""
+def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONTACT, kb=None):
+    """The paper's rules plus the grasp tests, written out candidate by candidate; the
+    landing lies between manifold times ``kb`` and ``ka`` (default: at ``ka``)."""
     name = manifold.finger
     times = manifold.times_s
     nt = times.size
@@ -315,7 +316,10 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
     other_n = np.array([n for _, n in others.values()])
     rows = []
     for i in range(len(sample)):
-        if not _usable_direct(hand, name, manifold, sample, ka, i, contact.choice_margin_rad):
+        if not all(
+            _usable_direct(hand, name, manifold, sample, k, i, contact.choice_margin_rad)
+            for k in {ka, ka if kb is None else kb}
+        ):
             continue
         if np.min(np.linalg.norm(other_p - sample.points[i], axis=1)) < SEP_M:
             continue
@@ -382,8 +386,13 @@ def _choose_from_grasp(five, finger, t_arrive, **kwargs):
     )
 
 
-@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.25), ("little", 1.0), ("thumb", 0.75)])
+@pytest.mark.parametrize(
+    "finger, t_arrive",
+    [("middle", 1.25), ("little", 1.0), ("thumb", 0.75), ("thumb", 1.15), ("little", 1.4)],
+)
 def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
+    # 1.15 s and 1.4 s fall between manifold times (every 0.25 s): Q must be usable at
+    # both neighbours (there, the first choice usable at the later one only is not)
     hand, box, _, sample, manifolds, grasp = five
     m = manifolds[finger]
     P, n_P = grasp.points_object[finger], grasp.normals_object[finger]
@@ -395,7 +404,10 @@ def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
     # the paper's order exactly (the re-rank by the finger's links is tested below)
     q = _choose_from_grasp(five, finger, t_arrive, max_checks=10_000, rerank=0)
     ka = m.time_index(t_arrive)
-    expected, rows, passing, eps_P = _brute_force_q(hand, box, m, sample, ka, P, n_P, others)
+    kb = int(np.flatnonzero(m.times_s <= t_arrive + 1e-9)[-1])
+    expected, rows, passing, eps_P = _brute_force_q(
+        hand, box, m, sample, ka, P, n_P, others, kb=kb
+    )
     rank, i, exit_index, e = expected
     assert q.index == i and q.rank == rank
     assert q.n_candidates == len(rows)

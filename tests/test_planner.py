@@ -17,6 +17,8 @@ from scipy.spatial.transform import Rotation
 from regrasp_pin import Plan, make_scenario, plan_manipulation
 from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.plan_check import recheck_plan
+from regrasp_pin.planning.schedule import held_until
+from regrasp_pin.tracking import track_contact
 
 # (angle [deg], rate [deg/s]): the demo and neighbours with other angles and rates
 SCENARIOS = [(100, 20), (60, 10), (100, 10)]
@@ -30,11 +32,11 @@ def demo(request, tmp_path_factory):
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
     )
     path = result.plan.save(tmp_path_factory.mktemp("plan") / "plan.json")
-    return result, Plan.load(path), angle
+    return result, Plan.load(path), angle, scen
 
 
 def test_demo_criteria(demo):
-    result, plan, angle = demo
+    result, plan, angle, _ = demo
     regrasps = plan.regrasps()
     assert len(regrasps) >= 3
     assert len({r.finger for r in regrasps}) >= 2
@@ -52,14 +54,56 @@ def test_demo_criteria(demo):
             assert a["kind"] in {k.value for k in FailureKind}
 
 
+def _assert_new_contacts_held(result, scen):
+    """Followed again from its landing configuration, each new contact is held inside
+    the joint limits for at least the shortest regrasp duration, or to the end."""
+    p = scen.params
+    grid = np.asarray(result.plan.t)
+    for r in result.regrasps:
+        times = np.concatenate([[r.t_end], grid[grid > r.t_end + 1e-9]])
+        track = track_contact(
+            scen.hand,
+            r.finger,
+            scen.obj,
+            scen.motion,
+            times,
+            r.Q_object,
+            r.n_Q_object,
+            r.q[-1],
+            contact=p.contact,
+        )
+        need = min(r.t_end + p.regrasp.duration_s, grid[-1] - p.dt_s)
+        assert held_until(track, p.contact) >= need - 1e-9, (r.finger, r.t_end)
+
+
+def test_every_new_contact_is_held_at_least_as_long_as_a_regrasp(demo):
+    # a regrasp that lands on a contact lost right after gains nothing
+    result, _, _, scen = demo
+    _assert_new_contacts_held(result, scen)
+
+
+def test_no_regrasp_lands_where_the_pad_is_about_to_turn_away():
+    """Allegro, 60 deg at 40 deg/s: the landing falls between two manifold times, and
+    a Q that faces the pad at the later one only would be lost at once (the ring then
+    had to lift off again while the index was in the air: finger-busy). Two guards,
+    each enough here: Q is chosen usable at both times, and the search follows each
+    landing and turns down a contact that would not be held as long as a regrasp takes.
+    A full plan, every new contact held."""
+    scen = make_scenario("allegro", "hexagon", angle_deg=60, rate_deg_s=40)
+    result = plan_manipulation(
+        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
+    )
+    _assert_new_contacts_held(result, scen)
+
+
 def test_plan_round_trips(demo):
-    _, plan, _ = demo
+    _, plan, _, _ = demo
     assert Plan.from_dict(plan.to_dict()).to_dict() == plan.to_dict()
 
 
 @pytest.fixture(scope="module")
 def recheck(demo):
-    _, plan, _ = demo
+    _, plan, _, _ = demo
     return recheck_plan(plan, max_step_rad=1e-3, penetration_tol_m=1e-4, contact_tol_m=1e-4)
 
 
@@ -68,7 +112,7 @@ def test_three_fingers_hold_at_every_instant(recheck):
 
 
 def test_every_regrasp_passes_an_independent_dense_recheck(demo, recheck):
-    _, plan, _ = demo
+    _, plan, _, _ = demo
     assert [(r.finger, r.t_start) for r in recheck.regrasps] == [
         (r.finger, r.t_start) for r in plan.regrasps()
     ]

@@ -10,7 +10,10 @@ shorter move; :func:`~regrasp_pin.contact_choice.choose_new_contact`). For each 
    its own variants by the kind of each failure;
 3. a velocity failure stretches the duration by the measured over-speed (time
    scaling) and plans the same Q again (or the Q the new arrival time prefers);
-4. any other failure excludes Q, and only the points within ``exclude_radius_m`` of
+4. a verified regrasp is judged by what follows its landing (the caller's
+   ``landing_check``: the planner follows the new contact and rejects one that would be
+   lost sooner than a regrasp takes);
+5. any other failure excludes Q, and only the points within ``exclude_radius_m`` of
    it, from the next choices at this start time.
 
 Every failure is recorded as an :class:`~regrasp_pin.exceptions.Attempt`. The search
@@ -134,6 +137,7 @@ class RegraspSearch:
         *,
         end_by_s: float | None = None,
         exclude: list[np.ndarray] | None = None,
+        landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
     ) -> Found:
         """Search a verified regrasp of ``finger`` (see the module docstring).
 
@@ -149,6 +153,9 @@ class RegraspSearch:
             end_by_s: The regrasp must have landed by this time [s] (None: the end of
                 the motion).
             exclude: Points (object frame) whose neighbourhood Q must avoid.
+            landing_check: Judges a verified regrasp by what follows its landing (e.g.
+                how long the new contact is held): an :class:`Attempt` rejects it and
+                excludes its Q like any other failure; None accepts it.
 
         Raises:
             PlanningError: nothing verified; its ``kind`` is the dominant cause, its
@@ -190,6 +197,7 @@ class RegraspSearch:
                     end_by,
                     attempts,
                     budget,
+                    landing_check,
                 )
                 if found is None:
                     break  # no candidate left at this start
@@ -266,6 +274,7 @@ class RegraspSearch:
         end_by: float,
         attempts: list[Attempt],
         budget: SearchBudget,
+        landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
     ) -> Found | bool | None:
         """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q)."""
         f = self.hand.finger(finger)
@@ -328,6 +337,10 @@ class RegraspSearch:
                         duration, exc.measured / exc.required, dt_s=self.dt_s
                     )
                     continue
+                break
+            rejected = None if landing_check is None else landing_check(result)
+            if rejected is not None:
+                attempts.append(rejected)
                 break
             return Found(result, choice, tuple(attempts))
         excluded.append(choice.p_object)

@@ -1,0 +1,93 @@
+"""One finger's regrasp search (regrasp_pin.planning.search) on the demo's first trigger.
+
+The demo's initial grasp is held; the index finger, whose contact triggers first,
+searches a regrasp. The landing check is the caller's judgement of a verified regrasp
+(the planner follows the new contact): a rejected landing must cost only its Q.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import held_grasp
+
+from regrasp_pin import make_scenario
+from regrasp_pin.exceptions import Attempt, FailureKind, PlanningError
+from regrasp_pin.holding import holding_q
+from regrasp_pin.manifold import build_manifold
+from regrasp_pin.planning.search import RegraspSearch, SearchBudget
+
+FINGER = "index"
+
+
+@pytest.fixture(scope="module")
+def problem():
+    scen = make_scenario("five_finger", "hexagon")
+    hand, p, motion = scen.hand, scen.params, scen.motion
+    _, base, holding = held_grasp(scen)
+    sample = scen.obj.sample_surface(p.sample_spacing_m)
+    times = np.linspace(motion.t_start, motion.t_end, 101)
+    manifolds = {
+        n: build_manifold(hand.finger(n), sample, motion, times, contact=p.contact)
+        for n in p.fingers
+    }
+    search = RegraspSearch(
+        hand, scen.obj, motion, manifolds, sample, regrasp=p.regrasp, contact=p.contact
+    )
+    h = holding[FINGER]
+    t_trig, _ = h.track.trigger()
+    assert t_trig is not None  # the demo's index contact nears its limits
+    stay = [n for n in p.fingers if n != FINGER]
+
+    def q_hand(t):
+        q = np.broadcast_to(base, (t.size, base.size)).copy()
+        for n in stay:
+            q[:, hand.finger(n).q_indices] = holding_q(
+                hand, motion, n, holding[n], t, p.contact.ik_tol_m
+            )
+        return q
+
+    def find(**kwargs):
+        return search.find(
+            FINGER,
+            (h.p, h.n),
+            [t_trig - p.lead_s],
+            lambda t: holding_q(hand, motion, FINGER, h, np.array([t]), p.contact.ik_tol_m)[0],
+            {n: (holding[n].p, holding[n].n) for n in stay},
+            q_hand,
+            SearchBudget(),
+            **kwargs,
+        )
+
+    return find
+
+
+def _reject(result):
+    return Attempt(FailureKind.SHORT_HOLD, FINGER, result.t_start, measured=0.0, required=0.4)
+
+
+def test_a_rejected_landing_costs_only_its_q(problem):
+    first = problem()
+    assert first.result.report.ok
+
+    def not_first(result):
+        same = np.allclose(result.Q_object, first.result.Q_object, atol=1e-12)
+        return _reject(result) if same else None
+
+    second = problem(landing_check=not_first)
+    assert second.result.report.ok
+    assert not np.allclose(second.result.Q_object, first.result.Q_object, atol=1e-12)
+    # the rejection is recorded as data, after the attempts that preceded the first
+    assert second.attempts[: len(first.attempts)] == first.attempts
+    assert second.attempts[len(first.attempts)].kind == FailureKind.SHORT_HOLD
+
+
+def test_every_landing_rejected_ends_typed_with_every_attempt(problem):
+    with pytest.raises(PlanningError) as err:
+        problem(landing_check=_reject)
+    exc = err.value
+    assert exc.kind == FailureKind.SHORT_HOLD and exc.finger == FINGER
+    rejected = [a for a in exc.attempts if a.kind == FailureKind.SHORT_HOLD]
+    # each verified landing was judged once, and each took another Q
+    assert len(rejected) >= 2
+    assert exc.required == pytest.approx(0.4)
