@@ -529,12 +529,19 @@ def _advance(
         early = start_times(
             win, latest_s=deadline - D, step_s=p.start_step_s, max_starts=p.max_starts
         )
-        if early:
-            try:
-                found = search(early, deadline)
-                why += f"; lands by t={deadline:.3f} s, before {other}'s hold is lost"
-            except PlanningError:
-                found = None
+        if not early:
+            raise PlanningError(
+                f"{reason} at t={t_trig:.3f} s, but no regrasp ({D:.2f} s) can land "
+                f"before {other}'s hold is lost at t={deadline:.3f} s",
+                finger=name,
+                time_s=t_trig,
+                kind=FailureKind.FINGER_BUSY,
+                measured=win.earliest_s + D,
+                required=deadline,
+            )
+        # landing later would leave the other finger no time: a dead end, not a plan
+        found = search(early, deadline)
+        why += f"; lands by t={deadline:.3f} s, before {other}'s hold is lost"
     if found is None:
         try:
             found = search(starts, end_by_s)
@@ -607,7 +614,8 @@ def _try_release(
     """The state after ``trig.finger`` lets go for the rest of the motion, or None.
 
     Only when releases are allowed, the hold is lost before the end, and every finger
-    that stays holds to the end (no regrasp can follow: it would leave too few). The
+    that stays holds to the end (no regrasp can follow: it would leave too few) once
+    this one has gone (a neighbour it was closing in on no longer ends their hold). The
     release times tried are the latest in the window first, then earlier ones.
     """
     p, motion = ctx.params, ctx.motion
@@ -615,8 +623,11 @@ def _try_release(
     end = motion.t_end - p.dt_s - _TIME_TOL_S
     if not p.release or win.empty or trig.lost_s >= end:
         return None
+    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
     if any(
-        e.lost_s < end for e in triggers if e.finger in stay and e.finger not in state.held_to_end
+        e.lost_s < end
+        for e in _triggers(ctx, without)
+        if e.finger in stay and e.finger not in state.held_to_end
     ):
         return None
     h = state.holding[name]
