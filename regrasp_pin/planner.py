@@ -343,18 +343,23 @@ class _Trigger:
     lost_s: float
 
 
-def _triggers(ctx: _Context, state: _State) -> list[_Trigger]:
+def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[_Trigger]:
     """The pending triggers, earliest first (ties by name): a contact near its joint
-    limits (or infeasible), or a holding finger near another holding finger."""
+    limits (or infeasible), or a holding finger near another finger (holding, idle,
+    or let go and still; ``gone``: fingers that are neither, e.g. one about to let go)."""
     p = ctx.params
     times = ctx.grid[ctx.grid >= state.now - _TIME_TOL_S]
+    base = ctx.base_q.copy()
+    for n, rel in state.released.items():  # where a finger that let go stays
+        base[ctx.hand.fingers[n].q_indices] = rel.q[-1]
     prox = holding_proximity(
         ctx.hand,
         state.holding,
         times,
-        ctx.base_q,
+        base,
         trigger_m=p.contact.finger_trigger_m,
         lost_m=p.regrasp.finger_clearance_m,
+        still=[n for n in ctx.hand.finger_names if n not in state.holding and n not in gone],
     )
     out = []
     for name, h in state.holding.items():
@@ -626,7 +631,7 @@ def _try_release(
     without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
     if any(
         e.lost_s < end
-        for e in _triggers(ctx, without)
+        for e in _triggers(ctx, without, gone=(name,))
         if e.finger in stay and e.finger not in state.held_to_end
     ):
         return None

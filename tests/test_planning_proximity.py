@@ -75,6 +75,48 @@ def test_proximity_finds_the_first_time_below_each_distance(holds, until_s):
         assert expected
 
 
+def test_a_holding_finger_near_a_still_one_triggers(holds):
+    """Of two holding fingers that close in on each other, one stops at the time they
+    are nearest the trigger distance and stays there; the others hold through the turn.
+    Pairs with the still finger count for the holding finger only, as computeDistances
+    finds them."""
+    hand, holding, grid, base = holds
+    times = grid[::5]
+    first = min(
+        holding_proximity(hand, holding, times, base, trigger_m=TRIGGER_M, lost_m=LOST_M).values(),
+        key=lambda p: (p.trigger_s, p.finger),
+    )
+    gone = first.other
+    still = base.copy()
+    still[hand.finger(gone).q_indices] = holding[gone].q_at(np.array([first.trigger_s]))[0]
+    rest = {n: h for n, h in holding.items() if n != gone}
+    prox = holding_proximity(
+        hand, rest, times, still, trigger_m=TRIGGER_M, lost_m=LOST_M, still=[gone, "little"]
+    )
+    expected = {}
+    for me in sorted(rest):
+        firsts = []
+        for other in sorted(set(rest) - {me}) + [gone, "little"]:
+            d = np.array([_distance(hand, rest, still, me, other, t) for t in times])
+            below = np.flatnonzero(d < TRIGGER_M)
+            if below.size:
+                lost = np.flatnonzero(d[below[0] :] < LOST_M)
+                t_lost = times[below[0] + lost[0]] if lost.size else np.inf
+                firsts.append((times[below[0]], other, t_lost))
+        if firsts:
+            expected[me] = min(firsts, key=lambda x: x[:2])
+    assert set(prox) == set(expected) and gone not in prox
+    for me, (t_trig, other, t_lost) in expected.items():
+        assert (prox[me].trigger_s, prox[me].other, prox[me].lost_s) == (
+            pytest.approx(t_trig),
+            other,
+            t_lost,
+        ), me
+    # the neighbour it was closing in on meets it, by the time it stopped at the latest
+    assert prox[first.finger].other == gone
+    assert prox[first.finger].trigger_s <= first.trigger_s + 1e-9
+
+
 def test_candidates_stay_clear_until_a_finger_comes_near(holds):
     """clear_of_fingers against computeDistances at every time: the mask is False
     from the first time the candidate finger is within the limit of another one."""

@@ -2,10 +2,11 @@
 
 Each holding finger follows its own contact; nothing in that keeps two holding
 fingers apart while the object turns. Two fingers that close in on each other must
-not both keep holding: one of them regrasps. For every pair of holding fingers this
-finds the first time their Coal distance falls below the trigger distance (a regrasp
-should start) and below the lost distance (the hold must have ended: a regrasp that
-lifts off later fails its finger-clearance check at once).
+not both keep holding: one of them regrasps. For every pair of holding fingers (and
+every holding finger and a still one: idle, or let go and parked) this finds the first
+time their Coal distance falls below the trigger distance (a regrasp should start) and
+below the lost distance (the hold must have ended: a regrasp that lifts off later
+fails its finger-clearance check at once).
 
 Conservative capsule bounds screen all times at once; Coal is called only where the
 bound is below the trigger distance, first on every ``COARSE``-th such time and then
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +102,7 @@ def holding_proximity(
     *,
     trigger_m: float,
     lost_m: float,
+    still: Sequence[str] = (),
 ) -> dict[str, Proximity]:
     """The earliest proximity of each holding finger to another one over ``times_s``.
 
@@ -111,6 +113,8 @@ def holding_proximity(
         base_q: ``(nq,)`` configuration of the fingers that do not hold.
         trigger_m: A regrasp should start below this distance [m].
         lost_m: The hold is lost below this distance [m] (< ``trigger_m``).
+        still: Fingers that do not hold and stay at ``base_q`` (idle, or let go):
+            a holding finger that comes near one of them must regrasp too.
 
     Returns:
         finger -> its earliest :class:`Proximity` (fingers that stay apart are absent).
@@ -123,7 +127,10 @@ def holding_proximity(
     for n, h in holding.items():
         q[:, hand.fingers[n].q_indices] = h.q_at(times)
     dist = _PairDistance(hand)
-    for a, b in itertools.combinations(sorted(holding), 2):
+    pairs = list(itertools.combinations(sorted(holding), 2)) + [
+        (a, b) for a in sorted(holding) for b in sorted(set(still) - set(holding))
+    ]
+    for a, b in pairs:
         ids = (list(hand.fingers[a].geometry_ids), list(hand.fingers[b].geometry_ids))
         cand = np.flatnonzero(capsule_gap(hand, *ids, q) < trigger_m)
         if cand.size == 0:
@@ -134,7 +141,7 @@ def holding_proximity(
         later = cand[cand >= i_trig]
         i_lost, _ = _first_below(dist, (a, b), q, later, lost_m)
         lost = math.inf if i_lost is None else float(times[i_lost])
-        for me, other in ((a, b), (b, a)):
+        for me, other in ((a, b), (b, a)) if b in holding else ((a, b),):
             p = Proximity(me, other, float(times[i_trig]), lost, d_trig)
             if me not in out or (p.trigger_s, p.other) < (out[me].trigger_s, out[me].other):
                 out[me] = p
