@@ -335,12 +335,14 @@ def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Trigger:
-    """A finger that must let go: when, why, and until when it can still hold [s]."""
+    """A finger that must let go: when, why, and until when it can still hold [s]
+    (``lost_near``: the finger whose approach ends the hold, if that is what ends it)."""
 
     time_s: float
     finger: str
     reason: str
     lost_s: float
+    lost_near: str | None = None
 
 
 def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[_Trigger]:
@@ -369,9 +371,10 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
         lost = held_until(h.track, p.contact)
         loss = _loss_reason(h, lost)
         near = prox.get(name)
+        lost_near = None
         if near is not None:
             if near.lost_s - p.dt_s < lost:
-                lost, loss = near.lost_s - p.dt_s, near.reason
+                lost, loss, lost_near = near.lost_s - p.dt_s, near.reason, near.other
             if t is None or near.trigger_s < t:
                 t, why = near.trigger_s, near.reason
         # a hold that will be lost triggers at least one regrasp (and the lead) before:
@@ -381,7 +384,7 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
             t = max(due, state.now, h.t_from)
             why = f"its hold is lost after t={lost:.3f} s ({loss})"
         if t is not None:
-            out.append(_Trigger(t, name, why, lost))
+            out.append(_Trigger(t, name, why, lost, lost_near))
     return sorted(out, key=lambda e: (round(e.time_s, 9), e.finger))
 
 
@@ -465,6 +468,7 @@ def _advance(
         )
         log.info("%s: %s", name, note)
         return replace(state, held_to_end={**state.held_to_end, name: note})
+    _refuse_dead_end(ctx, state, trig, triggers, win)
     stay = [n for n in ctx.active if n != name and n in state.holding]
     if len(stay) < p.min_holding:
         raise PlanningError(
@@ -605,6 +609,37 @@ def _landing_hold(ctx: _Context, name: str, res: RegraspResult) -> Holding:
         res.t_end,
         ctx.params.contact,
     )
+
+
+def _refuse_dead_end(
+    ctx: _Context, state: _State, trig: _Trigger, triggers: list[_Trigger], win: LiftOffWindow
+) -> None:
+    """Raise ``finger-busy`` if another finger's hold is lost before ``trig.finger``
+    could land (and not because ``trig.finger`` comes near it): whatever this regrasp
+    does, that finger would lose its hold while this one is in the air."""
+    p, name = ctx.params, trig.finger
+    land = win.earliest_s + p.regrasp.duration_s
+    end = ctx.motion.t_end - p.dt_s
+    lost = [
+        e
+        for e in triggers
+        if e.finger != name
+        and e.finger in state.holding
+        and e.finger not in state.held_to_end
+        and e.lost_near != name
+        and e.lost_s < min(land, end) - _TIME_TOL_S
+    ]
+    if lost:
+        first = min(lost, key=lambda e: (round(e.lost_s, 9), e.finger))
+        raise PlanningError(
+            f"{first.finger}'s hold is lost at t={first.lost_s:.3f} s, before a regrasp "
+            f"of {name} could land (t={land:.3f} s)",
+            finger=name,
+            time_s=trig.time_s,
+            kind=FailureKind.FINGER_BUSY,
+            measured=land,
+            required=first.lost_s,
+        )
 
 
 def _try_release(

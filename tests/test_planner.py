@@ -18,6 +18,7 @@ from regrasp_pin import Plan, make_scenario, plan_manipulation
 from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.plan_check import recheck_plan
 from regrasp_pin.planning.schedule import held_until
+from regrasp_pin.suite import build_scenario, generate_specs
 from regrasp_pin.tracking import track_contact
 
 # (angle [deg], rate [deg/s]): the demo and neighbours with other angles and rates
@@ -182,6 +183,23 @@ def test_a_neighbour_that_cannot_be_planned_ends_typed_with_a_verified_partial_p
     check = recheck_plan(exc.partial, max_step_rad=1e-3)
     assert not check.joint_limit_violations
     assert all(r.min_object_distance_m >= -1e-4 for r in check.regrasps)
+
+
+def test_a_grasp_that_loses_two_holds_at_once_fails_at_once():
+    """Suite spec 6 (five-finger hand, pentagonal prism, -175 deg about the thumb's
+    contact): the index's and the middle's holds are both lost within the first
+    0.4 s, less than one regrasp apart. Whichever goes first, the other loses its hold
+    in the meantime: a finger-busy failure at the start that names the hold and the
+    landing, not a search that plans on into a state with a finger already lost."""
+    spec = generate_specs(7, seed=0)[6]
+    scen = build_scenario(spec)
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    exc = err.value
+    assert exc.kind == FailureKind.FINGER_BUSY
+    assert exc.required < exc.measured  # the hold is lost before the landing
+    assert exc.time_s <= exc.required  # decided before that hold is lost
+    assert exc.partial is not None and not exc.partial.regrasps()
 
 
 def test_an_exhausted_budget_ends_typed_with_the_partial_plan():
