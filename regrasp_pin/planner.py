@@ -496,7 +496,7 @@ def _advance(
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
     if not starts:
         busy = win.empty
-        released = None if busy else _try_release(ctx, state, trig, triggers, win, stay, why)
+        released = None if busy else _try_release(ctx, state, trig, win, stay, why)
         if released is not None:
             return released
         raise PlanningError(
@@ -555,7 +555,7 @@ def _advance(
         try:
             found = search(starts, end_by_s)
         except PlanningError:
-            released = _try_release(ctx, state, trig, triggers, win, stay, why)
+            released = _try_release(ctx, state, trig, win, stay, why)
             if released is None:
                 raise
             return released
@@ -646,7 +646,6 @@ def _try_release(
     ctx: _Context,
     state: _State,
     trig: _Trigger,
-    triggers: list[_Trigger],
     win: LiftOffWindow,
     stay: list[str],
     why: str,
@@ -740,10 +739,6 @@ def _release_at(
 
 def _apply_release(state: _State, name: str, rel: Release, why: str) -> _State:
     """The state after a verified release of ``name``."""
-    h = state.holding[name]
-    hold = ContactPhase(
-        finger=name, t_start=h.t_from, t_end=rel.t_start, p_object=h.p, n_object=h.n
-    )
     off = ReleasePhase(
         finger=name,
         t_start=rel.t_start,
@@ -752,14 +747,23 @@ def _apply_release(state: _State, name: str, rel: Release, why: str) -> _State:
         min_clearance_m=rel.min_clearance_m,
         reason=why,
     )
-    return _State(
+    return replace(
+        _hold_ends(state, name, rel.t_start, off),
         holding={n: x for n, x in state.holding.items() if n != name},
-        history={**state.history, name: (*state.history[name], replace(h, t_to=rel.t_start))},
-        phases={**state.phases, name: (*state.phases[name], hold, off)},
-        regrasps=state.regrasps,
         now=max(state.now, rel.t_start),
-        held_to_end=state.held_to_end,
         released={**state.released, name: rel},
+    )
+
+
+def _hold_ends(state: _State, name: str, t_s: float, phase: RegraspPhase | ReleasePhase) -> _State:
+    """``state`` with ``name``'s current hold ended at ``t_s`` [s] and ``phase`` after it
+    (who holds what, and the time, are the caller's to change)."""
+    h = state.holding[name]
+    hold = ContactPhase(finger=name, t_start=h.t_from, t_end=t_s, p_object=h.p, n_object=h.n)
+    return replace(
+        state,
+        history={**state.history, name: (*state.history[name], replace(h, t_to=t_s))},
+        phases={**state.phases, name: (*state.phases[name], hold, phase)},
     )
 
 
@@ -813,10 +817,6 @@ def _apply(
     """The state after a verified regrasp of ``name`` (``new_hold``: the hold after its
     landing, if already followed)."""
     res, choice = found.result, found.choice
-    h = state.holding[name]
-    hold = ContactPhase(
-        finger=name, t_start=h.t_from, t_end=res.t_start, p_object=h.p, n_object=h.n
-    )
     fly = RegraspPhase(
         finger=name,
         t_start=res.t_start,
@@ -848,14 +848,11 @@ def _apply(
     if new_hold is None:
         new_hold = _landing_hold(ctx, name, res)
     log.info("%s regrasped at t=%.3f s (%s)", name, res.t_start, why)
-    return _State(
+    return replace(
+        _hold_ends(state, name, res.t_start, fly),
         holding={**state.holding, name: new_hold},
-        history={**state.history, name: (*state.history[name], replace(h, t_to=res.t_start))},
-        phases={**state.phases, name: (*state.phases[name], hold, fly)},
         regrasps=(*state.regrasps, res),
         now=res.t_end,
-        held_to_end=state.held_to_end,
-        released=state.released,
     )
 
 
