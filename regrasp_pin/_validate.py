@@ -24,7 +24,7 @@ def as_array(
             contains NaN or inf.
     """
     try:
-        arr = np.asarray(value, dtype=dtype)
+        arr: np.ndarray = np.asarray(value, dtype=dtype)
     except (TypeError, ValueError) as exc:
         raise InputError(argument, f"not a numeric array ({exc})", _shape_text(shape)) from None
     if arr.ndim != len(shape) or any(
@@ -44,12 +44,13 @@ def as_batch(
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise InputError(argument, f"not a numeric array ({exc})", f"shape (N, {width})") from None
+    given = arr.shape
     single = arr.ndim == 1
     if single:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != width:
         raise InputError(
-            argument, f"has shape {np.shape(value)}", f"shape ({width},) or (N, {width})"
+            argument, f"has shape {given}", f"shape ({width},) or (N, {width})"
         )
     if finite and not np.all(np.isfinite(arr)):
         raise InputError(argument, "contains NaN or inf", "finite values")

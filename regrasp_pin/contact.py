@@ -65,6 +65,7 @@ class ContactModel:
 
     @property
     def cos_cone(self) -> float:
+        """Cosine of the pad cone's half-angle."""
         return float(np.cos(np.radians(self.cone_deg)))
 
 

@@ -21,14 +21,14 @@ the surface distance; it is only a tie-breaker).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .contact import ContactModel, FingerClearance, LinkClearance
 from .exceptions import ContactError, FailureKind, InputError
 from .grasp_quality import ferrari_canny_epsilon
-from .hand import Hand
+from .hand import Finger, Hand
 from .manifold import Manifold
 from .objects import ConvexObject, SurfaceSample
 
@@ -175,29 +175,19 @@ def choose_new_contact(
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
     sep = 2 * finger.tip_radius + 0.001 if min_separation_m is None else min_separation_m
-    t_arrive = float(t_arrive_s)
-    t0, t1 = float(manifold.times_s[0]), float(manifold.times_s[-1])
-    if not t0 - 1e-9 <= t_arrive <= t1 + 1e-9:  # also rejects NaN
-        raise InputError(
-            "t_arrive_s",
-            f"{t_arrive_s!r} is outside the manifold's times",
-            f"a time in [{t0:.6g}, {t1:.6g}] s",
-        )
-    ka = manifold.time_index(t_arrive)
+    ka, kb = _arrival_indices(manifold, t_arrive_s)
     usable = manifold.usable(contact.limit_margin_rad)
     choice = manifold.usable(contact.choice_margin_rad)
     # the landing falls between two manifold times: Q must be usable at both
-    kb = max(int(np.searchsorted(manifold.times_s, t_arrive + 1e-9)) - 1, 0)
     cand = choice[ka] & choice[min(kb, ka)]
     pts = sample.points
-    for p_other, _ in others.values():
-        cand &= np.linalg.norm(pts - p_other, axis=1) >= sep
+    cand &= _far_from(pts, [p for p, _ in others.values()], sep)
     if exclude_radius_m > 0:
-        cand &= np.linalg.norm(pts - P_object, axis=1) >= exclude_radius_m
+        cand &= _far_from(pts, [P_object], exclude_radius_m)
     if exclude_points_object is not None:
         r_ex = exclude_radius_m if exclude_points_radius_m is None else exclude_points_radius_m
-        for e in np.asarray(exclude_points_object, float).reshape(-1, 3):
-            cand &= np.linalg.norm(pts - e, axis=1) >= max(r_ex, 1e-12)
+        ex = np.asarray(exclude_points_object, float).reshape(-1, 3)
+        cand &= _far_from(pts, list(ex), max(r_ex, 1e-12))
     idx = np.flatnonzero(cand)
     if idx.size == 0:
         raise ContactError(
@@ -210,112 +200,212 @@ def choose_new_contact(
             measured=float(usable[ka].sum()),
             required=1.0,
         )
-    t_exit = exit_times(usable[:, idx], manifold.times_s, ka)
-    margin = manifold.margin_rad[ka, idx]
-    dist = np.linalg.norm(pts[idx] - P_object, axis=1)
-    # the order must not follow last-bit noise of the IK: keys on a 1e-9 lattice
-    margin_key, dist_key = np.round(margin, 9), np.round(dist, 9)
-
-    def rank(t_exit: np.ndarray, lasts: np.ndarray) -> np.ndarray:
-        if exit_tolerance_s > 0:
-            # exit times within the tolerance of each other count as ties; among them the
-            # shorter move first (a short move is less likely to cross another finger)
-            bins = np.floor((t_exit.max() - t_exit) / exit_tolerance_s)
-            return np.lexsort((idx, -margin_key, dist_key, bins))
-        # (b), then margin, then distance; a point usable to the end outlasts one that
-        # leaves at the last grid time (both have exit time times_s[-1])
-        return np.lexsort((idx, dist_key, -margin_key, ~lasts, -t_exit))
-
+    ranked = _Ranking(
+        t_exit=exit_times(usable[:, idx], manifold.times_s, ka),
+        margin=manifold.margin_rad[ka, idx],
+        dist=np.linalg.norm(pts[idx] - P_object, axis=1),
+        idx=idx,
+        exit_tolerance_s=exit_tolerance_s,
+    )
     lasts = usable[-1, idx].copy()
-    order = rank(t_exit, lasts)
+    order = ranked.order(ranked.t_exit, lasts)
     if link_check and rerank > 0:
         # the manifold knows nothing of the finger's other links: the first candidates'
         # exit times are cut where a link would come within the trigger distance of the
         # object (Coal, at the manifold's times), and those candidates ranked again
         top = order[:rerank]
-        t_exit, lasts = t_exit.copy(), lasts.copy()
+        t_exit, lasts = ranked.t_exit.copy(), lasts.copy()
         t_exit[top], last = _link_exit(
             hand, finger.name, obj, manifold, idx[top], ka, contact, lasting
         )
         lasts[top] &= last
-        head = rank(t_exit, lasts)
+        ranked = replace(ranked, t_exit=t_exit)
+        head = ranked.order(t_exit, lasts)
         order = np.concatenate([head[np.isin(head, top)], order[rerank:]])
-
-    other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
-    other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
-    scale = obj.radius_m
-
-    def eps(p: np.ndarray, n: np.ndarray) -> float:
-        return ferrari_canny_epsilon(
-            np.vstack([other_p, p[None]]),
-            np.vstack([other_n, n[None]]),
-            mu,
-            n_edges=SCREEN_EDGES,
-            torque_scale_m=scale,
-        )
-
-    eps_P = eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
-    lc = _ObjectClearance(hand, finger.name, obj, contact) if link_check else None
-    fc = FingerClearance(hand, finger.name) if q_hand_arrive is not None else None
-    T_arrive = None
-    fallback = None
-    rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}
-    for position, j in enumerate(order[:max_checks]):
-        i = idx[j]
-        e = eps(pts[i], sample.normals[i])
-        if e <= 0.0:
-            rejected["force closure"] += 1
-            continue
-        if lc is not None:
-            if T_arrive is None:
-                T_arrive = manifold.T_palm_object[ka]
-            q_full = hand.to_full(finger.name, manifold.q[ka, i])
-            if not lc(q_full[None], T_arrive)[0]:
-                rejected["link clearance"] += 1
-                continue
-        if fc is not None:
-            q_all = np.array(q_hand_arrive, float)
-            q_all[finger.q_indices] = manifold.q[ka, i]
-            if fc(q_all) < finger_clearance_m:
-                rejected["finger clearance"] += 1
-                continue
-        result = NewContact(
-            finger=finger.name,
-            index=int(i),
-            p_object=pts[i].copy(),
-            n_object=sample.normals[i].copy(),
-            q_arrive=manifold.q[ka, i].copy(),
-            t_arrive_s=float(manifold.times_s[ka]),
-            exit_time_s=float(t_exit[j]),
-            margin_rad=float(margin[j]),
-            distance_from_P_m=float(dist[j]),
-            epsilon=float(e),
-            epsilon_with_P=float(eps_P),
-            quality_kept=bool(e >= eps_P),
-            n_candidates=int(idx.size),
-            rank=position,
-        )
-        if result.quality_kept:
-            return result
-        if fallback is None:
-            fallback = result
-    if fallback is not None:
-        return fallback
-    why = ", ".join(f"{n} {k}" for k, n in rejected.items() if n)
-    main = max(rejected, key=lambda k: rejected[k])  # dict order breaks ties
-    raise ContactError(
-        f"none of the {min(idx.size, max_checks)} best candidates (of {idx.size}) passes "
-        f"(rejected for: {why})",
-        finger=finger.name,
-        time_s=float(manifold.times_s[ka]),
-        kind={
-            "force closure": FailureKind.FORCE_CLOSURE,
-            "link clearance": FailureKind.OBJECT_CLEARANCE,
-            "finger clearance": FailureKind.FINGER_COLLISION,
-        }[main],
-        measured=float(rejected[main]),
-        required=0.0,
+    screen = _Screen(
+        hand,
+        finger,
+        obj,
+        manifold,
+        sample,
+        ka,
+        others,
+        mu,
+        _ObjectClearance(hand, finger.name, obj, contact) if link_check else None,
+        q_hand_arrive,
+        finger_clearance_m,
     )
+    return screen.first(order[:max_checks], ranked, P_object, n_P_object)
+
+
+def _arrival_indices(manifold: Manifold, t_arrive_s: float) -> tuple[int, int]:
+    """The manifold's time indices around a landing at ``t_arrive_s`` [s]: the first
+    time at or after it and the last time at or before it (raises InputError outside)."""
+    t_arrive = float(t_arrive_s)
+    t0, t1 = float(manifold.times_s[0]), float(manifold.times_s[-1])
+    if not t0 - 1e-9 <= t_arrive <= t1 + 1e-9:  # also rejects NaN
+        raise InputError(
+            "t_arrive_s",
+            f"{t_arrive_s!r} is outside the manifold's times",
+            f"a time in [{t0:.6g}, {t1:.6g}] s",
+        )
+    ka = manifold.time_index(t_arrive)
+    kb = max(int(np.searchsorted(manifold.times_s, t_arrive + 1e-9)) - 1, 0)
+    return ka, kb
+
+
+def _far_from(pts: np.ndarray, centres: list[np.ndarray], radius_m: float) -> np.ndarray:
+    """``(N,)`` True where a point is at least ``radius_m`` from every centre."""
+    ok = np.ones(pts.shape[0], bool)
+    for c in centres:
+        ok &= np.linalg.norm(pts - c, axis=1) >= radius_m
+    return ok
+
+
+@dataclass(frozen=True)
+class _Ranking:
+    """The candidates' keys (exit time, margin, distance from P; ``idx``: their sample
+    indices) and the order they give."""
+
+    t_exit: np.ndarray
+    margin: np.ndarray
+    dist: np.ndarray
+    idx: np.ndarray
+    exit_tolerance_s: float
+
+    def order(self, t_exit: np.ndarray, lasts: np.ndarray) -> np.ndarray:
+        """Candidate positions, best first (``lasts``: usable to the end)."""
+        # the order must not follow last-bit noise of the IK: keys on a 1e-9 lattice
+        margin_key, dist_key = np.round(self.margin, 9), np.round(self.dist, 9)
+        if self.exit_tolerance_s > 0:
+            # exit times within the tolerance of each other count as ties; among them the
+            # shorter move first (a short move is less likely to cross another finger)
+            bins = np.floor((t_exit.max() - t_exit) / self.exit_tolerance_s)
+            return np.lexsort((self.idx, -margin_key, dist_key, bins))
+        # (b), then margin, then distance; a point usable to the end outlasts one that
+        # leaves at the last grid time (both have exit time times_s[-1])
+        return np.lexsort((self.idx, dist_key, -margin_key, ~lasts, -t_exit))
+
+
+class _Screen:
+    """The slower tests of a ranked candidate: force closure with the other contacts,
+    the finger's links clear of the object and of the other fingers at arrival."""
+
+    def __init__(
+        self,
+        hand: Hand,
+        finger: Finger,
+        obj: ConvexObject,
+        manifold: Manifold,
+        sample: SurfaceSample,
+        ka: int,
+        others: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        mu: float,
+        link_clear: _ObjectClearance | None,
+        q_hand_arrive: np.ndarray | None,
+        finger_clearance_m: float,
+    ) -> None:
+        self.hand, self.finger, self.manifold, self.sample, self.ka = (
+            hand,
+            finger,
+            manifold,
+            sample,
+            ka,
+        )
+        self.other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
+        self.other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
+        self.mu, self.scale = mu, obj.radius_m
+        self.link_clear = link_clear
+        self.q_hand_arrive = q_hand_arrive
+        self.finger_clear = (
+            FingerClearance(hand, finger.name) if q_hand_arrive is not None else None
+        )
+        self.finger_clearance_m = finger_clearance_m
+        self.rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}
+
+    def eps(self, p: np.ndarray, n: np.ndarray) -> float:
+        """Ferrari-Canny epsilon of the other contacts and ``(p, n)``."""
+        return ferrari_canny_epsilon(
+            np.vstack([self.other_p, p[None]]),
+            np.vstack([self.other_n, n[None]]),
+            self.mu,
+            n_edges=SCREEN_EDGES,
+            torque_scale_m=self.scale,
+        )
+
+    def rejection(self, i: int, e: float) -> str | None:
+        """Why sample point ``i`` (epsilon ``e`` with the others) is refused, or None."""
+        if e <= 0.0:
+            return "force closure"
+        q_i = self.manifold.q[self.ka, i]
+        if self.link_clear is not None:
+            q_full = self.hand.to_full(self.finger.name, q_i)
+            if not self.link_clear(q_full[None], self.manifold.T_palm_object[self.ka])[0]:
+                return "link clearance"
+        if self.finger_clear is not None:
+            q_all = np.array(self.q_hand_arrive, float)
+            q_all[self.finger.q_indices] = q_i
+            if self.finger_clear(q_all) < self.finger_clearance_m:
+                return "finger clearance"
+        return None
+
+    def first(
+        self, order: np.ndarray, ranked: _Ranking, P_object: np.ndarray, n_P_object: np.ndarray
+    ) -> NewContact:
+        """The first candidate in ``order`` that keeps the grasp quality of P, else the
+        first that passes; ContactError (the most frequent rejection) if none does."""
+        pts, normals, idx = self.sample.points, self.sample.normals, ranked.idx
+        eps_P = self.eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
+        fallback = None
+        for position, j in enumerate(order):
+            i = int(idx[j])
+            e = self.eps(pts[i], normals[i])
+            why = self.rejection(i, e)
+            if why is not None:
+                self.rejected[why] += 1
+                continue
+            result = NewContact(
+                finger=self.finger.name,
+                index=i,
+                p_object=pts[i].copy(),
+                n_object=normals[i].copy(),
+                q_arrive=self.manifold.q[self.ka, i].copy(),
+                t_arrive_s=float(self.manifold.times_s[self.ka]),
+                exit_time_s=float(ranked.t_exit[j]),
+                margin_rad=float(ranked.margin[j]),
+                distance_from_P_m=float(ranked.dist[j]),
+                epsilon=float(e),
+                epsilon_with_P=float(eps_P),
+                quality_kept=bool(e >= eps_P),
+                n_candidates=int(idx.size),
+                rank=position,
+            )
+            if result.quality_kept:
+                return result
+            if fallback is None:
+                fallback = result
+        if fallback is not None:
+            return fallback
+        raise self.failure(order.size, idx.size)
+
+    def failure(self, checked: int, n_candidates: int) -> ContactError:
+        """The error when none of ``checked`` candidates passes."""
+        rejected = self.rejected
+        why = ", ".join(f"{n} {k}" for k, n in rejected.items() if n)
+        main = max(rejected, key=lambda k: rejected[k])  # dict order breaks ties
+        return ContactError(
+            f"none of the {checked} best candidates (of {n_candidates}) passes "
+            f"(rejected for: {why})",
+            finger=self.finger.name,
+            time_s=float(self.manifold.times_s[self.ka]),
+            kind={
+                "force closure": FailureKind.FORCE_CLOSURE,
+                "link clearance": FailureKind.OBJECT_CLEARANCE,
+                "finger clearance": FailureKind.FINGER_COLLISION,
+            }[main],
+            measured=float(rejected[main]),
+            required=0.0,
+        )
 
 
 @dataclass(frozen=True)
@@ -335,6 +425,88 @@ class Grasp:
     q: dict[str, np.ndarray]
     indices: dict[str, int]
     epsilon: float
+
+
+def _start_candidates(
+    hand: Hand,
+    obj: ConvexObject,
+    man: Manifold,
+    pts: np.ndarray,
+    t_index: int,
+    contact: ContactModel,
+    max_candidates: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One finger's candidate contacts at ``t_index`` for :func:`initial_grasp`: their
+    sample indices and lasting fractions, the longest-lasting first, spread over the
+    surface (two tip radii apart first, then one), links clear of the object."""
+    name = man.finger
+    finger = hand.finger(name)
+    usable = man.usable(contact.limit_margin_rad)
+    idx = np.flatnonzero(man.usable(contact.choice_margin_rad)[t_index])
+    if idx.size == 0:
+        raise ContactError(
+            "no usable contact at the start (inside the limits with margin, pad facing)",
+            finger=name,
+            time_s=float(man.times_s[t_index]),
+        )
+    last = exit_times(usable[:, idx], man.times_s, t_index)
+    frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
+    order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
+    clear = _ObjectClearance(hand, name, obj, contact)
+    q_rows = hand.to_full(name, man.q[t_index, idx])
+    T0 = man.T_palm_object[t_index]
+
+    def link_clear(j: int) -> bool:
+        return bool(clear(q_rows[j : j + 1], T0)[0])
+
+    chosen = _spread_out(
+        pts[idx],
+        order,
+        (2 * finger.tip_radius, finger.tip_radius),
+        max_candidates,
+        link_clear,
+    )
+    if not chosen:
+        raise ContactError("every usable contact makes a link touch the object", finger=name)
+    return idx[chosen], frac[chosen]
+
+
+def _grasp_score(
+    p: np.ndarray, n: np.ndarray, fracs: list[float], mu: float, scale_m: float
+) -> tuple[float, float] | None:
+    """``(score, epsilon)`` of a combination of contacts ``p``, ``n`` ``(F, 3)`` whose
+    lasting fractions are ``fracs``; None if it is not in force closure. The score
+    counts first the fingers that can let go with the rest still in force closure (so
+    that fingers can regrasp later, with four fingers or more), then the smallest of
+    those leave-one-out epsilons, twice the shortest lasting fraction, the mean one and
+    the epsilon."""
+    e = ferrari_canny_epsilon(p, n, mu, n_edges=SCREEN_EDGES, torque_scale_m=scale_m)
+    if e <= 0:
+        return None
+    F = p.shape[0]
+    loo = (
+        [
+            ferrari_canny_epsilon(
+                np.delete(p, j, 0),
+                np.delete(n, j, 0),
+                mu,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=scale_m,
+            )
+            for j in range(F)
+        ]
+        if F > 3
+        else []
+    )
+    removable = [x for x in loo if x > 0]
+    score = (
+        len(removable)
+        + (min(removable) / (min(removable) + 0.05) if removable else 0.0)
+        + 2.0 * min(fracs)
+        + sum(fracs) / F
+        + e / (e + 0.05)
+    )
+    return score, e
 
 
 def initial_grasp(
@@ -390,39 +562,12 @@ def initial_grasp(
     ks = soon[:: max(1, -(-soon.size // 5))]
     gap = _PairGaps(hand, {n: manifolds[n].q[ks] for n in names})
     pts, nrm = sample.points, sample.normals
-    per_finger: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for name in names:
-        man = manifolds[name]
-        finger = hand.finger(name)
-        usable = man.usable(contact.limit_margin_rad)
-        idx = np.flatnonzero(man.usable(contact.choice_margin_rad)[t_index])
-        if idx.size == 0:
-            raise ContactError(
-                "no usable contact at the start (inside the limits with margin, pad facing)",
-                finger=name,
-                time_s=float(man.times_s[t_index]),
-            )
-        last = exit_times(usable[:, idx], man.times_s, t_index)
-        frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
-        order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
-        clear = _ObjectClearance(hand, name, obj, contact)
-        q_rows = hand.to_full(name, man.q[t_index, idx])
-        T0 = man.T_palm_object[t_index]
-
-        def link_clear(j: int, clear=clear, q_rows=q_rows, T0=T0) -> bool:
-            return bool(clear(q_rows[j : j + 1], T0)[0])
-
-        # spread over the surface first (two tip radii apart), then denser (one radius)
-        chosen = _spread_out(
-            pts[idx],
-            order,
-            (2 * finger.tip_radius, finger.tip_radius),
-            candidates_per_finger,
-            link_clear,
+    per_finger = {
+        name: _start_candidates(
+            hand, obj, manifolds[name], pts, t_index, contact, candidates_per_finger
         )
-        if not chosen:
-            raise ContactError("every usable contact makes a link touch the object", finger=name)
-        per_finger[name] = (idx[chosen], frac[chosen])
+        for name in names
+    }
 
     sep_default = 2 * max(hand.finger(n).tip_radius for n in names) + 0.001
     sep = sep_default if min_separation_m is None else min_separation_m
@@ -449,36 +594,11 @@ def initial_grasp(
             continue
         pick = {n: int(per_finger[n][0][c]) for n, c in chosen_c.items()}
         fracs = [float(per_finger[n][1][c]) for n, c in chosen_c.items()]
-        score_frac, min_frac = sum(fracs), min(fracs)
         ii = np.array([pick[n] for n in names])
-        e = ferrari_canny_epsilon(
-            pts[ii], nrm[ii], mu, n_edges=SCREEN_EDGES, torque_scale_m=obj.radius_m
-        )
-        if e <= 0:
+        scored = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m)
+        if scored is None:
             continue
-        # robustness: how many fingers can let go with the rest still in force closure
-        loo = (
-            [
-                ferrari_canny_epsilon(
-                    np.delete(pts[ii], j, 0),
-                    np.delete(nrm[ii], j, 0),
-                    mu,
-                    n_edges=SCREEN_EDGES,
-                    torque_scale_m=obj.radius_m,
-                )
-                for j in range(len(names))
-            ]
-            if len(names) > 3
-            else []
-        )
-        removable = [x for x in loo if x > 0]
-        score = (
-            len(removable)
-            + (min(removable) / (min(removable) + 0.05) if removable else 0.0)
-            + 2.0 * min_frac
-            + score_frac / len(names)
-            + e / (e + 0.05)
-        )
+        score, e = scored
         if score > best_score:
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
@@ -725,4 +845,4 @@ def _link_exit(
     ok = usable & (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
     if lasting is not None:
         ok &= lasting(points, ka)
-    return exit_times(ok, times[ka:], 0), ok.all(axis=0)
+    return exit_times(ok, times[ka:], 0), np.asarray(ok.all(axis=0))

@@ -445,6 +445,23 @@ class _Builder:
         if spans.size == 0:
             return
         Lmax = int(spans[-1])
+        tables, inv_len = self._cross_tables(Lmax)
+        buf = np.empty((Lmax, n))
+        for L in spans.tolist():
+            sel = self._span_rows(L, keep)
+            if sel is None:
+                continue
+            rows, back, kr = sel
+            vals = self._span_values(tables, rows, back, L, Lmax, kind, buf)
+            vals *= inv_len[rows, L]
+            if kr is not None:
+                vals[~kr] = np.inf
+            F[rows, L] = vals
+
+    def _cross_tables(self, Lmax: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+        """Per coordinate plane ``(KfT, KzT)`` (see :meth:`_max_or_sum`) up to span
+        ``Lmax``, and ``(n, Lmax + 1)`` 1 / chord length (0 for coincident ends)."""
+        n = self.n
         tables = []
         for i, j in self.planes:
             xi, xj = self.P[:, i], self.P[:, j]
@@ -457,58 +474,65 @@ class _Builder:
             KzT = yi * self._window(j, -Lmax, Lmax + 1, 2 * n).T
             KzT -= yj * self._window(i, -Lmax, Lmax + 1, 2 * n).T
             tables.append((KfT, KzT))
-        # 1 / chord length per (x, L); 0 for coincident ends (fixed afterwards)
         ww = np.zeros((n, Lmax + 1))
         for c in range(self.d):
             wc = self._window(c, 0, Lmax + 1, n) - self.P[:, c, None]
             ww += wc * wc
         inv_len = np.divide(1.0, np.sqrt(ww), out=np.zeros_like(ww), where=ww > 0)
-        buf = np.empty((Lmax, n))
-        for L in spans.tolist():
-            R = n if self.closed else n - L
-            rows: slice | np.ndarray = slice(0, R)
-            back: slice | np.ndarray = slice(L, L + R)
-            kr = None
-            if keep is not None:
-                kr = keep[:R, L]
-                cnt = int(np.count_nonzero(kr))
-                if cnt == 0:
-                    continue
-                if cnt <= 0.6 * R:
-                    rows = np.flatnonzero(kr)
-                    back = rows + L
-                    kr = None
-            lo_c = Lmax - L + 1
-            if len(tables) == 1:
-                KfT, KzT = tables[0]
-                width = R if isinstance(rows, slice) else rows.shape[0]
-                t = buf[: L - 1, :width]
-                np.subtract(KzT[lo_c:Lmax, back], KfT[1:L, rows], out=t)  # K[y,z] - K[x,z]
-                c0 = KfT[L, rows]  # K[x, y]
-                if kind == "max":
-                    hi = np.maximum.reduce(t, axis=0)
-                    lo = np.minimum.reduce(t, axis=0)
-                    vals = np.maximum(c0 + hi, -(c0 + lo))
-                else:
-                    t += c0
-                    np.abs(t, out=t)
-                    vals = t.sum(axis=0)
-            else:
-                acc = np.zeros((L - 1, R if isinstance(rows, slice) else rows.shape[0]))
-                for KfT, KzT in tables:
-                    t = KzT[lo_c:Lmax, back] - KfT[1:L, rows]
-                    t += KfT[L, rows]
-                    t *= t
-                    acc += t
-                if kind == "max":
-                    vals = np.sqrt(acc.max(axis=0))
-                else:
-                    np.sqrt(acc, out=acc)
-                    vals = acc.sum(axis=0)
-            vals *= inv_len[rows, L]
-            if kr is not None:
-                vals[~kr] = np.inf
-            F[rows, L] = vals
+        return tables, inv_len
+
+    def _span_rows(
+        self, L: int, keep: np.ndarray | None
+    ) -> tuple[slice | np.ndarray, slice | np.ndarray, np.ndarray | None] | None:
+        """The chords of span ``L`` to fill: ``(rows, rows + L, mask of kept rows or
+        None)``, a slice when most rows are kept; None when none is."""
+        R = self.n if self.closed else self.n - L
+        if keep is None:
+            return slice(0, R), slice(L, L + R), None
+        kr = keep[:R, L]
+        cnt = int(np.count_nonzero(kr))
+        if cnt == 0:
+            return None
+        if cnt <= 0.6 * R:
+            rows = np.flatnonzero(kr)
+            return rows, rows + L, None
+        return slice(0, R), slice(L, L + R), kr
+
+    @staticmethod
+    def _span_values(
+        tables: list[tuple[np.ndarray, np.ndarray]],
+        rows: slice | np.ndarray,
+        back: slice | np.ndarray,
+        L: int,
+        Lmax: int,
+        kind: str,
+        buf: np.ndarray,
+    ) -> np.ndarray:
+        """MAX or SUM of the arc points' distances times the chord length, per chord."""
+        lo_c = Lmax - L + 1
+        width = (rows.stop - rows.start) if isinstance(rows, slice) else rows.shape[0]
+        if len(tables) == 1:
+            KfT, KzT = tables[0]
+            t = buf[: L - 1, :width]
+            np.subtract(KzT[lo_c:Lmax, back], KfT[1:L, rows], out=t)  # K[y,z] - K[x,z]
+            c0 = KfT[L, rows]  # K[x, y]
+            if kind == "max":
+                hi = np.maximum.reduce(t, axis=0)
+                lo = np.minimum.reduce(t, axis=0)
+                return np.maximum(c0 + hi, -(c0 + lo))
+            t += c0
+            np.abs(t, out=t)
+            return t.sum(axis=0)
+        acc = np.zeros((L - 1, width))
+        for KfT, KzT in tables:
+            t = KzT[lo_c:Lmax, back] - KfT[1:L, rows]
+            t += KfT[L, rows]
+            t *= t
+            acc += t
+        if kind == "max":
+            return np.sqrt(acc.max(axis=0))
+        np.sqrt(acc, out=acc)
+        return acc.sum(axis=0)
 
     def _fix_coincident(
         self, F: np.ndarray, kind: str, keep: np.ndarray | None, ncols: int

@@ -156,6 +156,7 @@ class Attempt:
     what: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """The attempt as JSON-serializable data (the kind by its value)."""
         d = asdict(self)
         d["kind"] = self.kind.value
         return d

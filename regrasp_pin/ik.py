@@ -66,7 +66,10 @@ def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _dls_step(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
-    """dq = J^T (J J^T + lambda^2 I)^-1 e for component-major J (3,k,n), e (3,n)."""
+    """Damped least-squares step ``dq = J^T (J J^T + lambda^2 I)^-1 e``.
+
+    ``J`` is component-major ``(3, k, n)``, ``e`` is ``(3, n)``.
+    """
     a00 = _rowdot(J[0], J[0])
     a11 = _rowdot(J[1], J[1])
     a22 = _rowdot(J[2], J[2])

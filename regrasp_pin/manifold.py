@@ -95,7 +95,7 @@ class Manifold:
 
     def time_index(self, t_s: float) -> int:
         """Index of the first grid time >= ``t_s`` (clamped to the last)."""
-        return int(min(np.searchsorted(self.times_s, t_s - 1e-12), self.times_s.size - 1))
+        return min(int(np.searchsorted(self.times_s, t_s - 1e-12)), self.times_s.size - 1)
 
 
 @dataclass(frozen=True)

@@ -191,7 +191,7 @@ class ObjectMotion:
 
     # ------------------------------------------------------------------ evaluation
     def pose(self, t_s: float | np.ndarray) -> np.ndarray:
-        """Interpolated pose(s): linear translation, slerped rotation.
+        """The interpolated pose at a time or at times: linear translation, slerped rotation.
 
         Args:
             t_s: A time [s] or times, shape (K,), within ``[t_start, t_end]``.

@@ -54,6 +54,7 @@ class ContactPhase:
     kind: str = field(default="contact", init=False)
 
     def to_dict(self) -> dict[str, Any]:
+        """The phase as plan-file data (JSON types)."""
         return {
             "finger": self.finger,
             "kind": self.kind,
@@ -95,6 +96,7 @@ class RegraspPhase:
     kind: str = field(default="regrasp", init=False)
 
     def to_dict(self) -> dict[str, Any]:
+        """The phase as plan-file data (JSON types)."""
         d = {
             "finger": self.finger,
             "kind": self.kind,
@@ -136,6 +138,7 @@ class ReleasePhase:
     kind: str = field(default="release", init=False)
 
     def to_dict(self) -> dict[str, Any]:
+        """The phase as plan-file data (JSON types)."""
         return {
             "finger": self.finger,
             "kind": self.kind,

@@ -41,9 +41,10 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from ._validate import positive, positive_int
 from .exceptions import InputError, ModelFileError
+from .plan import ContactPhase
 
 if TYPE_CHECKING:
-    from .plan import Plan
+    from .plan import Plan, RegraspPhase, ReleasePhase
 
 __all__ = ["JointLimitViolation", "PlanCheck", "RegraspCheck", "recheck_plan"]
 
@@ -233,7 +234,8 @@ def recheck_plan(
         )
 
     checks = []
-    for phase in [*plan.regrasps(), *plan.releases()]:
+    moves: list[RegraspPhase | ReleasePhase] = [*plan.regrasps(), *plan.releases()]
+    for phase in moves:
         rc = _check_regrasp(scene, phase, max_step)
         checks.append(rc)
         if rc.min_object_distance_m < -pen_tol:
@@ -472,7 +474,7 @@ def _contact_error(scene: _Scene, tips: np.ndarray) -> tuple[float, str | None, 
         r = float(plan.hand["fingers"][name]["tip_radius"])
         i_f = order.index(name)
         for ph in phases:
-            if ph.kind != "contact":
+            if not isinstance(ph, ContactPhase):
                 continue
             sel = np.flatnonzero(
                 (plan.t >= ph.t_start - _TIME_TOL_S) & (plan.t <= ph.t_end + _TIME_TOL_S)
@@ -503,7 +505,9 @@ def _densify(plan: Plan, sel: np.ndarray, max_step: float) -> tuple[np.ndarray, 
     return times, qs
 
 
-def _check_regrasp(scene: _Scene, phase: Any, max_step: float) -> RegraspCheck:
+def _check_regrasp(
+    scene: _Scene, phase: RegraspPhase | ReleasePhase, max_step: float
+) -> RegraspCheck:
     """Densify one regrasp; the moving finger against the object, all fingers pairwise."""
     import coal
 

@@ -469,29 +469,7 @@ def _advance(
         log.info("%s: %s", name, note)
         return replace(state, held_to_end={**state.held_to_end, name: note})
     _refuse_dead_end(ctx, state, trig, triggers, win)
-    stay = [n for n in ctx.active if n != name and n in state.holding]
-    if len(stay) < p.min_holding:
-        raise PlanningError(
-            f"only {len(stay)} fingers would hold (need {p.min_holding})",
-            finger=name,
-            time_s=win.preferred_s,
-            kind=FailureKind.TOO_FEW_FINGERS,
-            measured=len(stay),
-            required=p.min_holding,
-        )
-    p_stay = np.array([state.holding[n].p for n in stay])
-    n_stay = np.array([state.holding[n].n for n in stay])
-    eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=ctx.obj.radius_m)
-    if eps_stay <= 0.0:
-        raise PlanningError(
-            f"{reason} at t={t_trig:.3f} s, but without it the other fingers are not "
-            "in force closure",
-            finger=name,
-            time_s=win.preferred_s,
-            kind=FailureKind.FORCE_CLOSURE,
-            measured=eps_stay,
-            required=0.0,
-        )
+    stay = _fingers_that_stay(ctx, state, trig, win)
     end_by = motion.t_end if end_by_s is None else end_by_s
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
     if not starts:
@@ -566,6 +544,38 @@ def _advance(
         )
     steps.append(_Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
     return _apply(ctx, state, name, t_trig, why, found, landed.get(id(found.result)))
+
+
+def _fingers_that_stay(
+    ctx: _Context, state: _State, trig: _Trigger, win: LiftOffWindow
+) -> list[str]:
+    """The fingers that hold while ``trig.finger`` is in the air; PlanningError if they
+    are fewer than ``min_holding`` or not in force closure without it."""
+    p, name = ctx.params, trig.finger
+    stay = [n for n in ctx.active if n != name and n in state.holding]
+    if len(stay) < p.min_holding:
+        raise PlanningError(
+            f"only {len(stay)} fingers would hold (need {p.min_holding})",
+            finger=name,
+            time_s=win.preferred_s,
+            kind=FailureKind.TOO_FEW_FINGERS,
+            measured=len(stay),
+            required=p.min_holding,
+        )
+    p_stay = np.array([state.holding[n].p for n in stay])
+    n_stay = np.array([state.holding[n].n for n in stay])
+    eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=ctx.obj.radius_m)
+    if eps_stay <= 0.0:
+        raise PlanningError(
+            f"{trig.reason} at t={trig.time_s:.3f} s, but without it the other fingers are "
+            "not in force closure",
+            finger=name,
+            time_s=win.preferred_s,
+            kind=FailureKind.FORCE_CLOSURE,
+            measured=eps_stay,
+            required=0.0,
+        )
+    return stay
 
 
 def _check_landing(

@@ -128,6 +128,7 @@ class RegraspParams:
     max_variants: int = 8
 
     def validate(self) -> RegraspParams:
+        """Return ``self`` after checking every field (raises InputError naming it)."""
         positive(self.duration_s, "duration_s")
         positive(self.clearance_m, "clearance_m")
         positive(self.grid_spacing_m, "grid_spacing_m")
@@ -174,9 +175,9 @@ class RegraspResult:
         min_clearance_m: Smallest Coal distance between the finger and the object
             away from the lift-off and landing zones (the middle half of the motion when
             the path is too short to leave them) [m].
+        params: The parameters that succeeded.
         stage_ms: Time spent in each stage [ms].
         attempts: The variants that failed before success, as data.
-        params: The parameters that succeeded.
     """
 
     finger: str
@@ -197,9 +198,9 @@ class RegraspResult:
     tip_object: np.ndarray
     report: VerificationReport
     min_clearance_m: float
+    params: RegraspParams
     stage_ms: dict[str, float] = field(default_factory=dict)
     attempts: tuple[Attempt, ...] = ()
-    params: RegraspParams | None = None
 
     @property
     def planning_ms(self) -> float:
@@ -343,7 +344,6 @@ def plan_regrasp(
             n_Q_object=nQ,
             stage_ms=dict(stages.ms),
             attempts=tuple(attempts),
-            params=p_try,
         )
     assert last is not None  # max_variants >= 1
     cls = VerificationError if isinstance(last, VerificationError) else PlanningError
@@ -548,7 +548,7 @@ def _attempt(
     vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
     ratio = vel / f.velocity_limit
     if (ratio > 1.0).any():
-        i, j = np.unravel_index(np.argmax(ratio), vel.shape)
+        i, j = (int(v) for v in np.unravel_index(np.argmax(ratio), vel.shape))
         raise PlanningError(
             f"joint {f.joint_names[j]} would move at {vel[i, j]:.2f} rad/s "
             f"(limit {f.velocity_limit[j]:.2f})",
@@ -613,6 +613,7 @@ def _attempt(
         tip_object=tip_exec,
         report=report,
         min_clearance_m=min_clear,
+        params=p,
     )
 
 

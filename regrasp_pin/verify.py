@@ -295,7 +295,7 @@ def _interpolate(
     counts: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The plan's interpolation at ``counts[i]`` equal steps per interval."""
-    if t.size < 2:
+    if t.size < 2 or motion is None:
         return t.copy(), q.copy(), T.copy()
     idx = np.repeat(np.arange(t.size - 1), counts)
     start = np.repeat(np.cumsum(counts) - counts, counts)

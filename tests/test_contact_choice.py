@@ -306,12 +306,20 @@ def test_no_initial_grasp_names_the_finger(five):
 
 
 # ------------------------------------------------------------------ the new contact Q
+def _exit_index_direct(hand, name, manifold, sample, ka, i, contact):
+    """The first manifold time from ``ka`` at which point ``i`` is not usable (the
+    number of times if it stays usable to the end), tested time by time."""
+    nt = manifold.times_s.size
+    for t in range(ka, nt):
+        if not _usable_direct(hand, name, manifold, sample, t, i, contact.limit_margin_rad):
+            return t
+    return nt
+
+
 def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONTACT, kb=None):
     """The paper's rules plus the grasp tests, written out candidate by candidate; the
     landing lies between manifold times ``kb`` and ``ka`` (default: at ``ka``)."""
     name = manifold.finger
-    times = manifold.times_s
-    nt = times.size
     other_p = np.array([p for p, _ in others.values()])
     other_n = np.array([n for _, n in others.values()])
     rows = []
@@ -323,11 +331,7 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
             continue
         if np.min(np.linalg.norm(other_p - sample.points[i], axis=1)) < SEP_M:
             continue
-        exit_index = nt  # usable to the end
-        for t in range(ka, nt):
-            if not _usable_direct(hand, name, manifold, sample, t, i, contact.limit_margin_rad):
-                exit_index = t
-                break
+        exit_index = _exit_index_direct(hand, name, manifold, sample, ka, i, contact)
         q = manifold.q[ka, i]
         f = hand.finger(name)
         margin = min(np.min(q - f.lower), np.min(f.upper - q))

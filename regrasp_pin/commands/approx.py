@@ -19,6 +19,7 @@ _METHODS = ("hopfield", "exact")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``approx`` options to ``parser``."""
     parser.add_argument("curve", type=Path, help="CSV file with x,y or x,y,z rows")
     parser.add_argument("-m", type=int, required=True, help="number of vertices (waypoints)")
     parser.add_argument("--closed", action="store_true", help="treat the curve as closed")
@@ -85,6 +86,7 @@ def load_curve(path: Path) -> list[list[float]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Approximate the curve in ``args.curve``; return the exit status."""
     import numpy as np
 
     from ..polygon import approximate_polygon

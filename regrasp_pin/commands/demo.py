@@ -7,7 +7,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..planner import ManipulationPlan
@@ -17,6 +17,7 @@ HELP = "Plan the canonical regrasping scenario, print a summary, write plan.json
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``demo`` options to ``parser``."""
     parser.add_argument("--out", default="out", help="output folder (default: out/)")
     parser.add_argument("--hand", choices=("five_finger", "allegro"), default="five_finger")
     parser.add_argument(
@@ -37,8 +38,8 @@ def summary_rows(result: ManipulationPlan) -> list[dict]:
     for r in result.regrasps:
         ph = next(
             p
-            for p in result.plan.phases[r.finger]
-            if p.kind == "regrasp" and abs(p.t_start - r.t_start) < 1e-9
+            for p in result.plan.regrasps()
+            if p.finger == r.finger and abs(p.t_start - r.t_start) < 1e-9
         )
         rows.append(
             {
@@ -60,6 +61,7 @@ def summary_rows(result: ManipulationPlan) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Plan the demo scenario, print its table and write the outputs; return the exit status."""
     from ..exceptions import PlanningError
     from ..planner import plan_manipulation
     from ..scenarios import make_scenario
@@ -71,20 +73,7 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if not args.json:
         print(scen.description)
-    bar = None
-    if not args.quiet and not args.json:
-        try:
-            from tqdm import tqdm
-
-            bar = tqdm(
-                total=round(scen.motion.duration_s, 2),
-                unit="s",
-                desc="planning",
-                file=sys.stderr,
-                bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s",
-            )
-        except ImportError:  # pragma: no cover - tqdm is a dependency
-            bar = None
+    bar = None if args.quiet or args.json else _progress_bar(scen.motion.duration_s)
 
     def progress(t_s: float) -> None:
         if bar is not None:
@@ -122,10 +111,7 @@ def run(args: argparse.Namespace) -> int:
         "fingers_regrasped": sorted({r["finger"] for r in rows}),
         "all_verified": all(r["verified"] for r in rows),
         "rows": rows,
-        "releases": [
-            {"finger": p.finger, "t_s": p.t_start, "min_clearance_mm": 1e3 * p.min_clearance_m}
-            for p in result.plan.releases()
-        ],
+        "releases": _release_rows(result),
         "stage_s": result.stage_s,
         "total_s": elapsed,
         "plan": str(plan_path),
@@ -144,6 +130,29 @@ def run(args: argparse.Namespace) -> int:
             print(f"meshcat: {show_plan_live(result.plan)}  (Ctrl-C to stop)")
             wait_until_interrupted()
     return 0
+
+
+def _progress_bar(duration_s: float) -> Any:
+    """A tqdm bar over the motion's duration [s] on stderr (None without tqdm)."""
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        return None
+    return tqdm(
+        total=round(duration_s, 2),
+        unit="s",
+        desc="planning",
+        file=sys.stderr,
+        bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s",
+    )
+
+
+def _release_rows(result: ManipulationPlan) -> list[dict]:
+    """One row per release: finger, time [s], smallest clearance [mm]."""
+    return [
+        {"finger": p.finger, "t_s": p.t_start, "min_clearance_mm": 1e3 * p.min_clearance_m}
+        for p in result.plan.releases()
+    ]
 
 
 def _print_table(rows: list[dict], summary: dict) -> None:

@@ -10,11 +10,13 @@ HELP = "Show a hand's fingers, joint limits and a solved IK round trip."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``info`` options to ``parser``."""
     parser.add_argument("--hand", choices=("five_finger", "allegro"), default="five_finger")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:
+    """Print the hand's fingers, joints and limits; return the exit status."""
     import numpy as np
 
     from ..hand import Hand

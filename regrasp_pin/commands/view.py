@@ -11,6 +11,7 @@ HELP = "Show a plan file in the browser (meshcat), live on 127.0.0.1 or as stati
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``view`` options to ``parser``."""
     parser.add_argument("plan", help="plan file (JSON, format regrasp_pin.plan/1)")
     parser.add_argument(
         "--port", type=int, default=None,
@@ -25,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Show a plan file in meshcat (or export it); return the exit status."""
     from ..plan import Plan
 
     plan = Plan.load(args.plan)  # fails early, before the optional imports

@@ -52,6 +52,7 @@ class Proximity:
 
     @property
     def reason(self) -> str:
+        """Why the hold ends, in words."""
         return f"{self.distance_m * 1e3:.2f} mm from the {self.other} finger"
 
 

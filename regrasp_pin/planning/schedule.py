@@ -42,6 +42,7 @@ class LiftOffWindow:
 
     @property
     def empty(self) -> bool:
+        """True when no lift-off time fits (the latest is before the earliest)."""
         return self.latest_s < self.earliest_s - TIME_TOL_S
 
 

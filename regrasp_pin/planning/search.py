@@ -67,10 +67,12 @@ class SearchBudget:
 
     @classmethod
     def seconds(cls, budget_s: float, max_plans: int = 10_000) -> SearchBudget:
+        """A budget of ``budget_s`` [s] of wall-clock time from now."""
         return cls(deadline=time.perf_counter() + budget_s, max_plans=max_plans)
 
     @property
     def exhausted(self) -> bool:
+        """True once the deadline has passed or ``max_plans`` regrasps were planned."""
         return self.plans >= self.max_plans or time.perf_counter() > self.deadline
 
 

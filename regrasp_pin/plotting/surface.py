@@ -15,6 +15,33 @@ from . import require_pyplot
 __all__ = ["plot_unfolded_grid"]
 
 
+def _draw_faces(ax: Any, grid: SurfaceGrid) -> None:
+    """Outline the unfolded faces [mm] and dash the edges between them."""
+    mm = 1e3
+    for unf in grid.unfoldings:
+        poly = np.vstack([unf.polygon_uv, unf.polygon_uv[:1]]) * mm
+        ax.plot(poly[:, 0], poly[:, 1], color="0.25", lw=1.2, zorder=3)
+        centre = unf.polygon_uv.mean(axis=0) * mm
+        ax.annotate(f"face {unf.face_id}", centre, color="0.45", fontsize=8, ha="center")
+    for hinge in grid.hinges_uv:
+        ax.plot(hinge[:, 0] * mm, hinge[:, 1] * mm, color="tab:orange", lw=1.5, ls="--", zorder=3)
+
+
+def _polygon_indices(value: Any, n: int) -> np.ndarray:
+    """``value`` as >= 2 integer indices into a path of ``n`` points (else InputError)."""
+    idx = np.asarray(value)
+    if (
+        idx.ndim != 1
+        or idx.size < 2
+        or not np.issubdtype(idx.dtype, np.integer)
+        or (np.any(idx < 0) or np.any(idx >= n))
+    ):
+        raise InputError(
+            "polygon_indices", "must be >= 2 indices into the path", f"integers in [0, {n})"
+        )
+    return idx
+
+
 def plot_unfolded_grid(
     grid: SurfaceGrid,
     path: GridPath | None = None,
@@ -55,13 +82,7 @@ def plot_unfolded_grid(
     else:
         fig = ax.figure
     mm = 1e3
-    for unf in grid.unfoldings:
-        poly = np.vstack([unf.polygon_uv, unf.polygon_uv[:1]]) * mm
-        ax.plot(poly[:, 0], poly[:, 1], color="0.25", lw=1.2, zorder=3)
-        centre = unf.polygon_uv.mean(axis=0) * mm
-        ax.annotate(f"face {unf.face_id}", centre, color="0.45", fontsize=8, ha="center")
-    for hinge in grid.hinges_uv:
-        ax.plot(hinge[:, 0] * mm, hinge[:, 1] * mm, color="tab:orange", lw=1.5, ls="--", zorder=3)
+    _draw_faces(ax, grid)
     uv = grid.uv * mm
     if heights is not None:
         h = np.asarray(heights, dtype=float)
@@ -94,18 +115,7 @@ def plot_unfolded_grid(
         source = tip_path.uv if tip_path is not None else (path.uv if path is not None else None)
         if source is None:
             raise InputError("polygon_indices", "needs a path or a tip_path to index")
-        idx = np.asarray(polygon_indices)
-        if (
-            idx.ndim != 1
-            or idx.size < 2
-            or not np.issubdtype(idx.dtype, np.integer)
-            or (np.any(idx < 0) or np.any(idx >= source.shape[0]))
-        ):
-            raise InputError(
-                "polygon_indices",
-                "must be >= 2 indices into the path",
-                f"integers in [0, {source.shape[0]})",
-            )
+        idx = _polygon_indices(polygon_indices, source.shape[0])
         poly = source[idx] * mm
         ax.plot(
             poly[:, 0],

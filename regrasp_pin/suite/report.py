@@ -21,7 +21,7 @@ def _rate(results: Sequence[ScenarioResult]) -> str:
     return f"{k}/{len(results)} {k / len(results):4.0%}"
 
 
-def _stats(values: Iterable[float], unit: str, scale: float = 1.0) -> str:
+def _stats(values: Iterable[float | None], unit: str, scale: float = 1.0) -> str:
     v = np.array([x for x in values if x is not None], float) * scale
     if v.size == 0:
         return "n/a"
@@ -89,7 +89,9 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
     lines.append("build time per scenario: " + _stats((r.build_s for r in res), "s"))
     got = [r for r in planned if r.planned_until_s is not None and r.duration_s]
     if got:
-        reached = np.mean([r.planned_until_s / r.duration_s for r in got])
+        reached = np.mean(
+            [float(r.planned_until_s or 0.0) / float(r.duration_s or 1.0) for r in got]
+        )
         lines.append(f"motion planned before success or failure: {reached:.0%} on average")
     touching = [
         r

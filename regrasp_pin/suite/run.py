@@ -192,9 +192,12 @@ def run_scenario(
         _record_failure(result, exc, "grasp" if isinstance(exc, ContactError) else "build")
         return result
     result.build_s = time.perf_counter() - t0
-    fingers = tuple(scen.grasp.q)
+    grasp = scen.grasp
+    if grasp is None:  # build_scenario always chooses one (or raises ContactError)
+        raise AssertionError("build_scenario returned a scenario without a grasp")
+    fingers = tuple(grasp.q)
     result.initial_finger_clearance_m = float(
-        _finger_clearance(scen.hand, scen.obj, scen.motion, fingers, 0.0)(scen.grasp.q)
+        _finger_clearance(scen.hand, scen.obj, scen.motion, fingers, 0.0)(grasp.q)
     )
     params = scen.params
     if any(f.name == "budget_s" for f in dataclasses.fields(params)):

@@ -9,7 +9,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -51,6 +51,16 @@ NEIGHBOUR_RATES_DEG_S = (10.0, 20.0, 40.0)
 
 
 # ---------------------------------------------------------------------- specs
+_T = TypeVar("_T")
+
+
+def _given(value: _T | None) -> _T:
+    """``value``, known not to be None (``ObjectSpec.__post_init__`` checked it)."""
+    if value is None:
+        raise AssertionError("a field checked in __post_init__ is None")
+    return value
+
+
 def _vec3(value: Any, argument: str) -> tuple[float, float, float]:
     a = as_array(value, argument, (3,))
     return (float(a[0]), float(a[1]), float(a[2]))
@@ -98,8 +108,8 @@ class ObjectSpec:
             object.__setattr__(self, "size_m", size)
         if self.kind == "prism":
             positive_int(self.n_sides, "object.n_sides", minimum=3)
-            positive(self.circumradius_m, "object.circumradius_m")
-            positive(self.height_m, "object.height_m")
+            positive(_given(self.circumradius_m), "object.circumradius_m")
+            positive(_given(self.height_m), "object.height_m")
         if self.kind == "mesh":
             positive_int(self.n_points, "object.n_points", minimum=4)
             positive_int(self.seed, "object.seed", minimum=0)
@@ -117,16 +127,19 @@ class ObjectSpec:
                 on an ellipsoid, but the hull is computed, not assumed).
         """
         if self.kind == "prism":
-            return Prism(int(self.n_sides), float(self.circumradius_m), float(self.height_m))
+            return Prism(
+                _given(self.n_sides), _given(self.circumradius_m), _given(self.height_m)
+            )
         if self.kind == "box":
-            return Box(self.size_m)
+            return Box(_given(self.size_m))
         rng = np.random.default_rng(self.seed)
-        u = rng.normal(size=(int(self.n_points), 3))
+        u = rng.normal(size=(_given(self.n_points), 3))
         u /= np.linalg.norm(u, axis=1, keepdims=True)
         r = rng.uniform(1.0 - MESH_JITTER, 1.0 + MESH_JITTER, (u.shape[0], 1))
         return ConvexMesh(0.5 * np.asarray(self.size_m) * u * r)
 
     def to_dict(self) -> dict[str, Any]:
+        """The spec as JSON-serializable data."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in _fields(self).items()}
 
 
@@ -174,6 +187,7 @@ class MotionSpec:
         return abs(float(self.angle_deg)) / float(self.rate_deg_s)
 
     def to_dict(self) -> dict[str, Any]:
+        """The spec as JSON-serializable data."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in _fields(self).items()}
 
 

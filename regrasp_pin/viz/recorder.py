@@ -150,12 +150,15 @@ class SceneRecorder:
         return self.static_html()
 
     def wait(self) -> str:
+        """Nothing to wait for: there is no browser."""
         return "ok"
 
     def open(self) -> SceneRecorder:
+        """Nothing to open: there is no browser."""
         return self
 
     def close(self) -> None:
+        """Nothing to close."""
         return None
 
 
