@@ -28,6 +28,8 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(PY) -m mypy
 
 docs-images: $(STAMP)
 	$(VENV)/bin/regrasp-pin demo --out out --quiet

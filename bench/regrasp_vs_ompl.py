@@ -156,8 +156,7 @@ class FingerCollision:
     pairs whose bounding spheres are apart are not sent to Coal.
     """
 
-    def __init__(self, hand: Hand, finger: str, box: Box, q_hand: np.ndarray,
-                 T_box: np.ndarray):
+    def __init__(self, hand: Hand, finger: str, box: Box, q_hand: np.ndarray, T_box: np.ndarray):
         f = hand.finger(finger)
         cm = hand.collision_model
         self.f = f
@@ -174,12 +173,14 @@ class FingerCollision:
         self.ids = list(f.geometry_ids)
         self.geoms = [cm.geometryObjects[g].geometry for g in self.ids]
         other_ids = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
-        self.others = [(cm.geometryObjects[g].geometry, pin.SE3(self.gdata.oMg[g]))
-                       for g in other_ids]
+        self.others = [
+            (cm.geometryObjects[g].geometry, pin.SE3(self.gdata.oMg[g])) for g in other_ids
+        ]
         for geom in self.geoms + [g for g, _ in self.others]:
             geom.computeLocalAABB()
-        self.others_c = np.array([M.act(np.asarray(g.aabb_center, float))
-                                  for g, M in self.others]).reshape(-1, 3)
+        self.others_c = np.array(
+            [M.act(np.asarray(g.aabb_center, float)) for g, M in self.others]
+        ).reshape(-1, 3)
         self.others_r = np.array([g.aabb_radius for g, _ in self.others])
         self.own_c = [np.asarray(g.aabb_center, float) for g in self.geoms]
         self.own_r = np.array([g.aabb_radius for g in self.geoms])
@@ -188,8 +189,10 @@ class FingerCollision:
         own = [gm.addGeometryObject(cm.geometryObjects[g].copy()) for g in self.ids]
         oth = [gm.addGeometryObject(cm.geometryObjects[g].copy()) for g in other_ids]
         box_id = gm.addGeometryObject(
-            pin.GeometryObject("box", 0, 0, pin.SE3(T_box[:3, :3].copy(), T_box[:3, 3].copy()),
-                               self.box_geom))
+            pin.GeometryObject(
+                "box", 0, 0, pin.SE3(T_box[:3, :3].copy(), T_box[:3, 3].copy()), self.box_geom
+            )
+        )
         for a in own:
             gm.addCollisionPair(pin.CollisionPair(a, box_id))
             for b in oth:
@@ -206,8 +209,7 @@ class FingerCollision:
     def valid_static(self, q_finger: np.ndarray) -> bool:
         """The validity rule with the box at ``T_box``."""
         self.vq[self.qi] = q_finger
-        return not pin.computeCollisions(self.model, self.vdata, self.vgm, self.vgd, self.vq,
-                                         True)
+        return not pin.computeCollisions(self.model, self.vdata, self.vgm, self.vgd, self.vq, True)
 
     def _distances(self, q_finger: np.ndarray, tf_box: coal.Transform3s) -> tuple[float, float]:
         """Smallest box distance and smallest finger distance [m] at one configuration."""
@@ -217,17 +219,22 @@ class FingerCollision:
         d_box = np.inf
         for g, geom in zip(self.ids, self.geoms, strict=True):
             self.res.clear()
-            d_box = min(d_box, coal.distance(geom, oMg[g], self.box_geom, tf_box, self.req,
-                                             self.res))
+            d_box = min(
+                d_box, coal.distance(geom, oMg[g], self.box_geom, tf_box, self.req, self.res)
+            )
         c = np.array([oMg[g].act(c0) for g, c0 in zip(self.ids, self.own_c, strict=True)])
-        gap = (np.linalg.norm(c[:, None, :] - self.others_c[None], axis=2)
-               - self.own_r[:, None] - self.others_r[None])
+        gap = (
+            np.linalg.norm(c[:, None, :] - self.others_c[None], axis=2)
+            - self.own_r[:, None]
+            - self.others_r[None]
+        )
         d_ff = np.inf
         for a, b in zip(*np.nonzero(gap < 0.0), strict=True):
             other, M2 = self.others[b]
             self.res.clear()
-            d_ff = min(d_ff, coal.distance(self.geoms[a], oMg[self.ids[a]], other, M2,
-                                           self.req, self.res))
+            d_ff = min(
+                d_ff, coal.distance(self.geoms[a], oMg[self.ids[a]], other, M2, self.req, self.res)
+            )
         return float(d_box), float(d_ff)
 
     def valid_at(self, q_finger: np.ndarray, T_box: np.ndarray) -> bool:
@@ -247,8 +254,9 @@ class FingerCollision:
 
 
 # ------------------------------------------------------------------- contacts
-def choose_pairs(scene: Scene, checker: FingerCollision, n_pairs: int, min_dist_m: float,
-                 seed: int) -> list[Pair]:
+def choose_pairs(
+    scene: Scene, checker: FingerCollision, n_pairs: int, min_dist_m: float, seed: int
+) -> list[Pair]:
     """Contacts feasible at the start pose and at the moving box's landing pose."""
     hand, box = scene.hand, scene.box
     f = hand.finger(FINGER)
@@ -270,27 +278,39 @@ def choose_pairs(scene: Scene, checker: FingerCollision, n_pairs: int, min_dist_
         if t == 0.0:
             q_start[idx] = res.q
     cand = np.nonzero(ok)[0].tolist()
-    combos = [(i, j) for i, j in itertools.permutations(cand, 2)
-              if np.linalg.norm(sample.points[i] - sample.points[j]) >= min_dist_m]
+    combos = [
+        (i, j)
+        for i, j in itertools.permutations(cand, 2)
+        if np.linalg.norm(sample.points[i] - sample.points[j]) >= min_dist_m
+    ]
     if len(combos) < n_pairs:
         raise SystemExit(f"only {len(combos)} contact pairs in this scene, {n_pairs} wanted")
     rng = np.random.default_rng(seed)
     picks = [combos[c] for c in rng.choice(len(combos), size=n_pairs, replace=False)]
-    return [Pair(sample.points[i], sample.normals[i], sample.points[j], sample.normals[j],
-                 q_start[i].copy(), q_start[j].copy()) for i, j in picks]
+    return [
+        Pair(
+            sample.points[i],
+            sample.normals[i],
+            sample.points[j],
+            sample.normals[j],
+            q_start[i].copy(),
+            q_start[j].copy(),
+        )
+        for i, j in picks
+    ]
 
 
 def rule_agreement(scene: Scene, checker: FingerCollision, n: int, seed: int) -> float:
     """Fraction of random configurations on which both implementations of the rule agree."""
     f = scene.hand.finger(FINGER)
     qs = np.random.default_rng(seed).uniform(f.lower, f.upper, (n, f.k))
-    return float(np.mean([checker.valid_static(q) == checker.valid_at(q, scene.T0)
-                          for q in qs]))
+    return float(np.mean([checker.valid_static(q) == checker.valid_at(q, scene.T0) for q in qs]))
 
 
 # ----------------------------------------------------------------- planners
-def run_ours(scene: Scene, motion: ObjectMotion, pair: Pair
-             ) -> tuple[float, RegraspResult | None, str]:
+def run_ours(
+    scene: Scene, motion: ObjectMotion, pair: Pair
+) -> tuple[float, RegraspResult | None, str]:
     """Wall time [ms], the result (None on failure) and the failure message."""
 
     def q_hand(times: np.ndarray) -> np.ndarray:
@@ -298,8 +318,20 @@ def run_ours(scene: Scene, motion: ObjectMotion, pair: Pair
 
     t0 = time.perf_counter()
     try:
-        res = plan_regrasp(scene.hand, scene.box, motion, FINGER, 0.0, pair.P, pair.n_P,
-                           pair.Q, pair.n_Q, pair.q_P, q_hand, params=scene.params)
+        res = plan_regrasp(
+            scene.hand,
+            scene.box,
+            motion,
+            FINGER,
+            0.0,
+            pair.P,
+            pair.n_P,
+            pair.Q,
+            pair.n_Q,
+            pair.q_P,
+            q_hand,
+            params=scene.params,
+        )
     except RegraspError as exc:
         return 1e3 * (time.perf_counter() - t0), None, str(exc)
     return 1e3 * (time.perf_counter() - t0), res, ""
@@ -334,8 +366,9 @@ def _cause(reason: str) -> str:
     return why[:40]
 
 
-def failure_causes(scene: Scene, motion: ObjectMotion, pairs: list[Pair]
-                   ) -> tuple[Counter[str], Counter[str]]:
+def failure_causes(
+    scene: Scene, motion: ObjectMotion, pairs: list[Pair]
+) -> tuple[Counter[str], Counter[str]]:
     """Re-run failed pairs with plan_regrasp's debug log captured (not timed).
 
     Returns the causes of every failed attempt, and of the first attempt (the default
@@ -363,11 +396,15 @@ def failure_causes(scene: Scene, motion: ObjectMotion, pairs: list[Pair]
 
 def print_causes(label: str, n_failed: int, causes: tuple[Counter[str], Counter[str]]) -> None:
     every, first = causes
-    print(f"ours failed on {n_failed} pairs ({label}); causes of all "
-          f"{sum(every.values())} failed attempts: "
-          + ", ".join(f"{k} {v}" for k, v in every.most_common()))
-    print("  first attempt (default parameters): "
-          + ", ".join(f"{k} {v}" for k, v in first.most_common()))
+    print(
+        f"ours failed on {n_failed} pairs ({label}); causes of all "
+        f"{sum(every.values())} failed attempts: "
+        + ", ".join(f"{k} {v}" for k, v in every.most_common())
+    )
+    print(
+        "  first attempt (default parameters): "
+        + ", ".join(f"{k} {v}" for k, v in first.most_common())
+    )
 
 
 @dataclass
@@ -378,8 +415,9 @@ class OmplRun:
     q: np.ndarray | None  # (S, k) simplified path [rad]
 
 
-def run_ompl(scene: Scene, valid: Callable[[np.ndarray], bool], pair: Pair,
-             time_limit_s: float) -> OmplRun:
+def run_ompl(
+    scene: Scene, valid: Callable[[np.ndarray], bool], pair: Pair, time_limit_s: float
+) -> OmplRun:
     f = scene.hand.finger(FINGER)
     space = ob.RealVectorStateSpace(f.k)
     bounds = ob.RealVectorBounds(f.k)
@@ -426,8 +464,9 @@ class Check:
     worst_m: float  # smallest box distance anywhere [m]
 
 
-def densify_linear(times: np.ndarray, q: np.ndarray, motion: ObjectMotion
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def densify_linear(
+    times: np.ndarray, q: np.ndarray, motion: ObjectMotion
+) -> tuple[np.ndarray, np.ndarray]:
     """Piecewise-linear ``q`` at <= CHECK_STEP_RAD per joint and per object rotation."""
     R = Rotation.from_matrix(motion.pose(times)[:, :3, :3])
     turn = (R[:-1].inv() * R[1:]).magnitude()
@@ -440,8 +479,9 @@ def densify_linear(times: np.ndarray, q: np.ndarray, motion: ObjectMotion
     return t_d, q_d
 
 
-def timed_joint_path(q: np.ndarray, duration_s: float, rate_rad_s: float
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def timed_joint_path(
+    q: np.ndarray, duration_s: float, rate_rad_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """A joint-space polyline traversed in ``duration_s`` with minimum-jerk progress.
 
     Uniform time samples, dense enough for <= CHECK_STEP_RAD per joint step (the
@@ -454,8 +494,15 @@ def timed_joint_path(q: np.ndarray, duration_s: float, rate_rad_s: float
     return tau * duration_s, np.column_stack([np.interp(s, arc, qj) for qj in q.T])
 
 
-def recheck(scene: Scene, checker: FingerCollision, motion: ObjectMotion, times: np.ndarray,
-            q_dense: np.ndarray, pair: Pair, end_zone_m: float) -> Check:
+def recheck(
+    scene: Scene,
+    checker: FingerCollision,
+    motion: ObjectMotion,
+    times: np.ndarray,
+    q_dense: np.ndarray,
+    pair: Pair,
+    end_zone_m: float,
+) -> Check:
     f = scene.hand.finger(FINGER)
     T = motion.pose(times)
     d_box, d_ff = checker.along(q_dense, T)
@@ -478,8 +525,10 @@ def med(x: Sequence[float]) -> float:
     return float(np.median(x)) if len(x) else float("nan")
 
 
-HEADER = (f"{'planner':<27}{'ok':>6}  {'median time [ms]':>28}  {'length [rad]':>19}"
-          f"  {'min clr [mm]':>12}  {'touch':>6}  {'pen':>6}")
+HEADER = (
+    f"{'planner':<27}{'ok':>6}  {'median time [ms]':>28}  {'length [rad]':>19}"
+    f"  {'min clr [mm]':>12}  {'touch':>6}  {'pen':>6}"
+)
 
 
 def row(label: str, n_ok: int, n: int, t_ms: str, checks: list[Check]) -> str:
@@ -489,8 +538,10 @@ def row(label: str, n_ok: int, n: int, t_ms: str, checks: list[Check]) -> str:
     m = len(checks)
     touch = f"{sum(c.touches for c in checks)}/{m}"
     pen = f"{sum(c.penetrates for c in checks)}/{m}"
-    return (f"{label:<27}{n_ok:>3}/{n:<2}  {t_ms:>28}  {med(lengths):>7.2f} {rng:>11}"
-            f"  {1e3 * clear:>12.2f}  {touch:>6}  {pen:>6}")
+    return (
+        f"{label:<27}{n_ok:>3}/{n:<2}  {t_ms:>28}  {med(lengths):>7.2f} {rng:>11}"
+        f"  {1e3 * clear:>12.2f}  {touch:>6}  {pen:>6}"
+    )
 
 
 @dataclass
@@ -526,52 +577,76 @@ def time_ours(scene: Scene, motion: ObjectMotion, pairs: list[Pair], reps: int) 
     return OursRuns(times, results, stages, deterministic)
 
 
-def print_ours_notes(scene: Scene, motion: ObjectMotion, label: str, pairs: list[Pair],
-                     ours: OursRuns) -> None:
+def print_ours_notes(
+    scene: Scene, motion: ObjectMotion, label: str, pairs: list[Pair], ours: OursRuns
+) -> None:
     tries = [len(r.attempts) + 1 for r in ours.results if r is not None]
-    print("ours median stage times [ms]: "
-          + ", ".join(f"{k} {med(v):.1f}" for k, v in ours.stages.items())
-          + f"; candidates tried per success: median {med(tries):.0f}, max "
-          + (f"{max(tries)}" if tries else "-")
-          + f"; identical over repeats: {ours.deterministic}")
+    print(
+        "ours median stage times [ms]: "
+        + ", ".join(f"{k} {med(v):.1f}" for k, v in ours.stages.items())
+        + f"; candidates tried per success: median {med(tries):.0f}, max "
+        + (f"{max(tries)}" if tries else "-")
+        + f"; identical over repeats: {ours.deterministic}"
+    )
     failed = [p for p, r in zip(pairs, ours.results, strict=True) if r is None]
     if failed:
         print_causes(label, len(failed), failure_causes(scene, motion, failed))
 
 
-def bench_static(scene: Scene, checker: FingerCollision, pairs: list[Pair], args: argparse.Namespace
-                 ) -> list[list[OmplRun]]:
+def bench_static(
+    scene: Scene, checker: FingerCollision, pairs: list[Pair], args: argparse.Namespace
+) -> list[list[OmplRun]]:
     """Both planners on the static box; returns OMPL's runs (reused by the moving case)."""
     reps, end_zone = args.repeats, 1e-3 * args.end_zone_mm
     ours = time_ours(scene, scene.static, pairs, reps)
-    om_runs = [[run_ompl(scene, checker.valid_static, pair, args.time_limit)
-                for _ in range(reps)] for pair in pairs]
+    om_runs = [
+        [run_ompl(scene, checker.valid_static, pair, args.time_limit) for _ in range(reps)]
+        for pair in pairs
+    ]
     ok_runs = [run for runs in om_runs for run in runs if run.ok]
 
     ours_checks: list[Check] = []
     om_checks: list[Check] = []
     straight = [float(np.linalg.norm(p.q_Q - p.q_P)) for p in pairs]
     for i, (pair, res, runs) in enumerate(zip(pairs, ours.results, om_runs, strict=True)):
-        line = (f"  pair {i:2d} |PQ| {1e3 * np.linalg.norm(pair.Q - pair.P):4.1f} mm, "
-                f"|q_Q-q_P| {straight[i]:.2f} rad")
+        line = (
+            f"  pair {i:2d} |PQ| {1e3 * np.linalg.norm(pair.Q - pair.P):4.1f} mm, "
+            f"|q_Q-q_P| {straight[i]:.2f} rad"
+        )
         if res is not None:
-            c = recheck(scene, checker, scene.static,
-                        *densify_linear(res.times_s, res.q, scene.static), pair, end_zone)
+            c = recheck(
+                scene,
+                checker,
+                scene.static,
+                *densify_linear(res.times_s, res.q, scene.static),
+                pair,
+                end_zone,
+            )
             ours_checks.append(c)
             m = res.params.m if res.params else "?"
-            line += (f" | ours {c.length_rad:.2f} rad, clr {1e3 * c.min_clearance_m:.2f} mm, "
-                     f"m={m}, lands {np.abs(res.q[-1] - pair.q_Q).max():.0e} rad from q_Q")
+            line += (
+                f" | ours {c.length_rad:.2f} rad, clr {1e3 * c.min_clearance_m:.2f} mm, "
+                f"m={m}, lands {np.abs(res.q[-1] - pair.q_Q).max():.0e} rad from q_Q"
+            )
         else:
             line += " | ours FAILED"
         for r, run in enumerate(runs):
             if run.q is not None:
                 t_path = np.linspace(0.0, scene.params.duration_s, len(run.q))
-                c = recheck(scene, checker, scene.static,
-                            *densify_linear(t_path, run.q, scene.static), pair, end_zone)
+                c = recheck(
+                    scene,
+                    checker,
+                    scene.static,
+                    *densify_linear(t_path, run.q, scene.static),
+                    pair,
+                    end_zone,
+                )
                 om_checks.append(c)
                 if r == 0:
-                    line += (f" | OMPL {c.length_rad:.2f} rad, clr "
-                             f"{1e3 * c.min_clearance_m:.2f} mm, worst {1e3 * c.worst_m:.2f} mm")
+                    line += (
+                        f" | OMPL {c.length_rad:.2f} rad, clr "
+                        f"{1e3 * c.min_clearance_m:.2f} mm, worst {1e3 * c.worst_m:.2f} mm"
+                    )
         if args.verbose:
             print(line)
 
@@ -579,46 +654,79 @@ def bench_static(scene: Scene, checker: FingerCollision, pairs: list[Pair], args
     simp = [r.simplify_ms for r in ok_runs]
     total = [r.plan_ms + r.simplify_ms for r in ok_runs]
     n = len(pairs)
-    print(f"\nstatic box: same q_P -> q_Q for both; straight joint-space distance "
-          f"|q_Q - q_P| median {med(straight):.2f} rad")
+    print(
+        f"\nstatic box: same q_P -> q_Q for both; straight joint-space distance "
+        f"|q_Q - q_P| median {med(straight):.2f} rad"
+    )
     print(HEADER)
-    print(row("ours (plan_regrasp)", len(ours_checks), n, f"{med(ours.times_ms):.1f}",
-              ours_checks))
-    print(row("OMPL RRTConnect+simplify", len(ok_runs), n * reps,
-              f"{med(plan):.1f} + {med(simp):.1f} = {med(total):.1f}", om_checks))
+    print(row("ours (plan_regrasp)", len(ours_checks), n, f"{med(ours.times_ms):.1f}", ours_checks))
+    print(
+        row(
+            "OMPL RRTConnect+simplify",
+            len(ok_runs),
+            n * reps,
+            f"{med(plan):.1f} + {med(simp):.1f} = {med(total):.1f}",
+            om_checks,
+        )
+    )
     ours_len = med([c.length_rad for c in ours_checks])
     om_len = med([c.length_rad for c in om_checks])
-    print(f"ours / OMPL: time {med(ours.times_ms) / med(total):.2f}x (target <= 0.5), "
-          f"length {ours_len / om_len:.2f}x (target <= 0.6)")
+    print(
+        f"ours / OMPL: time {med(ours.times_ms) / med(total):.2f}x (target <= 0.5), "
+        f"length {ours_len / om_len:.2f}x (target <= 0.6)"
+    )
     print_ours_notes(scene, scene.static, "static box", pairs, ours)
     return om_runs
 
 
-def bench_moving(scene: Scene, checker: FingerCollision, pairs: list[Pair],
-                 om_runs: list[list[OmplRun]], args: argparse.Namespace) -> None:
+def bench_moving(
+    scene: Scene,
+    checker: FingerCollision,
+    pairs: list[Pair],
+    om_runs: list[list[OmplRun]],
+    args: argparse.Namespace,
+) -> None:
     """Ours plans with the motion; OMPL's static-box paths are replayed on the moving box."""
     duration = scene.params.duration_s
     rate = np.radians(args.rate_deg_s)
     end_zone = 1e-3 * args.end_zone_mm
     ours = time_ours(scene, scene.moving, pairs, args.repeats)
     ours_checks = [
-        recheck(scene, checker, scene.moving, *densify_linear(res.times_s, res.q, scene.moving),
-                pair, end_zone)
-        for pair, res in zip(pairs, ours.results, strict=True) if res is not None
+        recheck(
+            scene,
+            checker,
+            scene.moving,
+            *densify_linear(res.times_s, res.q, scene.moving),
+            pair,
+            end_zone,
+        )
+        for pair, res in zip(pairs, ours.results, strict=True)
+        if res is not None
     ]
     om_checks = [
-        recheck(scene, checker, scene.moving, *timed_joint_path(run.q, duration, rate), pair,
-                end_zone)
-        for pair, runs in zip(pairs, om_runs, strict=True) for run in runs if run.q is not None
+        recheck(
+            scene, checker, scene.moving, *timed_joint_path(run.q, duration, rate), pair, end_zone
+        )
+        for pair, runs in zip(pairs, om_runs, strict=True)
+        for run in runs
+        if run.q is not None
     ]
     n = len(pairs)
-    print(f"\nmoving box: {args.rate_deg_s:g} deg/s about the palm y axis through its centre "
-          f"for the {duration:g} s regrasp; OMPL = its static-box paths with ours' timing")
+    print(
+        f"\nmoving box: {args.rate_deg_s:g} deg/s about the palm y axis through its centre "
+        f"for the {duration:g} s regrasp; OMPL = its static-box paths with ours' timing"
+    )
     print(HEADER)
-    print(row("ours (plan_regrasp)", len(ours_checks), n, f"{med(ours.times_ms):.1f}",
-              ours_checks))
-    print(row("OMPL (ignores the motion)", len(om_checks), n * args.repeats, "(static plans)",
-              om_checks))
+    print(row("ours (plan_regrasp)", len(ours_checks), n, f"{med(ours.times_ms):.1f}", ours_checks))
+    print(
+        row(
+            "OMPL (ignores the motion)",
+            len(om_checks),
+            n * args.repeats,
+            "(static plans)",
+            om_checks,
+        )
+    )
     print_ours_notes(scene, scene.moving, "moving box", pairs, ours)
 
 
@@ -635,8 +743,10 @@ def main() -> None:
     parser.add_argument("--verbose", action="store_true", help="one line per pair")
     args = parser.parse_args()
     if ob is None:
-        print("OMPL is not installed: this benchmark compares against it. Install the "
-              "'bench' extra (pip install -e '.[bench]', PyPI 'ompl' >= 2.0). Skipping.")
+        print(
+            "OMPL is not installed: this benchmark compares against it. Install the "
+            "'bench' extra (pip install -e '.[bench]', PyPI 'ompl' >= 2.0). Skipping."
+        )
         return
     ou.setLogLevel(ou.LOG_ERROR)
     ou.RNG.setSeed(args.seed + 1)  # OMPL wants a seed > 0; set once, before any planner
@@ -646,15 +756,21 @@ def main() -> None:
     pairs = choose_pairs(scene, checker, args.pairs, 1e-3 * args.min_distance_mm, args.seed)
     size, centre, tilt = SCENES[args.scene]
     dist = [1e3 * np.linalg.norm(p.Q - p.P) for p in pairs]
-    print(f"Allegro {FINGER}; box {' x '.join(f'{1e3 * s:g}' for s in size)} mm, centre "
-          f"({', '.join(f'{1e3 * c:g}' for c in centre)}) mm in the palm frame, tilted "
-          f"{tilt:g} deg; {len(pairs)} pairs (seed {args.seed}), |PQ| {min(dist):.0f}-"
-          f"{max(dist):.0f} mm; {args.repeats} timed runs per pair and planner")
-    print(f"validity (both): finger geometries >= -{1e3 * PENETRATION_TOL_M:g} mm from the box, "
-          f"not touching another finger; OMPL checker and re-check agree on "
-          f"{100 * rule_agreement(scene, checker, 2000, args.seed):.1f}% of 2000 random q")
-    print(f"re-check at {1e3 * CHECK_STEP_RAD:g} mrad; min clr / touch (< {1e3 * TOUCH_M:g} mm) "
-          f"with the tip > {args.end_zone_mm:g} mm from P and Q; pen = rule broken anywhere")
+    print(
+        f"Allegro {FINGER}; box {' x '.join(f'{1e3 * s:g}' for s in size)} mm, centre "
+        f"({', '.join(f'{1e3 * c:g}' for c in centre)}) mm in the palm frame, tilted "
+        f"{tilt:g} deg; {len(pairs)} pairs (seed {args.seed}), |PQ| {min(dist):.0f}-"
+        f"{max(dist):.0f} mm; {args.repeats} timed runs per pair and planner"
+    )
+    print(
+        f"validity (both): finger geometries >= -{1e3 * PENETRATION_TOL_M:g} mm from the box, "
+        f"not touching another finger; OMPL checker and re-check agree on "
+        f"{100 * rule_agreement(scene, checker, 2000, args.seed):.1f}% of 2000 random q"
+    )
+    print(
+        f"re-check at {1e3 * CHECK_STEP_RAD:g} mrad; min clr / touch (< {1e3 * TOUCH_M:g} mm) "
+        f"with the tip > {args.end_zone_mm:g} mm from P and Q; pen = rule broken anywhere"
+    )
 
     # warm-up (caches, first calls), not timed
     run_ours(scene, scene.static, pairs[0])

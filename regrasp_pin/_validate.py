@@ -49,9 +49,7 @@ def as_batch(
     if single:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != width:
-        raise InputError(
-            argument, f"has shape {given}", f"shape ({width},) or (N, {width})"
-        )
+        raise InputError(argument, f"has shape {given}", f"shape ({width},) or (N, {width})")
     if finite and not np.all(np.isfinite(arr)):
         raise InputError(argument, "contains NaN or inf", "finite values")
     return arr, single

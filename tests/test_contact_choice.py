@@ -409,9 +409,7 @@ def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
     q = _choose_from_grasp(five, finger, t_arrive, max_checks=10_000, rerank=0)
     ka = m.time_index(t_arrive)
     kb = int(np.flatnonzero(m.times_s <= t_arrive + 1e-9)[-1])
-    expected, rows, passing, eps_P = _brute_force_q(
-        hand, box, m, sample, ka, P, n_P, others, kb=kb
-    )
+    expected, rows, passing, eps_P = _brute_force_q(hand, box, m, sample, ka, P, n_P, others, kb=kb)
     rank, i, exit_index, e = expected
     assert q.index == i and q.rank == rank
     assert q.n_candidates == len(rows)

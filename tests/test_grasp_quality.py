@@ -28,8 +28,9 @@ QUAD_N = np.array([[1.0, 0, 0], [1.0, 0, 0], [-1.0, 0, 0], [-1.0, 0, 0]])
 
 def _resists(wrenches: np.ndarray, target: np.ndarray) -> bool:
     """Whether ``-target`` is a non-negative combination of the wrenches (an LP)."""
-    res = linprog(np.ones(len(wrenches)), A_eq=wrenches.T, b_eq=-target,
-                  bounds=(0, None), method="highs")
+    res = linprog(
+        np.ones(len(wrenches)), A_eq=wrenches.T, b_eq=-target, bounds=(0, None), method="highs"
+    )
     return res.status == 0
 
 
@@ -60,8 +61,13 @@ def test_tripod_on_a_box_is_force_closure():
 def _in_hull(wrenches: np.ndarray, x: np.ndarray) -> bool:
     """Whether x is a convex combination of the wrenches (an LP)."""
     n = len(wrenches)
-    res = linprog(np.zeros(n), A_eq=np.vstack([wrenches.T, np.ones((1, n))]),
-                  b_eq=np.append(x, 1.0), bounds=(0, None), method="highs")
+    res = linprog(
+        np.zeros(n),
+        A_eq=np.vstack([wrenches.T, np.ones((1, n))]),
+        b_eq=np.append(x, 1.0),
+        bounds=(0, None),
+        method="highs",
+    )
     return res.status == 0
 
 
@@ -103,8 +109,7 @@ def test_antipodal_point_pinch_cannot_resist_torque_about_its_axis():
 
 def test_single_contact_is_not_force_closure():
     assert ferrari_canny_epsilon(PINCH_P[:1], PINCH_N[:1], MU) == 0.0
-    assert ferrari_canny_epsilon(PINCH_P[:1], PINCH_N[:1], MU, n_edges=16,
-                                 torsion_m=0.01) == 0.0
+    assert ferrari_canny_epsilon(PINCH_P[:1], PINCH_N[:1], MU, n_edges=16, torsion_m=0.01) == 0.0
     assert not is_force_closure(PINCH_P[:1], PINCH_N[:1], MU)
 
 
@@ -124,14 +129,18 @@ def test_contacts_on_one_side_are_not_force_closure():
 
 
 def test_epsilon_grows_when_contacts_spread_apart():
-    eps = [ferrari_canny_epsilon(QUAD_P * [1.0, s, s], QUAD_N, MU, torque_scale_m=SCALE_M)
-           for s in (0.5, 1.0, 1.5, 2.0)]
+    eps = [
+        ferrari_canny_epsilon(QUAD_P * [1.0, s, s], QUAD_N, MU, torque_scale_m=SCALE_M)
+        for s in (0.5, 1.0, 1.5, 2.0)
+    ]
     assert np.all(np.diff(eps) > 0), eps
 
 
 def test_epsilon_grows_with_friction():
-    eps = [ferrari_canny_epsilon(TRIPOD_P, TRIPOD_N, mu, torque_scale_m=SCALE_M)
-           for mu in (0.2, 0.5, 1.0)]
+    eps = [
+        ferrari_canny_epsilon(TRIPOD_P, TRIPOD_N, mu, torque_scale_m=SCALE_M)
+        for mu in (0.2, 0.5, 1.0)
+    ]
     assert np.all(np.diff(eps) > 0), eps
 
 

@@ -38,8 +38,10 @@ def _cases():
     prism = Prism(6, 0.03, 0.05)
     mesh = ConvexMesh(np.random.default_rng(7).normal(size=(30, 3)) * 0.03)
     ps, ms = prism.sample_surface(0.01), mesh.sample_surface(0.01)
-    far = np.argmax(np.linalg.norm(ps.points - ps.points[0], axis=1) * (
-        np.linalg.norm(ps.points - ps.points[0], axis=1) < 0.06))
+    far = np.argmax(
+        np.linalg.norm(ps.points - ps.points[0], axis=1)
+        * (np.linalg.norm(ps.points - ps.points[0], axis=1) < 0.06)
+    )
     d = np.linalg.norm(ms.points - ms.points[0], axis=1)
     near = int(np.argmax(np.where(d < 0.035, d, 0)))
     return [
@@ -105,7 +107,7 @@ def test_tip_path_stays_exactly_at_radius_plus_height(name, obj, P, Q):
     assert_close(tip.normals_object[on_face], obj.normals[tip.face_ids[on_face]], atol=0)
     # One arc per edge crossed, and the path is long enough to reach full clearance.
     crossings = len(grid.face_chain) - 1
-    assert (np.count_nonzero(np.diff(tip.face_ids[on_face]) != 0) == crossings)
+    assert np.count_nonzero(np.diff(tip.face_ids[on_face]) != 0) == crossings
     assert (tip.face_ids < 0).any() == (crossings > 0)
     assert path.length_m > 2 * CLEARANCE_M
     assert_close(tip.height_m.max(), CLEARANCE_M, atol=1e-12)
@@ -118,8 +120,7 @@ def test_arc_about_a_box_edge_turns_the_normal_by_90_degrees(box):
     block = np.arange(arc[0] - 1, arc[-1] + 2)  # the face points on both sides
     assert_close(tip.surface_points_object[block, 0], 0.03, atol=1e-15, what="on the edge")
     assert_close(tip.surface_points_object[block, 2], 0.02, atol=1e-15, what="on the edge")
-    angle = np.arccos(np.clip(tip.normals_object[block[0]] @ tip.normals_object[block[-1]],
-                              -1, 1))
+    angle = np.arccos(np.clip(tip.normals_object[block[0]] @ tip.normals_object[block[-1]], -1, 1))
     assert_close(angle, np.pi / 2, atol=1e-12)
     # The arc's chord steps at radius r + h stay below step_m: ceil(pi/2 (r+h) / step) pieces.
     expected = int(np.ceil(np.pi / 2 * (TIP_M + tip.height_m[arc[0]]) / STEP_M))
@@ -166,8 +167,7 @@ def test_taper_defaults_to_the_clearance(box):
     tip = inflate_path(box, path, tip_radius_m=TIP_M, clearance_m=CLEARANCE_M)
     assert tip.taper_m == CLEARANCE_M
     s = tip.arc_length_m
-    expected = inflation_height(s, path.length_m - s, clearance_m=CLEARANCE_M,
-                                taper_m=CLEARANCE_M)
+    expected = inflation_height(s, path.length_m - s, clearance_m=CLEARANCE_M, taper_m=CLEARANCE_M)
     assert_close(tip.height_m, expected, atol=0)
     assert_close(tip.offset_m, TIP_M + expected, atol=0)
 

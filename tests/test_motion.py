@@ -39,9 +39,15 @@ def _closed_form(tau: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def twist() -> ObjectMotion:
-    return ObjectMotion.constant_twist(_start_pose(), axis_palm=AXIS, point_palm=POINT,
-                                       rate_rad_s=RATE, velocity_palm_m_s=VEL,
-                                       duration_s=2.0, dt_s=0.01)
+    return ObjectMotion.constant_twist(
+        _start_pose(),
+        axis_palm=AXIS,
+        point_palm=POINT,
+        rate_rad_s=RATE,
+        velocity_palm_m_s=VEL,
+        duration_s=2.0,
+        dt_s=0.01,
+    )
 
 
 def test_constant_twist_is_exact_at_the_samples(twist):
@@ -53,8 +59,9 @@ def test_constant_twist_is_exact_at_the_samples(twist):
 
 def test_constant_twist_keeps_the_axis_point_fixed(twist):
     # A point of the object on the axis stays put (without drift): check with VEL = 0.
-    still = ObjectMotion.constant_twist(_start_pose(), axis_palm=AXIS, point_palm=POINT,
-                                        rate_rad_s=RATE, duration_s=1.0, dt_s=0.1)
+    still = ObjectMotion.constant_twist(
+        _start_pose(), axis_palm=AXIS, point_palm=POINT, rate_rad_s=RATE, duration_s=1.0, dt_s=0.1
+    )
     T0 = _start_pose()
     p_obj = T0[:3, :3].T @ (POINT + 0.03 * AXIS - T0[:3, 3])
     p = still.transform_points(still.times_s, p_obj[None])[:, 0]
@@ -67,12 +74,20 @@ def test_interpolation_between_samples(twist):
     # Slerp is exact for a constant-axis rotation; the translation chord deviates from
     # the arc by about r (rate dt)^2 / 8 (r <= 0.05 m here).
     assert_close(got[:, :3, :3], exact[:, :3, :3], atol=1e-12, what="rotation")
-    assert_close(got[:, :3, 3], exact[:, :3, 3], atol=0.05 * (RATE * 0.01) ** 2 / 8 + 1e-12,
-                 what="translation")
+    assert_close(
+        got[:, :3, 3],
+        exact[:, :3, 3],
+        atol=0.05 * (RATE * 0.01) ** 2 / 8 + 1e-12,
+        what="translation",
+    )
     # Rotation blocks remain rotations.
     R = got[:, :3, :3]
-    assert_close(np.einsum("kji,kjl->kil", R, R), np.broadcast_to(np.eye(3), R.shape),
-                 atol=1e-12, what="orthonormal")
+    assert_close(
+        np.einsum("kji,kjl->kil", R, R),
+        np.broadcast_to(np.eye(3), R.shape),
+        atol=1e-12,
+        what="orthonormal",
+    )
 
 
 def test_slerp_of_two_poses_at_half_time():
@@ -81,8 +96,12 @@ def test_slerp_of_two_poses_at_half_time():
     Tb[:3, 3] = [0.1, 0.0, -0.2]
     motion = ObjectMotion.from_poses([1.0, 3.0], np.stack([Ta, Tb]))
     half = motion.pose(2.0)
-    assert_close(half[:3, :3], Rotation.from_rotvec([0, 0, np.pi / 4]).as_matrix(), atol=1e-12,
-                 what="half rotation")
+    assert_close(
+        half[:3, :3],
+        Rotation.from_rotvec([0, 0, np.pi / 4]).as_matrix(),
+        atol=1e-12,
+        what="half rotation",
+    )
     assert_close(half[:3, 3], [0.05, 0.0, -0.1], atol=1e-15, what="half translation")
     assert motion.duration_s == 2.0
 
@@ -97,8 +116,9 @@ def test_transform_points_and_directions_shapes_and_values(twist):
         T = twist.pose(t)
         assert_close(batch[k], p @ T[:3, :3].T + T[:3, 3], atol=1e-15, what="points")
         assert_close(twist.transform_points(t, p), batch[k], atol=0, what="scalar t")
-        assert_close(twist.transform_directions(t, p), p @ T[:3, :3].T, atol=1e-15,
-                     what="directions")
+        assert_close(
+            twist.transform_directions(t, p), p @ T[:3, :3].T, atol=1e-15, what="directions"
+        )
     back = twist.to_object(times, batch[1])  # (K, N, 3): the palm points seen at each time
     assert back.shape == (3, 5, 3)
     assert_close(back[1], p, atol=1e-15, what="inverse at the matching time")
@@ -111,8 +131,12 @@ def test_xyzquat_round_trip_and_resample(twist):
     again = ObjectMotion.from_xyzquat(twist.times_s, xq)
     assert_close(again.T_palm_object, twist.T_palm_object, atol=1e-12, what="round trip")
     times = np.array([0.123, 1.5])
-    assert_close(ObjectMotion.from_xyzquat(twist.times_s, xq).as_xyzquat(times),
-                 twist.as_xyzquat(times), atol=1e-12, what="interpolated xyzquat")
+    assert_close(
+        ObjectMotion.from_xyzquat(twist.times_s, xq).as_xyzquat(times),
+        twist.as_xyzquat(times),
+        atol=1e-12,
+        what="interpolated xyzquat",
+    )
     coarse = twist.resample(0.3)
     assert len(coarse) == 8  # ceil(2.0 / 0.3) = 7 steps
     assert_close(coarse.T_palm_object, twist.pose(coarse.times_s), atol=1e-12, what="resample")

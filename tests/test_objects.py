@@ -40,9 +40,17 @@ def _coal_point_distance(obj: ConvexObject, points: np.ndarray) -> np.ndarray:
     geom, sphere = obj.coal_geometry(), coal.Sphere(1e-12)
     out = np.empty(points.shape[0])
     for i, p in enumerate(points):  # reference only: Coal has no batched distance
-        out[i] = coal.distance(sphere, coal.Transform3s(np.eye(3), p), geom,
-                               coal.Transform3s(), coal.DistanceRequest(),
-                               coal.DistanceResult()) + 1e-12
+        out[i] = (
+            coal.distance(
+                sphere,
+                coal.Transform3s(np.eye(3), p),
+                geom,
+                coal.Transform3s(),
+                coal.DistanceRequest(),
+                coal.DistanceResult(),
+            )
+            + 1e-12
+        )
     return out
 
 
@@ -52,8 +60,12 @@ def test_box_faces_and_mesh():
     assert len(box.faces) == 6 and len(box.face_adjacency) == 12
     assert box.triangles.shape == (12, 3)
     assert_close(box.volume_m3, 0.06 * 0.04 * 0.02, atol=1e-15, what="box volume")
-    assert_close(np.sort(np.abs(box.offsets)), [0.01, 0.01, 0.02, 0.02, 0.03, 0.03],
-                 atol=1e-15, what="face offsets")
+    assert_close(
+        np.sort(np.abs(box.offsets)),
+        [0.01, 0.01, 0.02, 0.02, 0.03, 0.03],
+        atol=1e-15,
+        what="face offsets",
+    )
     assert isinstance(box.coal_geometry(), coal.Box)
     assert box.coal_geometry() is box.coal_geometry()
     with pytest.raises(ValueError):
@@ -66,8 +78,12 @@ def test_faces_are_consistent(objects, name):
     verts, tris = obj.mesh()
     for f in obj.faces:
         assert_close(np.linalg.norm(f.normal), 1.0, atol=1e-12, what="unit normal")
-        assert_close(f.polygon @ f.normal, np.full(len(f.polygon), f.offset), atol=1e-9,
-                     what="polygon on its plane")
+        assert_close(
+            f.polygon @ f.normal,
+            np.full(len(f.polygon), f.offset),
+            atol=1e-9,
+            what="polygon on its plane",
+        )
         assert_close(np.cross(f.u, f.v), f.normal, atol=1e-12, what="u x v = n")
         assert_close(f.from_uv(f.polygon_uv), f.polygon, atol=1e-12, what="polygon uv")
         # CCW seen from outside: positive signed area in (u, v).
@@ -91,8 +107,9 @@ def test_face_adjacency_edges(objects):
     for adj in prism.face_adjacency:
         fa, fb = prism.faces[adj.face_a], prism.faces[adj.face_b]
         for f in (fa, fb):
-            assert_close(adj.edge @ f.normal, np.full(2, f.offset), atol=1e-12,
-                         what="edge on both faces")
+            assert_close(
+                adj.edge @ f.normal, np.full(2, f.offset), atol=1e-12, what="edge on both faces"
+            )
         # edge[0] -> edge[1] runs counter-clockwise around face_a (seen from outside).
         d = adj.edge[1] - adj.edge[0]
         assert np.cross(fa.normal, d) @ (fa.origin - adj.edge[0]) > 0
@@ -104,8 +121,9 @@ def test_extruded_polygon_centre_and_cw_input():
     cw = ExtrudedPolygon(poly[::-1], 0.02)
     assert_close(ccw.vertices, cw.vertices, atol=1e-15, what="orientation independent")
     assert_close(ccw.vertices.mean(axis=0)[2], 0.0, atol=1e-15, what="mid-height")
-    assert_close(ccw.polygon_xy.mean(axis=0), np.zeros(2), atol=1e-15,
-                 what="triangle centroid at the origin")
+    assert_close(
+        ccw.polygon_xy.mean(axis=0), np.zeros(2), atol=1e-15, what="triangle centroid at the origin"
+    )
 
 
 def test_convex_mesh_of_cube_equals_box():
@@ -163,8 +181,12 @@ def test_sampling_points_normals_and_uv(objects, name):
     assert np.all(counts >= 1), "every face gets a point"
     areas = np.array([f.area for f in obj.faces])
     big = areas > 25 * SPACING_M**2  # counts ~ area / spacing^2, minus the inset rim
-    perim = np.array([np.sum(np.linalg.norm(np.diff(f.polygon_uv, axis=0, append=f.polygon_uv[:1]),
-                                            axis=1)) for f in obj.faces])
+    perim = np.array(
+        [
+            np.sum(np.linalg.norm(np.diff(f.polygon_uv, axis=0, append=f.polygon_uv[:1]), axis=1))
+            for f in obj.faces
+        ]
+    )
     approx = areas / SPACING_M**2
     rim = perim / SPACING_M + 4
     assert np.all(np.abs(counts - approx)[big] <= rim[big]), (counts, approx)
@@ -174,8 +196,12 @@ def test_sampling_points_normals_and_uv(objects, name):
     # On the surface: own signed distance and Coal distance are ~0.
     assert_close(obj.signed_distance(s.points), np.zeros(len(s)), atol=1e-12, what="sdf")
     subset = s.points[:: max(1, len(s) // 150)]
-    assert_close(_coal_point_distance(obj, subset), np.zeros(len(subset)), atol=1e-7,
-                 what="Coal distance of samples")
+    assert_close(
+        _coal_point_distance(obj, subset),
+        np.zeros(len(subset)),
+        atol=1e-7,
+        what="Coal distance of samples",
+    )
     # Not on an edge: at least half a spacing inside the face polygon.
     for f in obj.faces:
         uv = s.uv[s.face_ids == f.id]
@@ -183,8 +209,9 @@ def test_sampling_points_normals_and_uv(objects, name):
             assert np.all(f.contains_uv(uv, 0.5 * SPACING_M * (1 - 1e-6)))
     # uv round-trip.
     assert_close(obj.surface_points(s.face_ids, s.uv), s.points, atol=1e-15, what="uv")
-    uv_back = np.concatenate([obj.faces[i].to_uv(s.points[s.face_ids == i])
-                              for i in range(len(obj.faces))])
+    uv_back = np.concatenate(
+        [obj.faces[i].to_uv(s.points[s.face_ids == i]) for i in range(len(obj.faces))]
+    )
     order = np.argsort(s.face_ids, kind="stable")
     assert_close(uv_back, s.uv[order], atol=1e-15, what="to_uv")
     assert np.array_equal(obj.supporting_face(s.points), s.face_ids)
@@ -264,13 +291,17 @@ def test_bad_parameters_name_the_argument(make, exc, argument):
 @pytest.mark.parametrize(
     ("make", "words"),
     [
-        (lambda: ExtrudedPolygon([[0, 0], [0.02, 0], [0.005, 0.005], [0, 0.02]], 0.01),
-         "not convex"),
+        (
+            lambda: ExtrudedPolygon([[0, 0], [0.02, 0], [0.005, 0.005], [0, 0.02]], 0.01),
+            "not convex",
+        ),
         (lambda: ExtrudedPolygon([[0, 0], [0.01, 0], [0.02, 0]], 0.01), "zero area"),
         (lambda: ExtrudedPolygon([[0, 0], [0.01, 0]], 0.01), "at least 3"),
         (lambda: ExtrudedPolygon([[0, 0], [0.01, 0], [0.01, 0], [0, 0.01]], 0.01), "repeated"),
-        (lambda: ConvexMesh(np.c_[np.random.default_rng(0).normal(size=(10, 2)), np.zeros(10)]),
-         "flat"),
+        (
+            lambda: ConvexMesh(np.c_[np.random.default_rng(0).normal(size=(10, 2)), np.zeros(10)]),
+            "flat",
+        ),
         (lambda: ConvexMesh(np.zeros((3, 3))), "at least 4"),
     ],
 )

@@ -33,7 +33,12 @@ def test_failure_summary_counts_and_advises():
 def test_errors_carry_kind_numbers_and_json_attempts():
     att = Attempt(K.VELOCITY, "index", 1.25, measured=5.0, required=4.0, what="start 1.2 s")
     err = PlanningError(
-        "too fast", finger="index", time_s=1.25, kind=K.VELOCITY, measured=5.0, required=4.0,
+        "too fast",
+        finger="index",
+        time_s=1.25,
+        kind=K.VELOCITY,
+        measured=5.0,
+        required=4.0,
         attempts=[att],
     )
     assert err.kind is K.VELOCITY and err.measured == 5.0 and err.required == 4.0

@@ -43,7 +43,12 @@ def test_window_reaches_past_the_trigger_to_the_limits_themselves():
     assert win.preferred_s == pytest.approx(0.28)
     assert win.latest_s == pytest.approx(0.4) and not win.empty
     lost = lift_off_window(
-        "index", _track(margin), 0.3, earliest_s=0.0, lead_s=0.02, contact=ContactModel(),
+        "index",
+        _track(margin),
+        0.3,
+        earliest_s=0.0,
+        lead_s=0.02,
+        contact=ContactModel(),
         lost_s=0.25,
     )
     assert lost.latest_s == pytest.approx(0.25) and lost.preferred_s == pytest.approx(0.25)

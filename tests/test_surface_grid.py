@@ -63,8 +63,9 @@ def test_unfolding_across_each_edge_preserves_the_geodesic(name, request):
         a_p = np.linalg.norm(p - e0 - alpha_p[:, None] * e, axis=1)
         a_q = np.linalg.norm(q - e0 - alpha_q[:, None] * e, axis=1)
         expected = np.hypot(a_p + a_q, alpha_p - alpha_q)
-        got = np.linalg.norm(unf_a.to_unfolded(fa.to_uv(p)) - unf_b.to_unfolded(fb.to_uv(q)),
-                             axis=1)
+        got = np.linalg.norm(
+            unf_a.to_unfolded(fa.to_uv(p)) - unf_b.to_unfolded(fb.to_uv(q)), axis=1
+        )
         assert_close(got, expected, atol=1e-12, what=f"faces {adj.face_a}-{adj.face_b}")
         # The shared edge lands at the same place from both faces, and the round trip
         # unfolded -> object is exact.
@@ -87,8 +88,12 @@ def test_top_to_side_geodesic_is_the_unfolded_straight_line(box):
     expected = math.hypot(0.05, 0.015)
     top, side = _face_with_normal(box, [0, 0, 1]), _face_with_normal(box, [1, 0, 0])
     assert grid.face_chain == (top, side)
-    assert_close(np.linalg.norm(grid.uv[grid.q_index] - grid.uv[grid.p_index]), expected,
-                 atol=1e-12, what="unfolded P-Q distance")
+    assert_close(
+        np.linalg.norm(grid.uv[grid.q_index] - grid.uv[grid.p_index]),
+        expected,
+        atol=1e-12,
+        what="unfolded P-Q distance",
+    )
     assert_close(grid.geodesic_m, expected, atol=1e-12)
     path = shortest_grid_path(grid)
     assert expected - 1e-12 <= path.length_m <= 1.03 * expected
@@ -221,8 +226,9 @@ def _wall_cost(grid, value, gap=True):
 
 @pytest.fixture(scope="module")
 def top_grid(box):
-    return build_surface_grid(box, np.array([-0.025, 0.0, 0.02]), np.array([0.025, 0.0, 0.02]),
-                              spacing_m=SPACING)
+    return build_surface_grid(
+        box, np.array([-0.025, 0.0, 0.02]), np.array([0.025, 0.0, 0.02]), spacing_m=SPACING
+    )
 
 
 def test_single_face_path_is_the_straight_line(top_grid):
@@ -273,8 +279,11 @@ def test_unreachable_q_raises_planning_error(top_grid):
 
 def test_bad_node_cost_is_refused(top_grid):
     m = len(top_grid)
-    for bad, word in ((np.full(m, np.nan), "NaN"), (-np.ones(m), "negative"),
-                      (np.zeros(m + 1), "shape")):
+    for bad, word in (
+        (np.full(m, np.nan), "NaN"),
+        (-np.ones(m), "negative"),
+        (np.zeros(m + 1), "shape"),
+    ):
         with pytest.raises(InputError, match=word) as err:
             shortest_grid_path(top_grid, bad)
         assert err.value.argument == "node_cost"

@@ -96,22 +96,31 @@ def brute_force(hand, obj, finger, t_d, q_d, T_d, tip_req, link_req, ff_req):
 
     for d in range(t_d.size):
         pin.updateGeometryPlacements(model, data, gmodel, gdata, q_d[d])
-        tf = {g: coal.Transform3s(gdata.oMg[g].rotation, gdata.oMg[g].translation)
-              for g in list(f.geometry_ids) + others}
+        tf = {
+            g: coal.Transform3s(gdata.oMg[g].rotation, gdata.oMg[g].translation)
+            for g in list(f.geometry_ids) + others
+        }
         tf_obj = coal.Transform3s(T_d[d, :3, :3], T_d[d, :3, 3])
         for g in f.geometry_ids:
             geom = gmodel.geometryObjects[g]
-            dist = coal.distance(geom.geometry, tf[g], shape_obj, tf_obj, req,
-                                 coal.DistanceResult())  # a fresh result every call
+            dist = coal.distance(
+                geom.geometry, tf[g], shape_obj, tf_obj, req, coal.DistanceResult()
+            )  # a fresh result every call
             tip = g in f.tip_geometry_ids
             key = "tip" if tip else "link"
             mins[key] = min(mins[key], dist)
-            check("tip-object" if tip else "link-object", f"{geom.name} vs object", d, dist,
-                  tip_req[d] if tip else link_req)
+            check(
+                "tip-object" if tip else "link-object",
+                f"{geom.name} vs object",
+                d,
+                dist,
+                tip_req[d] if tip else link_req,
+            )
             for h in others:
                 other = gmodel.geometryObjects[h]
-                dist = coal.distance(geom.geometry, tf[g], other.geometry, tf[h], req,
-                                     coal.DistanceResult())
+                dist = coal.distance(
+                    geom.geometry, tf[g], other.geometry, tf[h], req, coal.DistanceResult()
+                )
                 mins["ff"] = min(mins["ff"], dist)
                 check("finger-finger", f"{geom.name} vs {other.name}", d, dist, ff_req)
     return mins, failing
@@ -122,8 +131,12 @@ def n_runs(mask: np.ndarray) -> int:
 
 
 def report_mins(r: VerificationReport) -> dict:
-    return {"tip": r.min_tip_object_m, "link": r.min_link_object_m,
-            "ff": r.min_finger_finger_m, "margin": r.min_clearance_margin_m}
+    return {
+        "tip": r.min_tip_object_m,
+        "link": r.min_link_object_m,
+        "ff": r.min_finger_finger_m,
+        "margin": r.min_clearance_margin_m,
+    }
 
 
 # ---------------------------------------------------------------------- building blocks
@@ -183,12 +196,14 @@ def test_lower_bounds_never_exceed_coal_distances(hand_name):
     D = 60
     q = lo + rng.random((D, hand.model.nq)) * (hi - lo)
     centre = [0.07, 0.0, 0.06] if hand_name == "five_finger" else [0.08, 0.0, 0.08]
-    T = np.stack([pose(np.asarray(centre) + rng.normal(0, 0.02, 3), rng.normal(0, 1.0, 3))
-                  for _ in range(D)])
+    T = np.stack(
+        [pose(np.asarray(centre) + rng.normal(0, 0.02, 3), rng.normal(0, 1.0, 3)) for _ in range(D)]
+    )
     for obj in (Box((0.06, 0.04, 0.03)), Prism(5, 0.03, 0.05)):
         for finger in ("thumb", "index"):
-            checker = PairDistances(hand, obj, hand.finger(finger), q, T, np.zeros(D), 0.0,
-                                   1.0)  # 1 m: every pair gets the fine bound
+            checker = PairDistances(
+                hand, obj, hand.finger(finger), q, T, np.zeros(D), 0.0, 1.0
+            )  # 1 m: every pair gets the fine bound
             checker._query(*np.nonzero(np.ones(checker.lb.shape, dtype=bool)))
             assert np.all(checker.exact >= checker.lb - 1e-9)
             assert np.mean(checker.lb > 0) > 0.3  # and they are not trivial
@@ -207,15 +222,21 @@ def test_densify_bounds_steps_and_stays_on_the_interpolation():
     # the fewest steps: one step fewer per interval would exceed the bound somewhere
     counts = np.diff(np.searchsorted(t_d, t))
     rel = Rotation.from_matrix(T[:-1, :3, :3].transpose(0, 2, 1) @ T[1:, :3, :3])
-    need = np.maximum.reduce([
-        np.max(np.abs(np.diff(q, axis=0)), axis=1) / step,
-        rel.magnitude() / step,  # the object turns at most one step per sample
-        np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1) / (step * OBJECT_LEVER_M),
-    ])
+    need = np.maximum.reduce(
+        [
+            np.max(np.abs(np.diff(q, axis=0)), axis=1) / step,
+            rel.magnitude() / step,  # the object turns at most one step per sample
+            np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1) / (step * OBJECT_LEVER_M),
+        ]
+    )
     assert np.all(counts == np.maximum(np.ceil(need), 1))
     assert_close(T_d, ObjectMotion.from_poses(t, T).pose(t_d), atol=1e-12, what="poses")
-    assert_close(q_d, np.stack([np.interp(t_d, t, q[:, j]) for j in range(5)], axis=1),
-                 atol=1e-12, what="linear q")
+    assert_close(
+        q_d,
+        np.stack([np.interp(t_d, t, q[:, j]) for j in range(5)], axis=1),
+        atol=1e-12,
+        what="linear q",
+    )
 
 
 def test_densify_follows_object_rotation_when_joints_are_still():
@@ -243,8 +264,9 @@ def test_static_configuration_reports_exact_minima(five, gap):
     assert r.ok and r.joint_limits_ok and not r.failures and r.time_s is None
     assert r.n_samples == 3  # nothing moves: no extra samples
     # analytic: the sphere is the nearest tip geometry
-    assert_close(r.min_tip_object_m, box_distance(size, T, tip, TIP_R), atol=1e-9,
-                 what="sphere-box")
+    assert_close(
+        r.min_tip_object_m, box_distance(size, T, tip, TIP_R), atol=1e-9, what="sphere-box"
+    )
     assert_close(r.min_tip_object_m, gap, atol=1e-9, what="gap")
     # independent Coal calls on Pinocchio's placements
     mins, failing = brute_force(five, obj, "index", t, q, Ts, np.full(3, -TOL), -TOL, 5e-4)
@@ -261,8 +283,7 @@ def test_single_sample_is_checked_as_is(five):
     r = verify_finger_motion(five, obj, "index", [0.0], q[None], T[None], tip_clearance_m=0.0)
     assert r.ok and r.n_samples == 1 and r.max_tip_step_m == 0.0
     assert_close(r.min_tip_object_m, 0.001, atol=1e-9, what="gap")
-    r = verify_finger_motion(five, obj, "index", [0.0], q[None], T[None],
-                             tip_clearance_m=0.002)
+    r = verify_finger_motion(five, obj, "index", [0.0], q[None], T[None], tip_clearance_m=0.002)
     assert [x.kind for x in r.failures] == ["tip-object"] and r.time_s == 0.0
 
 
@@ -291,8 +312,9 @@ def test_tip_clearance_is_interpolated_in_time(five):
     Ts = np.tile(pose(tip + [TIP_R + 0.002 + 0.02, 0.0, 0.0]), (5, 1, 1))  # 2 mm gap
     q = line(five, "index", STRAIGHT, STRAIGHT, 5, base=np.zeros(five.model.nq))
     t = np.linspace(0.0, 1.0, 5)
-    r = verify_finger_motion(five, obj, "index", t, q, Ts,
-                             tip_clearance_m=np.array([0.0, 0.001, 0.002, 0.003, 0.004]))
+    r = verify_finger_motion(
+        five, obj, "index", t, q, Ts, tip_clearance_m=np.array([0.0, 0.001, 0.002, 0.003, 0.004])
+    )
     # required = clearance - tol: 0.002 - tol passes, 0.003 - tol does not
     assert [f.kind for f in r.failures] == ["tip-object"]
     assert (r.failures[0].t_first_s, r.failures[0].t_last_s) == (0.75, 1.0)
@@ -311,10 +333,12 @@ def test_link_penetration_is_a_link_failure_with_the_analytic_depth(five):
     obj = Box((0.02, 0.02, 0.02))
     T = pose([mcp[0] + 0.0225, mcp[1], mcp[2] + r - 0.002 + 0.01])
     q = line(five, "index", STRAIGHT, STRAIGHT, 2, base=np.zeros(five.model.nq))
-    r = verify_finger_motion(five, obj, "index", [0.0, 1.0], q, np.tile(T, (2, 1, 1)),
-                             tip_clearance_m=0.0)
+    r = verify_finger_motion(
+        five, obj, "index", [0.0, 1.0], q, np.tile(T, (2, 1, 1)), tip_clearance_m=0.0
+    )
     assert [(f.kind, f.detail) for f in r.failures] == [
-        ("link-object", "index_proximal_0 vs object")]
+        ("link-object", "index_proximal_0 vs object")
+    ]
     assert_close(r.failures[0].value, -0.002, atol=1e-6, what="penetration depth")
     assert_close(r.min_link_object_m, -0.002, atol=1e-6, what="min link distance")
 
@@ -325,8 +349,9 @@ def _sweep_case(five, n_coarse):
     f = five.finger("index")
     size = (0.01, 0.01, 0.01)
     T = pose(f.fk(np.array([0.15, 0.0, 0.0])))
-    q = line(five, "index", [0.3, 0.0, 0.0], [0.0, 0.0, 0.0], n_coarse,
-             base=np.zeros(five.model.nq))
+    q = line(
+        five, "index", [0.3, 0.0, 0.0], [0.0, 0.0, 0.0], n_coarse, base=np.zeros(five.model.nq)
+    )
     t = np.linspace(0.0, 1.0, n_coarse)
     return size, T, q, t
 
@@ -334,8 +359,9 @@ def _sweep_case(five, n_coarse):
 def test_tip_through_box_fails_at_the_analytic_time(five):
     size, T, q, t = _sweep_case(five, 5)
     f = five.finger("index")
-    r = verify_finger_motion(five, Box(size), "index", t, q, np.tile(T, (t.size, 1, 1)),
-                             tip_clearance_m=0.0)
+    r = verify_finger_motion(
+        five, Box(size), "index", t, q, np.tile(T, (t.size, 1, 1)), tip_clearance_m=0.0
+    )
     assert not r.ok
 
     def depth(s):  # analytic sphere-box distance at time s (q linear in time here)
@@ -358,8 +384,9 @@ def test_sweep_between_two_clear_samples_is_caught_by_densification(five):
     size, T, q, t = _sweep_case(five, 2)
     obj = Box(size)
     Ts = np.tile(T, (2, 1, 1))
-    coarse = verify_finger_motion(five, obj, "index", t, q, Ts, tip_clearance_m=0.0,
-                                  max_joint_step_rad=10.0)
+    coarse = verify_finger_motion(
+        five, obj, "index", t, q, Ts, tip_clearance_m=0.0, max_joint_step_rad=10.0
+    )
     assert coarse.ok and coarse.n_samples == 2  # both samples are clear of the box
     dense = verify_finger_motion(five, obj, "index", t, q, Ts, tip_clearance_m=0.0)
     assert not dense.ok and dense.n_samples == 301
@@ -375,13 +402,14 @@ def test_interpolation_slack_bounds_what_happens_between_samples(five):
     mcp = five.model.jointPlacements[five.model.getJointId("index_abd")].translation
     tip = f.fk(np.array([0.155, 0.0, 0.0]))
     radial = (tip - mcp) / np.linalg.norm(tip - mcp)
-    T = pose(tip + radial * (TIP_R + 0.0005 + 0.005), [0.0, 0.0, np.arctan2(radial[1],
-                                                                              radial[0])])
+    T = pose(tip + radial * (TIP_R + 0.0005 + 0.005), [0.0, 0.0, np.arctan2(radial[1], radial[0])])
     Ts = np.tile(T, (2, 1, 1))
-    coarse = verify_finger_motion(five, Box(size), "index", t, q, Ts, tip_clearance_m=0.0,
-                                  max_joint_step_rad=0.01)
-    fine = verify_finger_motion(five, Box(size), "index", t, q, Ts, tip_clearance_m=0.0,
-                                max_joint_step_rad=0.001)
+    coarse = verify_finger_motion(
+        five, Box(size), "index", t, q, Ts, tip_clearance_m=0.0, max_joint_step_rad=0.01
+    )
+    fine = verify_finger_motion(
+        five, Box(size), "index", t, q, Ts, tip_clearance_m=0.0, max_joint_step_rad=0.001
+    )
     assert 0 < fine.interpolation_slack_m < 1e-4  # 1 mrad: under 0.1 mm here
     assert coarse.min_tip_object_m > 0  # a near miss
     assert fine.min_tip_object_m <= coarse.min_tip_object_m
@@ -391,9 +419,17 @@ def test_interpolation_slack_bounds_what_happens_between_samples(five):
 
 def test_max_tip_step_refines_the_sampling(five):
     size, T, q, t = _sweep_case(five, 2)
-    r = verify_finger_motion(five, Box(size), "index", t, q, np.tile(T, (2, 1, 1)),
-                             tip_clearance_m=0.0, max_joint_step_rad=0.05,
-                             max_tip_step_m=2e-4)
+    r = verify_finger_motion(
+        five,
+        Box(size),
+        "index",
+        t,
+        q,
+        np.tile(T, (2, 1, 1)),
+        tip_clearance_m=0.0,
+        max_joint_step_rad=0.05,
+        max_tip_step_m=2e-4,
+    )
     assert r.max_tip_step_m <= 2e-4
     assert r.n_samples > 7  # 0.3 rad / 0.05 rad alone would give 7
 
@@ -402,8 +438,9 @@ def test_finger_into_neighbour_is_a_finger_finger_failure(five):
     obj = Box((0.04, 0.04, 0.04))
     T = pose([0.0, 0.0, 0.3])  # far away
     q = line(five, "index", [0.0, 0.65, 0.87], [-0.349, 0.65, 0.87], 3)
-    r = verify_finger_motion(five, obj, "index", [0.0, 0.5, 1.0], q, np.tile(T, (3, 1, 1)),
-                             tip_clearance_m=0.0)
+    r = verify_finger_motion(
+        five, obj, "index", [0.0, 0.5, 1.0], q, np.tile(T, (3, 1, 1)), tip_clearance_m=0.0
+    )
     assert not r.ok and r.joint_limits_ok
     assert {x.kind for x in r.failures} == {"finger-finger"}
     assert all(x.detail.startswith("index_") and " vs middle_" in x.detail for x in r.failures)
@@ -417,8 +454,9 @@ def test_joint_limit_violation(five):
     q_over = STRAIGHT.copy()
     q_over[2] = f.upper[2] + 0.01
     q = line(five, "index", STRAIGHT, q_over, 2, base=np.zeros(five.model.nq))
-    r = verify_finger_motion(five, obj, "index", [0.0, 1.0], q, np.tile(T, (2, 1, 1)),
-                             tip_clearance_m=0.0)
+    r = verify_finger_motion(
+        five, obj, "index", [0.0, 1.0], q, np.tile(T, (2, 1, 1)), tip_clearance_m=0.0
+    )
     assert not r.ok and not r.joint_limits_ok
     lim = [x for x in r.failures if x.kind == "joint-limit"]
     assert len(lim) == 1 and lim[0].detail == "index_pip"
@@ -452,8 +490,11 @@ def test_broad_phase_never_changes_the_answer(five, allegro, case, seed, retreat
     span = 1.06 if seed == 0 else 0.5
     q_f = f.q_mid + rng.uniform(-0.5, 0.5, (n, f.k)) * span * (f.upper - f.lower)
     # the other fingers drift around the middle of their limits
-    base = hand.neutral() + rng.normal(0.0, 0.1, (1, hand.model.nq)) \
+    base = (
+        hand.neutral()
+        + rng.normal(0.0, 0.1, (1, hand.model.nq))
         + np.linspace(0, 1, n)[:, None] * rng.normal(0.0, 0.05, hand.model.nq)
+    )
     q = hand.to_full(finger, q_f, base)
     c = np.asarray(centre) + retreat_m * np.asarray(away)
     T = np.stack([pose(c + rng.normal(0, 0.01, 3), rng.normal(0, 0.2, 3)) for _ in range(n)])
@@ -481,20 +522,39 @@ def test_near_misses_match_brute_force(five, allegro, hand_name, seed):
     q_f = q0 + rng.normal(0.0, 0.02, (n, f.k))
     q = hand.to_full(finger, q_f, np.tile(hand.neutral(), (n, 1)))
     t = np.cumsum(rng.uniform(0.2, 1.0, n))
-    assert_matches_brute_force(hand, Box((0.05, 0.04, 0.04)), finger, t, q, T,
-                               rng.uniform(0.0, 0.0015, n), step=0.005, link=0.0)
+    assert_matches_brute_force(
+        hand,
+        Box((0.05, 0.04, 0.04)),
+        finger,
+        t,
+        q,
+        T,
+        rng.uniform(0.0, 0.0015, n),
+        step=0.005,
+        link=0.0,
+    )
 
 
 def assert_matches_brute_force(hand, obj, finger, t, q, T, clearance, step=0.02, link=0.002):
     """The report equals an all-pairs Coal check on the same dense samples."""
     f = hand.finger(finger)
-    r = verify_finger_motion(hand, obj, finger, t, q, T, tip_clearance_m=clearance,
-                             link_clearance_m=link, finger_clearance_m=0.001,
-                             max_joint_step_rad=step)
+    r = verify_finger_motion(
+        hand,
+        obj,
+        finger,
+        t,
+        q,
+        T,
+        tip_clearance_m=clearance,
+        link_clearance_m=link,
+        finger_clearance_m=0.001,
+        max_joint_step_rad=step,
+    )
     t_d, q_d, T_d = densify(t, q, T, step)
     assert r.n_samples == t_d.size
-    mins, failing = brute_force(hand, obj, finger, t_d, q_d, T_d,
-                                np.interp(t_d, t, clearance) - TOL, link - TOL, 0.001)
+    mins, failing = brute_force(
+        hand, obj, finger, t_d, q_d, T_d, np.interp(t_d, t, clearance) - TOL, link - TOL, 0.001
+    )
     for key, value in mins.items():
         if r.minima_exact:
             assert_close(report_mins(r)[key], value, atol=2e-6, what=key)
@@ -505,16 +565,19 @@ def assert_matches_brute_force(hand, obj, finger, t, q, T, clearance, step=0.02,
     for x in kept:  # each kept failure is a whole run of the brute-force failing samples
         mask = failing[(x.kind, x.detail)]
         lo, hi = np.searchsorted(t_d, [x.t_first_s, x.t_last_s])
-        assert mask[lo:hi + 1].all() and hi - lo + 1 == x.n_samples
+        assert mask[lo : hi + 1].all() and hi - lo + 1 == x.n_samples
         assert (lo == 0 or not mask[lo - 1]) and (hi + 1 == t_d.size or not mask[hi + 1])
     q_f_d = q_d[:, f.q_indices]
-    joint_runs = sum(n_runs(q_f_d[:, j] < f.lower[j] - 1e-9)
-                     + n_runs(q_f_d[:, j] > f.upper[j] + 1e-9) for j in range(f.k))
+    joint_runs = sum(
+        n_runs(q_f_d[:, j] < f.lower[j] - 1e-9) + n_runs(q_f_d[:, j] > f.upper[j] + 1e-9)
+        for j in range(f.k)
+    )
     assert r.n_failures == sum(n_runs(m) for m in failing.values()) + joint_runs
     assert r.joint_limits_ok == (joint_runs == 0)
     assert r.ok == (not failing and r.joint_limits_ok)
-    n_pairs = len(f.geometry_ids) * (1 + sum(
-        len(o.geometry_ids) for name, o in hand.fingers.items() if name != finger))
+    n_pairs = len(f.geometry_ids) * (
+        1 + sum(len(o.geometry_ids) for name, o in hand.fingers.items() if name != finger)
+    )
     assert r.n_distance_queries < 0.5 * t_d.size * n_pairs  # the broad phase prunes
     return r
 
@@ -522,8 +585,9 @@ def assert_matches_brute_force(hand, obj, finger, t, q, T, clearance, step=0.02,
 # ---------------------------------------------------------------------- errors
 def test_raise_if_failed_names_finger_time_and_check(five):
     size, T, q, t = _sweep_case(five, 2)
-    r = verify_finger_motion(five, Box(size), "index", t, q, np.tile(T, (2, 1, 1)),
-                             tip_clearance_m=0.0)
+    r = verify_finger_motion(
+        five, Box(size), "index", t, q, np.tile(T, (2, 1, 1)), tip_clearance_m=0.0
+    )
     with pytest.raises(VerificationError) as err:
         r.raise_if_failed("index")
     e = err.value
@@ -531,8 +595,9 @@ def test_raise_if_failed_names_finger_time_and_check(five):
     text = str(e)
     assert "finger 'index'" in text and "tip-object" in text and "vs object" in text
     assert f"t={r.time_s:.3f} s" in text
-    ok = verify_finger_motion(five, Box(size), "index", t, q, np.tile(pose([0, 0, 0.3]),
-                              (2, 1, 1)), tip_clearance_m=0.0)
+    ok = verify_finger_motion(
+        five, Box(size), "index", t, q, np.tile(pose([0, 0, 0.3]), (2, 1, 1)), tip_clearance_m=0.0
+    )
     ok.raise_if_failed("index")  # no error
     assert isinstance(r.failures[0], Failure)
 
@@ -558,8 +623,12 @@ def test_raise_if_failed_names_finger_time_and_check(five):
     ],
 )
 def test_bad_input_names_the_argument(five, kwargs, argument):
-    args = {"times_s": [0.0, 1.0], "q_full": np.tile(five.neutral(), (2, 1)),
-            "T_palm_object": np.tile(pose([0, 0, 0.3]), (2, 1, 1)), "tip_clearance_m": 0.0}
+    args = {
+        "times_s": [0.0, 1.0],
+        "q_full": np.tile(five.neutral(), (2, 1)),
+        "T_palm_object": np.tile(pose([0, 0, 0.3]), (2, 1, 1)),
+        "tip_clearance_m": 0.0,
+    }
     args.update(kwargs)
     with pytest.raises(InputError) as err:
         verify_finger_motion(five, Box((0.04, 0.04, 0.04)), "index", **args)
@@ -568,5 +637,12 @@ def test_bad_input_names_the_argument(five, kwargs, argument):
 
 def test_unknown_finger(five):
     with pytest.raises(UnknownNameError, match="index"):
-        verify_finger_motion(five, Box((0.04, 0.04, 0.04)), "pinky", [0.0],
-                             five.neutral()[None], pose([0, 0, 0.3])[None], tip_clearance_m=0.0)
+        verify_finger_motion(
+            five,
+            Box((0.04, 0.04, 0.04)),
+            "pinky",
+            [0.0],
+            five.neutral()[None],
+            pose([0, 0, 0.3])[None],
+            tip_clearance_m=0.0,
+        )

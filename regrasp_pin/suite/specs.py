@@ -127,9 +127,7 @@ class ObjectSpec:
                 on an ellipsoid, but the hull is computed, not assumed).
         """
         if self.kind == "prism":
-            return Prism(
-                _given(self.n_sides), _given(self.circumradius_m), _given(self.height_m)
-            )
+            return Prism(_given(self.n_sides), _given(self.circumradius_m), _given(self.height_m))
         if self.kind == "box":
             return Box(_given(self.size_m))
         rng = np.random.default_rng(self.seed)
