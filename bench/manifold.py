@@ -5,13 +5,13 @@ box 40 x 60 x 40 mm at (65, 0, 60) mm turning about the palm y axis through its 
 at 30 deg/s for 3 s, its surface sampled every 2 mm, 100 object poses. Prints:
 
 - the one-off workspace covers (cached per finger, built on the first manifold);
-- the five manifolds (:func:`regrasp_pin.manifold.build_manifold`), best of 3;
+- the five manifolds (:func:`regrasp_pin.grasp.manifold.build_manifold`), best of 3;
 - the baseline: a per-point loop calling ``Finger.ik`` on one target at a time,
   warm-started from the same point's previous time, on a random subset of the points
   (all 100 times), extrapolated to every point of every finger; and the ratio. Once
   with ``Finger.ik``'s restarts (its default: what the manifold must agree with) and
   once without (cheaper, but a warm start can stay in a local minimum);
-- the choice of Q (:func:`regrasp_pin.contact_choice.choose_new_contact`) for the
+- the choice of Q (:func:`regrasp_pin.grasp.choice.choose_new_contact`) for the
   first finger of the initial grasp to trigger, best of 5;
 - how many of the manifold's feasible flags differ from the loops' on the subset.
 
@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from regrasp_pin.contact import ContactModel, pad_cosines, tip_targets
-from regrasp_pin.contact_choice import choose_new_contact, initial_grasp
-from regrasp_pin.hand import Hand
-from regrasp_pin.manifold import build_manifold, workspace_voxels
-from regrasp_pin.motion import ObjectMotion
-from regrasp_pin.objects import Box
-from regrasp_pin.tracking import track_contact
+from regrasp_pin.grasp.choice import choose_new_contact, initial_grasp
+from regrasp_pin.grasp.contact import ContactModel, pad_cosines, tip_targets
+from regrasp_pin.grasp.manifold import build_manifold, workspace_voxels
+from regrasp_pin.grasp.tracking import track_contact
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.model.objects import Box
 
 REGRASP_S = 0.3  # time from lift-off to landing used for the arrival time of Q
 

@@ -27,9 +27,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from regrasp_pin.deviation import DEVIATIONS, deviation_matrix
-from regrasp_pin.hopfield import initial_state
-from regrasp_pin.polygon import approximate_polygon, network_band
+from regrasp_pin.polygon.approximate import approximate_polygon, network_band
+from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
+from regrasp_pin.polygon.hopfield import initial_state
 
 CURVES = ("circle", "spiral", "sine", "grid", "digital")
 SIZES = (100, 200, 500)

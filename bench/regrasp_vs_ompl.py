@@ -10,9 +10,9 @@ inside the joint limits with 0.1 rad to spare, the pad facing the face, the non-
 links >= 2 mm from the box, and valid by the rule below. Both planners get the same
 start and goal joint configurations ``q_P`` and ``q_Q`` (IK at P and at Q).
 
-* ours: :func:`regrasp_pin.regrasp.plan_regrasp` (surface grid, grid path, Hopfield
+* ours: :func:`regrasp_pin.planning.regrasp.plan_regrasp` (surface grid, grid path, Hopfield
   waypoints, IK, Coal verification) with the default
-  :class:`~regrasp_pin.regrasp.RegraspParams`; static box (two equal poses).
+  :class:`~regrasp_pin.planning.regrasp.RegraspParams`; static box (two equal poses).
 * OMPL: ``RRTConnect`` in the finger's joint space (``RealVectorStateSpace`` bounded by
   the joint limits) from ``q_P`` to ``q_Q``, then ``SimpleSetup.simplifySolution()``
   (the ``PathSimplifier``); OMPL's default state validity resolution; ``--time-limit``.
@@ -67,9 +67,9 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Box, Hand, ObjectMotion, RegraspError
-from regrasp_pin.contact import LinkClearance
-from regrasp_pin.manifold import build_manifold
-from regrasp_pin.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
+from regrasp_pin.grasp.contact import LinkClearance
+from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.planning.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
 
 try:
     from ompl import base as ob
@@ -374,7 +374,7 @@ def failure_causes(
     Returns the causes of every failed attempt, and of the first attempt (the default
     parameters) alone.
     """
-    logger = logging.getLogger("regrasp_pin.regrasp")
+    logger = logging.getLogger("regrasp_pin.planning.regrasp")
     handler = _AttemptLog()
     level = logger.level
     logger.addHandler(handler)

@@ -6,7 +6,7 @@ and the next one drawn, as :func:`regrasp_pin.suite.suite_scenarios` does, at mo
 4 n draws) or, with ``--neighbours``, the canonical demo and its 29 neighbours
 (:func:`regrasp_pin.suite.neighbour_specs`). Each scenario is built, planned, and a
 full plan is saved, reloaded and re-checked with Pinocchio and Coal alone
-(:func:`regrasp_pin.plan_check.recheck_plan`).
+(:func:`regrasp_pin.verify.plan_check.recheck_plan`).
 
 Prints one line per scenario as it finishes (outcome, regrasps, times; the reason of a
 failure on a second line), then :func:`regrasp_pin.suite.summarize`, then, with

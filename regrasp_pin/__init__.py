@@ -12,9 +12,6 @@ Kinematics by Pinocchio, exact distances by Coal.
 from __future__ import annotations
 
 from . import exceptions
-from .contact import ContactModel, FingerClearance, LinkClearance
-from .contact_choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
-from .deviation import deviation_matrix
 from .exceptions import (
     ContactError,
     GeometryError,
@@ -26,15 +23,17 @@ from .exceptions import (
     UnknownNameError,
     VerificationError,
 )
-from .grasp_quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
-from .hand import Finger, Hand
-from .holding import holding_hand
-from .ik import IKResult
-from .inflation import TipPath, grid_inflation, inflate_path, inflation_height
-from .kinematics import FingerChain
-from .manifold import Manifold, build_manifold
-from .motion import ObjectMotion
-from .objects import (
+from .grasp.choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
+from .grasp.contact import ContactModel, FingerClearance, LinkClearance
+from .grasp.holding import holding_hand
+from .grasp.manifold import Manifold, build_manifold
+from .grasp.quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
+from .grasp.tracking import ContactTrack, track_contact
+from .model.hand import Finger, Hand
+from .model.ik import IKResult
+from .model.kinematics import FingerChain
+from .model.motion import ObjectMotion
+from .model.objects import (
     Box,
     ConvexMesh,
     ConvexObject,
@@ -46,14 +45,15 @@ from .objects import (
     object_from_params,
 )
 from .plan import ContactPhase, Plan, RegraspPhase
-from .planner import ManipulationPlan, PlannerParams, plan_manipulation
-from .polygon import PolygonResult, approximate_polygon
-from .regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .planning.planner import ManipulationPlan, PlannerParams, plan_manipulation
+from .planning.regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .polygon.approximate import PolygonResult, approximate_polygon
+from .polygon.deviation import deviation_matrix
 from .scenarios import Scenario, make_scenario
-from .surface_grid import SurfaceGrid, build_surface_grid
-from .surface_path import GridPath, shortest_grid_path
-from .tracking import ContactTrack, track_contact
-from .verify import Failure, VerificationReport, densify, verify_finger_motion
+from .surface.grid import SurfaceGrid, build_surface_grid
+from .surface.inflation import TipPath, grid_inflation, inflate_path, inflation_height
+from .surface.path import GridPath, shortest_grid_path
+from .verify.finger_motion import Failure, VerificationReport, densify, verify_finger_motion
 
 __version__ = "0.1.0"
 

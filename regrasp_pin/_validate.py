@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -86,3 +88,31 @@ def choice(value: object, argument: str, valid: Sequence[str]) -> str:
 def _shape_text(shape: Sequence[int | None]) -> str:
     parts = ["N" if s is None else str(s) for s in shape]
     return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
+
+
+def frozen(arr: np.ndarray) -> np.ndarray:
+    """A contiguous, read-only view (or copy) of ``arr``: results hand out arrays that
+    callers cannot change behind the object's back."""
+    arr = np.ascontiguousarray(arr)
+    arr.setflags(write=False)
+    return arr
+
+
+def known_fields(d: Any, cls: type, argument: str) -> None:
+    """Check that ``d`` is a dict holding the fields of dataclass ``cls`` (no unknown
+    field, every field without a default); InputError naming ``argument`` otherwise."""
+    if not isinstance(d, dict):
+        raise InputError(argument, f"is a {type(d).__name__}", "a dict")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(d) - set(fields))
+    if unknown:
+        raise InputError(argument, f"unknown field(s) {unknown}", f"fields of {cls.__name__}")
+    missing = sorted(
+        n
+        for n, f in fields.items()
+        if n not in d
+        and f.default is dataclasses.MISSING
+        and f.default_factory is dataclasses.MISSING
+    )
+    if missing:
+        raise InputError(argument, f"missing field(s) {missing}", f"fields of {cls.__name__}")

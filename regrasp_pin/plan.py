@@ -21,8 +21,8 @@ from ._validate import as_array
 from .exceptions import InputError, ModelFileError
 
 if TYPE_CHECKING:  # imported lazily at run time
-    from .hand import Hand
-    from .objects import ConvexObject
+    from .model.hand import Hand
+    from .model.objects import ConvexObject
 
 __all__ = ["PLAN_FORMAT", "ContactPhase", "Plan", "RegraspPhase", "ReleasePhase", "repo_root"]
 
@@ -301,8 +301,8 @@ class Plan:
         return p if p.is_absolute() else repo_root() / p
 
     def load_hand(self) -> Hand:
-        """Rebuild the :class:`~regrasp_pin.hand.Hand` from the URDF and finger table."""
-        from .hand import Hand
+        """Rebuild the :class:`~regrasp_pin.model.hand.Hand` from the URDF and finger table."""
+        from .model.hand import Hand
 
         fingers = {n: f["tip_frame"] for n, f in self.hand["fingers"].items()}
         radii = {n: float(f["tip_radius"]) for n, f in self.hand["fingers"].items()}
@@ -310,7 +310,7 @@ class Plan:
 
     def load_object(self) -> ConvexObject:
         """Rebuild the object from its kind and parameters."""
-        from .objects import object_from_params
+        from .model.objects import object_from_params
 
         return object_from_params(self.object["kind"], self.object["params"])
 

@@ -21,15 +21,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ._validate import choice, positive
-from .contact import ContactModel
-from .contact_choice import Grasp, initial_grasp
 from .exceptions import InputError
-from .hand import Hand
-from .manifold import build_manifold
-from .motion import ObjectMotion
-from .objects import Box, ConvexObject, Prism
-from .planner import PlannerParams
-from .regrasp import RegraspParams
+from .grasp.choice import Grasp, initial_grasp
+from .grasp.contact import ContactModel
+from .grasp.manifold import build_manifold
+from .model.hand import Hand
+from .model.motion import ObjectMotion
+from .model.objects import Box, ConvexObject, Prism
+from .planning.planner import PlannerParams
+from .planning.regrasp import RegraspParams
 
 __all__ = [
     "HANDS",
@@ -175,6 +175,11 @@ def setup_pose(hand: str) -> np.ndarray:
     T0[:3, :3] = setup["rotation"].as_matrix()
     T0[:3, 3] = setup["position"]
     return T0
+
+
+def setup_objects(hand: str) -> dict[str, Callable[[], ConvexObject]]:
+    """The hand's canonical objects by name, each as a function that builds it."""
+    return dict(_SETUP[choice(hand, "hand", HANDS)]["objects"])
 
 
 def setup_fingers(hand: str) -> tuple[str, ...]:

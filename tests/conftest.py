@@ -26,9 +26,9 @@ def held_grasp(scen):
 
     Returns:
         ``(grid, base_q, holding)``: the times [s], the hand configuration of the idle
-        fingers, and finger -> :class:`~regrasp_pin.holding.Holding`.
+        fingers, and finger -> :class:`~regrasp_pin.grasp.holding.Holding`.
     """
-    from regrasp_pin.holding import rest_configuration, start_holding
+    from regrasp_pin.grasp.holding import rest_configuration, start_holding
 
     hand, p = scen.hand, scen.params
     grid = np.round(np.arange(0.0, scen.motion.t_end + 1e-9, 0.01), 9)

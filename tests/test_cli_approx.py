@@ -10,8 +10,8 @@ from conftest import assert_close
 
 from regrasp_pin import cli
 from regrasp_pin.commands import approx
-from regrasp_pin.deviation import DEVIATIONS
-from regrasp_pin.polygon import METHODS, approximate_polygon
+from regrasp_pin.polygon.approximate import METHODS, approximate_polygon
+from regrasp_pin.polygon.deviation import DEVIATIONS
 
 
 def curve(n: int = 60) -> np.ndarray:

@@ -1,10 +1,10 @@
-"""Tests of the contact model (regrasp_pin.contact).
+"""Tests of the contact model (regrasp_pin.grasp.contact).
 
 Scene (palm frame: x toward the fingers, z out of the palm): the five-finger hand and a
 box 40 x 60 x 40 mm. Tip targets and pad cosines are checked against their formulas
 written out per point; the Coal clearances against Pinocchio's own distance pipeline
 (the object added to a copy of the hand's GeometryModel, ``pin.computeDistances`` over
-explicit collision pairs), which shares no code with :mod:`regrasp_pin.contact`.
+explicit collision pairs), which shares no code with :mod:`regrasp_pin.grasp.contact`.
 """
 
 from __future__ import annotations
@@ -15,15 +15,15 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
-from regrasp_pin.contact import (
+from regrasp_pin.grasp.contact import (
     ContactModel,
     FingerClearance,
     LinkClearance,
     pad_cosines,
     tip_targets,
 )
-from regrasp_pin.hand import Hand
-from regrasp_pin.objects import Box
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.objects import Box
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Tests of the new-contact choice and the initial grasp (regrasp_pin.contact_choice).
+"""Tests of the new-contact choice and the initial grasp (regrasp_pin.grasp.choice).
 
 Scenes (palm frame):
 
@@ -29,8 +29,8 @@ from conftest import assert_close
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from regrasp_pin.contact import ContactModel, tip_targets
-from regrasp_pin.contact_choice import (
+from regrasp_pin.exceptions import ContactError, FailureKind, InputError
+from regrasp_pin.grasp.choice import (
     SCREEN_EDGES,
     _CombinationSearch,
     _spread_out,
@@ -38,12 +38,12 @@ from regrasp_pin.contact_choice import (
     exit_times,
     initial_grasp,
 )
-from regrasp_pin.exceptions import ContactError, FailureKind, InputError
-from regrasp_pin.grasp_quality import ferrari_canny_epsilon, is_force_closure
-from regrasp_pin.hand import Hand
-from regrasp_pin.manifold import build_manifold
-from regrasp_pin.motion import ObjectMotion
-from regrasp_pin.objects import Box
+from regrasp_pin.grasp.contact import ContactModel, tip_targets
+from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.grasp.quality import ferrari_canny_epsilon, is_force_closure
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.model.objects import Box
 
 CONTACT = ContactModel()
 MU = 0.8

@@ -11,13 +11,13 @@ from conftest import assert_close
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from regrasp_pin.deviation import (
+from regrasp_pin.exceptions import InputError, UnknownNameError
+from regrasp_pin.polygon.deviation import (
     DEVIATIONS,
     chord_deviations,
     deviation_matrix,
     rest_lower_bound,
 )
-from regrasp_pin.exceptions import InputError, UnknownNameError
 
 
 def loop_matrix(P: np.ndarray, deviation: str, closed: bool) -> np.ndarray:

@@ -9,8 +9,8 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.grasp_quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
-from regrasp_pin.objects import Box
+from regrasp_pin.grasp.quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
+from regrasp_pin.model.objects import Box
 
 MU = 0.5
 BOX = Box((0.06, 0.04, 0.04))

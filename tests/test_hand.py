@@ -12,7 +12,7 @@ import pytest
 
 import regrasp_pin
 from regrasp_pin import Hand, InputError, ModelFileError, UnknownNameError
-from regrasp_pin.hand import five_finger_urdf_path
+from regrasp_pin.model.hand import five_finger_urdf_path
 
 
 @pytest.fixture(scope="module")

@@ -8,15 +8,15 @@ from conftest import assert_close
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from regrasp_pin.deviation import DEVIATIONS, deviation_matrix
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.hopfield import (
-    competitive_hopfield,
+from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
+from regrasp_pin.polygon.hopfield import (
     initial_state,
     network_input,
     polygon_energy,
     run_network,
 )
+from regrasp_pin.polygon.hopfield_search import competitive_hopfield
 
 
 def noisy_curve(n: int, d: int = 2, seed: int = 0) -> np.ndarray:

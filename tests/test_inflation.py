@@ -1,4 +1,5 @@
-"""Virtual inflation (regrasp_pin.inflation) and the Fig. 4 plot (regrasp_pin.plotting.surface).
+"""Virtual inflation (regrasp_pin.surface.inflation) and the Fig. 4 plot
+(regrasp_pin.plotting.surface).
 
 The tip centre must stay exactly ``tip_radius + h`` from the convex object (checked with
 the object's exact signed distance), touch down at P and Q, and move in steps no longer
@@ -11,10 +12,10 @@ import numpy as np
 import pytest
 
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.inflation import grid_inflation, inflate_path, inflation_height
-from regrasp_pin.objects import Box, ConvexMesh, Prism
-from regrasp_pin.surface_grid import build_surface_grid
-from regrasp_pin.surface_path import shortest_grid_path
+from regrasp_pin.model.objects import Box, ConvexMesh, Prism
+from regrasp_pin.surface.grid import build_surface_grid
+from regrasp_pin.surface.inflation import grid_inflation, inflate_path, inflation_height
+from regrasp_pin.surface.path import shortest_grid_path
 from tests.conftest import assert_close
 
 TIP_M = 0.008

@@ -8,7 +8,7 @@ import pytest
 from conftest import assert_close
 
 from regrasp_pin import Hand
-from regrasp_pin.kinematics import FingerChain
+from regrasp_pin.model.kinematics import FingerChain
 
 
 @pytest.fixture(scope="module", params=["five_finger", "allegro"])

@@ -1,4 +1,4 @@
-"""Tests of the joint-space manifolds (regrasp_pin.manifold), the paper's Fig. 2.
+"""Tests of the joint-space manifolds (regrasp_pin.grasp.manifold), the paper's Fig. 2.
 
 Scene (palm frame: x toward the fingers, z out of the palm): the five-finger hand and a
 box 40 x 60 x 40 mm at (65, 0, 60) mm, axes aligned with the palm, turning about the
@@ -21,12 +21,12 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
-from regrasp_pin.contact import ContactModel, tip_targets
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.hand import Finger, Hand
-from regrasp_pin.manifold import build_manifold, pad_directions, workspace_voxels
-from regrasp_pin.motion import ObjectMotion
-from regrasp_pin.objects import Box
+from regrasp_pin.grasp.contact import ContactModel, tip_targets
+from regrasp_pin.grasp.manifold import build_manifold, pad_directions, workspace_voxels
+from regrasp_pin.model.hand import Finger, Hand
+from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.model.objects import Box
 
 EXTEND_RAD = 0.3  # build_manifold's default
 CONTACT = ContactModel()
@@ -342,8 +342,8 @@ def test_a_nan_pose_cannot_make_a_motion():
 
 def test_fig2_draws_the_box_the_instants_p_and_q(scene):
     pytest.importorskip("matplotlib")
+    from regrasp_pin.grasp.tracking import track_contact
     from regrasp_pin.plotting.manifold import plot_manifold
-    from regrasp_pin.tracking import track_contact
 
     hand, box, motion, sample, times, manifolds = scene
     m = manifolds["index"]

@@ -8,7 +8,7 @@ from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.model.motion import ObjectMotion
 
 AXIS = np.array([0.3, -0.2, 0.9]) / np.linalg.norm([0.3, -0.2, 0.9])
 POINT = np.array([0.02, 0.01, 0.1])

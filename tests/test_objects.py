@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from regrasp_pin.exceptions import GeometryError, InputError
-from regrasp_pin.objects import (
+from regrasp_pin.model.objects import (
     Box,
     ConvexMesh,
     ConvexObject,

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from regrasp_pin import ContactPhase, Plan, RegraspPhase, make_scenario
-from regrasp_pin.contact import tip_targets
 from regrasp_pin.exceptions import InputError, ModelFileError
-from regrasp_pin.holding import holding_hand, rest_configuration
-from regrasp_pin.motion import ObjectMotion
-from regrasp_pin.plan_check import recheck_plan
+from regrasp_pin.grasp.contact import tip_targets
+from regrasp_pin.grasp.holding import holding_hand, rest_configuration
+from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.verify.plan_check import recheck_plan
 
 T_END = 0.6
 LIFT = (0.1, 0.5)  # the ring regrasp [s]

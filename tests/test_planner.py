@@ -3,7 +3,7 @@
 The scenarios are the canonical demo and two of its neighbours (other angles and
 rates; regrasp_pin.suite.neighbour_specs lists all 30, bench/suite.py runs them).
 
-The re-check (:func:`regrasp_pin.plan_check.recheck_plan`) uses only the plan file
+The re-check (:func:`regrasp_pin.verify.plan_check.recheck_plan`) uses only the plan file
 (URDF path, object mesh, q, poses, phases), Pinocchio and Coal: none of regrasp_pin's
 own kinematics or verification.
 """
@@ -16,10 +16,10 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Plan, make_scenario, plan_manipulation
 from regrasp_pin.exceptions import FailureKind, PlanningError
-from regrasp_pin.plan_check import recheck_plan
+from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.planning.schedule import held_until
 from regrasp_pin.suite import build_scenario, generate_specs
-from regrasp_pin.tracking import track_contact
+from regrasp_pin.verify.plan_check import recheck_plan
 
 # (angle [deg], rate [deg/s]): the demo and neighbours with other angles and rates
 SCENARIOS = [(100, 20), (60, 10), (100, 10)]
@@ -149,7 +149,7 @@ def test_unachievable_motion_raises_with_partial_plan():
     scen = make_scenario("five_finger", "hexagon", angle_deg=-100)
     from dataclasses import replace
 
-    from regrasp_pin.contact import ContactModel
+    from regrasp_pin.grasp.contact import ContactModel
 
     # a trigger margin larger than any new contact can offer: the first regrasp fails
     params = replace(

@@ -11,8 +11,8 @@ from conftest import assert_close, held_grasp
 
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import FailureKind, PlanningError
-from regrasp_pin.holding import holding_q, rest_configuration
-from regrasp_pin.motion import ObjectMotion
+from regrasp_pin.grasp.holding import holding_q, rest_configuration
+from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.planning.release import plan_release
 
 T_RELEASE_S = 0.3

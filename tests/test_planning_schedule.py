@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_pin.contact import ContactModel
+from regrasp_pin.grasp.contact import ContactModel
+from regrasp_pin.grasp.tracking import ContactTrack
 from regrasp_pin.planning.schedule import LiftOffWindow, held_until, lift_off_window, start_times
-from regrasp_pin.tracking import ContactTrack
 
 
 def _track(margin: np.ndarray, error: np.ndarray | None = None) -> ContactTrack:

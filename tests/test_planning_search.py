@@ -13,8 +13,8 @@ from conftest import held_grasp
 
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import Attempt, FailureKind, PlanningError
-from regrasp_pin.holding import holding_q
-from regrasp_pin.manifold import build_manifold
+from regrasp_pin.grasp.holding import holding_q
+from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.planning.search import RegraspSearch, SearchBudget
 
 FINGER = "index"

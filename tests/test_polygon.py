@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from conftest import assert_close
 
-from regrasp_pin.deviation import DEVIATIONS, chord_deviations, deviation_matrix
 from regrasp_pin.exceptions import InputError, UnknownNameError
-from regrasp_pin.hopfield import initial_state, run_network
-from regrasp_pin.polygon import METHODS, PolygonResult, approximate_polygon
-from regrasp_pin.polygon_exact import exact_polygon
+from regrasp_pin.polygon.approximate import METHODS, PolygonResult, approximate_polygon
+from regrasp_pin.polygon.deviation import DEVIATIONS, chord_deviations, deviation_matrix
+from regrasp_pin.polygon.exact import exact_polygon
+from regrasp_pin.polygon.hopfield import initial_state, run_network
 
 
 def noisy_circle(n: int, seed: int = 0, noise: float = 0.01) -> np.ndarray:
@@ -70,7 +70,7 @@ def test_banded_pipeline_matches_the_full_matrix(caplog):
     """n large enough for the band: the plain network still sees the full matrix (the band
     is widened when a column competes over a wider span), and the exact method is exact."""
     P = noisy_circle(200, seed=5)
-    caplog.set_level(logging.DEBUG, logger="regrasp_pin.polygon")
+    caplog.set_level(logging.DEBUG, logger="regrasp_pin.polygon.approximate")
     res = approximate_polygon(P, 20, closed=True, deviation="max", restarts=2)
     assert "plain network needed span" in caplog.text, "band widening not exercised"
     H = deviation_matrix(P, "max", closed=True)

@@ -10,10 +10,11 @@ from conftest import assert_close
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from regrasp_pin.deviation import DEVIATIONS, deviation_matrix
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.hopfield import competitive_hopfield, polygon_energy
-from regrasp_pin.polygon_exact import exact_polygon
+from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
+from regrasp_pin.polygon.exact import exact_polygon
+from regrasp_pin.polygon.hopfield import polygon_energy
+from regrasp_pin.polygon.hopfield_search import competitive_hopfield
 
 
 def brute_force(H: np.ndarray, m: int, closed: bool) -> float:

@@ -1,8 +1,8 @@
-"""Tests of one verified regrasp (regrasp_pin.regrasp).
+"""Tests of one verified regrasp (regrasp_pin.planning.regrasp).
 
 Every trajectory the planner returns is re-checked here, independently of
-:mod:`regrasp_pin.verify`: the returned samples are interpolated linearly at joint steps
-of at most 1 mrad, the object poses come from ``motion.pose``, the finger is placed with
+:mod:`regrasp_pin.verify.finger_motion`: the returned samples are interpolated linearly at
+joint steps of at most 1 mrad, the object poses come from ``motion.pose``, the finger is placed with
 Pinocchio (``forwardKinematics`` / ``updateGeometryPlacements``) and every distance is a
 ``coal.distance`` call on a ``coal.Box`` built here from the box's size.
 
@@ -34,13 +34,13 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
-from regrasp_pin.contact import LinkClearance
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, VerificationError
-from regrasp_pin.hand import Hand
-from regrasp_pin.manifold import build_manifold
-from regrasp_pin.motion import ObjectMotion
-from regrasp_pin.objects import Box
-from regrasp_pin.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
+from regrasp_pin.grasp.contact import LinkClearance
+from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.model.objects import Box
+from regrasp_pin.planning.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
 
 FINGER = "index"
 BOX_SIZE = (0.04, 0.06, 0.04)

@@ -7,8 +7,8 @@ import pytest
 from conftest import assert_close
 
 from regrasp_pin import make_scenario
-from regrasp_pin.contact_choice import exit_times
-from regrasp_pin.manifold import build_manifold
+from regrasp_pin.grasp.choice import exit_times
+from regrasp_pin.grasp.manifold import build_manifold
 
 
 @pytest.fixture(scope="module")

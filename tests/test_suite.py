@@ -31,7 +31,7 @@ from regrasp_pin.suite import (
     run_scenario,
     summarize,
 )
-from regrasp_pin.suite.build import _finger_clearance
+from regrasp_pin.suite.build import finger_clearance
 
 
 @pytest.fixture(scope="module")
@@ -265,7 +265,7 @@ def test_grasp_clearance_keeps_the_initial_fingers_apart():
     except ContactError as exc:
         assert exc.kind is FailureKind.NO_CANDIDATE
         return
-    clearance = _finger_clearance(scen.hand, scen.obj, scen.motion, tuple(scen.grasp.q), 0.0)
+    clearance = finger_clearance(scen.hand, scen.obj, scen.motion, tuple(scen.grasp.q), 0.0)
     assert clearance(scen.grasp.q) > 0.0
 
 

@@ -1,4 +1,4 @@
-"""Unfolded surface grid (regrasp_pin.surface_grid) and grid path (regrasp_pin.surface_path).
+"""Unfolded surface grid (regrasp_pin.surface.grid) and grid path (regrasp_pin.surface.path).
 
 Box of 60 x 40 x 40 mm: x in [-30, 30] mm, y and z in [-20, 20] mm. Geodesics across
 box edges are checked against the unfolded straight line computed by hand.
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from regrasp_pin.exceptions import GeometryError, InputError, PlanningError
-from regrasp_pin.objects import Box, ConvexMesh, Prism
-from regrasp_pin.surface_grid import build_surface_grid, unfold_faces
-from regrasp_pin.surface_path import edge_weights, shortest_grid_path
+from regrasp_pin.model.objects import Box, ConvexMesh, Prism
+from regrasp_pin.surface.grid import build_surface_grid, unfold_faces
+from regrasp_pin.surface.path import edge_weights, shortest_grid_path
 from tests.conftest import assert_close
 
 SPACING = 0.002

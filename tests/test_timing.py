@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_pin.timing import (
+from regrasp_pin.planning.timing import (
     MJ_PEAK,
     PATH_FACTOR,
     duration_for_move,

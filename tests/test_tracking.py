@@ -1,4 +1,4 @@
-"""Tests of contact tracking and the regrasp trigger (regrasp_pin.tracking).
+"""Tests of contact tracking and the regrasp trigger (regrasp_pin.grasp.tracking).
 
 Scene (palm frame: x toward the fingers, z out of the palm): the five-finger hand and a
 box 40 x 60 x 40 mm at (65, 0, 60) mm turning about the palm y axis through its centre
@@ -20,14 +20,14 @@ import pinocchio as pin
 import pytest
 from conftest import assert_close
 
-from regrasp_pin.contact import ContactModel, LinkClearance
-from regrasp_pin.contact_choice import exit_times
 from regrasp_pin.exceptions import InputError, UnknownNameError
-from regrasp_pin.hand import Hand
-from regrasp_pin.manifold import build_manifold
-from regrasp_pin.motion import ObjectMotion
-from regrasp_pin.objects import Box
-from regrasp_pin.tracking import track_contact
+from regrasp_pin.grasp.choice import exit_times
+from regrasp_pin.grasp.contact import ContactModel, LinkClearance
+from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.grasp.tracking import track_contact
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.model.objects import Box
 
 CONTACT = ContactModel()
 TIMES = np.linspace(0.0, 3.0, 61)

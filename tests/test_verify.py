@@ -1,4 +1,4 @@
-"""Tests of the dense Coal verification of a finger motion (regrasp_pin.verify).
+"""Tests of the dense Coal verification of a finger motion (regrasp_pin.verify.finger_motion).
 
 Every distance the verifier reports is checked against a reason: analytic sphere/box
 and cylinder/box distances, independent ``coal.distance`` calls on Pinocchio's own
@@ -15,17 +15,17 @@ from conftest import assert_close
 from scipy.optimize import brentq, minimize_scalar
 from scipy.spatial.transform import Rotation
 
-from regrasp_pin._pair_distances import (
+from regrasp_pin.exceptions import InputError, UnknownNameError, VerificationError
+from regrasp_pin.model.distances import (
     PairDistances,
     _geometry,
     _placements,
     _segment_distance,
 )
-from regrasp_pin.exceptions import InputError, UnknownNameError, VerificationError
-from regrasp_pin.hand import Hand
-from regrasp_pin.motion import ObjectMotion
-from regrasp_pin.objects import Box, Prism
-from regrasp_pin.verify import (
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.model.objects import Box, Prism
+from regrasp_pin.verify.finger_motion import (
     OBJECT_LEVER_M,
     Failure,
     VerificationReport,

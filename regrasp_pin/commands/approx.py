@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     """Approximate the curve in ``args.curve``; return the exit status."""
     import numpy as np
 
-    from ..polygon import approximate_polygon
+    from ..polygon.approximate import approximate_polygon
 
     points = np.asarray(load_curve(args.curve), dtype=float)
     t0 = time.perf_counter()

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from ..planner import ManipulationPlan
+    from ..planning.planner import ManipulationPlan
 
 NAME = "demo"
 HELP = "Plan the canonical regrasping scenario, print a summary, write plan.json and figures."
@@ -63,7 +63,7 @@ def summary_rows(result: ManipulationPlan) -> list[dict]:
 def run(args: argparse.Namespace) -> int:
     """Plan the demo scenario, print its table and write the outputs; return the exit status."""
     from ..exceptions import PlanningError
-    from ..planner import plan_manipulation
+    from ..planning.planner import plan_manipulation
     from ..scenarios import make_scenario
 
     t0 = time.perf_counter()
@@ -225,8 +225,8 @@ def _figures(result: ManipulationPlan, out: Path) -> list[Path]:
             plt.close(fig)
         except ImportError:  # the Fig. 2 module is optional
             pass
-        from ..inflation import grid_inflation
         from ..plotting.surface import plot_unfolded_grid
+        from ..surface.inflation import grid_inflation
 
         p = r.params
         height = p.inflation_factor * p.clearance_m

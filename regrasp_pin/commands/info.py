@@ -19,7 +19,7 @@ def run(args: argparse.Namespace) -> int:
     """Print the hand's fingers, joints and limits; return the exit status."""
     import numpy as np
 
-    from ..hand import Hand
+    from ..model.hand import Hand
 
     hand = Hand.five_finger() if args.hand == "five_finger" else Hand.allegro()
     rng = np.random.default_rng(0)

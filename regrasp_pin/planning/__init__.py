@@ -1,25 +1,41 @@
-"""The regrasp search: when a finger lifts off, where it lands, how long it flies.
+"""Regrasps and the whole hand: the paper's step 5 (section 2.3, Fig. 9) and its test.
 
-Takes a hand, an object, its motion and the fingers that hold; returns verified
-regrasps (:class:`~regrasp_pin.regrasp.RegraspResult`) or a typed
-:class:`~regrasp_pin.exceptions.PlanningError` that carries every failed attempt.
+Takes a hand, an object, its motion and an initial grasp. Gives verified regrasps and
+a whole-hand plan, or a typed :class:`~regrasp_pin.exceptions.PlanningError` that
+carries every failed attempt and the partial plan:
 
-- :mod:`.schedule`: the lift-off window of a finger and the start times tried in it.
+- :mod:`.regrasp`: one finger's regrasp from P to Q: surface path
+  (:mod:`regrasp_pin.surface`), Hopfield waypoints (:mod:`regrasp_pin.polygon`), a
+  timing synchronized with the object (:mod:`.timing`), IK, and the Coal check
+  (:mod:`regrasp_pin.verify`);
+- :mod:`.planner`: the whole hand over the whole motion (:func:`plan_manipulation`):
+  which finger lets go when, backtracking, releases;
+- :mod:`.schedule`: a finger's lift-off window and the start times tried in it;
 - :mod:`.search`: one finger's regrasp as a search over start times, new contacts Q
-  and durations (:mod:`regrasp_pin.timing`), with a budget.
+  and durations, with a budget;
+- :mod:`.proximity`: holding fingers closing in on each other;
+- :mod:`.release`: a finger that lets go for the rest of the motion;
 - :mod:`.outcomes`: the dominant cause of a list of failed attempts.
 """
 
 from .outcomes import dominant_kind, failure_summary
+from .planner import ManipulationPlan, PlannerParams, plan_manipulation
+from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import LiftOffWindow, lift_off_window, start_times
 from .search import RegraspSearch, SearchBudget
 
 __all__ = [
     "LiftOffWindow",
+    "ManipulationPlan",
+    "PlannerParams",
+    "RegraspParams",
+    "RegraspResult",
     "RegraspSearch",
     "SearchBudget",
     "dominant_kind",
     "failure_summary",
     "lift_off_window",
+    "plan_manipulation",
+    "plan_regrasp",
     "start_times",
 ]

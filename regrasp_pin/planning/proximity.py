@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._pair_distances import capsule_gap
-from ..contact import FingerClearance
-from ..hand import Hand
-from ..holding import Holding
+from ..grasp.contact import FingerClearance
+from ..grasp.holding import Holding
+from ..model.distances import capsule_gap
+from ..model.hand import Hand
 
 __all__ = ["Proximity", "clear_of_fingers", "holding_proximity"]
 

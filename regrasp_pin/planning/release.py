@@ -7,7 +7,7 @@ go: from the release time ``t_r`` its fingertip backs off along the contact norm
 (fixed in the palm frame: ``clearance`` from where the pad touched) over a short
 minimum-jerk move; the finger then stays still or, given a parking configuration,
 moves there (minimum jerk, joint space) and stays. The motion is verified with Coal
-like every regrasp (:func:`~regrasp_pin.verify.verify_finger_motion`: the fingertip
+like every regrasp (:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip
 clear of the object, allowed to touch only at the release, the other links and the
 other fingers clear, joints within their limits).
 """
@@ -19,13 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact import LinkClearance, tip_targets
 from ..exceptions import FailureKind, PlanningError
-from ..hand import Hand
-from ..motion import ObjectMotion
-from ..objects import ConvexObject
-from ..timing import minimum_jerk
-from ..verify import verify_finger_motion
+from ..grasp.contact import LinkClearance, tip_targets
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject
+from ..verify.finger_motion import verify_finger_motion
+from .timing import minimum_jerk
 
 __all__ = ["Release", "plan_release"]
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..contact import ContactModel
-from ..tracking import ContactTrack
+from ..grasp.contact import ContactModel
+from ..grasp.tracking import ContactTrack
 
 __all__ = ["LiftOffWindow", "held_until", "lift_off_window", "start_times"]
 

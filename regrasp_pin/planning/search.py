@@ -2,11 +2,11 @@
 
 For each start time of the finger's lift-off window (:mod:`.schedule`), the new
 contacts Q are taken in the order of the paper's criterion (condition (b), then the
-shorter move; :func:`~regrasp_pin.contact_choice.choose_new_contact`). For each Q:
+shorter move; :func:`~regrasp_pin.grasp.choice.choose_new_contact`). For each Q:
 
 1. the duration is computed from the joint velocity limits for the move from the
-   lift-off configuration to Q's (:func:`~regrasp_pin.timing.duration_for_move`);
-2. :func:`~regrasp_pin.regrasp.plan_regrasp` plans and verifies the path, changing
+   lift-off configuration to Q's (:func:`~regrasp_pin.planning.timing.duration_for_move`);
+2. :func:`~regrasp_pin.planning.regrasp.plan_regrasp` plans and verifies the path, changing
    its own variants by the kind of each failure;
 3. a velocity failure stretches the duration by the measured over-speed (time
    scaling) and plans the same Q again (or the Q the new arrival time prefers);
@@ -32,17 +32,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..contact import ContactModel
-from ..contact_choice import NewContact, choose_new_contact
 from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
-from ..hand import Hand
-from ..manifold import Manifold
-from ..motion import ObjectMotion
-from ..objects import ConvexObject, SurfaceSample
-from ..regrasp import RegraspParams, RegraspResult, plan_regrasp
-from ..timing import duration_for_move, stretched_duration
+from ..grasp.choice import NewContact, choose_new_contact
+from ..grasp.contact import ContactModel
+from ..grasp.manifold import Manifold
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject, SurfaceSample
 from .outcomes import dominant_kind, failure_summary
 from .proximity import clear_of_fingers
+from .regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .timing import duration_for_move, stretched_duration
 
 __all__ = ["Found", "RegraspSearch", "SearchBudget"]
 
@@ -57,7 +57,7 @@ class SearchBudget:
 
     Attributes:
         deadline: ``time.perf_counter()`` value after which no new attempt starts.
-        max_plans: Most calls of :func:`~regrasp_pin.regrasp.plan_regrasp`.
+        max_plans: Most calls of :func:`~regrasp_pin.planning.regrasp.plan_regrasp`.
         plans: Calls made so far.
     """
 
@@ -109,7 +109,7 @@ class RegraspSearch:
         exclude_radius_m: A failed Q excludes the points this close to it [m]
             (default: the tip radius / 2).
         exit_tolerance_s: Exit times closer than this are ties (see
-            :func:`~regrasp_pin.contact_choice.choose_new_contact`).
+            :func:`~regrasp_pin.grasp.choice.choose_new_contact`).
         stretches: Most duration stretches for one Q after velocity failures.
     """
 

@@ -8,8 +8,8 @@ import numpy as np
 
 from .._validate import as_array
 from ..exceptions import InputError
-from ..manifold import Manifold
-from ..tracking import ContactTrack
+from ..grasp.manifold import Manifold
+from ..grasp.tracking import ContactTrack
 from . import require_pyplot
 
 __all__ = ["plot_manifold"]
@@ -34,13 +34,13 @@ def plot_manifold(
     its first three (the title says so).
 
     Args:
-        manifold: The finger's manifold (:func:`regrasp_pin.manifold.build_manifold`).
+        manifold: The finger's manifold (:func:`regrasp_pin.grasp.manifold.build_manifold`).
         times_idx: Grid indices of the instants to draw; default four evenly spaced
             ones, first and last included.
         track: The held contact followed over time
-            (:func:`regrasp_pin.tracking.track_contact`); its ``q`` is P's path.
+            (:func:`regrasp_pin.grasp.tracking.track_contact`); its ``q`` is P's path.
         q_new: Q's joint coordinates ``(k,)`` [rad], or a
-            :class:`~regrasp_pin.contact_choice.NewContact` (its ``q_arrive``).
+            :class:`~regrasp_pin.grasp.choice.NewContact` (its ``q_arrive``).
         trigger_index: Index into ``track`` of the trigger; default
             ``track.trigger_index()``.
         ax: A matplotlib 3-D axes; default a new figure.

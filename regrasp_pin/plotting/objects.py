@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_array
-from ..objects import ConvexObject, SurfaceSample
+from ..model.objects import ConvexObject, SurfaceSample
 from . import require_pyplot
 
 __all__ = ["plot_object"]

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InputError
-from ..polygon import PolygonResult
+from ..polygon.approximate import PolygonResult
 from . import require_pyplot
 
 __all__ = ["plot_polygon"]
@@ -27,7 +27,8 @@ def plot_polygon(
 
     Args:
         points: The curve that was approximated, shape ``(n, 2)`` or ``(n, 3)``.
-        result: The approximation of ``points`` (:func:`~regrasp_pin.polygon.approximate_polygon`).
+        result: The approximation of ``points``
+            (:func:`~regrasp_pin.polygon.approximate_polygon`).
         ax: A matplotlib axes (3-D axes for a 3-D curve); default a new figure.
         title: Axes title; default states m, the method, the deviation and the energy.
 

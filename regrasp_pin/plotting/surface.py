@@ -7,9 +7,9 @@ from typing import Any
 import numpy as np
 
 from ..exceptions import InputError
-from ..inflation import TipPath
-from ..surface_grid import SurfaceGrid
-from ..surface_path import GridPath
+from ..surface.grid import SurfaceGrid
+from ..surface.inflation import TipPath
+from ..surface.path import GridPath
 from . import require_pyplot
 
 __all__ = ["plot_unfolded_grid"]
@@ -62,7 +62,7 @@ def plot_unfolded_grid(
         grid: The surface grid.
         path: A grid path to draw.
         heights: Inflation height of each node [m], shape (M,) (e.g.
-            :func:`regrasp_pin.inflation.grid_inflation`).
+            :func:`regrasp_pin.surface.inflation.grid_inflation`).
         polygon_indices: Indices of waypoints, shape (m,) int, into ``tip_path`` if
             given, else into ``path``; the polygon through them is drawn (Fig. 8).
         tip_path: The inflated tip path (its surface points are drawn in the plane).

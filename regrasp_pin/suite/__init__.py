@@ -15,18 +15,19 @@ many problems at once, the same ones on every machine.
 * :func:`build_scenario` (:mod:`.build`) builds a spec the way
   :func:`~regrasp_pin.scenarios.make_scenario` does: the object at the hand's
   canonical pose composed with the spec's offsets, an initial grasp chosen by
-  :func:`~regrasp_pin.contact_choice.initial_grasp` over the manifolds of a turn about
+  :func:`~regrasp_pin.grasp.choice.initial_grasp` over the manifolds of a turn about
   an axis through the object's centre, then the motion placed.
   :func:`suite_scenarios` skips the specs without an initial grasp.
 * :func:`run_scenario` (:mod:`.run`) builds and plans one spec and records the outcome
   as a :class:`ScenarioResult`: failure kind, numbers, attempts, timings, and for a
   full plan the independent re-check of the saved plan file
-  (:func:`~regrasp_pin.plan_check.recheck_plan`).
+  (:func:`~regrasp_pin.verify.plan_check.recheck_plan`).
 * :func:`summarize` (:mod:`.report`) turns results into a plain-text report.
 
-Object sizes are centred on the canonical objects of each hand (``scenarios._SETUP``)
-and vary by +-10 %; motions turn by 60-270 deg either way at 10-45 deg/s; the object
-starts up to 3 mm and 6 deg away from the canonical pose. The grasp search of a
+Object sizes are centred on the canonical objects of each hand
+(:func:`~regrasp_pin.scenarios.setup_objects`) and vary by +-10 %; motions turn by
+60-270 deg either way at 10-45 deg/s; the object starts up to 3 mm and 6 deg away from
+the canonical pose. The grasp search of a
 generated spec samples the turn every ~2 deg (0.05-0.2 s) over its first 120 deg.
 """
 

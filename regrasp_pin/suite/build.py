@@ -10,12 +10,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .._validate import positive_int
-from ..contact import ContactModel, FingerClearance
 from ..exceptions import Attempt, ContactError
-from ..hand import Hand
-from ..holding import rest_configuration
-from ..motion import ObjectMotion
-from ..objects import ConvexObject
+from ..grasp.contact import ContactModel, FingerClearance
+from ..grasp.holding import rest_configuration
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject
 from ..scenarios import (
     Scenario,
     describe,
@@ -41,7 +41,7 @@ def _hand(name: str) -> Hand:
     return hand_model(name)
 
 
-def _finger_clearance(
+def finger_clearance(
     hand: Hand, obj: ConvexObject, motion: ObjectMotion, fingers: tuple[str, ...], margin: float
 ) -> Any:
     """``q_fingers -> smallest finger-finger distance - margin`` [m] for initial_grasp."""
@@ -63,7 +63,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
 
     The object starts at the hand's canonical pose (:func:`~regrasp_pin.scenarios.setup_pose`)
     moved by the spec's offsets. The initial grasp is chosen by
-    :func:`~regrasp_pin.contact_choice.initial_grasp` for a turn about an axis through the
+    :func:`~regrasp_pin.grasp.choice.initial_grasp` for a turn about an axis through the
     object's centre: the motion itself for ``"object-axis"`` and
     ``"rotate-translate"``, the turn about the object's z axis for ``"contact-axis"``,
     whose motion is then placed about the thumb's contact (as
@@ -112,7 +112,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     clearance = (
         None
         if spec.grasp_clearance_m is None
-        else _finger_clearance(h, o, turn, fingers, spec.grasp_clearance_m)
+        else finger_clearance(h, o, turn, fingers, spec.grasp_clearance_m)
     )
     grasp = grasp_for_motion(
         h,

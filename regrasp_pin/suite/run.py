@@ -15,13 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import positive
+from .._validate import known_fields, positive
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
-from ..plan_check import recheck_plan
-from ..planner import plan_manipulation
-from .build import _finger_clearance, build_scenario
-from .specs import ScenarioSpec, _known
+from ..planning.planner import plan_manipulation
+from ..verify.plan_check import recheck_plan
+from .build import build_scenario, finger_clearance
+from .specs import ScenarioSpec
 
 __all__ = ["ScenarioResult", "load_results", "run_scenario"]
 
@@ -51,7 +51,7 @@ class ScenarioResult:
         attempts: The failed attempts behind the failure (``Attempt.to_dict()``).
         n_regrasps: Verified regrasps (of the partial plan, for a failure).
         regrasp_ms: Planning time of each verified regrasp [ms].
-        plan_s: Wall time of :func:`~regrasp_pin.planner.plan_manipulation` [s].
+        plan_s: Wall time of :func:`~regrasp_pin.planning.planner.plan_manipulation` [s].
         build_s: Wall time of :func:`build_scenario` [s].
         duration_s: Duration of the motion [s].
         planned_until_s: End of the (partial) plan [s]; None without a plan.
@@ -59,7 +59,7 @@ class ScenarioResult:
         initial_finger_clearance_m: Smallest Coal distance between two fingers at the
             initial grasp (idle fingers at their rest posture) [m]; negative when the
             scenario starts with fingers inside each other.
-        recheck_ok: Full plans: :func:`~regrasp_pin.plan_check.recheck_plan` of the saved and
+        recheck_ok: Full plans: :func:`~regrasp_pin.verify.plan_check.recheck_plan` of the saved and
             reloaded plan file passed; None otherwise.
         recheck_problems: Its problems.
         recheck_s: Its wall time [s].
@@ -103,7 +103,7 @@ class ScenarioResult:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ScenarioResult:
         """Rebuild a result from :meth:`to_dict` (e.g. a line of ``results.jsonl``)."""
-        _known(d, cls, "result")
+        known_fields(d, cls, "result")
         return cls(**d)
 
 
@@ -197,7 +197,7 @@ def run_scenario(
         raise AssertionError("build_scenario returned a scenario without a grasp")
     fingers = tuple(grasp.q)
     result.initial_finger_clearance_m = float(
-        _finger_clearance(scen.hand, scen.obj, scen.motion, fingers, 0.0)(grasp.q)
+        finger_clearance(scen.hand, scen.obj, scen.motion, fingers, 0.0)(grasp.q)
     )
     params = scen.params
     if any(f.name == "budget_s" for f in dataclasses.fields(params)):

@@ -14,10 +14,10 @@ from typing import Any, TypeVar
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .._validate import as_array, choice, positive, positive_int
+from .._validate import as_array, choice, known_fields, positive, positive_int
 from ..exceptions import InputError
-from ..objects import Box, ConvexMesh, ConvexObject, Prism
-from ..scenarios import _SETUP, HANDS
+from ..model.objects import Box, ConvexMesh, ConvexObject, Prism
+from ..scenarios import HANDS, setup_objects
 
 __all__ = [
     "MOTION_KINDS",
@@ -258,9 +258,9 @@ class ScenarioSpec:
         Raises:
             InputError: unknown or missing fields, or values out of range.
         """
-        _known(d, cls, "spec")
-        _known(d["object"], ObjectSpec, "object")
-        _known(d["motion"], MotionSpec, "motion")
+        known_fields(d, cls, "spec")
+        known_fields(d["object"], ObjectSpec, "object")
+        known_fields(d["motion"], MotionSpec, "motion")
         return cls(
             **{
                 **d,
@@ -274,30 +274,12 @@ def _fields(obj: Any) -> dict[str, Any]:
     return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
 
 
-def _known(d: Any, cls: type, argument: str) -> None:
-    if not isinstance(d, dict):
-        raise InputError(argument, f"is a {type(d).__name__}", "a dict")
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(d) - set(fields))
-    if unknown:
-        raise InputError(argument, f"unknown field(s) {unknown}", f"fields of {cls.__name__}")
-    missing = sorted(
-        n
-        for n, f in fields.items()
-        if n not in d
-        and f.default is dataclasses.MISSING
-        and f.default_factory is dataclasses.MISSING
-    )
-    if missing:
-        raise InputError(argument, f"missing field(s) {missing}", f"fields of {cls.__name__}")
-
-
 # ---------------------------------------------------------------------- generation
 @functools.cache
 def _canonical_sizes(hand: str) -> tuple[float, float, tuple[float, ...]]:
-    """Centre sizes of the hand's canonical objects (scenarios._SETUP) [m]: the prisms'
+    """Centre sizes of the hand's canonical objects (scenarios.setup_objects) [m]: the prisms'
     mean circumradius and height, and the box's sides."""
-    objs = _SETUP[hand]["objects"]
+    objs = setup_objects(hand)
     prisms = [objs[k]().params for k in ("hexagon", "octagon")]
     return (
         float(np.mean([p["circumradius_m"] for p in prisms])),
@@ -396,7 +378,7 @@ def neighbour_specs() -> list[ScenarioSpec]:
     contact, no offsets, grasp seed 0, grasp manifolds every 0.05 s (30 specs)."""
     out = []
     for hand in HANDS:
-        p = _SETUP[hand]["objects"]["hexagon"]().params
+        p = setup_objects(hand)["hexagon"]().params
         obj = ObjectSpec(
             "prism",
             n_sides=int(p["n_sides"]),

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..hand import Hand
-from ..motion import ObjectMotion
-from ..objects import Box
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import Box
 from ..plan import ContactPhase, Plan, RegraspPhase, repo_root
 
 __all__ = ["synthetic_manifold", "synthetic_plan"]

@@ -37,7 +37,7 @@ from pinocchio.visualize import MeshcatVisualizer
 
 from .._validate import as_array, positive
 from ..exceptions import InputError
-from ..hand import Hand
+from ..model.hand import Hand
 from ..plan import ContactPhase, Plan, RegraspPhase
 from .animation import build_animation, plan_states
 from .recorder import recording_visualizer
@@ -83,7 +83,7 @@ class PlanViewer:
     Attributes:
         plan: The plan.
         vis: The visualizer drawn into.
-        hand: The hand (a :class:`~regrasp_pin.hand.Hand`).
+        hand: The hand (a :class:`~regrasp_pin.model.hand.Hand`).
         object_node: Path of the object node, relative to ``vis``.
         camera_target: Point the camera looks at, palm frame ``(3,)`` [m].
         camera_eye: Camera position, palm frame ``(3,)`` [m].

@@ -1,0 +1,41 @@
+"""Contacts and grasps: the paper's steps 1 and 2 (section 2.1, Fig. 2).
+
+Takes the hand, the object and its motion. Gives:
+
+- :mod:`.manifold`: each finger's joint-space manifold of the object surface over
+  time, with the joint limits as boundary planes (Fig. 2);
+- :mod:`.contact`: the contact model (when a contact is usable: inside the limits with
+  a margin, the pad facing the surface, the links clear) and link clearances;
+- :mod:`.tracking` and :mod:`.holding`: a held contact followed by IK over time, when
+  its hold ends, and the holding hand's configurations;
+- :mod:`.choice`: the initial grasp and the new contact Q (the paper's conditions
+  (a) and (b): inside the limits, usable for the longest time);
+- :mod:`.quality`: force closure and the Ferrari-Canny epsilon.
+"""
+
+from .choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
+from .contact import ContactModel, FingerClearance, LinkClearance
+from .holding import Holding, holding_hand
+from .manifold import Manifold, build_manifold
+from .quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
+from .tracking import ContactTrack, track_contact
+
+__all__ = [
+    "ContactModel",
+    "ContactTrack",
+    "FingerClearance",
+    "Grasp",
+    "Holding",
+    "LinkClearance",
+    "Manifold",
+    "NewContact",
+    "build_manifold",
+    "choose_new_contact",
+    "contact_wrenches",
+    "exit_times",
+    "ferrari_canny_epsilon",
+    "holding_hand",
+    "initial_grasp",
+    "is_force_closure",
+    "track_contact",
+]

@@ -1,0 +1,160 @@
+"""Fingers that hold: a contact fixed in the object frame, followed by IK.
+
+While a finger holds, its contact is fixed in the object frame and the finger follows
+it through the object's motion (:func:`~.tracking.track_contact`). This module keeps
+one such hold per finger and phase, places a holding finger exactly at any time (the
+configurations the verification and the plan file use), builds the ``q_hand``
+callables that :func:`~.regrasp.plan_regrasp` needs, and parks idle fingers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject
+from .choice import Grasp
+from .contact import ContactModel, tip_targets
+from .tracking import ContactTrack, track_contact
+
+__all__ = [
+    "Holding",
+    "holding_hand",
+    "holding_q",
+    "holds_to_end",
+    "rest_configuration",
+    "start_holding",
+]
+
+
+@dataclass
+class Holding:
+    """A finger holding a contact from ``t_from`` (to ``t_to``, None while held).
+
+    Attributes:
+        p: Contact point, object frame ``(3,)`` [m].
+        n: Outward normal at the contact, object frame ``(3,)``.
+        t_from: Start of the hold [s].
+        track: The contact followed over the rest of the motion.
+        t_to: End of the hold [s] (the lift-off of the next regrasp), or None.
+    """
+
+    p: np.ndarray
+    n: np.ndarray
+    t_from: float
+    track: ContactTrack
+    t_to: float | None = None
+
+    def q_at(self, times: np.ndarray) -> np.ndarray:
+        """The track's configurations ``(S, k)`` interpolated at ``times`` [rad]."""
+        tr = self.track
+        return np.stack(
+            [np.interp(times, tr.times_s, tr.q[:, j]) for j in range(tr.q.shape[1])], axis=1
+        )
+
+
+def start_holding(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    grid: np.ndarray,
+    name: str,
+    p: np.ndarray,
+    n: np.ndarray,
+    q_start: np.ndarray,
+    t_from: float,
+    contact: ContactModel,
+) -> Holding:
+    """Follow a new contact from ``t_from`` over the later times of ``grid``."""
+    times = np.concatenate([[t_from], grid[grid > t_from + 1e-9]])
+    if times.size < 2:
+        # a hold that starts at (or within float noise of) the motion's end: a two-sample
+        # track that stays inside the motion
+        t_from = min(t_from, motion.t_end)
+        times = (
+            np.array([t_from, motion.t_end])
+            if motion.t_end > t_from + 1e-9
+            else np.array([t_from - 1e-6, t_from])
+        )
+    track = track_contact(hand, name, obj, motion, times, p, n, q_start, contact=contact)
+    return Holding(p=np.asarray(p, float), n=np.asarray(n, float), t_from=t_from, track=track)
+
+
+def holds_to_end(track: ContactTrack, t_from: float, contact: ContactModel) -> bool:
+    """Whether a contact stays reached, inside the joint limits (margin >= 0), pad facing
+    and links clear from ``t_from`` to the end of its track."""
+    sel = track.times_s >= t_from - 1e-9
+    return bool(
+        np.all(track.error_m[sel] <= contact.ik_tol_m)
+        and np.all(track.margin_rad[sel] >= 0.0)
+        and np.all(track.pad_cos[sel] >= contact.cos_cone)
+        and np.all(track.link_clearance_m[sel] >= 0.0)
+    )
+
+
+def holding_q(
+    hand: Hand, motion: ObjectMotion, name: str, h: Holding, times: np.ndarray, tol_m: float
+) -> np.ndarray:
+    """Exact IK of a holding finger at arbitrary times (warm from its track)."""
+    f = hand.fingers[name]
+    targets = tip_targets(h.p[None], h.n[None], f.tip_radius, motion.pose(times))[:, 0]
+    return f.ik(targets, h.q_at(times), tol_m=tol_m).q
+
+
+def rest_configuration(
+    hand: Hand, obj: ConvexObject, motion: ObjectMotion, idle: list[str]
+) -> np.ndarray:
+    """Full configuration ``(nq,)`` with the idle fingers where they stay clearest of
+    the object over the motion (Coal), chosen among a few fixed postures; the other
+    fingers at the middle of their limits.
+    """
+    from .contact import LinkClearance
+
+    q = hand.neutral()
+    if not idle:
+        return q
+    T = motion.pose(np.linspace(motion.t_start, motion.t_end, 7))
+    for name in idle:
+        f = hand.fingers[name]
+        fr = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+        grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
+        postures = f.lower + grid * (f.upper - f.lower)
+        lc = LinkClearance(hand, name, obj, include_tip=True)
+        best, best_d = f.q_mid, -np.inf
+        for qf in postures:
+            full = hand.to_full(name, qf, q)
+            d = float(lc(np.repeat(full[None], len(T), 0), T).min())
+            if d > best_d + 1e-6:
+                best, best_d = qf, d
+        q[f.q_indices] = best
+    return q
+
+
+def holding_hand(
+    hand: Hand,
+    motion: ObjectMotion,
+    grasp: Grasp,
+    fingers: tuple[str, ...] | list[str],
+    moving: str,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """A ``q_hand(times) -> (S, nq)`` for :func:`~.regrasp.plan_regrasp`: every finger of
+    ``fingers`` but ``moving`` holds its ``grasp`` contact (exact IK at every time, warm
+    from the grasp configuration); the others stay at the middle of their limits."""
+
+    def q_hand(times: np.ndarray) -> np.ndarray:
+        times = np.atleast_1d(np.asarray(times, float))
+        q = np.broadcast_to(hand.neutral(), (times.size, hand.model.nq)).copy()
+        T = motion.pose(times)
+        for n in fingers:
+            if n == moving:
+                continue
+            f = hand.fingers[n]
+            p, nrm = grasp.points_object[n][None], grasp.normals_object[n][None]
+            q[:, f.q_indices] = f.ik(tip_targets(p, nrm, f.tip_radius, T)[:, 0], grasp.q[n]).q
+        return q
+
+    return q_hand

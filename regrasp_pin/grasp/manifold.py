@@ -1,0 +1,392 @@
+"""Joint-space manifolds of the object surface (the paper's Fig. 2).
+
+For one finger, every sampled surface point ``s`` (normal ``n``) is mapped into the
+finger's joint space by IK of the tip-centre target ``T_palm_object(t) (s + r n)``,
+at every time of a grid. As the object moves, this point cloud (the manifold) moves
+through joint space; the joint limits are the boundary planes of a box.
+
+IK runs in a box *extended* beyond the joint limits by ``extend_rad`` so that the part
+of the manifold just outside the limits is mapped too (that is what the paper draws:
+the manifold crossing the boundary planes). A point is
+
+- ``reachable`` when IK reaches it within tolerance in the extended box,
+- ``inside`` when, in addition, its joint coordinates are within the real limits,
+- ``pad_ok`` when the finger pad faces the surface there (see :mod:`.contact`),
+
+and its ``margin`` is the signed distance [rad] of its joint coordinates to the nearest
+boundary plane (negative outside). Times are processed in order, each warm-started
+from the previous solution. Two repairs keep the entries equal to a per-point IK: a
+point whose warm start fails is re-solved cold when its target may have come into
+reach (a warm start can stay in a local minimum), and a solution outside the limits
+is re-solved in the real box from its reflection about the violated planes (the
+extended box admits a second branch, e.g. a hyperextended one mirroring a flexed one,
+where the real box has a solution inside).
+
+Points that provably cannot be feasible are not sent to IK: points whose tip target
+lies outside a conservative voxel cover of the finger's workspace, and points on a face
+whose normal no pad direction of the finger can oppose within the cone (checked per
+face and time against pad directions sampled over the joint box, with a slack that
+bounds the sampling error). They are reported unreachable, with NaN coordinates.
+
+The link-vs-object Coal test of the contact model is not part of the manifold (it
+would cost a Coal query per point and time); it is applied where contacts are chosen
+(:mod:`.contact_choice`) and followed (:mod:`.tracking`).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_array, positive
+from ..exceptions import InputError
+from ..model.hand import Finger
+from ..model.ik import solve_position_ik
+from ..model.motion import ObjectMotion
+from ..model.objects import SurfaceSample
+from .contact import ContactModel, pad_cosines, tip_targets
+
+__all__ = ["Manifold", "WorkspaceVoxels", "build_manifold", "workspace_voxels"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Manifold:
+    """One finger's manifold over a time grid.
+
+    Attributes:
+        finger: Finger name.
+        times_s: ``(T,)`` times [s].
+        q: ``(T, N, k)`` joint coordinates of the N surface points [rad] (the IK
+            result; meaningful where ``reachable``).
+        reachable: ``(T, N)`` IK reached the point (extended box).
+        inside: ``(T, N)`` reachable and within the joint limits.
+        margin_rad: ``(T, N)`` signed distance to the nearest boundary plane [rad]
+            (``-inf`` where not reachable).
+        pad_ok: ``(T, N)`` the pad faces the surface.
+        lower: ``(k,)`` joint limits [rad].
+        upper: ``(k,)`` joint limits [rad].
+        T_palm_object: ``(T, 4, 4)`` object poses at the grid times.
+    """
+
+    finger: str
+    times_s: np.ndarray
+    q: np.ndarray
+    reachable: np.ndarray
+    inside: np.ndarray
+    margin_rad: np.ndarray
+    pad_ok: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    T_palm_object: np.ndarray
+
+    @property
+    def feasible(self) -> np.ndarray:
+        """``(T, N)`` inside the limits and the pad facing the surface."""
+        return self.inside & self.pad_ok
+
+    def usable(self, margin_rad: float) -> np.ndarray:
+        """``(T, N)`` feasible with at least ``margin_rad`` to every boundary plane."""
+        return self.feasible & (self.margin_rad >= margin_rad)
+
+    def time_index(self, t_s: float) -> int:
+        """Index of the first grid time >= ``t_s`` (clamped to the last)."""
+        return min(int(np.searchsorted(self.times_s, t_s - 1e-12)), self.times_s.size - 1)
+
+
+@dataclass(frozen=True)
+class WorkspaceVoxels:
+    """A conservative voxel cover of a finger's tip-centre workspace (palm frame).
+
+    Attributes:
+        origin: ``(3,)`` corner of voxel (0, 0, 0) [m].
+        voxel_m: Voxel edge [m].
+        occupied: ``(nx, ny, nz)`` True where some configuration may put the tip.
+    """
+
+    origin: np.ndarray
+    voxel_m: float
+    occupied: np.ndarray
+
+    def contains(self, p_palm: np.ndarray) -> np.ndarray:
+        """``(...,)`` True where the points may be reachable (False = provably not)."""
+        idx = np.floor((p_palm - self.origin) / self.voxel_m).astype(np.int64)
+        shape = np.array(self.occupied.shape)
+        ok = np.all((idx >= 0) & (idx < shape), axis=-1)
+        out = np.zeros(p_palm.shape[:-1], bool)
+        i = idx[ok]
+        out[ok] = self.occupied[i[:, 0], i[:, 1], i[:, 2]]
+        return out
+
+
+@functools.lru_cache(maxsize=64)
+def workspace_voxels(
+    finger: Finger, extend_rad: float = 0.0, voxel_m: float = 0.004, max_samples: int = 60_000
+) -> WorkspaceVoxels:
+    """Voxels that hold every tip-centre position reachable in the (extended) joint box.
+
+    The joint box is sampled on a regular grid of step ``h`` [rad]; any configuration
+    is within ``h / 2`` per joint of a grid sample, so its tip is within
+    ``L = max|J|_2 * h * sqrt(k) / 2`` of that sample's tip. Every voxel within ``L`` of
+    a sampled tip is marked, which makes the cover conservative.
+    """
+    lo, hi = finger.lower - extend_rad, finger.upper + extend_rad
+    k = finger.k
+    h = float((np.prod(hi - lo) / max_samples) ** (1.0 / k))
+    axes = [np.arange(a, b + h, h) for a, b in zip(lo, hi, strict=True)]
+    q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, k)
+    q = np.minimum(q, hi)
+    p, J = finger.chain.positions_jacobians(q)
+    reach = float(np.linalg.norm(J, axis=(1, 2)).max()) * h * np.sqrt(k) / 2
+    pad = int(np.ceil(reach / voxel_m)) + 1
+    origin = p.min(0) - (pad + 1) * voxel_m
+    idx = np.floor((p - origin) / voxel_m).astype(np.int64)
+    shape = idx.max(0) + pad + 2
+    occ = np.zeros(tuple(shape), bool)
+    occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    if pad:
+        from scipy.ndimage import binary_dilation
+
+        occ = binary_dilation(occ, np.ones((3, 3, 3), bool), iterations=pad)
+    return WorkspaceVoxels(origin=origin, voxel_m=voxel_m, occupied=occ)
+
+
+def pad_directions(
+    finger: Finger, extend_rad: float = 0.0, n: int = 20000
+) -> tuple[np.ndarray, float]:
+    """Pad directions ``(M, 3)`` (palm frame) sampled over the joint box, and a slack.
+
+    The slack [cos units] bounds how much the best pad direction for any normal can
+    exceed the best sampled one (the angular sampling step), so that
+    ``max(P @ -n) + slack < cos(cone)`` proves no configuration faces ``n``.
+    """
+    lo, hi = finger.lower - extend_rad, finger.upper + extend_rad
+    rng = np.random.default_rng(54321)
+    q = rng.uniform(lo, hi, (n, finger.k))
+    R, _ = finger.chain.poses(q)
+    pads = R @ finger.pad_axis_tip
+    # the pad turns at most sqrt(k) * step [rad] between a configuration and its
+    # nearest sample; 1 - cos(x) <= x and the cosine moves by at most that angle
+    step = float(np.prod(hi - lo) / n) ** (1.0 / finger.k)
+    return pads, float(min(1.0, np.sqrt(finger.k) * step))
+
+
+def build_manifold(
+    finger: Finger,
+    sample: SurfaceSample,
+    motion: ObjectMotion,
+    times_s: np.ndarray,
+    *,
+    contact: ContactModel | None = None,
+    extend_rad: float = 0.3,
+    max_iter: int = 30,
+    max_iter_warm: int = 5,
+    chunk: int = 5,
+) -> Manifold:
+    """Map the sampled surface into the finger's joint space at every time.
+
+    Args:
+        finger: The finger.
+        sample: Surface sample (object frame): points and outward normals.
+        motion: The object's motion ``T_palm_object(t)``.
+        times_s: ``(T,)`` increasing times within the motion [s].
+        contact: Contact model (IK tolerance, pad cone); default :class:`ContactModel`.
+        extend_rad: How far beyond the limits IK may go to map the manifold [rad].
+        max_iter: IK iteration cap at the first time (cold start, with restarts).
+        max_iter_warm: IK iteration cap at later times, each warm-started from the
+            previous time's iterate; a point still converging continues at the next
+            time, so slow points cost no long tails.
+        chunk: Number of consecutive times solved in one IK batch (warm-started from
+            the last time of the previous chunk).
+
+    Returns:
+        The :class:`Manifold`.
+
+    Raises:
+        InputError: NaN or non-increasing times, times outside the motion.
+    """
+    contact = contact or ContactModel()
+    times = as_array(times_s, "times_s", (None,))
+    if times.size == 0 or np.any(np.diff(times) <= 0):
+        raise InputError("times_s", "is empty or not strictly increasing", "increasing times [s]")
+    positive(extend_rad, "extend_rad", allow_zero=True)
+    T_all = motion.pose(times)
+    targets = tip_targets(sample.points, sample.normals, finger.tip_radius, T_all)  # (T,N,3)
+    normals_palm = sample.normals @ np.swapaxes(T_all[:, :3, :3], -1, -2)  # (T,N,3)
+    lo, hi = finger.lower - extend_rad, finger.upper + extend_rad
+    voxels = workspace_voxels(finger, float(extend_rad))
+    pads, slack = pad_directions(finger)
+    # per time and point: can any pad direction oppose the normal within the cone?
+    face_ids = np.unique(sample.face_ids)
+    face_normal = {int(f): sample.normals[np.argmax(sample.face_ids == f)] for f in face_ids}
+
+    nt, n, k = times.size, len(sample), finger.k
+    q_out = np.zeros((nt, n, k))
+    reach = np.zeros((nt, n), bool)
+    pad = np.zeros((nt, n), bool)
+    q_prev = np.broadcast_to(finger.q_mid, (n, k)).copy()
+    q_out[:] = np.nan
+    # per point: target and IK residual at its last failed cold solve (see _retry_failed)
+    anchor = targets[0].copy()
+    resid = np.zeros(n)
+    stays_out = np.zeros(n, bool)  # reached outside the limits, no inside solution found
+    # which points are worth solving at each time (vectorized over times and faces)
+    n_palm_faces = np.einsum("tij,fj->tfi", T_all[:, :3, :3], np.array(list(face_normal.values())))
+    inward = -n_palm_faces.reshape(-1, 3)
+    pads_T = np.ascontiguousarray(pads.T)
+    best_cos = np.concatenate(  # in blocks of 32 normals, small enough for the cache
+        [(b @ pads_T).max(axis=1) for b in np.array_split(inward, -(-len(inward) // 32))]
+    ).reshape(n_palm_faces.shape[:2])
+    can_face = best_cos + slack >= contact.cos_cone
+    face_index = np.searchsorted(np.array(list(face_normal)), sample.face_ids)
+    solve = can_face[:, face_index] & voxels.contains(targets)
+
+    # time 0 cold (with restarts); then chunks of `chunk` times, all warm-started from
+    # the last solved time (small motions between grid times), in one IK batch each
+    starts = [0, *range(1, nt, chunk)]
+    stops = [1, *[min(s0 + chunk, nt) for s0 in range(1, nt, chunk)]]
+    for s0, s1 in zip(starts, stops, strict=True):
+        ti, pi = np.nonzero(solve[s0:s1])
+        if ti.size == 0:
+            continue
+        ti = ti + s0
+        res = solve_position_ik(
+            finger.chain,
+            lo,
+            hi,
+            targets[ti, pi],
+            q_prev[pi],
+            tol_m=contact.ik_tol_m,
+            max_iter=max_iter if s0 == 0 else max_iter_warm,
+            restarts=(s0 == 0),
+        )
+        q_res, ok = res.q, res.success
+        if s0 == 0:
+            resid[pi[~ok]] = res.error_m[~ok]
+            anchor[pi[~ok]] = targets[0, pi[~ok]]
+        else:
+            _retry_failed(
+                finger,
+                lo,
+                hi,
+                targets,
+                ti,
+                pi,
+                q_res,
+                ok,
+                anchor,
+                resid,
+                contact,
+                2 * max_iter_warm,
+            )
+        # the extended box admits other IK branches (e.g. a hyperextended one mirroring
+        # a flexed one): a solution outside the limits is re-solved in the real box from
+        # its reflection about the violated boundary planes, and replaced when that
+        # finds a solution inside (once per stay outside: not while the same point's
+        # re-solve failed at the previous chunk's last time)
+        outside = ok & np.any((q_res < finger.lower) | (q_res > finger.upper), axis=1)
+        out = np.flatnonzero(outside & ~stays_out[pi])
+        if out.size:
+            q_o = q_res[out]
+            q_refl = np.where(q_o < finger.lower, 2 * finger.lower - q_o, q_o)
+            q_refl = np.where(q_o > finger.upper, 2 * finger.upper - q_o, q_refl)
+            res_in = solve_position_ik(
+                finger.chain,
+                finger.lower,
+                finger.upper,
+                targets[ti[out], pi[out]],
+                q_refl,
+                tol_m=contact.ik_tol_m,
+                max_iter=max_iter_warm,
+                restarts=False,
+            )
+            q_res[out[res_in.success]] = res_in.q[res_in.success]
+        q_out[ti, pi] = q_res
+        reach[ti, pi] = ok
+        last = ti == s1 - 1
+        q_prev[pi[last]] = q_res[last]
+        stays_out[pi[last]] = ok[last] & np.any(
+            (q_res[last] < finger.lower) | (q_res[last] > finger.upper), axis=1
+        )
+        resid[pi[ok]] = 0.0  # reached: retry at once if it fails later
+        if ok.any():
+            cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
+            pad[ti[ok], pi[ok]] = cos >= contact.cos_cone
+    with np.errstate(invalid="ignore"):
+        margin = np.minimum(q_out - finger.lower, finger.upper - q_out).min(axis=2)
+    margin = np.where(reach, margin, -np.inf)
+    inside = reach & (margin >= 0.0)
+    log.debug(
+        "manifold %s: %d times x %d points, %.1f%% reachable",
+        finger.name,
+        nt,
+        n,
+        100 * reach.mean(),
+    )
+    return Manifold(
+        finger=finger.name,
+        times_s=times,
+        q=q_out,
+        reachable=reach,
+        inside=inside,
+        margin_rad=margin,
+        pad_ok=pad & reach,
+        lower=finger.lower.copy(),
+        upper=finger.upper.copy(),
+        T_palm_object=T_all,
+    )
+
+
+def _retry_failed(
+    finger: Finger,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    targets: np.ndarray,
+    ti: np.ndarray,
+    pi: np.ndarray,
+    q_res: np.ndarray,
+    ok: np.ndarray,
+    anchor: np.ndarray,
+    resid: np.ndarray,
+    contact: ContactModel,
+    max_iter: int,
+) -> None:
+    """Retry cold, from the middle of the box, warm-started points that failed.
+
+    A warm start that fails may sit in a local minimum (e.g. on an extended limit) that
+    it would not leave as its target comes into reach, or may need more iterations
+    than ``max_iter_warm`` after a fast move. A failed point is retried when it was
+    reached since its last failed retry (``resid`` 0) or earlier in this chunk, or once its
+    target has moved from ``anchor`` (where its last cold retry failed) by at least that
+    retry's residual ``resid``: the distance from the target to the reachable set
+    changes by no more than the target moves (the residual is that distance when the
+    cold solve ended at the nearest reachable point: usual, not guaranteed). Updates
+    ``q_res``, ``ok``, ``anchor`` and ``resid`` in place.
+    """
+    sel = np.flatnonzero(~ok)
+    p = pi[sel]
+    moved = np.linalg.norm(targets[ti[sel], p] - anchor[p], axis=1)
+    first_ok = np.full(targets.shape[1], np.iinfo(np.int64).max)
+    np.minimum.at(first_ok, pi[ok], ti[ok])
+    keep = (moved >= resid[p] - contact.ik_tol_m) | (first_ok[p] < ti[sel])
+    sel, p = sel[keep], p[keep]
+    if sel.size == 0:
+        return
+    res = solve_position_ik(
+        finger.chain,
+        lo,
+        hi,
+        targets[ti[sel], p],
+        np.broadcast_to(0.5 * (lo + hi), (sel.size, finger.k)),
+        tol_m=contact.ik_tol_m,
+        max_iter=max_iter,
+        restarts=False,
+    )
+    q_res[sel], ok[sel] = res.q, res.success
+    bad = ~res.success  # (ti is ascending: the latest time of a point is written last)
+    resid[p[bad]] = res.error_m[bad]
+    anchor[p[bad]] = targets[ti[sel[bad]], p[bad]]

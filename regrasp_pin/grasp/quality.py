@@ -1,0 +1,211 @@
+"""Grasp quality: force closure and the Ferrari-Canny epsilon of point contacts with friction.
+
+Beyond the paper (which has no grasp-quality test during a regrasp): while one finger
+is in the air, the contacts that keep holding must still be in force closure, and the
+new contact Q should keep or improve the quality of the grasp.
+
+Model. Contact i at ``p_i`` on a surface with OUTWARD unit normal ``n_i`` (both in the
+object frame, origin at the centre of mass) pushes on the object with a force inside
+the Coulomb cone ``{f : |f_t| <= mu f_n}`` about the INWARD normal ``-n_i``. The cone
+is linearized by ``n_edges`` unit-normal-force edges
+
+    f_ij = -n_i + mu (cos(2 pi j / m) t1_i + sin(2 pi j / m) t2_i),
+
+each giving the primitive wrench ``w_ij = [f_ij, (p_i x f_ij) / L]`` where the torque
+scale ``L`` [m] makes forces and torques comparable. The Ferrari-Canny epsilon (L1
+version, "the sum of the normal forces is at most 1") is the radius of the largest
+ball about the origin inside the convex hull of all ``w_ij``; the grasp is in force
+closure iff that radius is > 0.
+
+With point contacts a grasp needs wrenches that span all 6 dimensions: two antipodal
+point contacts can never resist a torque about the line through them, so their
+epsilon is 0. An optional soft-finger (torsional friction) model, ``torsion_m`` > 0,
+adds a torque ``+-torsion_m f_n`` about each normal; with it a two-finger pinch can
+be in force closure.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from .._validate import as_array, positive, positive_int
+from ..exceptions import InputError
+
+__all__ = ["contact_wrenches", "ferrari_canny_epsilon", "is_force_closure"]
+
+FORCE_CLOSURE_TOL = 1e-9  # epsilon above this counts as force closure
+_NORMAL_TOL = 1e-3  # accepted deviation of |n| from 1
+
+
+def contact_wrenches(
+    points_object: np.ndarray,
+    normals_object: np.ndarray,
+    mu: float,
+    *,
+    n_edges: int = 8,
+    torque_scale_m: float | None = None,
+    torsion_m: float = 0.0,
+) -> np.ndarray:
+    """Primitive wrenches of linearized Coulomb friction cones.
+
+    Args:
+        points_object: Contact points in the object frame [m], shape (k, 3).
+        normals_object: OUTWARD unit surface normals of the object at the contacts,
+            shape (k, 3); the contact forces push along ``-normal`` (into the object).
+        mu: Coulomb friction coefficient, >= 0.
+        n_edges: Edges per linearized cone, >= 3.
+        torque_scale_m: Torques are divided by this [m]; default the largest distance
+            of a contact from the origin (the centre of mass). Pass a fixed value
+            (e.g. the object radius) to compare different grasps of one object.
+        torsion_m: Soft-finger torsional friction [m] (max torque about the normal
+            per unit normal force); 0 (default) is a point contact with friction.
+
+    Returns:
+        Wrenches ``[f (3), tau / torque_scale_m (3)]``, shape (k * n_edges, 6)
+        (``(k * 2 * n_edges, 6)`` with torsion), in contact-major order, every one
+        with unit normal force.
+
+    Raises:
+        InputError: for bad shapes, NaN/inf, normals that are not unit length, a
+            negative or non-finite ``mu``, or a non-positive ``torque_scale_m``.
+    """
+    p, n, mu, m, scale, torsion = _check(
+        points_object, normals_object, mu, n_edges, torque_scale_m, torsion_m
+    )
+    t1, t2 = _tangents(n)
+    phi = 2.0 * np.pi * np.arange(m) / m
+    f = -n[:, None, :] + mu * (
+        np.cos(phi)[None, :, None] * t1[:, None, :] + np.sin(phi)[None, :, None] * t2[:, None, :]
+    )  # (k, m, 3)
+    tau = np.cross(p[:, None, :], f)  # (k, m, 3) about the centre of mass
+    if torsion > 0.0:
+        spin = torsion * n[:, None, None, :] * np.array([1.0, -1.0])[None, None, :, None]
+        f = np.repeat(f[:, :, None, :], 2, axis=2)
+        tau = tau[:, :, None, :] + spin  # (k, m, 2, 3)
+    w = np.concatenate([f, tau / scale], axis=-1)
+    return w.reshape(-1, 6)
+
+
+def ferrari_canny_epsilon(
+    points_object: np.ndarray,
+    normals_object: np.ndarray,
+    mu: float,
+    *,
+    n_edges: int = 8,
+    torque_scale_m: float | None = None,
+    torsion_m: float = 0.0,
+) -> float:
+    """Ferrari-Canny epsilon: the largest origin-centred ball in the wrench hull.
+
+    The facets of ``scipy.spatial.ConvexHull`` of the primitive wrenches are
+    ``a . w + b = 0`` with unit ``a`` and ``a . w + b <= 0`` inside, so the distance
+    from the origin to facet j is ``-b_j`` and epsilon is ``min_j (-b_j)``.
+
+    Args:
+        points_object, normals_object, mu, n_edges, torque_scale_m, torsion_m:
+            As in :func:`contact_wrenches`.
+
+    Returns:
+        Epsilon (force units per unit total normal force; torques scaled by
+        ``torque_scale_m``), >= 0. It is 0.0 when the origin is not strictly inside
+        the hull, or when the wrenches span less than 6 dimensions (fewer than 7
+        affinely independent wrenches: one contact, two point contacts, frictionless
+        contacts, ...); never an exception for such grasps.
+
+    Raises:
+        InputError: for invalid arguments (see :func:`contact_wrenches`).
+    """
+    w = contact_wrenches(
+        points_object,
+        normals_object,
+        mu,
+        n_edges=n_edges,
+        torque_scale_m=torque_scale_m,
+        torsion_m=torsion_m,
+    )
+    if w.shape[0] < 7:
+        return 0.0
+    try:
+        hull = ConvexHull(w)
+    except QhullError:
+        if np.linalg.matrix_rank(w - w.mean(axis=0), tol=1e-9) < 6:
+            return 0.0  # the wrenches span fewer than 6 dimensions
+        try:  # full-dimensional but numerically awkward: joggle the input
+            hull = ConvexHull(w, qhull_options="QJ")
+        except QhullError:
+            return 0.0
+    eps = float(np.min(-hull.equations[:, -1]))
+    return max(eps, 0.0)
+
+
+def is_force_closure(
+    points_object: np.ndarray,
+    normals_object: np.ndarray,
+    mu: float,
+    *,
+    n_edges: int = 8,
+    torque_scale_m: float | None = None,
+    torsion_m: float = 0.0,
+    tol: float = FORCE_CLOSURE_TOL,
+) -> bool:
+    """Whether the contacts can resist any wrench: epsilon > ``tol``.
+
+    Args:
+        points_object, normals_object, mu, n_edges, torque_scale_m, torsion_m:
+            As in :func:`contact_wrenches`.
+        tol: Threshold on :func:`ferrari_canny_epsilon`, >= 0.
+
+    Returns:
+        True when the grasp is in force closure (with margin ``tol``).
+
+    Raises:
+        InputError: for invalid arguments.
+    """
+    tol = positive(tol, "tol", allow_zero=True)
+    eps = ferrari_canny_epsilon(
+        points_object,
+        normals_object,
+        mu,
+        n_edges=n_edges,
+        torque_scale_m=torque_scale_m,
+        torsion_m=torsion_m,
+    )
+    return eps > tol
+
+
+def _check(
+    points: object,
+    normals: object,
+    mu: float,
+    n_edges: int,
+    torque_scale_m: float | None,
+    torsion_m: float,
+) -> tuple[np.ndarray, np.ndarray, float, int, float, float]:
+    p = as_array(points, "points_object", (None, 3))
+    n = as_array(normals, "normals_object", (p.shape[0], 3))
+    if p.shape[0] == 0:
+        raise InputError("points_object", "is empty", "at least one contact")
+    norm = np.linalg.norm(n, axis=1)
+    if np.any(np.abs(norm - 1.0) > _NORMAL_TOL):
+        i = int(np.argmax(np.abs(norm - 1.0)))
+        raise InputError(
+            "normals_object", f"normal {i} has length {norm[i]:.6g}", "unit outward normals"
+        )
+    mu = positive(mu, "mu", allow_zero=True)
+    m = positive_int(n_edges, "n_edges", minimum=3)
+    if torque_scale_m is None:
+        scale = float(np.max(np.linalg.norm(p, axis=1)))
+        scale = scale if scale > 0.0 else 1.0
+    else:
+        scale = positive(torque_scale_m, "torque_scale_m")
+    torsion = positive(torsion_m, "torsion_m", allow_zero=True)
+    return p, n / norm[:, None], mu, m, scale, torsion
+
+
+def _tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents per normal, ``t1 x t2 = n``, shape (k, 3) each."""
+    axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    t1 = np.cross(n, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return t1, np.cross(n, t1)

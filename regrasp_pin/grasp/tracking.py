@@ -1,0 +1,169 @@
+"""Following a held contact through the object's motion, and the regrasp trigger.
+
+While a finger holds a contact, the contact point ``P`` is fixed in the object frame;
+its tip-centre target ``T_palm_object(t) (P + r n)`` moves with the object, and the
+finger follows it by IK (warm-started from one time to the next). The *trigger* is the
+first time P comes within ``limit_margin_rad`` of a boundary plane of the joint box,
+or stops being feasible (IK fails, the pad turns away beyond the cone, or another link
+of the finger touches the object) -- the moment the paper's contact point "meets one of
+the boundary planes".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_array
+from ..exceptions import InputError
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject
+from .contact import ContactModel, LinkClearance, pad_cosines, tip_targets
+
+__all__ = ["ContactTrack", "track_contact"]
+
+
+@dataclass(frozen=True)
+class ContactTrack:
+    """A contact followed over a time grid.
+
+    Attributes:
+        finger: Finger name.
+        times_s: ``(T,)`` times [s].
+        p_object: Contact point, object frame ``(3,)`` [m].
+        n_object: Outward normal at the contact, object frame ``(3,)``.
+        q: ``(T, k)`` finger configurations [rad] (always within the limits).
+        error_m: ``(T,)`` IK residual [m].
+        margin_rad: ``(T,)`` distance to the nearest boundary plane [rad].
+        pad_cos: ``(T,)`` cosine between the pad direction and the inward normal.
+        link_clearance_m: ``(T,)`` Coal distance of the finger's non-tip links to the
+            object [m] (``inf`` where not computed).
+        tip_clearance_m: ``(T,)`` Coal distance of the fingertip link's geometries to
+            the object [m] (about 0 at a contact; ``inf`` where not computed).
+        reasons: ``(T,)`` why each time is not holdable ("" where it is).
+    """
+
+    finger: str
+    times_s: np.ndarray
+    p_object: np.ndarray
+    n_object: np.ndarray
+    q: np.ndarray
+    error_m: np.ndarray
+    margin_rad: np.ndarray
+    pad_cos: np.ndarray
+    link_clearance_m: np.ndarray
+    reasons: tuple[str, ...]
+    tip_clearance_m: np.ndarray | None = None
+
+    @property
+    def holdable(self) -> np.ndarray:
+        """``(T,)`` True where the contact can be held (no trigger condition)."""
+        return np.array([r == "" for r in self.reasons])
+
+    def trigger_index(self) -> int | None:
+        """Index of the first time the contact cannot be held, or None."""
+        bad = np.flatnonzero(~self.holdable)
+        return int(bad[0]) if bad.size else None
+
+    def trigger(self) -> tuple[float | None, str]:
+        """``(time [s], reason)`` of the first trigger, or ``(None, "")``."""
+        i = self.trigger_index()
+        return (None, "") if i is None else (float(self.times_s[i]), self.reasons[i])
+
+
+def track_contact(
+    hand: Hand,
+    finger: str,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    times_s: np.ndarray,
+    p_object: np.ndarray,
+    n_object: np.ndarray,
+    q_start: np.ndarray,
+    *,
+    contact: ContactModel | None = None,
+    check_links: bool = True,
+    chunk: int = 8,
+) -> ContactTrack:
+    """Follow a contact fixed in the object frame and find when it must be let go.
+
+    Args:
+        hand: The hand.
+        finger: Finger name.
+        obj: The object.
+        motion: Object motion ``T_palm_object(t)``.
+        times_s: ``(T,)`` increasing times [s].
+        p_object: Contact point, object frame ``(3,)`` [m].
+        n_object: Outward unit normal there, object frame ``(3,)``.
+        q_start: ``(k,)`` finger configuration near the solution at ``times_s[0]``.
+        contact: Contact model (tolerances, cone, trigger margin).
+        check_links: Measure link-object clearance with Coal at every time.
+        chunk: Times solved per IK batch, each chunk warm-started from the last
+            solution of the previous one.
+
+    Returns:
+        The :class:`ContactTrack`.
+    """
+    contact = contact or ContactModel()
+    f = hand.finger(finger)
+    times = as_array(times_s, "times_s", (None,))
+    if times.size == 0 or np.any(np.diff(times) <= 0):
+        raise InputError("times_s", "is empty or not strictly increasing", "increasing times [s]")
+    p = as_array(p_object, "p_object", (3,))
+    n = as_array(n_object, "n_object", (3,))
+    q0 = as_array(q_start, "q_start", (f.k,))
+    T_all = motion.pose(times)
+    targets = tip_targets(p[None], n[None], f.tip_radius, T_all)[:, 0]  # (T, 3)
+    q = np.empty((times.size, f.k))
+    err = np.empty(times.size)
+    prev = q0
+    for s0 in range(0, times.size, chunk):
+        s1 = min(s0 + chunk, times.size)
+        res = f.ik(targets[s0:s1], prev, tol_m=contact.ik_tol_m)
+        q[s0:s1], err[s0:s1] = res.q, res.error_m
+        prev = res.q[-1]
+    margin = np.minimum(q - f.lower, f.upper - q).min(axis=1)
+    n_palm = T_all[:, :3, :3] @ n
+    pad_cos = pad_cosines(f, q, n_palm)
+    clearance = np.full(times.size, np.inf)
+    tip_clear = np.full(times.size, np.inf)
+    if check_links:
+        q_full = hand.to_full(finger, q)
+        clearance = LinkClearance(hand, finger, obj)(q_full, T_all)
+        tip_clear = LinkClearance(hand, finger, obj, tip_only=True)(q_full, T_all)
+    reasons = []
+    for i in range(times.size):
+        if err[i] > contact.ik_tol_m:
+            reasons.append(f"IK cannot reach the contact (residual {err[i] * 1e3:.2f} mm)")
+        elif margin[i] < contact.limit_margin_rad:
+            j = int(np.argmin(np.minimum(q[i] - f.lower, f.upper - q[i])))
+            side = "lower" if q[i, j] - f.lower[j] < f.upper[j] - q[i, j] else "upper"
+            reasons.append(
+                f"joint {f.joint_names[j]} within {margin[i]:.3f} rad of its {side} limit"
+            )
+        elif pad_cos[i] < contact.cos_cone:
+            ang = np.degrees(np.arccos(np.clip(pad_cos[i], -1, 1)))
+            reasons.append(f"pad turned {ang:.0f} deg from the surface normal")
+        elif clearance[i] < contact.link_clearance_m:
+            reasons.append(f"a link of the finger touches the object ({clearance[i] * 1e3:.2f} mm)")
+        elif tip_clear[i] < -contact.tip_penetration_m:
+            reasons.append(
+                f"the fingertip link sinks into the object ({-tip_clear[i] * 1e3:.2f} mm)"
+            )
+        else:
+            reasons.append("")
+    return ContactTrack(
+        finger=finger,
+        times_s=times,
+        p_object=p,
+        n_object=n,
+        q=q,
+        error_m=err,
+        margin_rad=margin,
+        pad_cos=pad_cos,
+        link_clearance_m=clearance,
+        reasons=tuple(reasons),
+        tip_clearance_m=tip_clear,
+    )

@@ -1,0 +1,523 @@
+"""Distances of every (sample, geometry pair) check of one finger motion.
+
+Internal to :mod:`regrasp_pin.verify.finger_motion`, which documents what is checked. This module
+holds the machinery: batched geometry placements, the numpy broad phase (lower bounds
+on the signed distance for all samples at once), the exact Coal queries where the
+bounds do not settle a check, and the branch and bound that makes the reported
+minima exact.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import weakref
+from dataclasses import dataclass
+from typing import Any
+
+import coal
+import numpy as np
+
+from .hand import Finger, Hand
+from .kinematics import FingerChain
+from .objects import ConvexObject
+
+#: Coal is called wherever a lower bound is below the requirement plus this [m].
+BROAD_PHASE_MARGIN_M = 0.005
+#: Extra Coal queries allowed per reported minimum (beyond the mandatory ones).
+MAX_MINIMUM_QUERIES = 256
+
+_MAX_DEPTH_M = 1.0  # a Coal distance below -this is an EPA failure, not a depth
+TIP, LINK, FF = 0, 1, 2  # kinds of check (columns)
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class _Geometry:
+    """One collision geometry: how to place it in batch, and two convex bounds of it.
+
+    The capsule ``(seg_a, seg_b, radius)`` contains the shape. The support function
+    of the shape about ``centre`` in a unit direction ``u`` (geometry frame) is
+    ``sum_i half_i |u_i| + axial |u_z| + radial sqrt(1 - u_z^2) + round``: a box
+    (``half``), a cylinder (``axial`` = half length, ``radial`` = radius), a capsule
+    (``axial``, ``round``), a sphere (``round``); any other shape gets the sphere of
+    its local AABB.
+    """
+
+    gid: int
+    name: str
+    shape: Any  # coal.CollisionGeometry
+    chain: FingerChain
+    R_frame_geom: np.ndarray  # (3, 3)
+    p_frame_geom: np.ndarray  # (3,)
+    seg_a: np.ndarray  # (3,) capsule segment start, geometry frame [m]
+    seg_b: np.ndarray  # (3,) capsule segment end
+    radius: float  # capsule radius [m]
+    centre: np.ndarray  # (3,) centre of symmetry, geometry frame [m]
+    support: np.ndarray  # (6,) half_x, half_y, half_z, axial, radial, round [m]
+
+
+_TABLES: weakref.WeakKeyDictionary[Hand, dict[Any, Any]] = weakref.WeakKeyDictionary()
+
+
+def _geometry(hand: Hand, gid: int) -> _Geometry:
+    """The (cached) batch description of collision geometry ``gid`` of the hand."""
+    table = _TABLES.setdefault(hand, {})
+    if gid not in table:
+        model = hand.model
+        gobj = hand.collision_model.geometryObjects[gid]
+        frame_name = model.frames[int(gobj.parentFrame)].name
+        fid = model.getFrameId(frame_name)
+        if int(model.frames[fid].parentJoint) != int(gobj.parentJoint):  # ambiguous name
+            frame_name = model.names[int(gobj.parentJoint)]
+            fid = model.getFrameId(frame_name)
+        chain = table.get(("chain", frame_name))
+        if chain is None:
+            chain = table[("chain", frame_name)] = FingerChain(model, frame_name)
+        M = model.frames[fid].placement.inverse() * gobj.placement  # frame -> geometry
+        a, b, r = _capsule(gobj.geometry)
+        centre, support = _support_parameters(gobj.geometry)
+        table[gid] = _Geometry(
+            gid=gid,
+            name=gobj.name,
+            shape=gobj.geometry,
+            chain=chain,
+            R_frame_geom=M.rotation.copy(),
+            p_frame_geom=M.translation.copy(),
+            seg_a=a,
+            seg_b=b,
+            radius=r,
+            centre=centre,
+            support=support,
+        )
+    return table[gid]
+
+
+def _capsule(shape: Any) -> tuple[np.ndarray, np.ndarray, float]:
+    """A capsule ``(a, b, r)`` that contains the shape, in the shape's frame."""
+    zero = np.zeros(3)
+    if isinstance(shape, coal.Sphere):
+        return zero, zero, float(shape.radius)
+    if isinstance(shape, (coal.Cylinder, coal.Capsule)):
+        h = np.array([0.0, 0.0, float(shape.halfLength)])
+        return -h, h, float(shape.radius)
+    if isinstance(shape, coal.Box):
+        half = np.asarray(shape.halfSide, dtype=float)
+        i = int(np.argmax(half))
+        h = np.zeros(3)
+        h[i] = half[i]
+        return -h, h, float(np.linalg.norm(np.delete(half, i)))
+    shape.computeLocalAABB()
+    c = np.asarray(shape.aabb_center, dtype=float)
+    return c, c.copy(), float(shape.aabb_radius)
+
+
+def _support_parameters(shape: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and support parameters (see :class:`_Geometry`) of a Coal shape."""
+    out = np.zeros(6)
+    centre = np.zeros(3)
+    if isinstance(shape, coal.Box):
+        out[:3] = np.asarray(shape.halfSide, dtype=float)
+    elif isinstance(shape, coal.Cylinder):
+        out[3], out[4] = float(shape.halfLength), float(shape.radius)
+    elif isinstance(shape, coal.Capsule):
+        out[3], out[5] = float(shape.halfLength), float(shape.radius)
+    elif isinstance(shape, coal.Sphere):
+        out[5] = float(shape.radius)
+    else:
+        shape.computeLocalAABB()
+        centre = np.asarray(shape.aabb_center, dtype=float).copy()
+        out[5] = float(shape.aabb_radius)
+    return centre, out
+
+
+def _support(u_local: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """Support function values ``(...)`` for unit directions ``(..., 3)`` in the geometry
+    frames and support parameters ``(..., 6)`` (broadcast)."""
+    uz = np.abs(u_local[..., 2])
+    return (
+        np.sum(params[..., :3] * np.abs(u_local), axis=-1)
+        + params[..., 3] * uz
+        + params[..., 4] * np.sqrt(np.maximum(0.0, 1.0 - uz * uz))
+        + params[..., 5]
+    )
+
+
+def _placements(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Geometry placements in the palm frame: ``R (D, G, 3, 3)``, ``p (D, G, 3)``."""
+    D, G = q.shape[0], len(geoms)
+    R = np.empty((D, G, 3, 3))
+    p = np.empty((D, G, 3))
+    poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for j, g in enumerate(geoms):
+        key = id(g.chain)
+        if key not in poses:
+            R_f, p_f = g.chain.poses(q[:, g.chain.q_indices])
+            poses[key] = (R_f.reshape(-1, 3), p_f)  # rows of all R_f: one BLAS product
+        R_rows, p_f = poses[key]
+        R[:, j] = (R_rows @ g.R_frame_geom).reshape(D, 3, 3)
+        p[:, j] = p_f + (R_rows @ g.p_frame_geom).reshape(D, 3)
+    return R, p
+
+
+# ---------------------------------------------------------------------- lower bounds
+def _segment_distance(
+    a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distance between segments ``[a1, b1]`` and ``[a2, b2]``, shapes (N, 3).
+
+    Returns:
+        The distances (N,) and the vectors from the nearest point of the second
+        segment to that of the first (N, 3).
+
+    Closed form of Ericson, *Real-Time Collision Detection*, 5.1.9 (degenerate
+    segments included), vectorized.
+    """
+    d1, d2, r = (b1 - a1).T, (b2 - a2).T, (a1 - a2).T  # (3, N) rows for speed
+
+    def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+    a, e, b = dot(d1, d1), dot(d2, d2), dot(d1, d2)
+    c, f = dot(d1, r), dot(d2, r)
+    eps = 1e-18
+    a_ok, e_ok = a > eps, e > eps
+    a_safe, e_safe = np.where(a_ok, a, 1.0), np.where(e_ok, e, 1.0)
+    denom = a * e - b * b
+    s = np.where(
+        denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1.0), 0.0, 1.0), 0.0
+    )
+    s = np.where(a_ok, s, 0.0)
+    t = np.where(e_ok, (b * s + f) / e_safe, 0.0)
+    # t outside [0, 1] (or the second segment is a point): clamp t and recompute s
+    redo = (t < 0.0) | (t > 1.0) | ~e_ok
+    t = np.clip(t, 0.0, 1.0)
+    s = np.where(redo, np.where(a_ok, np.clip((t * b - c) / a_safe, 0.0, 1.0), 0.0), s)
+    diff = r + s * d1 - t * d2
+    return np.sqrt(dot(diff, diff)), diff.T
+
+
+def _object_lower_bound(
+    obj: ConvexObject, c_obj: np.ndarray, R_obj_geom: np.ndarray, params: np.ndarray
+) -> np.ndarray:
+    """Lower bound on the signed distance from geometries to the object.
+
+    ``max_f (n_f . c - o_f - h(n_f))`` over the object's face planes ``n_f . x = o_f``,
+    with ``c`` the geometry's centre and ``h`` its support function: the geometry lies
+    entirely beyond that far in front of each face plane, and the object entirely
+    behind it. Valid under penetration too (moving the geometry by the bound's
+    opposite along ``n_f`` separates them).
+
+    Args:
+        obj: The object.
+        c_obj: Geometry centres in the object frame, (D, G, 3) [m].
+        R_obj_geom: Geometry orientations in the object frame, (D, G, 3, 3).
+        params: Support parameters, (G, 6).
+
+    Returns:
+        Lower bounds (D, G) [m].
+    """
+    n_local = np.matmul(obj.normals, R_obj_geom)  # rows R^T n_f: (D, G, F, 3)
+    h = _support(n_local, params[None, :, None, :])
+    return np.max(c_obj @ obj.normals.T - obj.offsets - h, axis=-1)
+
+
+def _step_bound(c: np.ndarray, R: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """Bound on how far any point of a body moves between consecutive samples.
+
+    A point ``c + R v`` with ``|v| <= rho`` moves by at most ``|dc| + rho |dR|_2``, and
+    for rotations ``|dR|_2 = |dR|_F / sqrt(2)`` (= 2 sin(angle / 2)).
+
+    Args:
+        c: Body centres (D, G, 3) [m].
+        R: Body orientations (D, G, 3, 3).
+        rho: Largest distance of a point of each body from its centre (G,) [m].
+
+    Returns:
+        Step bounds (D - 1, G) [m].
+    """
+    dc = np.linalg.norm(np.diff(c, axis=0), axis=-1)
+    dR = R[1:] - R[:-1]
+    dR = np.sqrt(np.einsum("...ij,...ij->...", dR, dR) / 2.0)
+    return dc + rho * dR
+
+
+class PairDistances:
+    """Lower bounds and exact Coal distances for all (sample, pair) checks of one motion.
+
+    Pairs are the columns: first the finger's geometries vs the object, then every
+    (finger geometry, other finger's geometry) pair.
+    """
+
+    def __init__(
+        self,
+        hand: Hand,
+        obj: ConvexObject,
+        f: Finger,
+        q_d: np.ndarray,
+        T_d: np.ndarray,
+        tip_req: np.ndarray,
+        link_req: float | np.ndarray,
+        ff_req: float,
+    ) -> None:
+        """Place the geometries and evaluate every lower bound.
+
+        Args:
+            hand: The hand.
+            obj: The object.
+            f: The moving finger.
+            q_d: Dense configurations (D, nq) [rad].
+            T_d: Dense object poses (D, 4, 4).
+            tip_req: Required fingertip distance per sample (D,) [m].
+            link_req: Required distance of the other finger geometries to the object [m],
+                one for all samples or one per dense sample (D,).
+            ff_req: Required distance to the other fingers [m].
+        """
+        moving = [_geometry(hand, g) for g in f.geometry_ids]
+        own = set(f.geometry_ids)
+        other_ids = sorted(
+            {g for name, o in hand.fingers.items() if name != f.name for g in o.geometry_ids} - own
+        )
+        others = [_geometry(hand, g) for g in other_ids]
+        geoms = moving + others
+        R, p = _placements(geoms, q_d)
+        self._R, self._p, self._T = R, p, T_d
+        self.geoms = geoms
+        self._obj_shape = obj.coal_geometry()
+        nm, no = len(moving), len(others)
+        tip = set(f.tip_geometry_ids)
+        # columns
+        self.first = np.concatenate([np.arange(nm), np.repeat(np.arange(nm), no)]).astype(int)
+        self.second = np.concatenate([np.full(nm, -1), nm + np.tile(np.arange(no), nm)])
+        self.second = self.second.astype(int)
+        self.kind = np.concatenate(
+            [[TIP if g.gid in tip else LINK for g in moving], np.full(nm * no, FF)]
+        ).astype(int)
+        # capsule endpoints and centres in the palm frame, (D, G, 3)
+        a_loc = np.array([g.seg_a for g in geoms]).reshape(-1, 3)
+        b_loc = np.array([g.seg_b for g in geoms]).reshape(-1, 3)
+        c_loc = np.array([g.centre for g in geoms]).reshape(-1, 3)
+        params = np.array([g.support for g in geoms]).reshape(-1, 6)
+        rad = np.array([g.radius for g in geoms])
+        abc = np.matmul(R, np.stack([a_loc, b_loc, c_loc], axis=2)) + p[..., None]
+        a, b, c = abc[..., 0], abc[..., 1], abc[..., 2]
+        # geometry vs object: the face-plane support bound, in the object frame
+        R_po = T_d[:, None, :3, :3]
+        c_o = np.matmul(c[:, :nm] - T_d[:, None, :3, 3], T_d[:, :3, :3])  # R^T (x - p)
+        lb_obj = _object_lower_bound(
+            obj, c_o, np.matmul(np.swapaxes(R_po, 2, 3), R[:, :nm]), params[:nm]
+        )
+        # geometry vs geometry: bounding spheres first; near pairs get the capsule bound
+        # and the separating-axis bound along the capsules' nearest-point direction
+        i1, i2 = self.first[nm:], self.second[nm:]
+        mid = 0.5 * (a + b)
+        reach = 0.5 * np.linalg.norm(b - a, axis=2) + rad  # (D, G)
+        diff = mid[:, i1] - mid[:, i2]
+        lb_ff = np.sqrt(np.einsum("dpi,dpi->dp", diff, diff)) - reach[:, i1] - reach[:, i2]
+        d, k = np.nonzero(lb_ff < ff_req + BROAD_PHASE_MARGIN_M)
+        n_g = len(geoms)
+        j1, j2 = d * n_g + i1[k], d * n_g + i2[k]  # flat (sample, geometry) indices
+        g1, g2 = i1[k], i2[k]
+        a_, b_, c_ = a.reshape(-1, 3), b.reshape(-1, 3), c.reshape(-1, 3)
+        R_ = R.reshape(-1, 3, 3)
+        seg, v = _segment_distance(a_[j1], b_[j1], a_[j2], b_[j2])
+        lb = seg - rad[g1] - rad[g2]
+        u = v / np.where(seg > 1e-12, seg, 1.0)[:, None]  # from geometry 2 towards 1
+        gap = (
+            np.einsum("ni,ni->n", u, c_[j1] - c_[j2])
+            - _support(np.einsum("ni,nij->nj", u, R_[j1]), params[g1])
+            - _support(np.einsum("ni,nij->nj", u, R_[j2]), params[g2])
+        )
+        lb_ff[d, k] = np.where(seg > 1e-12, np.maximum(lb, gap), lb)
+        self.lb = np.concatenate([lb_obj, lb_ff], axis=1)
+        # sweep bound: between samples s and s', no point of a geometry moves by more
+        # than the sum of its per-step bounds |dc| + rho |dR|_2, so a distance is
+        # 1-Lipschitz in the cumulative sum of the two bodies' steps (see _update_sweep)
+        rho = np.array(
+            [
+                np.linalg.norm(g.support[:3])
+                + math.hypot(g.support[3], g.support[4])
+                + g.support[5]
+                for g in geoms
+            ]
+        )
+        step_g = _step_bound(c, R, rho)  # (D - 1, G)
+        step_o = _step_bound(T_d[:, None, :3, 3], T_d[:, None, :3, :3], np.array([obj.radius_m]))[
+            :, 0
+        ]
+        second = np.where(self.second < 0, 0, self.second)
+        step = step_g[:, self.first] + np.where(self.second < 0, step_o[:, None], step_g[:, second])
+        self._sweep = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])
+        #: Largest per-step bound on the relative motion of two checked bodies [m].
+        self.max_step_m = float(step.max()) if step.size else 0.0
+        self.swept = np.full(self.lb.shape, -np.inf)
+        self.required = np.empty(self.lb.shape)
+        self.required[:, self.kind == TIP] = tip_req[:, None]
+        link = np.asarray(link_req, dtype=float)
+        self.required[:, self.kind == LINK] = link[:, None] if link.ndim else link
+        self.required[:, self.kind == FF] = ff_req
+        self.exact = np.full(self.lb.shape, np.nan)
+        self.n_queries = 0
+        self._request = coal.DistanceRequest()
+        self._request.gjk_tolerance = 1e-9  # separation distances to ~1e-9 m
+        # penetration depths (EPA) to 1e-6 m: tighter tolerances make EPA fail on
+        # deep cylinder/convex penetrations (Coal then returns -DBL_MAX)
+        self._request.epa_tolerance = 1e-6
+        self._result = coal.DistanceResult()
+        self._functors: dict[int, Any] = {}
+
+    def run(self) -> tuple[dict[str, float], bool]:
+        """Mandatory queries, then the minima.
+
+        Returns:
+            The minima ``{"tip", "link", "ff", "margin"}`` [m] and whether all are exact.
+        """
+        rows, cols = np.nonzero(self.lb < self.required + BROAD_PHASE_MARGIN_M)
+        self._query(rows, cols)
+        self._update_sweep(np.unique(cols))
+        out, exact = {}, True
+        zero = np.zeros(self.lb.shape)
+        for key, kind in (("tip", TIP), ("link", LINK), ("ff", FF)):
+            out[key], ok = self._minimum(zero, self.kind == kind)
+            exact &= ok
+        out["margin"], ok = self._minimum(-self.required, np.ones(self.kind.size, dtype=bool))
+        return out, exact and ok
+
+    def _minimum(self, offset: np.ndarray, columns: np.ndarray) -> tuple[float, bool]:
+        """``min(distance + offset)`` over the given columns, by branch and bound.
+
+        The bound of a sample not queried is the larger of its broad-phase bound and
+        the sweep bound from the exact values of its column. Each round queries, in
+        every column whose bound is still below the best exact value, the sample with
+        the lowest bound, until no bound is below it. A minimum within the mandatory
+        zone (below requirement + margin) needs no extra query.
+
+        Args:
+            offset: Added to every distance, shape (D, P) [m].
+            columns: Columns taking part, boolean shape (P,).
+
+        Returns:
+            The minimum and True, or, when :data:`MAX_MINIMUM_QUERIES` did not settle it,
+            a lower bound on it and False.
+        """
+        cols = np.nonzero(columns)[0]
+        if cols.size == 0:
+            return math.inf, True
+        off = offset[:, cols]
+        ex = self.exact[:, cols] + off
+        done = ~np.isnan(ex)
+        best = float(np.min(ex[done])) if done.any() else math.inf
+        bound = np.where(done, np.inf, np.maximum(self.lb[:, cols], self.swept[:, cols]) + off)
+        rows = np.argmin(bound, axis=0)  # per column, the sample with the lowest bound
+        low = bound[rows, np.arange(cols.size)]
+        n_extra = 0
+        while True:
+            open_ = np.nonzero(low < best)[0]
+            if open_.size == 0:
+                return best, True
+            if n_extra >= MAX_MINIMUM_QUERIES:
+                return float(np.min(low)), False  # bounds every distance left
+            pick = open_[np.argsort(low[open_])[: MAX_MINIMUM_QUERIES - n_extra]]
+            sub = cols[pick]
+            self._query(rows[pick], sub)
+            self._update_sweep(sub)
+            n_extra += pick.size
+            # only the picked columns changed
+            ex = self.exact[:, sub] + off[:, pick]
+            done = ~np.isnan(ex)
+            best = min(best, float(np.min(ex[done])))
+            bound = np.where(
+                done, np.inf, np.maximum(self.lb[:, sub], self.swept[:, sub]) + off[:, pick]
+            )
+            rows[pick] = np.argmin(bound, axis=0)
+            low[pick] = bound[rows[pick], np.arange(pick.size)]
+
+    def _update_sweep(self, cols: np.ndarray) -> None:
+        """Sweep bounds of the given columns from their exact values.
+
+        ``swept(s) = max_k exact(k) - |S(s) - S(k)|`` with ``S`` the cumulative step
+        bound, in two running maxima: ``max_{k<=s} (exact(k) + S(k)) - S(s)`` and
+        ``max_{k>=s} (exact(k) - S(k)) + S(s)``.
+        """
+        if cols.size == 0:
+            return
+        S = self._sweep[:, cols]
+        e = self.exact[:, cols]
+        e = np.where(np.isnan(e), -np.inf, e)
+        forward = np.maximum.accumulate(e + S, axis=0) - S
+        backward = np.maximum.accumulate((e - S)[::-1], axis=0)[::-1] + S
+        self.swept[:, cols] = np.maximum(forward, backward) - 1e-12  # rounding of S
+
+    def _query(self, rows: np.ndarray, cols: np.ndarray) -> None:
+        """Exact Coal distances for the (sample, column) pairs not yet computed."""
+        todo = np.isnan(self.exact[rows, cols])
+        rows, cols = rows[todo], cols[todo]
+        if rows.size == 0:
+            return
+        g1 = self.first[cols]
+        g2 = self.second[cols]
+        # relative placement of geometry g1 in the frame of the second body (object or g2)
+        R1, p1 = self._R[rows, g1], self._p[rows, g1]
+        is_obj = g2 < 0
+        R2 = np.where(
+            is_obj[:, None, None], self._T[rows, :3, :3], self._R[rows, np.maximum(g2, 0)]
+        )
+        p2 = np.where(is_obj[:, None], self._T[rows, :3, 3], self._p[rows, np.maximum(g2, 0)])
+        R_rel = np.matmul(np.swapaxes(R2, 1, 2), R1)
+        p_rel = np.matmul((p1 - p2)[:, None, :], R2)[:, 0]
+        identity = coal.Transform3s()
+        request, result = self._request, self._result
+        values = np.empty(rows.size)
+        for n in range(rows.size):
+            key = int(cols[n])
+            fn = self._functors.get(key)
+            if fn is None:
+                second = self._obj_shape if is_obj[n] else self.geoms[g2[n]].shape
+                fn = self._functors[key] = coal.ComputeDistance(second, self.geoms[g1[n]].shape)
+            result.clear()  # Coal keeps the smaller of the old and new distances otherwise
+            values[n] = fn(identity, coal.Transform3s(R_rel[n], p_rel[n]), request, result)
+        bad = np.nonzero(~(values > -_MAX_DEPTH_M))[0]  # NaN or EPA failure (-DBL_MAX)
+        if bad.size:
+            retry = coal.DistanceRequest()
+            retry.epa_tolerance = 1e-4
+            for n in bad.tolist():
+                values[n] = coal.distance(
+                    self._obj_shape if is_obj[n] else self.geoms[g2[n]].shape,
+                    identity,
+                    self.geoms[g1[n]].shape,
+                    coal.Transform3s(R_rel[n], p_rel[n]),
+                    retry,
+                    coal.DistanceResult(),
+                )
+                if not values[n] > -_MAX_DEPTH_M:  # keep the (negative) lower bound
+                    values[n] = min(self.lb[rows[n], cols[n]], 0.0)
+                    logger.warning(
+                        "Coal could not measure a penetration depth; using the "
+                        "broad-phase bound %.6f m",
+                        values[n],
+                    )
+        self.exact[rows, cols] = values
+        self.n_queries += int(rows.size)
+
+
+def capsule_gap(hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray) -> np.ndarray:
+    """Lower bound ``(N,)`` [m] on the distance between geometries ``ids_a`` and ``ids_b``
+    of the hand at each configuration row of ``q`` ``(N, nq)``, from capsules that
+    contain the geometries (inf when either list is empty)."""
+    gap = np.full(q.shape[0], np.inf)
+    if not ids_a or not ids_b:
+        return gap
+    ga = [_geometry(hand, g) for g in ids_a]
+    gb = [_geometry(hand, g) for g in ids_b]
+    Ra, pa = _placements(ga, q)
+    Rb, pb = _placements(gb, q)
+    for i, g in enumerate(ga):
+        a1 = pa[:, i] + Ra[:, i] @ g.seg_a
+        b1 = pa[:, i] + Ra[:, i] @ g.seg_b
+        for j, h in enumerate(gb):
+            a2 = pb[:, j] + Rb[:, j] @ h.seg_a
+            b2 = pb[:, j] + Rb[:, j] @ h.seg_b
+            d, _ = _segment_distance(a1, b1, a2, b2)
+            gap = np.minimum(gap, d - g.radius - h.radius)
+    return gap

@@ -1,0 +1,491 @@
+"""Hand models: a Pinocchio model, its collision model, and one :class:`Finger` per finger.
+
+Frames: every position is in the palm frame, the root frame of the URDF (the
+``universe`` frame of the Pinocchio model). Units: metres and radians.
+
+Bundled hands:
+
+- :meth:`Hand.five_finger` loads ``urdf/five_finger_hand.urdf``, an anthropomorphic
+  right hand with four 3-joint fingers (abduction, MCP, PIP, DIP coupled to PIP by a
+  ``<mimic>`` joint) and a 3-joint thumb (opposition, MCP, IP).
+- :meth:`Hand.allegro` loads the Allegro right hand from ``example-robot-data``
+  (offline, from the installed package), four 4-joint fingers.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .._validate import as_array, as_batch, positive
+from ..exceptions import InputError, ModelFileError, UnknownNameError
+from .ik import IKResult, solve_position_ik
+from .kinematics import FingerChain
+
+__all__ = ["Finger", "Hand", "five_finger_urdf_path", "allegro_urdf_path"]
+
+#: Tip frames of the bundled five-finger hand.
+FIVE_FINGER_TIPS = {
+    "thumb": "thumb_tip",
+    "index": "index_tip",
+    "middle": "middle_tip",
+    "ring": "ring_tip",
+    "little": "little_tip",
+}
+FIVE_FINGER_TIP_RADIUS = 0.008
+
+#: Allegro right hand: fingertip links and the radius of their collision spheres.
+ALLEGRO_TIPS = {
+    "thumb": "link_15.0_tip",
+    "index": "link_3.0_tip",
+    "middle": "link_7.0_tip",
+    "ring": "link_11.0_tip",
+}
+ALLEGRO_TIP_RADIUS = 0.012
+
+
+def five_finger_urdf_path() -> Path:
+    """Path of the bundled ``five_finger_hand.urdf``."""
+    return Path(str(resources.files("regrasp_pin") / "urdf" / "five_finger_hand.urdf"))
+
+
+def allegro_urdf_path() -> Path:
+    """Path of the Allegro right hand URDF installed by ``example-robot-data``.
+
+    Raises:
+        ModelFileError: if example-robot-data is not installed or lacks the file.
+    """
+    rel = "share/example-robot-data/robots/allegro_hand_description/urdf/allegro_right_hand.urdf"
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        raise ModelFileError(
+            "allegro_right_hand.urdf", "example-robot-data is not installed (pip install it)"
+        ) from None
+    for prefix in ("cmeel.prefix/", ""):
+        path = Path(str(dist.locate_file(prefix + rel)))
+        if path.is_file():
+            return path
+    raise ModelFileError(rel, "not found in the installed example-robot-data")
+
+
+@dataclass(frozen=True, eq=False)
+class Finger:
+    """One finger: its independent joints, limits, tip frame and batched kinematics.
+
+    Attributes:
+        name: Finger name (e.g. ``"index"``).
+        tip_frame: Name of the frame at the centre of the fingertip sphere.
+        tip_radius: Fingertip sphere radius [m].
+        joint_names: Names of the independent joints, shape ``(k,)``; mimic joints
+            driven by them are not listed (they follow).
+        q_indices: Indices of those joints in the full configuration, ``(k,)``.
+        lower: Lower joint limits ``(k,)`` [rad].
+        upper: Upper joint limits ``(k,)`` [rad].
+        velocity_limit: Joint velocity limits ``(k,)`` [rad/s].
+        pad_axis_tip: Unit vector in the tip frame pointing out of the finger pad (the
+            palmar side), ``(3,)``.
+        chain: The batched kinematics kernel.
+        geometry_ids: Indices in the hand's collision model of the geometries carried
+            by this finger's links.
+        tip_geometry_ids: Those of them that touch the object at a contact (the
+            fingertip sphere and the distal link it sits on).
+    """
+
+    name: str
+    tip_frame: str
+    tip_radius: float
+    joint_names: tuple[str, ...]
+    q_indices: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity_limit: np.ndarray
+    pad_axis_tip: np.ndarray
+    chain: FingerChain = field(repr=False)
+    geometry_ids: tuple[int, ...] = ()
+    tip_geometry_ids: tuple[int, ...] = ()
+
+    @property
+    def k(self) -> int:
+        """Number of independent joints (dimension of the finger's joint space)."""
+        return len(self.joint_names)
+
+    @property
+    def q_mid(self) -> np.ndarray:
+        """Middle of the joint box ``(k,)`` [rad]."""
+        return 0.5 * (self.lower + self.upper)
+
+    # -------------------------------------------------------------- kinematics
+    def _q_batch(self, q: object, argument: str = "q") -> tuple[np.ndarray, bool]:
+        return as_batch(q, argument, self.k)
+
+    def fk(self, q: object) -> np.ndarray:
+        """Tip-centre positions in the palm frame.
+
+        Args:
+            q: ``(k,)`` or ``(N, k)`` finger configurations [rad].
+
+        Returns:
+            ``(3,)`` or ``(N, 3)`` positions [m].
+
+        Raises:
+            InputError: wrong shape or NaN/inf.
+        """
+        qb, single = self._q_batch(q)
+        p = self.chain.positions(qb)
+        return p[0] if single else p
+
+    def jacobian(self, q: object) -> tuple[np.ndarray, np.ndarray]:
+        """Tip positions and position Jacobians in the palm frame.
+
+        Args:
+            q: ``(k,)`` or ``(N, k)`` configurations [rad].
+
+        Returns:
+            ``p`` ``(N, 3)`` [m] and ``J`` ``(N, 3, k)`` [m/rad] (without the N axis for
+            a single configuration).
+        """
+        qb, single = self._q_batch(q)
+        p, J = self.chain.positions_jacobians(qb)
+        return (p[0], J[0]) if single else (p, J)
+
+    def tip_poses(self, q: object) -> tuple[np.ndarray, np.ndarray]:
+        """Tip frame rotations ``(N, 3, 3)`` and positions ``(N, 3)`` in the palm frame."""
+        qb, single = self._q_batch(q)
+        R, p = self.chain.poses(qb)
+        return (R[0], p[0]) if single else (R, p)
+
+    def pad_normals(self, q: object) -> np.ndarray:
+        """Unit pad directions (out of the finger pad) in the palm frame, ``(N, 3)``."""
+        R, _ = self.tip_poses(q)
+        return R @ self.pad_axis_tip
+
+    def ik(
+        self,
+        targets_palm: object,
+        q_init: object | None = None,
+        *,
+        tol_m: float = 1e-5,
+        max_iter: int = 40,
+        restarts: bool = True,
+    ) -> IKResult:
+        """Batched damped-least-squares position IK of the tip centre.
+
+        Args:
+            targets_palm: ``(3,)`` or ``(N, 3)`` tip-centre targets in the palm frame [m].
+            q_init: Initial guess, ``(k,)`` (shared) or ``(N, k)`` (warm start per target)
+                [rad]; default the middle of the joint box.
+            tol_m: Position tolerance [m].
+            max_iter: Iteration cap per pass.
+            restarts: Retry unconverged targets from fixed seeds over the joint box.
+
+        Returns:
+            :class:`~regrasp_pin.model.ik.IKResult` with ``q`` ``(N, k)`` inside the limits,
+            ``success`` ``(N,)`` and ``error_m`` ``(N,)``. An unreachable target gets
+            ``success=False`` and its residual; it is not an error.
+
+        Raises:
+            InputError: wrong shapes, NaN/inf, non-positive tolerance.
+        """
+        targets, _ = as_batch(targets_palm, "targets_palm", 3)
+        n = targets.shape[0]
+        if q_init is None:
+            q0 = np.broadcast_to(self.q_mid, (n, self.k))
+        else:
+            q0, single = as_batch(q_init, "q_init", self.k)
+            if single:
+                q0 = np.broadcast_to(q0[0], (n, self.k))
+            elif q0.shape[0] != n:
+                raise InputError(
+                    "q_init",
+                    f"has {q0.shape[0]} rows for {n} targets",
+                    f"shape ({self.k},) or ({n}, {self.k})",
+                )
+        tol = positive(tol_m, "tol_m")
+        if (
+            isinstance(max_iter, bool)
+            or not isinstance(max_iter, (int, np.integer))
+            or max_iter < 1
+        ):
+            raise InputError("max_iter", f"{max_iter!r} is not allowed", "an integer >= 1")
+        return solve_position_ik(
+            self.chain,
+            self.lower,
+            self.upper,
+            targets,
+            q0,
+            tol_m=tol,
+            max_iter=int(max_iter),
+            restarts=restarts,
+        )
+
+    def within_limits(self, q: object, tol: float = 0.0) -> np.ndarray:
+        """``(N,)`` True where every joint is within ``[lower - tol, upper + tol]``."""
+        qb, _ = self._q_batch(q)
+        return np.all((qb >= self.lower - tol) & (qb <= self.upper + tol), axis=1)
+
+    def limit_margin(self, q: object) -> np.ndarray:
+        """Distance to the nearest boundary plane of the joint box, ``(N,)`` [rad].
+
+        Negative outside the box.
+        """
+        qb, _ = self._q_batch(q)
+        return np.minimum(qb - self.lower, self.upper - qb).min(axis=1)
+
+
+class Hand:
+    """A hand: Pinocchio model, collision and visual models, and its fingers.
+
+    Use :meth:`five_finger`, :meth:`allegro` or :meth:`from_urdf` to build one.
+
+    Attributes:
+        model: The Pinocchio model (mimic joints loaded as mimic joints).
+        collision_model: Pinocchio ``GeometryModel`` of the collision geometry.
+        visual_model: Pinocchio ``GeometryModel`` of the visual geometry.
+        urdf_path: Path of the URDF the hand was loaded from.
+        fingers: Mapping finger name -> :class:`Finger`, in the given order.
+        name: Short name (``"five_finger"``, ``"allegro"`` or the URDF stem).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        collision_model: pin.GeometryModel,
+        visual_model: pin.GeometryModel,
+        urdf_path: Path,
+        fingers: dict[str, Finger],
+        name: str,
+    ) -> None:
+        self.model = model
+        self.collision_model = collision_model
+        self.visual_model = visual_model
+        self.urdf_path = urdf_path
+        self.fingers = fingers
+        self.name = name
+
+    def __repr__(self) -> str:
+        return f"Hand({self.name!r}, fingers={self.finger_names}, nq={self.model.nq})"
+
+    # ------------------------------------------------------------ construction
+    @classmethod
+    def five_finger(cls) -> Hand:
+        """The bundled anthropomorphic five-finger right hand."""
+        return cls.from_urdf(
+            five_finger_urdf_path(),
+            FIVE_FINGER_TIPS,
+            tip_radius=FIVE_FINGER_TIP_RADIUS,
+            name="five_finger",
+        )
+
+    @classmethod
+    def allegro(cls) -> Hand:
+        """The Allegro right hand from example-robot-data (loaded offline)."""
+        return cls.from_urdf(
+            allegro_urdf_path(), ALLEGRO_TIPS, tip_radius=ALLEGRO_TIP_RADIUS, name="allegro"
+        )
+
+    @classmethod
+    def from_urdf(
+        cls,
+        path: str | Path,
+        fingers: Mapping[str, str],
+        *,
+        tip_radius: float | Mapping[str, float],
+        pad_axes: Mapping[str, object] | None = None,
+        name: str | None = None,
+    ) -> Hand:
+        """Load any hand URDF.
+
+        Args:
+            path: URDF file. Meshes referenced by ``package://`` are looked up next to
+                the URDF's package folder.
+            fingers: Mapping finger name -> tip frame name (the frame at the centre of
+                the fingertip sphere).
+            tip_radius: Fingertip sphere radius [m], one for all or one per finger.
+            pad_axes: Optional mapping finger -> unit pad direction in its tip frame.
+                By default it is the direction in which the tip centre moves when the
+                last joint of the finger flexes (with its limits' sign), which points
+                out of the pad for a flexion joint.
+            name: Short name; default the URDF file stem.
+
+        Raises:
+            ModelFileError: the file does not exist or cannot be parsed.
+            UnknownNameError: a tip frame is not in the model (lists the valid frames).
+            InputError: bad radius or pad axis, or a finger chain that is not revolute.
+        """
+        urdf = Path(path)
+        if not urdf.is_file():
+            raise ModelFileError(urdf, "no such URDF file")
+        if not isinstance(fingers, Mapping) or not fingers:
+            raise InputError("fingers", "is empty or not a mapping", "{finger name: tip frame}")
+        try:
+            model = pin.buildModelFromUrdf(str(urdf), mimic=True)
+            # package://NAME/... resolves against every ancestor folder of the URDF
+            pkg_dirs = [str(p) for p in urdf.resolve().parents]
+            collision = pin.buildGeomFromUrdf(
+                model, str(urdf), pin.COLLISION, package_dirs=pkg_dirs
+            )
+            visual = pin.buildGeomFromUrdf(model, str(urdf), pin.VISUAL, package_dirs=pkg_dirs)
+        except (RuntimeError, ValueError) as exc:
+            raise ModelFileError(urdf, f"cannot be loaded by Pinocchio: {exc}") from None
+
+        frame_names = [f.name for f in model.frames]
+        built: dict[str, Finger] = {}
+        for finger_name, tip in fingers.items():
+            if tip not in frame_names:
+                raise UnknownNameError(f"fingers[{finger_name!r}]", tip, frame_names)
+            if isinstance(tip_radius, Mapping):
+                if finger_name not in tip_radius:
+                    raise UnknownNameError("tip_radius", finger_name, list(tip_radius))
+                radius = positive(tip_radius[finger_name], f"tip_radius[{finger_name!r}]")
+            else:
+                radius = positive(tip_radius, "tip_radius")
+            chain = FingerChain(model, tip)
+            if chain.k == 0:
+                raise InputError(
+                    f"fingers[{finger_name!r}]",
+                    f"frame {tip!r} is not moved by any joint",
+                    "a tip frame on a finger chain",
+                )
+            qi = chain.q_indices
+            lower = model.lowerPositionLimit[qi].copy()
+            upper = model.upperPositionLimit[qi].copy()
+            if pad_axes is not None and finger_name in pad_axes:
+                pad = as_array(pad_axes[finger_name], f"pad_axes[{finger_name!r}]", (3,))
+                if np.linalg.norm(pad) < 1e-9:
+                    raise InputError(f"pad_axes[{finger_name!r}]", "is zero", "a unit vector")
+                pad = pad / np.linalg.norm(pad)
+            else:
+                pad = _default_pad_axis(model, chain, lower, upper)
+            geom_ids, tip_ids = _finger_geometries(model, collision, chain, tip)
+            built[finger_name] = Finger(
+                name=finger_name,
+                tip_frame=tip,
+                tip_radius=radius,
+                joint_names=tuple(model.names[int(j)] for j in chain.joint_ids),
+                q_indices=qi,
+                lower=lower,
+                upper=upper,
+                velocity_limit=model.velocityLimit[
+                    [model.joints[int(j)].idx_v for j in chain.joint_ids]
+                ].copy(),
+                pad_axis_tip=pad,
+                chain=chain,
+                geometry_ids=geom_ids,
+                tip_geometry_ids=tip_ids,
+            )
+        return cls(model, collision, visual, urdf, built, name or urdf.stem)
+
+    # ------------------------------------------------------------------ access
+    @property
+    def finger_names(self) -> tuple[str, ...]:
+        """Finger names in the order they were given."""
+        return tuple(self.fingers)
+
+    def finger(self, name: str) -> Finger:
+        """The finger called ``name``.
+
+        Raises:
+            UnknownNameError: lists the valid finger names.
+        """
+        try:
+            return self.fingers[name]
+        except KeyError:
+            raise UnknownNameError("finger", name, self.finger_names) from None
+
+    def neutral(self) -> np.ndarray:
+        """A full configuration ``(nq,)`` with every finger at the middle of its limits."""
+        q = pin.neutral(self.model)
+        for f in self.fingers.values():
+            q[f.q_indices] = f.q_mid
+        return q
+
+    def to_full(self, finger: str, q_finger: object, q_full: object | None = None) -> np.ndarray:
+        """Put a finger's configuration into full configurations.
+
+        Args:
+            finger: Finger name.
+            q_finger: ``(k,)`` or ``(N, k)`` [rad].
+            q_full: Base full configuration(s) ``(nq,)`` or ``(N, nq)``; default
+                :meth:`neutral`.
+
+        Returns:
+            ``(nq,)`` or ``(N, nq)`` full configurations.
+        """
+        f = self.finger(finger)
+        qf, single = as_batch(q_finger, "q_finger", f.k)
+        nq = self.model.nq
+        if q_full is None:
+            base = np.broadcast_to(self.neutral(), (qf.shape[0], nq)).copy()
+        else:
+            base, base_single = as_batch(q_full, "q_full", nq)
+            base = np.broadcast_to(base, (qf.shape[0], nq)).copy() if base_single else base.copy()
+            if base.shape[0] != qf.shape[0]:
+                raise InputError("q_full", f"has {base.shape[0]} rows", f"{qf.shape[0]} rows")
+        base[:, f.q_indices] = qf
+        return base[0] if single else base
+
+    def from_full(self, finger: str, q_full: object) -> np.ndarray:
+        """Take a finger's ``(k,)`` / ``(N, k)`` configuration out of full configurations."""
+        f = self.finger(finger)
+        qb, single = as_batch(q_full, "q_full", self.model.nq)
+        out = qb[:, f.q_indices]
+        return out[0] if single else out
+
+
+def _default_pad_axis(
+    model: pin.Model, chain: FingerChain, lower: np.ndarray, upper: np.ndarray
+) -> np.ndarray:
+    """Direction (tip frame) in which the tip centre moves when the last joint of the
+    chain turns positively, at the middle of the joint box."""
+    q = pin.neutral(model)
+    q[chain.q_indices] = 0.5 * (lower + upper)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    jid, axis_local = chain.path_axes[-1]
+    oMi = data.oMi[jid]
+    oMf = data.oMf[model.getFrameId(chain.tip_frame)]
+    v = np.cross(oMi.rotation @ axis_local, oMf.translation - oMi.translation)
+    if np.linalg.norm(v) < 1e-9:
+        return np.array([0.0, 0.0, 1.0])
+    v = oMf.rotation.T @ v
+    return v / np.linalg.norm(v)
+
+
+def _finger_geometries(
+    model: pin.Model, collision: pin.GeometryModel, chain: FingerChain, tip: str
+) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Collision geometry ids on the finger's moving links, and those on the tip link."""
+    frame = model.frames[model.getFrameId(tip)]
+    tip_joint = int(frame.parentJoint)
+    # joints whose motion is caused by the finger's independent joints
+    finger_joints = set()
+    for jid in range(1, model.njoints):
+        j = jid
+        while j > 0:
+            if j in {int(x) for x in chain.joint_ids} or _mimics(model, j, chain.joint_ids):
+                finger_joints.add(jid)
+                break
+            j = int(model.parents[j])
+    ids = []
+    tip_ids = []
+    for gid, geom in enumerate(collision.geometryObjects):
+        if int(geom.parentJoint) in finger_joints:
+            ids.append(gid)
+            if int(geom.parentJoint) == tip_joint:
+                tip_ids.append(gid)
+    return tuple(ids), tuple(tip_ids)
+
+
+def _mimics(model: pin.Model, jid: int, drivers: np.ndarray) -> bool:
+    for a, b in zip(model.mimicking_joints, model.mimicked_joints, strict=True):
+        if int(a) == jid and int(b) in {int(x) for x in drivers}:
+            return True
+    return False

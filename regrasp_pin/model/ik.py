@@ -1,0 +1,265 @@
+"""Batched damped-least-squares position IK for one finger.
+
+Solves ``p_tip(q) = target`` for ``N`` targets at once, with the finger's joint limits
+respected at every iterate (projected steps with an active set: a joint at a limit
+whose step points outward is frozen for that step, and the step is recomputed for the
+others). Damping follows the error (lambda^2 = lambda0^2 + w |e|^2, Sugihara's
+Levenberg-Marquardt rule), so far targets take cautious steps and the last steps are
+nearly Gauss-Newton. Inner iterations evaluate cos/sin in
+single precision (errors of order 1e-8 m, far below any useful tolerance) and a final
+double-precision pass checks, and if needed finishes, every point, so the reported
+residuals are exact. Points that have not converged after ``max_iter`` iterations are
+restarted from a fixed set of seeds spread over the joint box (deterministic), and the
+best result is kept. An unreachable target is not an error: it comes back with
+``success=False`` and its residual.
+
+The work is done on component-major arrays ``(k, N)`` and only on the points that
+have not converged yet.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kinematics import FingerChain
+
+__all__ = ["IKResult", "solve_position_ik"]
+
+_LAMBDA0_SQ = 1e-8  # [m^2]
+_LAMBDA_ERR = 1e-2  # [-], weight of |e|^2 in lambda^2
+_MAX_STEP = 0.4  # [rad] largest joint change per iteration
+_BLOCK = 8192  # points per block
+_STALL_SQ = 0.995**2  # an iteration must shrink the error by 0.5 % ...
+_STALL_TOL_FACTOR = 10.0  # ... unless it is already within 10 x tol
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """Result of a batched IK solve.
+
+    Attributes:
+        q: ``(N, k)`` joint solutions [rad], always within the joint limits.
+        success: ``(N,)`` True where the residual is below the tolerance.
+        error_m: ``(N,)`` residual distance between tip and target [m].
+        iterations: Total number of damped least-squares iterations run (all passes).
+    """
+
+    q: np.ndarray
+    success: np.ndarray
+    error_m: np.ndarray
+    iterations: int
+
+    @property
+    def success_rate(self) -> float:
+        """Fraction of targets reached, in [0, 1]."""
+        return float(np.mean(self.success)) if self.success.size else 1.0
+
+
+def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """sum_k a[k] * b[k] for (k, n) arrays (faster than einsum for small k)."""
+    out = a[0] * b[0]
+    for i in range(1, a.shape[0]):
+        out += a[i] * b[i]
+    return out
+
+
+def _dls_step(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
+    """Damped least-squares step ``dq = J^T (J J^T + lambda^2 I)^-1 e``.
+
+    ``J`` is component-major ``(3, k, n)``, ``e`` is ``(3, n)``.
+    """
+    a00 = _rowdot(J[0], J[0])
+    a11 = _rowdot(J[1], J[1])
+    a22 = _rowdot(J[2], J[2])
+    a01 = _rowdot(J[0], J[1])
+    a02 = _rowdot(J[0], J[2])
+    a12 = _rowdot(J[1], J[2])
+    lam = _LAMBDA0_SQ + _LAMBDA_ERR * err_sq
+    a00 += lam
+    a11 += lam
+    a22 += lam
+    # adjugate of the symmetric 3x3 matrix
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    x0 = (c00 * e[0] + c01 * e[1] + c02 * e[2]) / det
+    x1 = (c01 * e[0] + c11 * e[1] + c12 * e[2]) / det
+    x2 = (c02 * e[0] + c12 * e[1] + c22 * e[2]) / det
+    return J[0] * x0 + J[1] * x1 + J[2] * x2  # (k, n)
+
+
+def _iterate(
+    chain: FingerChain,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    targets: np.ndarray,
+    q: np.ndarray,
+    tol_m: float,
+    max_iter: int,
+    fast_trig: bool = False,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Run DLS on component-major ``targets`` (3,n), ``q`` (k,n); return q, err, iters.
+
+    Only the points that have not converged are carried from one iteration to the next.
+    """
+    n = q.shape[1]
+    err = np.empty(n)
+    active = np.arange(n)
+    qa = q
+    ta = targets
+    lo = lower[:, None]
+    hi = upper[:, None]
+    iters = 0
+    prev_sq = np.full(n, np.inf)
+    while True:
+        p, _, J = chain.forward_soa(qa, True, fast_trig)
+        e = ta - p
+        err_sq = _rowdot(e, e)
+        err[active] = np.sqrt(err_sq)
+        # done: converged, or stalled far from the target (an unreachable target whose
+        # error no longer drops by 0.5 % per iteration)
+        keep = (err_sq > tol_m * tol_m) & (
+            (err_sq < _STALL_SQ * prev_sq) | (err_sq < (_STALL_TOL_FACTOR * tol_m) ** 2)
+        )
+        n_keep = int(np.count_nonzero(keep))
+        if n_keep < keep.size:
+            q[:, active] = qa  # write back finished points
+            active, qa, ta = active[keep], qa[:, keep], ta[:, keep]
+            J, e, err_sq = J[:, :, keep], e[:, keep], err_sq[keep]
+        prev_sq = err_sq
+        if n_keep == 0 or iters == max_iter:
+            break
+        iters += 1
+        dq = _dls_step(J, e, err_sq)
+        blocked = ((qa <= lo) & (dq < 0)) | ((qa >= hi) & (dq > 0))
+        rows = np.flatnonzero(blocked.any(axis=0))
+        if rows.size:
+            Jb = J[:, :, rows] * ~blocked[None, :, rows]
+            dq[:, rows] = _dls_step(Jb, e[:, rows], err_sq[rows]) * ~blocked[:, rows]
+        big = np.abs(dq).max(axis=0)
+        if big.max() > _MAX_STEP:
+            dq *= np.minimum(1.0, _MAX_STEP / np.maximum(big, 1e-300))
+        qa = np.clip(qa + dq, lo, hi)
+    q[:, active] = qa
+    return q, err, iters
+
+
+def _finish(
+    chain: FingerChain,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    targets: np.ndarray,
+    q: np.ndarray,
+    tol_m: float,
+    max_iter: int,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Exact (double-precision) residuals for all points; finish those just above tol.
+
+    Points far above the tolerance after the first pass have stalled (unreachable) or
+    run out of iterations; more iterations would not help them (restarts might).
+    """
+    p, _, _ = chain.forward_soa(q, False)
+    d = targets - p
+    err = np.sqrt(_rowdot(d, d))
+    bad = np.flatnonzero((err > tol_m) & (err <= _STALL_TOL_FACTOR * tol_m))
+    iters = 0
+    if bad.size:
+        qb, eb, iters = _iterate(chain, lower, upper, targets[:, bad], q[:, bad], tol_m, max_iter)
+        q[:, bad] = qb
+        err[bad] = eb
+    return q, err, iters
+
+
+def _seeds(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Deterministic restart seeds ``(s, k)``: the box centre's neighbours and corners."""
+    k = lower.size
+    fr = np.array([0.2, 0.8])
+    grid = np.stack(np.meshgrid(*[fr] * k, indexing="ij"), -1).reshape(-1, k)
+    return lower + grid * (upper - lower)
+
+
+def solve_position_ik(
+    chain: FingerChain,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    targets_palm: np.ndarray,
+    q_init: np.ndarray,
+    *,
+    tol_m: float = 1e-5,
+    max_iter: int = 40,
+    restarts: bool = True,
+) -> IKResult:
+    """Batched damped-least-squares position IK (inputs already validated).
+
+    Prefer :meth:`regrasp_pin.model.hand.Finger.ik`, which validates its arguments.
+
+    Args:
+        chain: The finger's kinematic kernel.
+        lower: ``(k,)`` lower joint limits [rad].
+        upper: ``(k,)`` upper joint limits [rad].
+        targets_palm: ``(N, 3)`` tip-centre targets in the palm frame [m].
+        q_init: ``(N, k)`` initial guesses [rad] (clipped into the limits).
+        tol_m: Convergence tolerance on the tip position error [m].
+        max_iter: Iteration cap per pass.
+        restarts: Restart points that did not converge from deterministic seeds.
+
+    Returns:
+        An :class:`IKResult`; ``q`` is always within ``[lower, upper]``.
+    """
+    n = targets_palm.shape[0]
+    if n > _BLOCK:  # blocks small enough for the working set to stay in cache
+        parts = [
+            solve_position_ik(
+                chain,
+                lower,
+                upper,
+                targets_palm[i : i + _BLOCK],
+                q_init[i : i + _BLOCK],
+                tol_m=tol_m,
+                max_iter=max_iter,
+                restarts=restarts,
+            )
+            for i in range(0, n, _BLOCK)
+        ]
+        return IKResult(
+            q=np.concatenate([r.q for r in parts]),
+            success=np.concatenate([r.success for r in parts]),
+            error_m=np.concatenate([r.error_m for r in parts]),
+            iterations=max(r.iterations for r in parts),
+        )
+    targets = np.ascontiguousarray(targets_palm.T)
+    q = np.clip(np.ascontiguousarray(q_init.T, dtype=float), lower[:, None], upper[:, None])
+    # Inner iterations with single-precision trig to half the tolerance, then a
+    # double-precision pass that checks every point and finishes the few that need it.
+    q, _, iters = _iterate(chain, lower, upper, targets, q, 0.5 * tol_m, max_iter, True)
+    q, err, it = _finish(chain, lower, upper, targets, q, tol_m, max_iter)
+    iters += it
+    if restarts:
+        bad = np.flatnonzero(err > tol_m)
+        if bad.size:
+            # every seed for every failed point, in one batch; keep the best per point
+            seeds = _seeds(lower, upper)
+            ns = seeds.shape[0]
+            k = q.shape[0]
+            q_try = np.repeat(seeds.T[:, None, :], bad.size, axis=1).reshape(k, -1)
+            t_try = np.repeat(targets[:, bad, None], ns, axis=2).reshape(3, -1)
+            q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter, True)
+            q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
+            iters += it + it2
+            e_try = e_try.reshape(bad.size, ns)
+            best = np.argmin(e_try, axis=1)
+            rows = np.arange(bad.size)
+            e_best = e_try[rows, best]
+            better = e_best < err[bad]
+            q_best = q_try.reshape(k, bad.size, ns)[:, rows, best]
+            q[:, bad[better]] = q_best[:, better]
+            err[bad[better]] = e_best[better]
+    return IKResult(
+        q=np.ascontiguousarray(q.T), success=err <= tol_m, error_m=err, iterations=iters
+    )

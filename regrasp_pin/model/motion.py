@@ -1,0 +1,348 @@
+"""The object's motion: a time-stamped trajectory of ``T_palm_object(t)``.
+
+``T_palm_object(t)`` (4 x 4 homogeneous) maps points from the object frame (origin at
+the centre of mass) to the palm frame: ``p_palm = R(t) p_object + t(t)``. Between the
+samples the pose is interpolated: translation linearly, rotation by slerp (constant
+angular velocity about a fixed axis). This interpolation *is* the motion: a plan
+stores the samples, and any consumer that re-interpolates them gets the same poses.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation, Slerp
+
+from .._validate import as_array, positive
+from ..exceptions import InputError
+
+__all__ = ["ObjectMotion"]
+
+_ROTATION_TOL = 1e-6  # max |R^T R - I| and |det R - 1| accepted for a rotation matrix
+_TIME_SLACK_S = 1e-9  # times this close outside [t_start, t_end] are clamped to the range
+
+
+class ObjectMotion:
+    """Object poses in the palm frame at strictly increasing times.
+
+    Build one with :meth:`from_poses`, :meth:`from_xyzquat` or :meth:`constant_twist`.
+    Instances are immutable.
+
+    Attributes:
+        times_s: Sample times [s], shape (T,), strictly increasing, T >= 2.
+        T_palm_object: Sampled poses, shape (T, 4, 4).
+    """
+
+    def __init__(self, times_s: np.ndarray, rotations: Rotation, positions_m: np.ndarray) -> None:
+        """Low-level constructor; prefer :meth:`from_poses` (which validates).
+
+        Args:
+            times_s: Strictly increasing sample times [s], shape (T,).
+            rotations: ``R_palm_object`` at the samples (T rotations).
+            positions_m: Object origin in the palm frame [m], shape (T, 3).
+        """
+        self._t = np.array(times_s, dtype=float)
+        self._t.setflags(write=False)
+        self._rot = rotations
+        self._pos = np.array(positions_m, dtype=float)
+        self._pos.setflags(write=False)
+        self._slerp = Slerp(self._t, rotations)
+        mats = np.zeros((self._t.size, 4, 4))
+        mats[:, :3, :3] = rotations.as_matrix()
+        mats[:, :3, 3] = self._pos
+        mats[:, 3, 3] = 1.0
+        mats.setflags(write=False)
+        self._mats = mats
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_poses(cls, times_s: np.ndarray, T_palm_object: np.ndarray) -> ObjectMotion:
+        """A motion from sampled homogeneous poses.
+
+        Args:
+            times_s: Sample times [s], shape (T,), strictly increasing, T >= 2.
+            T_palm_object: Object poses in the palm frame, shape (T, 4, 4); each
+                rotation block must be a proper rotation (to 1e-6) and the last row
+                ``[0, 0, 0, 1]``.
+
+        Returns:
+            The motion.
+
+        Raises:
+            InputError: for NaN/inf, wrong shapes, fewer than 2 samples, times not
+                strictly increasing, or a block that is not a rotation.
+        """
+        t = _check_times(times_s)
+        mats = _check_poses(T_palm_object, "T_palm_object", t)
+        R = mats[:, :3, :3]
+        return cls(t, Rotation.from_matrix(R), mats[:, :3, 3])
+
+    @classmethod
+    def from_xyzquat(cls, times_s: np.ndarray, xyzquat: np.ndarray) -> ObjectMotion:
+        """A motion from positions and quaternions.
+
+        Args:
+            times_s: Sample times [s], shape (T,), strictly increasing, T >= 2.
+            xyzquat: Rows ``[x, y, z, qx, qy, qz, qw]`` ([m], scalar-last quaternion),
+                shape (T, 7); quaternions are normalized.
+
+        Raises:
+            InputError: for NaN/inf, wrong shapes, bad times or a zero quaternion.
+        """
+        t = _check_times(times_s)
+        xq = as_array(xyzquat, "xyzquat", (t.size, 7))
+        norm = np.linalg.norm(xq[:, 3:], axis=1)
+        if np.any(norm < 1e-9):
+            raise InputError("xyzquat", "contains a zero quaternion", "unit quaternions")
+        return cls(t, Rotation.from_quat(xq[:, 3:] / norm[:, None]), xq[:, :3])
+
+    @classmethod
+    def constant_twist(
+        cls,
+        T_palm_object_start: np.ndarray,
+        *,
+        axis_palm: np.ndarray,
+        point_palm: np.ndarray,
+        rate_rad_s: float,
+        velocity_palm_m_s: ArrayLike = (0.0, 0.0, 0.0),
+        duration_s: float,
+        dt_s: float = 0.01,
+        t_start_s: float = 0.0,
+    ) -> ObjectMotion:
+        """Rotation about a fixed palm axis through a point, plus a constant drift.
+
+        In closed form, with ``tau = t - t_start_s``, ``R_a(phi)`` the rotation by
+        ``phi`` about ``axis_palm``, ``c = point_palm`` and ``w = velocity_palm_m_s``:
+        ``R(t) = R_a(rate tau) R_0`` and ``p(t) = R_a(rate tau) (p_0 - c) + c + w tau``.
+        The samples are exact; the grid has ``ceil(duration_s / dt_s)`` equal steps
+        (each <= ``dt_s``), ends included.
+
+        Args:
+            T_palm_object_start: Pose at ``t_start_s``, shape (4, 4).
+            axis_palm: Rotation axis in the palm frame, shape (3,) (normalized here).
+            point_palm: A point of the axis in the palm frame [m], shape (3,).
+            rate_rad_s: Angular rate [rad/s] (sign by the right-hand rule about the axis).
+            velocity_palm_m_s: Constant translation velocity [m/s], shape (3,).
+            duration_s: Duration [s], > 0.
+            dt_s: Maximum sample step [s], > 0; one step must turn less than pi.
+            t_start_s: Time of the first sample [s].
+
+        Raises:
+            InputError: for NaN/inf, a zero axis, non-positive duration or step, a
+                step too long for slerp, or a bad start pose.
+        """
+        T0 = as_array(T_palm_object_start, "T_palm_object_start", (4, 4))
+        T0 = _check_poses(T0[None], "T_palm_object_start", np.zeros(1))[0]
+        axis = as_array(axis_palm, "axis_palm", (3,))
+        if np.linalg.norm(axis) < 1e-12:
+            raise InputError("axis_palm", "is zero", "a non-zero axis")
+        axis = axis / np.linalg.norm(axis)
+        c = as_array(point_palm, "point_palm", (3,))
+        w = as_array(velocity_palm_m_s, "velocity_palm_m_s", (3,))
+        rate = float(as_array(rate_rad_s, "rate_rad_s", ()))
+        duration = positive(duration_s, "duration_s")
+        dt = positive(dt_s, "dt_s")
+        t0 = float(as_array(t_start_s, "t_start_s", ()))
+        n = max(1, math.ceil(duration / dt - 1e-9))
+        if abs(rate) * duration / n >= math.pi:
+            raise InputError(
+                "dt_s",
+                f"a step of {duration / n:.4g} s turns >= pi rad",
+                f"dt_s < {math.pi / max(abs(rate), 1e-300):.4g} s",
+            )
+        tau = np.linspace(0.0, duration, n + 1)
+        R_a = Rotation.from_rotvec(np.outer(rate * tau, axis))
+        pos = R_a.apply(T0[:3, 3] - c) + c + np.outer(tau, w)
+        return cls(t0 + tau, R_a * Rotation.from_matrix(T0[:3, :3]), pos)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def times_s(self) -> np.ndarray:
+        """Sample times [s], shape (T,)."""
+        return self._t
+
+    @property
+    def T_palm_object(self) -> np.ndarray:
+        """Sampled poses, shape (T, 4, 4)."""
+        return self._mats
+
+    @property
+    def t_start(self) -> float:
+        """First sample time [s]."""
+        return float(self._t[0])
+
+    @property
+    def t_end(self) -> float:
+        """Last sample time [s]."""
+        return float(self._t[-1])
+
+    @property
+    def duration_s(self) -> float:
+        """``t_end - t_start`` [s]."""
+        return self.t_end - self.t_start
+
+    def __len__(self) -> int:
+        return int(self._t.size)
+
+    def __repr__(self) -> str:
+        return f"ObjectMotion({len(self)} samples, t=[{self.t_start:.4g}, {self.t_end:.4g}] s)"
+
+    # ------------------------------------------------------------------ evaluation
+    def pose(self, t_s: float | np.ndarray) -> np.ndarray:
+        """The interpolated pose at a time or at times: linear translation, slerped rotation.
+
+        Args:
+            t_s: A time [s] or times, shape (K,), within ``[t_start, t_end]``.
+
+        Returns:
+            ``T_palm_object``: shape (4, 4) for a scalar time, (K, 4, 4) for an array.
+
+        Raises:
+            InputError: for NaN or times outside ``[t_start, t_end]``.
+        """
+        t, scalar = self._check_query(t_s)
+        R, p = self._interpolate(t)
+        out = np.zeros((t.size, 4, 4))
+        out[:, :3, :3] = R
+        out[:, :3, 3] = p
+        out[:, 3, 3] = 1.0
+        return out[0] if scalar else out
+
+    def transform_points(self, t_s: float | np.ndarray, p_object: np.ndarray) -> np.ndarray:
+        """Points of the object frame expressed in the palm frame at time(s) ``t_s``.
+
+        Args:
+            t_s: A time [s] or times, shape (K,).
+            p_object: Points in the object frame [m], shape (N, 3).
+
+        Returns:
+            ``p_palm`` [m]: shape (N, 3) for a scalar time, (K, N, 3) for an array.
+        """
+        t, scalar = self._check_query(t_s)
+        p = as_array(p_object, "p_object", (None, 3))
+        R, pos = self._interpolate(t)
+        out = np.einsum("kij,nj->kni", R, p) + pos[:, None, :]
+        return out[0] if scalar else out
+
+    def transform_directions(self, t_s: float | np.ndarray, d_object: np.ndarray) -> np.ndarray:
+        """Directions (e.g. normals) of the object frame rotated into the palm frame.
+
+        Args:
+            t_s: A time [s] or times, shape (K,).
+            d_object: Directions in the object frame, shape (N, 3).
+
+        Returns:
+            ``d_palm``: shape (N, 3) for a scalar time, (K, N, 3) for an array.
+        """
+        t, scalar = self._check_query(t_s)
+        d = as_array(d_object, "d_object", (None, 3))
+        R, _ = self._interpolate(t)
+        out = np.einsum("kij,nj->kni", R, d)
+        return out[0] if scalar else out
+
+    def to_object(self, t_s: float | np.ndarray, p_palm: np.ndarray) -> np.ndarray:
+        """Palm-frame points expressed in the object frame (the inverse transform).
+
+        Args:
+            t_s: A time [s] or times, shape (K,).
+            p_palm: Points in the palm frame [m], shape (N, 3).
+
+        Returns:
+            ``p_object`` [m]: shape (N, 3) for a scalar time, (K, N, 3) for an array.
+        """
+        t, scalar = self._check_query(t_s)
+        p = as_array(p_palm, "p_palm", (None, 3))
+        R, pos = self._interpolate(t)
+        out = np.einsum("kji,knj->kni", R, p[None, :, :] - pos[:, None, :])
+        return out[0] if scalar else out
+
+    def as_xyzquat(self, times_s: np.ndarray | None = None) -> np.ndarray:
+        """Poses as rows ``[x, y, z, qx, qy, qz, qw]`` ([m], scalar-last quaternion).
+
+        Args:
+            times_s: Times [s], shape (K,); default the sample times.
+
+        Returns:
+            Shape (K, 7).
+        """
+        if times_s is None:
+            return np.hstack([self._pos, self._rot.as_quat()])
+        t, _ = self._check_query(np.atleast_1d(np.asarray(times_s, dtype=float)))
+        return np.hstack([self._positions(t), self._slerp(t).as_quat()])
+
+    def resample(self, dt_s: float) -> ObjectMotion:
+        """The same motion on a uniform grid of ``ceil(duration / dt_s)`` equal steps.
+
+        Args:
+            dt_s: Maximum step [s], > 0.
+
+        Returns:
+            A new motion whose samples are interpolated from this one (ends included).
+        """
+        dt = positive(dt_s, "dt_s")
+        n = max(1, math.ceil(self.duration_s / dt - 1e-9))
+        t = np.linspace(self.t_start, self.t_end, n + 1)
+        return ObjectMotion(t, self._slerp(t), self._positions(t))
+
+    # ------------------------------------------------------------------ internals
+    def _check_query(self, t_s: float | np.ndarray) -> tuple[np.ndarray, bool]:
+        arr = np.asarray(t_s, dtype=float)
+        scalar = arr.ndim == 0
+        t = as_array(np.atleast_1d(arr), "t_s", (None,))
+        lo, hi = self._t[0], self._t[-1]
+        slack = _TIME_SLACK_S * max(1.0, abs(lo), abs(hi))
+        if np.any(t < lo - slack) or np.any(t > hi + slack):
+            worst = t[np.argmax(np.maximum(lo - t, t - hi))]
+            raise InputError(
+                "t_s",
+                f"time {worst:.6g} s is outside the motion",
+                f"times in [{lo:.6g}, {hi:.6g}] s",
+            )
+        return np.clip(t, lo, hi), scalar
+
+    def _interpolate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotation matrices (K, 3, 3) and positions (K, 3) at clamped times (K,)."""
+        return self._slerp(t).as_matrix(), self._positions(t)
+
+    def _positions(self, t: np.ndarray) -> np.ndarray:
+        """Linearly interpolated positions (K, 3) at clamped times (K,)."""
+        i = np.clip(np.searchsorted(self._t, t, side="right") - 1, 0, self._t.size - 2)
+        a = ((t - self._t[i]) / (self._t[i + 1] - self._t[i]))[:, None]
+        return (1.0 - a) * self._pos[i] + a * self._pos[i + 1]
+
+
+def _check_times(times_s: np.ndarray) -> np.ndarray:
+    t = as_array(times_s, "times_s", (None,))
+    if t.size < 2:
+        raise InputError("times_s", f"has {t.size} sample(s)", "at least 2 samples")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        i = int(np.argmin(steps))
+        raise InputError(
+            "times_s",
+            f"not strictly increasing at index {i + 1} ({t[i]:.6g} s then {t[i + 1]:.6g} s)",
+            "strictly increasing times",
+        )
+    return t
+
+
+def _check_poses(value: np.ndarray, argument: str, t: np.ndarray) -> np.ndarray:
+    """Validate homogeneous poses (K, 4, 4): finite, last row [0 0 0 1], proper rotations."""
+    mats = as_array(value, argument, (t.size, 4, 4))
+    if np.any(np.abs(mats[:, 3] - [0.0, 0.0, 0.0, 1.0]) > 1e-9):
+        raise InputError(argument, "last row is not [0, 0, 0, 1]", "homogeneous poses")
+    R = mats[:, :3, :3]
+    ortho = np.max(np.abs(np.einsum("kji,kjl->kil", R, R) - np.eye(3)), axis=(1, 2))
+    det = np.linalg.det(R)
+    bad = np.nonzero((ortho > _ROTATION_TOL) | (np.abs(det - 1.0) > _ROTATION_TOL))[0]
+    if bad.size:
+        i = int(bad[0])
+        raise InputError(
+            argument,
+            f"pose {i} (t={t[i]:.6g} s) is not a rotation (|R^T R - I| = {ortho[i]:.2e}, "
+            f"det = {det[i]:.6g})",
+            "orthonormal rotation blocks with det +1",
+        )
+    return mats

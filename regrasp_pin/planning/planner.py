@@ -1,0 +1,1076 @@
+"""Whole-hand manipulation by regrasping (the paper's test, section 3).
+
+The object follows its motion ``T_palm_object(t)``. Every finger holds a contact fixed
+in the object frame and follows it by IK; when a contact comes within the trigger
+margin of a boundary plane (or stops being feasible), that finger regrasps -- lifts
+off, travels around the object and lands on a new contact Q -- while the others keep
+holding. One finger is in the air at a time.
+
+Scheduling. Triggers are taken in time order; a hold that will be lost triggers at
+least one regrasp duration before it is. A finger may lift off anywhere in its
+window (:mod:`.planning.schedule`): from when it is free (no other finger in the air)
+to the last time its contact is still held inside the joint limits. The preferred
+start is ``lead_s`` before the trigger, earlier if the next finger's trigger would
+otherwise fall inside the regrasp; other starts are tried earlier and later in turn.
+For each start the search (:mod:`.planning.search`) tries new contacts Q and durations
+until one regrasp verifies and the contact it lands on is held (followed by IK from the
+landing) at least as long as the shortest regrasp takes, or to the end. When a finger
+finds none, the planner backs up once per failure (at most ``max_backtracks`` times):
+the previous regrasp is planned again to land before this finger's window closes, or, if
+time was not the problem, to land elsewhere. Every search shares one budget
+(``budget_s``). A hold that is lost too close to the end for any regrasp, while the
+others hold in force closure to the end, is let go (:mod:`.planning.release`: a verified
+back-off; a ``release`` phase).
+A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
+finger, the time, the kind of the failure, every attempt and the partial plan up to
+that time.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..exceptions import Attempt, FailureKind, PlanningError
+from ..grasp.choice import Grasp, initial_grasp
+from ..grasp.contact import ContactModel
+from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
+from ..grasp.manifold import Manifold, build_manifold
+from ..grasp.quality import ferrari_canny_epsilon
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject, SurfaceSample
+from ..plan import ContactPhase, Plan, RegraspPhase, ReleasePhase
+from .proximity import holding_proximity
+from .regrasp import RegraspParams, RegraspResult
+from .release import Release, plan_release
+from .schedule import LiftOffWindow, held_until, lift_off_window, start_times
+from .search import Found, RegraspSearch, SearchBudget
+
+__all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation"]
+
+log = logging.getLogger(__name__)
+
+_TIME_TOL_S = 1e-9  # times closer than this are the same time
+
+
+@dataclass(frozen=True)
+class PlannerParams:
+    """Parameters of the whole-hand planner.
+
+    Attributes:
+        dt_s: Time step of the holding phases [s].
+        manifold_dt_s: Time step of the joint-space manifolds used to choose Q [s].
+        sample_spacing_m: Surface sampling spacing for the manifolds [m].
+        lead_s: A regrasp preferably starts this long before its trigger [s].
+        min_holding: Fewest fingers that must hold while one is in the air.
+        mu: Friction coefficient for force closure.
+        candidates: How many new contacts Q to try per lift-off time.
+        start_step_s: Spacing of the lift-off times tried in a finger's window [s].
+        max_starts: Most lift-off times tried per regrasp.
+        max_backtracks: Most times the planner re-plans an earlier regrasp.
+        budget_s: Wall-clock budget of the whole call [s] (manifolds and tracking
+            included); past it no new regrasp attempt starts, and the planner stops
+            with a ``budget`` failure and the partial plan.
+        exit_tolerance_s: New contacts whose exit times differ by less than this are
+            ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
+        fingers: The fingers that take part (default: all). The others stay idle at
+            the configuration of :func:`rest_configuration`, as obstacles that every
+            regrasp is verified against.
+        contact: The contact model (trigger margin, pad cone, tolerances).
+        regrasp: Parameters of each regrasp (``duration_s`` is the shortest duration;
+            longer ones follow from the joint velocity limits).
+        release: Let a finger go for the rest of the motion when its hold is lost with
+            no regrasp possible before the end, if the others hold in force closure to
+            the end (:mod:`.planning.release`).
+        release_back_off_s: Duration of a release's back-off move [s].
+    """
+
+    dt_s: float = 0.01
+    manifold_dt_s: float = 0.05
+    sample_spacing_m: float = 0.002
+    lead_s: float = 0.02
+    min_holding: int = 3
+    mu: float = 0.8
+    candidates: int = 6
+    start_step_s: float = 0.1
+    max_starts: int = 5
+    max_backtracks: int = 8
+    budget_s: float = 60.0
+    fingers: tuple[str, ...] | None = None
+    exit_tolerance_s: float = 0.25
+    contact: ContactModel = field(default_factory=ContactModel)
+    regrasp: RegraspParams = field(default_factory=RegraspParams)
+    release: bool = True
+    release_back_off_s: float = 0.1
+
+
+@dataclass
+class ManipulationPlan:
+    """The result of :func:`plan_manipulation`.
+
+    Attributes:
+        plan: The plan file content (:class:`~regrasp_pin.plan.Plan`).
+        regrasps: The verified regrasps, in time order.
+        grasp: The initial grasp.
+        manifolds: The joint-space manifolds per finger.
+        sample: The surface sample.
+        stage_s: Time spent per stage [s].
+    """
+
+    plan: Plan
+    regrasps: list[RegraspResult]
+    grasp: Grasp
+    manifolds: dict[str, Manifold]
+    sample: SurfaceSample
+    stage_s: dict[str, float]
+
+
+@dataclass(frozen=True)
+class _State:
+    """Where the plan stands: who holds what since when, and what was done."""
+
+    holding: dict[str, Holding]
+    history: dict[str, tuple[Holding, ...]]
+    phases: dict[str, tuple]
+    regrasps: tuple[RegraspResult, ...]
+    now: float  # no regrasp may start before this (one finger in the air)
+    held_to_end: dict[str, str]
+    released: dict[str, Release] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _Step:
+    """A regrasp decision that can be revisited: the state before it and its trigger."""
+
+    before: _State
+    trig: _Trigger
+    triggers: list[_Trigger]
+    Q_object: np.ndarray
+    excluded: tuple[np.ndarray, ...] = ()
+
+
+@dataclass
+class _Context:
+    hand: Hand
+    obj: ConvexObject
+    motion: ObjectMotion
+    grid: np.ndarray
+    params: PlannerParams
+    active: tuple[str, ...]
+    search: RegraspSearch
+    budget: SearchBudget
+    base_q: np.ndarray
+    tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
+    parks: dict[str, np.ndarray] = field(default_factory=dict)  # where let-go fingers go
+
+
+def plan_manipulation(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    *,
+    grasp: Grasp | None = None,
+    params: PlannerParams | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> ManipulationPlan:
+    """Plan the whole hand over the whole motion.
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        motion: The object's motion ``T_palm_object(t)``.
+        grasp: Initial grasp; found by :func:`~.contact_choice.initial_grasp` if None.
+        params: :class:`PlannerParams`.
+        progress: Called with the planned time [s] as planning advances (e.g. to
+            drive a progress bar).
+
+    Returns:
+        A :class:`ManipulationPlan`.
+
+    Raises:
+        ContactError: no initial grasp.
+        PlanningError: the motion cannot be achieved; ``kind`` says why, ``attempts``
+            holds every failed attempt of the last search and ``partial`` the plan up
+            to the failure.
+    """
+    params = params or PlannerParams()
+    budget = SearchBudget.seconds(params.budget_s)  # the whole call, manifolds included
+    active = tuple(params.fingers) if params.fingers else hand.finger_names
+    for name in active:
+        hand.finger(name)  # raises UnknownNameError listing the valid names
+    base_q = rest_configuration(
+        hand, obj, motion, [n for n in hand.finger_names if n not in active]
+    )
+    stage: dict[str, float] = {}
+    t0 = time.perf_counter()
+    sample = obj.sample_surface(params.sample_spacing_m)
+    n_m = max(int(round(motion.duration_s / params.manifold_dt_s)), 1) + 1
+    m_times = np.linspace(motion.t_start, motion.t_end, n_m)
+    manifolds = {
+        name: build_manifold(hand.fingers[name], sample, motion, m_times, contact=params.contact)
+        for name in active
+    }
+    stage["manifolds"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if grasp is None:
+        grasp = initial_grasp(hand, obj, manifolds, sample, contact=params.contact, mu=params.mu)
+    stage["initial grasp"] = time.perf_counter() - t0
+
+    grid = _time_grid(motion, params.dt_s)
+    t0 = time.perf_counter()
+    holding = {
+        name: start_holding(
+            hand,
+            obj,
+            motion,
+            grid,
+            name,
+            grasp.points_object[name],
+            grasp.normals_object[name],
+            grasp.q[name],
+            motion.t_start,
+            params.contact,
+        )
+        for name in active
+    }
+    stage["tracking"] = time.perf_counter() - t0
+    search = RegraspSearch(
+        hand,
+        obj,
+        motion,
+        manifolds,
+        sample,
+        regrasp=params.regrasp,
+        contact=params.contact,
+        mu=params.mu,
+        dt_s=params.dt_s,
+        candidates=params.candidates,
+        exit_tolerance_s=params.exit_tolerance_s,
+    )
+    ctx = _Context(
+        hand,
+        obj,
+        motion,
+        grid,
+        params,
+        active,
+        search,
+        budget,
+        base_q,
+    )
+    state = _State(
+        holding=holding,
+        history={n: () for n in active},
+        phases={n: () for n in active},
+        regrasps=(),
+        now=motion.t_start,
+        held_to_end={},
+    )
+    t0 = time.perf_counter()
+    steps: list[_Step] = []
+    backtracks = 0
+    while True:
+        triggers = _triggers(ctx, state)
+        contenders = _contenders(triggers, ctx)
+        if not contenders:
+            break
+        trig = contenders[0]
+        try:
+            state = _advance(ctx, state, trig, triggers, steps)
+        except PlanningError as exc:
+            redone = None
+            if backtracks < params.max_backtracks:
+                backtracks += 1
+                redone = _another_first(ctx, state, contenders, triggers, steps)
+                if redone is None and steps:
+                    redone = _backtrack(ctx, steps, exc, state, trig)
+            if redone is None:
+                stage["regrasps"] = time.perf_counter() - t0
+                when = exc.time_s if exc.time_s is not None else trig.time_s
+                until = min(max(min(when, trig.time_s), state.now), motion.t_end)
+                raise PlanningError(
+                    exc.reason,
+                    finger=exc.finger or trig.finger,
+                    time_s=when,
+                    partial=_plan_until(ctx, state, until),
+                    kind=exc.kind,
+                    measured=exc.measured,
+                    required=exc.required,
+                    attempts=exc.attempts,
+                ) from exc
+            state = redone
+        if progress is not None:
+            progress(state.now)
+    stage["regrasps"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    plan = _plan_until(ctx, state, motion.t_end, final=True)
+    stage["assembly"] = time.perf_counter() - t0
+    plan.summary.update(
+        {
+            "regrasps": len(state.regrasps),
+            "fingers_regrasped": sorted({r.finger for r in state.regrasps}),
+            "initial_epsilon": grasp.epsilon,
+            "held_to_end": dict(state.held_to_end),
+            "released": {n: r.t_start for n, r in state.released.items()},
+            "backtracks": backtracks,
+            "stage_s": stage,
+        }
+    )
+    return ManipulationPlan(plan, list(state.regrasps), grasp, manifolds, sample, stage)
+
+
+def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:
+    grid = np.arange(motion.t_start, motion.t_end + _TIME_TOL_S, dt_s)
+    if grid[-1] < motion.t_end - _TIME_TOL_S:
+        grid = np.append(grid, motion.t_end)
+    grid[-1] = min(grid[-1], motion.t_end)
+    return grid
+
+
+@dataclass(frozen=True)
+class _Trigger:
+    """A finger that must let go: when, why, and until when it can still hold [s]
+    (``lost_near``: the finger whose approach ends the hold, if that is what ends it)."""
+
+    time_s: float
+    finger: str
+    reason: str
+    lost_s: float
+    lost_near: str | None = None
+
+
+def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[_Trigger]:
+    """The pending triggers, earliest first (ties by name): a contact near its joint
+    limits (or infeasible), or a holding finger near another finger (holding, idle,
+    or let go and still; ``gone``: fingers that are neither, e.g. one about to let go)."""
+    p = ctx.params
+    times = ctx.grid[ctx.grid >= state.now - _TIME_TOL_S]
+    base = ctx.base_q.copy()
+    for n, rel in state.released.items():  # where a finger that let go stays
+        base[ctx.hand.fingers[n].q_indices] = rel.q[-1]
+    prox = holding_proximity(
+        ctx.hand,
+        state.holding,
+        times,
+        base,
+        trigger_m=p.contact.finger_trigger_m,
+        lost_m=p.regrasp.finger_clearance_m,
+        still=[n for n in ctx.hand.finger_names if n not in state.holding and n not in gone],
+    )
+    out = []
+    for name, h in state.holding.items():
+        if name in state.held_to_end:
+            continue
+        t, why = h.track.trigger()
+        lost = held_until(h.track, p.contact)
+        loss = _loss_reason(h, lost)
+        near = prox.get(name)
+        lost_near = None
+        if near is not None:
+            if near.lost_s - p.dt_s < lost:
+                lost, loss, lost_near = near.lost_s - p.dt_s, near.reason, near.other
+            if t is None or near.trigger_s < t:
+                t, why = near.trigger_s, near.reason
+        # a hold that will be lost triggers at least one regrasp (and the lead) before:
+        # a margin that closes fast (a link nearing the object) leaves no time otherwise
+        due = lost - p.regrasp.duration_s - p.lead_s
+        if lost < ctx.motion.t_end - p.dt_s - _TIME_TOL_S and (t is None or due < t):
+            t = max(due, state.now, h.t_from)
+            why = f"its hold is lost after t={lost:.3f} s ({loss})"
+        if t is not None:
+            out.append(_Trigger(t, name, why, lost, lost_near))
+    return sorted(out, key=lambda e: (round(e.time_s, 9), e.finger))
+
+
+def _loss_reason(h: Holding, lost_s: float) -> str:
+    """Why the hold ends right after ``lost_s`` [s] (the track's reason there)."""
+    k = int(np.searchsorted(h.track.times_s, lost_s + _TIME_TOL_S))
+    reasons = h.track.reasons
+    return reasons[min(k, len(reasons) - 1)] or "it leaves the joint limits"
+
+
+def _contenders(triggers: list[_Trigger], ctx: _Context) -> list[_Trigger]:
+    """The fingers that may regrasp next, the first to go first: earliest deadline first.
+
+    Among the fingers whose triggers fall within one regrasp (plus the lead) of the
+    first trigger -- they cannot all wait for each other -- the one whose hold is
+    lost first goes first (ties: the earlier trigger, then the name).
+    """
+    if not triggers:
+        return []
+    p = ctx.params
+    horizon = triggers[0].time_s + p.regrasp.duration_s + p.lead_s
+    contenders = [e for e in triggers if e.time_s <= horizon + _TIME_TOL_S]
+    return sorted(contenders, key=lambda e: (round(e.lost_s, 9), round(e.time_s, 9), e.finger))
+
+
+def _window(
+    ctx: _Context, state: _State, trig: _Trigger, triggers: list[_Trigger]
+) -> tuple[LiftOffWindow, str]:
+    """The finger's lift-off window, with its preferred start and why."""
+    p = ctx.params
+    name, t_trig = trig.finger, trig.time_s
+    h = state.holding[name]
+    D = p.regrasp.duration_s
+    win = lift_off_window(
+        name,
+        h.track,
+        t_trig,
+        earliest_s=max(state.now, h.t_from),
+        lead_s=p.lead_s,
+        contact=p.contact,
+        lost_s=trig.lost_s,
+    )
+    why = f"at t={t_trig:.3f} s; lift-off {p.lead_s:.3f} s before"
+    others = [e for e in triggers if e.finger != name]
+    if others:
+        t_next, next_name = others[0].time_s, others[0].finger
+        if t_next - p.lead_s < win.preferred_s + D:
+            preferred = max(t_next - p.lead_s - D, win.earliest_s)
+            win = replace(win, preferred_s=min(preferred, win.latest_s))
+            why += f", moved earlier so that {next_name} (trigger t={t_next:.3f} s) can follow"
+    return win, why
+
+
+def _advance(
+    ctx: _Context,
+    state: _State,
+    trig: _Trigger,
+    triggers: list[_Trigger],
+    steps: list[_Step],
+    *,
+    end_by_s: float | None = None,
+    exclude: list[np.ndarray] | None = None,
+) -> _State:
+    """The state after ``trig``: its finger held to the end, or one verified regrasp."""
+    p, motion = ctx.params, ctx.motion
+    D = p.regrasp.duration_s
+    name, t_trig, reason = trig.finger, trig.time_s, trig.reason
+    h = state.holding[name]
+    win, why = _window(ctx, state, trig, triggers)
+    why = f"{reason} {why}"
+    if (
+        win.preferred_s + D > motion.t_end
+        and trig.lost_s >= motion.t_end - p.dt_s - _TIME_TOL_S
+        and holds_to_end(h.track, t_trig, p.contact)
+    ):
+        # too late to regrasp, but the contact stays inside the joint limits (within the
+        # trigger margin only) and feasible until the motion ends: keep holding
+        note = (
+            f"{reason} at t={t_trig:.3f} s, too late for a regrasp; held to the end "
+            "inside the joint limits"
+        )
+        log.info("%s: %s", name, note)
+        return replace(state, held_to_end={**state.held_to_end, name: note})
+    _refuse_dead_end(ctx, state, trig, triggers, win)
+    stay = _fingers_that_stay(ctx, state, trig, win)
+    end_by = motion.t_end if end_by_s is None else end_by_s
+    starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
+    if not starts:
+        busy = win.empty
+        released = None if busy else _try_release(ctx, state, trig, win, stay, why)
+        if released is not None:
+            return released
+        raise PlanningError(
+            f"{reason} at t={t_trig:.3f} s, "
+            + (
+                f"while another finger is in the air until t={state.now:.3f} s and the "
+                f"contact is lost at t={win.latest_s:.3f} s"
+                if busy
+                else f"but a regrasp ({D:.2f} s) would not land by t={end_by:.3f} s"
+            ),
+            finger=name,
+            time_s=t_trig,
+            kind=FailureKind.FINGER_BUSY if busy else FailureKind.TOO_LATE,
+            measured=state.now if busy else win.earliest_s + D,
+            required=win.latest_s if busy else end_by,
+        )
+    others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
+    landed: dict[int, Holding] = {}  # id(verified regrasp) -> the hold after it
+
+    def search(starts: list[float], end_by: float | None) -> Found:
+        return ctx.search.find(
+            name,
+            (h.p, h.n),
+            starts,
+            lambda t: holding_q(ctx.hand, motion, name, h, np.array([t]), p.contact.ik_tol_m)[0],
+            others,
+            _q_hand(ctx, state, stay),
+            ctx.budget,
+            end_by_s=end_by,
+            exclude=exclude,
+            landing_check=lambda res: _check_landing(ctx, name, res, landed),
+        )
+
+    found = None
+    nxt = _next_deadline(ctx, triggers, trig, win) if end_by_s is None else None
+    if nxt is not None:
+        # first, land before the next finger's hold is lost (earliest deadline first)
+        deadline, other = nxt
+        early = start_times(
+            win, latest_s=deadline - D, step_s=p.start_step_s, max_starts=p.max_starts
+        )
+        if not early:
+            raise PlanningError(
+                f"{reason} at t={t_trig:.3f} s, but no regrasp ({D:.2f} s) can land "
+                f"before {other}'s hold is lost at t={deadline:.3f} s",
+                finger=name,
+                time_s=t_trig,
+                kind=FailureKind.FINGER_BUSY,
+                measured=win.earliest_s + D,
+                required=deadline,
+            )
+        # landing later would leave the other finger no time: a dead end, not a plan
+        found = search(early, deadline)
+        why += f"; lands by t={deadline:.3f} s, before {other}'s hold is lost"
+    if found is None:
+        try:
+            found = search(starts, end_by_s)
+        except PlanningError:
+            released = _try_release(ctx, state, trig, win, stay, why)
+            if released is None:
+                raise
+            return released
+    if abs(found.result.t_start - starts[0]) > _TIME_TOL_S:
+        why += (
+            f"; lifted off at t={found.result.t_start:.3f} s: "
+            "no verified regrasp at the start times tried before"
+        )
+    steps.append(_Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
+    return _apply(ctx, state, name, t_trig, why, found, landed.get(id(found.result)))
+
+
+def _fingers_that_stay(
+    ctx: _Context, state: _State, trig: _Trigger, win: LiftOffWindow
+) -> list[str]:
+    """The fingers that hold while ``trig.finger`` is in the air; PlanningError if they
+    are fewer than ``min_holding`` or not in force closure without it."""
+    p, name = ctx.params, trig.finger
+    stay = [n for n in ctx.active if n != name and n in state.holding]
+    if len(stay) < p.min_holding:
+        raise PlanningError(
+            f"only {len(stay)} fingers would hold (need {p.min_holding})",
+            finger=name,
+            time_s=win.preferred_s,
+            kind=FailureKind.TOO_FEW_FINGERS,
+            measured=len(stay),
+            required=p.min_holding,
+        )
+    p_stay = np.array([state.holding[n].p for n in stay])
+    n_stay = np.array([state.holding[n].n for n in stay])
+    eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=ctx.obj.radius_m)
+    if eps_stay <= 0.0:
+        raise PlanningError(
+            f"{trig.reason} at t={trig.time_s:.3f} s, but without it the other fingers are "
+            "not in force closure",
+            finger=name,
+            time_s=win.preferred_s,
+            kind=FailureKind.FORCE_CLOSURE,
+            measured=eps_stay,
+            required=0.0,
+        )
+    return stay
+
+
+def _check_landing(
+    ctx: _Context, name: str, res: RegraspResult, landed: dict[int, Holding]
+) -> Attempt | None:
+    """Follow the contact a verified regrasp lands on (kept in ``landed``); a
+    ``short-hold`` attempt if it is lost sooner after landing than the shortest regrasp
+    takes (no other finger could take its turn before this one must go again), unless
+    it is held to the end of the motion."""
+    p = ctx.params
+    hold = _landing_hold(ctx, name, res)
+    landed[id(res)] = hold
+    lost = held_until(hold.track, p.contact)
+    need = min(res.t_end + p.regrasp.duration_s, ctx.motion.t_end - p.dt_s)
+    if lost >= need - _TIME_TOL_S:
+        return None
+    return Attempt(
+        FailureKind.SHORT_HOLD,
+        name,
+        res.t_start,
+        measured=lost - res.t_end,
+        required=need - res.t_end,
+        what=(
+            f"start {res.t_start:.2f} s, Q={np.round(res.Q_object, 4).tolist()}: "
+            f"held {lost - res.t_end:.2f} s after landing ({_loss_reason(hold, lost)})"
+        ),
+    )
+
+
+def _landing_hold(ctx: _Context, name: str, res: RegraspResult) -> Holding:
+    """The hold that follows a regrasp's landing."""
+    return start_holding(
+        ctx.hand,
+        ctx.obj,
+        ctx.motion,
+        ctx.grid,
+        name,
+        res.Q_object,
+        res.n_Q_object,
+        res.q[-1],
+        res.t_end,
+        ctx.params.contact,
+    )
+
+
+def _refuse_dead_end(
+    ctx: _Context, state: _State, trig: _Trigger, triggers: list[_Trigger], win: LiftOffWindow
+) -> None:
+    """Raise ``finger-busy`` if another finger's hold is lost before ``trig.finger``
+    could land (and not because ``trig.finger`` comes near it): whatever this regrasp
+    does, that finger would lose its hold while this one is in the air."""
+    p, name = ctx.params, trig.finger
+    land = win.earliest_s + p.regrasp.duration_s
+    end = ctx.motion.t_end - p.dt_s
+    lost = [
+        e
+        for e in triggers
+        if e.finger != name
+        and e.finger in state.holding
+        and e.finger not in state.held_to_end
+        and e.lost_near != name
+        and e.lost_s < min(land, end) - _TIME_TOL_S
+    ]
+    if lost:
+        first = min(lost, key=lambda e: (round(e.lost_s, 9), e.finger))
+        raise PlanningError(
+            f"{first.finger}'s hold is lost at t={first.lost_s:.3f} s, before a regrasp "
+            f"of {name} could land (t={land:.3f} s)",
+            finger=name,
+            time_s=trig.time_s,
+            kind=FailureKind.FINGER_BUSY,
+            measured=land,
+            required=first.lost_s,
+        )
+
+
+def _try_release(
+    ctx: _Context,
+    state: _State,
+    trig: _Trigger,
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> _State | None:
+    """The state after ``trig.finger`` lets go for the rest of the motion, or None.
+
+    Only when releases are allowed, the hold is lost before the end, and every finger
+    that stays holds to the end (no regrasp can follow: it would leave too few) once
+    this one has gone (a neighbour it was closing in on no longer ends their hold). The
+    release times tried are the latest in the window first, then earlier ones.
+    """
+    p, motion = ctx.params, ctx.motion
+    name = trig.finger
+    end = motion.t_end - p.dt_s - _TIME_TOL_S
+    if not p.release or win.empty or trig.lost_s >= end:
+        return None
+    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
+    if any(
+        e.lost_s < end
+        for e in _triggers(ctx, without, gone=(name,))
+        if e.finger in stay and e.finger not in state.held_to_end
+    ):
+        return None
+    h = state.holding[name]
+    q_hand = _q_hand(ctx, state, stay)
+    tried: list[str] = []
+    for k in range(p.max_starts):
+        t_r = win.latest_s - k * p.start_step_s
+        if t_r < win.earliest_s - _TIME_TOL_S or ctx.budget.exhausted:
+            break
+        t_r = max(t_r, win.earliest_s)
+        q_r = holding_q(ctx.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
+        for park in (None, _park(ctx, name)):
+            rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
+            if rel is not None:
+                log.info("%s lets go at t=%.3f s", name, t_r)
+                note = (
+                    f"{why}; no regrasp can land before the end: let go (the others hold "
+                    "to the end)"
+                )
+                return _apply_release(state, name, rel, note)
+    log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
+    return None
+
+
+def _park(ctx: _Context, name: str) -> np.ndarray:
+    """Where ``name`` goes after letting go: its posture clearest of the object over the
+    motion (:func:`~.holding.rest_configuration`), computed once."""
+    if name not in ctx.parks:
+        q = rest_configuration(ctx.hand, ctx.obj, ctx.motion, [name])
+        ctx.parks[name] = q[ctx.hand.fingers[name].q_indices]
+    return ctx.parks[name]
+
+
+def _release_at(
+    ctx: _Context,
+    state: _State,
+    name: str,
+    t_r: float,
+    q_r: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    park: np.ndarray | None,
+    tried: list[str],
+) -> Release | None:
+    """A verified release of ``name`` at ``t_r`` (``park``: see plan_release), or None
+    (the failure noted in ``tried``)."""
+    p, h = ctx.params, state.holding[name]
+    try:
+        return plan_release(
+            ctx.hand,
+            ctx.obj,
+            ctx.motion,
+            name,
+            t_r,
+            (h.p, h.n),
+            q_r,
+            q_hand,
+            clearance_m=p.regrasp.clearance_m,
+            back_off_s=p.release_back_off_s,
+            dt_s=p.dt_s,
+            link_clearance_m=p.regrasp.link_clearance_m,
+            finger_clearance_m=p.regrasp.finger_clearance_m,
+            ik_tol_m=p.contact.ik_tol_m,
+            q_park=park,
+            park_s=p.regrasp.duration_s,
+        )
+    except PlanningError as exc:
+        tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {exc.kind.value}")
+        return None
+
+
+def _apply_release(state: _State, name: str, rel: Release, why: str) -> _State:
+    """The state after a verified release of ``name``."""
+    off = ReleasePhase(
+        finger=name,
+        t_start=rel.t_start,
+        t_end=rel.t_end,
+        P_object=rel.P_object,
+        min_clearance_m=rel.min_clearance_m,
+        reason=why,
+    )
+    return replace(
+        _hold_ends(state, name, rel.t_start, off),
+        holding={n: x for n, x in state.holding.items() if n != name},
+        now=max(state.now, rel.t_start),
+        released={**state.released, name: rel},
+    )
+
+
+def _hold_ends(state: _State, name: str, t_s: float, phase: RegraspPhase | ReleasePhase) -> _State:
+    """``state`` with ``name``'s current hold ended at ``t_s`` [s] and ``phase`` after it
+    (who holds what, and the time, are the caller's to change)."""
+    h = state.holding[name]
+    hold = ContactPhase(finger=name, t_start=h.t_from, t_end=t_s, p_object=h.p, n_object=h.n)
+    return replace(
+        state,
+        history={**state.history, name: (*state.history[name], replace(h, t_to=t_s))},
+        phases={**state.phases, name: (*state.phases[name], hold, phase)},
+    )
+
+
+def _next_deadline(
+    ctx: _Context, triggers: list[_Trigger], trig: _Trigger, win: LiftOffWindow
+) -> tuple[float, str] | None:
+    """When the next finger's hold is lost, if that falls within two regrasps of this
+    finger's preferred start (and after one regrasp from its earliest): the time this
+    regrasp should have landed by, and that finger."""
+    p = ctx.params
+    D = p.regrasp.duration_s
+    soon = [
+        (e.lost_s, e.finger)
+        for e in triggers
+        if e.finger != trig.finger
+        and e.lost_s < ctx.motion.t_end - _TIME_TOL_S
+        and e.lost_s <= win.preferred_s + 2 * D + p.lead_s
+        and e.lost_s >= win.earliest_s + D + _TIME_TOL_S
+    ]
+    return min(soon) if soon else None
+
+
+def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarray], np.ndarray]:
+    """Hand configurations over time with the ``stay`` fingers holding (exact IK)."""
+    hand, motion, tol, base_q = ctx.hand, ctx.motion, ctx.params.contact.ik_tol_m, ctx.base_q
+
+    def q_hand(times: np.ndarray) -> np.ndarray:
+        q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
+        for n in stay:
+            q[:, hand.fingers[n].q_indices] = holding_q(
+                hand, motion, n, state.holding[n], times, tol
+            )
+        for n, rel in state.released.items():  # let go: still, after the back-off
+            idx = hand.fingers[n].q_indices
+            for j in range(idx.size):
+                q[:, idx[j]] = np.interp(times, rel.times_s, rel.q[:, j])
+        return q
+
+    return q_hand
+
+
+def _apply(
+    ctx: _Context,
+    state: _State,
+    name: str,
+    t_trig: float,
+    why: str,
+    found: Found,
+    new_hold: Holding | None = None,
+) -> _State:
+    """The state after a verified regrasp of ``name`` (``new_hold``: the hold after its
+    landing, if already followed)."""
+    res, choice = found.result, found.choice
+    fly = RegraspPhase(
+        finger=name,
+        t_start=res.t_start,
+        t_end=res.t_end,
+        P_object=res.P_object,
+        Q_object=res.Q_object,
+        waypoints_object=res.waypoints_object,
+        min_clearance_m=res.min_clearance_m,
+        planning_ms=res.planning_ms,
+        reason=why,
+        extra={
+            "n_P_object": res.n_P_object.tolist(),
+            "n_Q_object": res.n_Q_object.tolist(),
+            "trigger_time_s": t_trig,
+            "waypoint_times_s": res.waypoint_times_s.tolist(),
+            "grid_path_object": res.grid_path.points_object.tolist(),
+            "tip_path_object": res.tip_path.points_object[
+                :: max(1, len(res.tip_path) // 200)
+            ].tolist(),
+            "path_length_m": res.path_length_m,
+            "m": int(res.waypoints_object.shape[0]),
+            "q_exit_time_s": choice.exit_time_s,
+            "quality_kept": choice.quality_kept,
+            "epsilon": choice.epsilon,
+            "stage_ms": res.stage_ms,
+            "attempts": [a.to_dict() for a in (*found.attempts, *res.attempts)],
+        },
+    )
+    if new_hold is None:
+        new_hold = _landing_hold(ctx, name, res)
+    log.info("%s regrasped at t=%.3f s (%s)", name, res.t_start, why)
+    return replace(
+        _hold_ends(state, name, res.t_start, fly),
+        holding={**state.holding, name: new_hold},
+        regrasps=(*state.regrasps, res),
+        now=res.t_end,
+    )
+
+
+def _signature(state: _State) -> tuple:
+    """What identifies a state for the backtracking: who holds what since when."""
+    return (
+        round(state.now, 9),
+        tuple(
+            (n, round(h.t_from, 9), tuple(np.round(h.p, 6)))
+            for n, h in sorted(state.holding.items())
+        ),
+        tuple(sorted(state.held_to_end)),
+        tuple(sorted(state.released)),
+    )
+
+
+def _another_first(
+    ctx: _Context,
+    state: _State,
+    contenders: list[_Trigger],
+    triggers: list[_Trigger],
+    steps: list[_Step],
+) -> _State | None:
+    """When the first contender finds no regrasp, let another contender go first
+    (e.g. the other finger of two that close in on each other); None if none can."""
+    for alt in contenders[1:]:
+        key = (_signature(state), f"{alt.finger} first")
+        if key in ctx.tried or ctx.budget.exhausted:
+            continue
+        ctx.tried.add(key)
+        log.info("%s failed: %s regrasps first", contenders[0].finger, alt.finger)
+        trial = list(steps)
+        try:
+            new_state = _advance(ctx, state, alt, triggers, trial)
+        except PlanningError:
+            continue
+        steps[:] = trial
+        return new_state
+    return None
+
+
+_BACKTRACK_DEPTH = 3  # how many earlier regrasps a failure may revisit
+
+
+def _backtrack(
+    ctx: _Context,
+    steps: list[_Step],
+    failure: PlanningError,
+    state: _State,
+    trig: _Trigger,
+) -> _State | None:
+    """Change an earlier decision so that ``trig.finger`` can go; None if none helps.
+
+    The last regrasps are revisited, the latest first (at most ``_BACKTRACK_DEPTH``).
+    If the finger ran out of time (its window closed, or no regrasp landed in time),
+    it regrasps early, before that regrasp; or that regrasp lands one regrasp before
+    the finger's hold is lost. Otherwise that regrasp lands elsewhere than it did.
+    On success the steps after the revisited one are dropped (they are planned again).
+    """
+    timing = failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE)
+    D = ctx.params.regrasp.duration_s
+    h_now = state.holding[trig.finger]
+    for depth in range(1, min(_BACKTRACK_DEPTH, len(steps)) + 1):
+        step = steps[-depth]
+        kept = steps[: len(steps) - depth]
+        options: list[tuple[str, _Trigger, dict]] = []
+        h_then = step.before.holding.get(trig.finger)
+        if (
+            timing
+            and step.trig.finger != trig.finger
+            and h_then is not None
+            and (h_then.t_from == h_now.t_from)
+        ):
+            early = replace(
+                trig,
+                time_s=max(step.before.now, h_then.t_from),
+                reason=f"{trig.reason} at t={trig.time_s:.3f} s (early: no time left after "
+                f"{step.trig.finger}'s regrasp)",
+            )
+            options.append((f"{trig.finger} before {step.trig.finger}", early, {}))
+        if timing:
+            end_by = trig.lost_s - D
+            if end_by > step.before.now + D + _TIME_TOL_S:
+                options.append(
+                    (
+                        f"{step.trig.finger} lands by t={end_by:.3f} s",
+                        step.trig,
+                        {"end_by_s": end_by},
+                    )
+                )
+        else:
+            exclude = [*step.excluded, step.Q_object]
+            options.append((f"{step.trig.finger} lands elsewhere", step.trig, {"exclude": exclude}))
+        for what, t_alt, kw in options:
+            if ctx.budget.exhausted:
+                return None
+            key = (_signature(step.before), what)
+            if key in ctx.tried:
+                continue  # a retry that repeats what already failed is not a search
+            ctx.tried.add(key)
+            log.info("%s failed (%s): %s", trig.finger, failure.kind.value, what)
+            trial = list(kept)
+            try:
+                new_state = _advance(ctx, step.before, t_alt, step.triggers, trial, **kw)
+            except PlanningError:
+                continue
+            steps[:] = trial
+            return new_state
+    return None
+
+
+def _plan_until(ctx: _Context, state: _State, until: float, *, final: bool = False) -> Plan:
+    """The plan up to ``until``: every finger holding its current contact to then (the
+    whole plan with ``final``, which keeps a hold that starts at the very end)."""
+    phases = {n: list(state.phases[n]) for n in state.released}
+    for n, h in state.holding.items():
+        hold = ContactPhase(finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n)
+        phases[n] = [*state.phases[n], *([hold] if final or h.t_from < until else [])]
+    return _assemble(
+        ctx.hand,
+        ctx.obj,
+        ctx.motion,
+        ctx.grid,
+        state.history,
+        state.holding,
+        phases,
+        [*state.regrasps, *state.released.values()],
+        until=until,
+        params=ctx.params,
+        base_q=ctx.base_q,
+    )
+
+
+def _assemble(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    grid: np.ndarray,
+    history: dict[str, tuple[Holding, ...]],
+    holding: dict[str, Holding],
+    phases: dict[str, list],
+    regrasps: list[RegraspResult | Release],
+    *,
+    until: float,
+    params: PlannerParams,
+    base_q: np.ndarray,
+) -> Plan:
+    """Sample the whole hand: grid times outside the regrasps (and releases), their own
+    samples inside them (so linear interpolation between samples is what was verified).
+
+    Holding fingers are placed by exact IK on their contact at every sample (warm from
+    their track), which is exactly what the regrasp verification used for them.
+    """
+    keep = np.ones(grid.size, bool)
+    for r in regrasps:
+        keep &= ~((grid > r.t_start - 1e-9) & (grid < r.t_end + 1e-9))
+    times = np.unique(np.round(np.concatenate([grid[keep]] + [r.times_s for r in regrasps]), 9))
+    times = times[times <= until + 1e-9]
+    if times.size < 2:
+        times = np.array([motion.t_start, max(until, motion.t_start + params.dt_s)])
+    q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
+    for name in history:
+        f = hand.fingers[name]
+        in_air = np.zeros(times.size, bool)
+        for r in regrasps:
+            if r.finger == name:
+                sel = (times >= r.t_start - 1e-9) & (times <= r.t_end + 1e-9)
+                for j in range(f.k):
+                    q[sel, f.q_indices[j]] = np.interp(times[sel], r.times_s, r.q[:, j])
+                in_air |= sel
+        for h in [*history[name], *([holding[name]] if name in holding else [])]:
+            b = h.t_to if h.t_to is not None else until
+            sel = (times >= h.t_from - 1e-9) & (times <= b + 1e-9) & ~in_air
+            if sel.any():
+                q[np.ix_(np.flatnonzero(sel), f.q_indices)] = holding_q(
+                    hand, motion, name, h, times[sel], params.contact.ik_tol_m
+                )
+    hand_dict = {
+        "name": hand.name,
+        "urdf": _urdf_entry(hand),
+        "fingers": {
+            n: {"tip_frame": f.tip_frame, "tip_radius": f.tip_radius, "joints": list(f.joint_names)}
+            for n, f in hand.fingers.items()
+        },
+    }
+    verts, faces = obj.mesh()
+    obj_dict = {
+        "kind": obj.kind,
+        "params": obj.params,
+        "vertices": np.asarray(verts).tolist(),
+        "faces": np.asarray(faces).tolist(),
+    }
+    return Plan(
+        hand=hand_dict,
+        object=obj_dict,
+        t=times,
+        q=q,
+        T_palm_object=motion.as_xyzquat(times),
+        phases={n: list(ps) for n, ps in phases.items()},
+        summary={},
+    )
+
+
+def _urdf_entry(hand: Hand) -> str:
+    from ..plan import repo_root
+
+    path = hand.urdf_path.resolve()
+    try:
+        return str(path.relative_to(repo_root()))
+    except ValueError:
+        return str(path)

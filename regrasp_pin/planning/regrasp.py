@@ -1,0 +1,655 @@
+"""One verified regrasp: inflated surface, grid path, Hopfield waypoints, joint trajectory.
+
+Sections 2.1-2.3 of the paper. The finger lets go of P at ``t_start`` and lands on Q
+at ``t_start + duration`` while the object keeps moving:
+
+1. In the object frame, the surface region holding P and Q is unfolded into a plane
+   and gridded (:mod:`.surface_grid`); grid nodes cost more where the finger's IK, at
+   the time the tip would pass over them, comes near a boundary plane, and nodes
+   under another fingertip are forbidden. The cheapest grid path (Dijkstra,
+   :mod:`.surface_path`) is lifted onto the virtually inflated surface
+   (:mod:`.inflation`): the fingertip-centre curve.
+2. The competitive Hopfield network reduces that curve to m waypoints (Eqs. 5-10).
+3. The waypoints are joined by a shape-preserving C1 curve (PCHIP, no overshoot)
+   traversed with a minimum-jerk timing, so the tip leaves P and reaches Q at rest
+   relative to the object; waypoint i is passed at time t_i, in step with the
+   object's motion (section 2.3). Each sample is moved to the palm frame with
+   ``T_palm_object(t)`` and turned into joint angles by warm-started batched IK.
+4. Coal checks the whole trajectory densely (:mod:`.verify`): the finger against the
+   object (no penetration; at least ``clearance_m`` away from the lift-off and
+   landing zones) and against the other fingers, which keep holding and move with
+   the object; joint limits and velocity limits are checked too.
+
+A failed candidate is changed by what failed (its :class:`~.exceptions.FailureKind`):
+a curve that cuts into the clearance gets more waypoints, then more inflation; a finger
+that comes near another finger keeps a wider gap from it on the grid (and a grid with
+no route keeps a narrower one); a finger near its joint limits is rerouted more
+strongly. A failure that only another duration can fix (velocity) ends the variants at
+once, for the caller
+(:mod:`.planning.search`). It never returns a path that has not passed the check;
+when nothing passes it raises :class:`~.exceptions.PlanningError` (or
+:class:`~.exceptions.VerificationError`) with the finger, the time, the kind of the
+failure, its numbers and every attempt.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from .._validate import as_array, positive
+from ..exceptions import Attempt, FailureKind, InputError, PlanningError, VerificationError
+from ..grasp.contact import LinkClearance
+from ..model.distances import capsule_gap
+from ..model.hand import Finger, Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject
+from ..polygon.approximate import PolygonResult, approximate_polygon
+from ..surface.grid import SurfaceGrid, build_surface_grid
+from ..surface.inflation import TipPath, grid_inflation, inflate_path
+from ..surface.path import GridPath, shortest_grid_path
+from ..verify.finger_motion import VerificationReport, verify_finger_motion
+from .timing import inverse_minimum_jerk, minimum_jerk
+
+__all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
+
+log = logging.getLogger(__name__)
+
+_UNREACHABLE_COST = 20.0  # node cost where IK cannot reach the inflated point
+_PENETRATION_TOL_M = 5e-5  # the verifier's tolerance, applied to the planned curve too
+_FINGER_GAP_M = 0.004  # grid nodes whose finger comes closer than this to another cost more
+_FINGER_COST = 10.0  # cost per unit of (gap deficit / _FINGER_GAP_M)
+_FINGER_GAP_SLACK_M = 0.001  # forbidden-gap threshold below the gap that P and Q have
+_OTHERS_TIMES = 21  # the other fingers are placed at this many times over the regrasp
+_MAX_LIMIT_WEIGHT_FACTOR = 16.0  # the joint-limit weight grows up to this x its start
+_MAX_INFLATION_FACTOR = 2.25  # the inflation grows up to this x its start
+_MAX_FINGER_GAP_M = 0.008  # the hard gap kept from the other fingers grows up to this
+#: failures that no path variant fixes: the caller changes Q or the duration
+CALLER_KINDS = frozenset({FailureKind.VELOCITY})
+
+
+@dataclass(frozen=True)
+class RegraspParams:
+    """Parameters of one regrasp.
+
+    Attributes:
+        duration_s: Time from lift-off to landing [s].
+        clearance_m: Clearance the fingertip must keep from the object away from the
+            lift-off and landing zones (verified with Coal) [m].
+        inflation_factor: The surface is inflated by ``inflation_factor * clearance_m``
+            so that the waypoint curve, which cuts corners, still keeps ``clearance_m``.
+        taper_m: Length of the lift-off and landing zones along the surface path [m]
+            (default: the inflation height).
+        grid_spacing_m: Grid spacing on the unfolded surface [m].
+        m: Number of Hopfield waypoints (P, Q and m - 2 intermediate points).
+        max_m: Largest m tried when the waypoint curve loses clearance.
+        deviation: Hopfield deviation measure ("max" as in Eq. 7, "sum", "ise").
+        method: "hopfield" (the paper) or "exact" (dynamic programming).
+        limit_margin_rad: Nodes whose IK margin is below this cost extra [rad].
+        limit_weight: Weight of the joint-limit cost in the grid path.
+        contact_keepout_m: Extra distance kept from the other fingertips [m].
+        link_clearance_m: Clearance of the finger's other links from the object [m].
+        finger_clearance_m: Clearance from the other fingers [m].
+        finger_gap_m: Grid nodes where the finger's links (conservative capsules)
+            come closer than this to another finger, at the time the tip passes
+            there, are forbidden [m]; grows when the Coal check finds the fingers
+            too close.
+        sample_dt_s: Time step of the returned trajectory [s] (the verifier
+            densifies further, to 1 mrad joint steps).
+        ik_tol_m: IK tolerance at lift-off and landing (and in their zones) [m].
+        flight_ik_tol_m: IK tolerance in flight [m]: the executed motion, not the
+            planned curve, is what the Coal check verifies.
+        max_variants: Most path variants tried for one P, Q and duration.
+    """
+
+    duration_s: float = 0.5
+    clearance_m: float = 0.005
+    inflation_factor: float = 1.6
+    taper_m: float | None = None
+    grid_spacing_m: float = 0.002
+    m: int = 7
+    max_m: int = 13
+    deviation: str = "ise"
+    method: str = "hopfield"
+    limit_margin_rad: float = 0.25
+    limit_weight: float = 3.0
+    contact_keepout_m: float = 0.003
+    link_clearance_m: float = 0.0
+    finger_clearance_m: float = 0.0005
+    finger_gap_m: float = 0.001
+    sample_dt_s: float = 0.005
+    ik_tol_m: float = 1e-5
+    flight_ik_tol_m: float = 5e-4
+    max_variants: int = 8
+
+    def validate(self) -> RegraspParams:
+        """Return ``self`` after checking every field (raises InputError naming it)."""
+        positive(self.duration_s, "duration_s")
+        positive(self.clearance_m, "clearance_m")
+        positive(self.grid_spacing_m, "grid_spacing_m")
+        positive(self.sample_dt_s, "sample_dt_s")
+        if self.inflation_factor < 1.0:
+            raise InputError("inflation_factor", f"{self.inflation_factor} < 1", "a number >= 1")
+        if not isinstance(self.m, int) or self.m < 2:
+            raise InputError("m", f"{self.m!r} is not allowed", "an integer >= 2")
+        if self.taper_m is not None:
+            positive(self.taper_m, "taper_m")
+        positive(self.limit_margin_rad, "limit_margin_rad")
+        positive(self.ik_tol_m, "ik_tol_m")
+        if self.flight_ik_tol_m < self.ik_tol_m:
+            raise InputError(
+                "flight_ik_tol_m", f"{self.flight_ik_tol_m} < ik_tol_m", "a tolerance >= ik_tol_m"
+            )
+        if not isinstance(self.max_variants, int) or self.max_variants < 1:
+            raise InputError("max_variants", f"{self.max_variants!r}", "an integer >= 1")
+        return self
+
+
+@dataclass(frozen=True)
+class RegraspResult:
+    """A verified regrasp.
+
+    Attributes:
+        finger: Finger name.
+        t_start: Lift-off time [s].
+        t_end: Landing time [s].
+        P_object: Released contact, object frame ``(3,)`` [m].
+        n_P_object: Its outward normal.
+        Q_object: New contact, object frame ``(3,)`` [m].
+        n_Q_object: Its outward normal.
+        grid: The unfolded surface grid.
+        grid_path: The grid path from P to Q.
+        tip_path: The fingertip-centre curve over the inflated surface.
+        polygon: The Hopfield (or exact) polygonal approximation of ``tip_path``.
+        waypoints_object: ``(m, 3)`` waypoints (tip centres), object frame [m].
+        waypoint_times_s: ``(m,)`` when each waypoint is passed [s].
+        times_s: ``(S,)`` trajectory times [s].
+        q: ``(S, k)`` finger joint trajectory [rad].
+        tip_object: ``(S, 3)`` planned tip centres in the object frame [m].
+        report: The Coal verification report (``report.ok`` is always True).
+        min_clearance_m: Smallest Coal distance between the finger and the object
+            away from the lift-off and landing zones (the middle half of the motion when
+            the path is too short to leave them) [m].
+        params: The parameters that succeeded.
+        stage_ms: Time spent in each stage [ms].
+        attempts: The variants that failed before success, as data.
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    P_object: np.ndarray
+    n_P_object: np.ndarray
+    Q_object: np.ndarray
+    n_Q_object: np.ndarray
+    grid: SurfaceGrid
+    grid_path: GridPath
+    tip_path: TipPath
+    polygon: PolygonResult
+    waypoints_object: np.ndarray
+    waypoint_times_s: np.ndarray
+    times_s: np.ndarray
+    q: np.ndarray
+    tip_object: np.ndarray
+    report: VerificationReport
+    min_clearance_m: float
+    params: RegraspParams
+    stage_ms: dict[str, float] = field(default_factory=dict)
+    attempts: tuple[Attempt, ...] = ()
+
+    @property
+    def planning_ms(self) -> float:
+        """Total planning and verification time [ms]."""
+        return float(sum(self.stage_ms.values()))
+
+    @property
+    def path_length_m(self) -> float:
+        """Length of the fingertip-centre trajectory in the object frame [m]."""
+        return float(np.linalg.norm(np.diff(self.tip_object, axis=0), axis=1).sum())
+
+
+class _Stages:
+    def __init__(self) -> None:
+        self.ms: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.ms[name] = self.ms.get(name, 0.0) + 1e3 * (now - self._t)
+        self._t = now
+
+
+def plan_regrasp(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    finger: str,
+    t_start: float,
+    P_object: np.ndarray,
+    n_P_object: np.ndarray,
+    Q_object: np.ndarray,
+    n_Q_object: np.ndarray,
+    q_start: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    *,
+    others_tips_object: np.ndarray | None = None,
+    params: RegraspParams | None = None,
+) -> RegraspResult:
+    """Plan and verify one finger's regrasp from P to Q while the object moves.
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        motion: Object motion ``T_palm_object(t)``; ``[t_start, t_start + duration]``
+            must lie within it.
+        finger: The regrasping finger.
+        t_start: Lift-off time [s].
+        P_object: Current contact, object frame ``(3,)`` [m]; on the surface.
+        n_P_object: Outward normal at P.
+        Q_object: New contact, object frame ``(3,)`` [m]; on the surface.
+        n_Q_object: Outward normal at Q.
+        q_start: ``(k,)`` finger configuration at lift-off (tip at P) [rad].
+        q_hand: Maps times ``(S,)`` to full hand configurations ``(S, nq)`` of the other
+            fingers (holding their contacts); the regrasping finger's entries are
+            overwritten.
+        others_tips_object: ``(F, 3)`` tip centres of the other fingers in the object
+            frame (they are fixed there while holding) [m]; grid nodes under them are
+            forbidden.
+        params: :class:`RegraspParams`.
+
+    Returns:
+        A :class:`RegraspResult` whose trajectory passed the Coal verification.
+
+    Raises:
+        InputError: bad parameters, P or Q not on the object, P == Q.
+        VerificationError: no candidate passed the verification (finger, time, why).
+        PlanningError: the path or the IK failed for every candidate.
+    """
+    params = (params or RegraspParams()).validate()
+    f = hand.finger(finger)
+    P = as_array(P_object, "P_object", (3,))
+    Q = as_array(Q_object, "Q_object", (3,))
+    nP = as_array(n_P_object, "n_P_object", (3,))
+    nQ = as_array(n_Q_object, "n_Q_object", (3,))
+    q0 = as_array(q_start, "q_start", (f.k,))
+    if not np.isfinite(t_start):
+        raise InputError("t_start", f"{t_start!r} is not finite", "a time within the motion [s]")
+    t_end = float(t_start) + params.duration_s
+    if t_start < motion.t_start - 1e-9 or t_end > motion.t_end + 1e-9:
+        raise InputError(
+            "t_start",
+            f"regrasp [{t_start:.3f}, {t_end:.3f}] s leaves the motion",
+            f"within [{motion.t_start:.3f}, {motion.t_end:.3f}] s",
+        )
+    others = (
+        np.zeros((0, 3))
+        if others_tips_object is None
+        else as_array(others_tips_object, "others_tips_object", (None, 3))
+    )
+    stages = _Stages()
+    grid = build_surface_grid(obj, P, Q, spacing_m=params.grid_spacing_m)
+    stages.lap("grid")
+    # the other fingers over the whole regrasp: they hold, and move with the object
+    t_others = float(t_start) + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
+    q_others = np.asarray(q_hand(t_others), float)
+    stages.lap("others")
+
+    attempts: list[Attempt] = []
+    last: PlanningError | None = None
+    tried: set[tuple] = set()
+    paths: dict[tuple, tuple[GridPath, TipPath]] = {}
+    p_try = params
+    for _ in range(params.max_variants):
+        tried.add(_variant_key(p_try))
+        try:
+            key = (p_try.inflation_factor, p_try.limit_weight, p_try.finger_gap_m)
+            if key not in paths:
+                paths[key] = _surface_path(
+                    hand, f.name, obj, motion, grid, t_start, q0, others, p_try, t_others, q_others
+                )
+            gpath, tip_path = paths[key]
+            stages.lap("path")
+            result = _attempt(
+                hand, obj, motion, f.name, t_start, grid, gpath, tip_path, q0, q_hand, p_try, stages
+            )
+        except PlanningError as exc:
+            attempts.append(exc.as_attempt(_describe(p_try)))
+            last = exc
+            log.debug("regrasp %s variant failed: %s", f.name, exc)
+            if exc.kind in CALLER_KINDS:
+                break
+            nxt = _next_variant(p_try, exc.kind, params)
+            if nxt is None or _variant_key(nxt) in tried:
+                break
+            p_try = nxt
+            continue
+        log.info(
+            "regrasp %s at t=%.3f s verified (m=%d, min clearance %.2f mm, %.0f ms)",
+            f.name,
+            t_start,
+            p_try.m,
+            1e3 * result.min_clearance_m,
+            sum(stages.ms.values()),
+        )
+        return replace(
+            result,
+            P_object=P,
+            n_P_object=nP,
+            Q_object=Q,
+            n_Q_object=nQ,
+            stage_ms=dict(stages.ms),
+            attempts=tuple(attempts),
+        )
+    assert last is not None  # max_variants >= 1
+    cls = VerificationError if isinstance(last, VerificationError) else PlanningError
+    raise cls(
+        f"no path variant passed ({len(attempts)} tried); the last: {last.reason}",
+        finger=f.name,
+        time_s=last.time_s if last.time_s is not None else float(t_start),
+        kind=last.kind,
+        measured=last.measured,
+        required=last.required,
+        attempts=attempts,
+    )
+
+
+def _variant_key(p: RegraspParams) -> tuple:
+    return (p.m, p.inflation_factor, p.limit_weight, p.finger_gap_m)
+
+
+def _describe(p: RegraspParams) -> str:
+    return (
+        f"m={p.m}, inflation x{p.inflation_factor:g}, limit weight {p.limit_weight:g}, "
+        f"finger gap {1e3 * p.finger_gap_m:g} mm"
+    )
+
+
+def _next_variant(p: RegraspParams, kind: FailureKind, base: RegraspParams) -> RegraspParams | None:
+    """The path variant that addresses a failure of ``kind``, or None if none is left.
+
+    Too little clearance from the object: more waypoints (the curve cuts fewer
+    corners), then more inflation. Too close to another finger: a wider forbidden gap
+    around the other fingers on the grid. Near a joint limit or out of reach: a
+    stronger joint-limit cost. No route on the grid: only the other fingers' capsules
+    themselves stay forbidden.
+    """
+    if kind == FailureKind.OBJECT_CLEARANCE:
+        if p.m + 2 <= p.max_m:
+            return replace(p, m=p.m + 2)
+        infl = p.inflation_factor * 1.5
+        if infl <= base.inflation_factor * _MAX_INFLATION_FACTOR + 1e-9:
+            return replace(p, inflation_factor=infl, m=base.m)
+        return None
+    if kind == FailureKind.FINGER_COLLISION:
+        gap = max(2.0 * p.finger_gap_m, 0.002)
+        return replace(p, finger_gap_m=gap) if gap <= _MAX_FINGER_GAP_M + 1e-12 else None
+    if kind == FailureKind.GRID_UNREACHABLE:
+        # the forbidden gap around the other fingers may close every route: keep only
+        # the capsules' overlap forbidden (the soft cost and Coal still keep them apart)
+        return replace(p, finger_gap_m=0.0) if p.finger_gap_m > 0.0 else None
+    if kind in (FailureKind.JOINT_LIMIT, FailureKind.IK_UNREACHABLE):
+        weight = p.limit_weight * 4.0
+        if weight <= base.limit_weight * _MAX_LIMIT_WEIGHT_FACTOR + 1e-9:
+            return replace(p, limit_weight=weight)
+        return None
+    return None
+
+
+def _surface_path(
+    hand: Hand,
+    finger: str,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    grid: SurfaceGrid,
+    t_start: float,
+    q0: np.ndarray,
+    others_tips: np.ndarray,
+    p: RegraspParams,
+    t_others: np.ndarray,
+    q_others: np.ndarray,
+) -> tuple[GridPath, TipPath]:
+    """Grid path weighing distance, joint limits and the other fingers, lifted onto the
+    inflated surface.
+
+    ``q_others`` ``(T, nq)`` is the hand at times ``t_others`` (the other fingers
+    holding). Each node is judged at the time the tip passes over it: its IK margin
+    costs, and where the finger's links (conservative capsules) come within
+    ``p.finger_gap_m`` of another finger the node is forbidden (outside the lift-off
+    and landing zones); nearer than ``_FINGER_GAP_M`` it costs more.
+    """
+    f = hand.finger(finger)
+    height = p.inflation_factor * p.clearance_m
+    taper = p.taper_m if p.taper_m is not None else height
+    h_nodes = grid_inflation(grid, height, taper)
+    tips = grid.points_object + (f.tip_radius + h_nodes)[:, None] * grid.normals_object
+    # time at which the tip passes over each node: progress along P -> Q (unfolded)
+    uvP, uvQ = grid.uv[grid.p_index], grid.uv[grid.q_index]
+    d = uvQ - uvP
+    s = np.clip((grid.uv - uvP) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
+    t_nodes = t_start + p.duration_s * inverse_minimum_jerk(s)
+    # only nodes in an ellipse around P and Q can be on a sensible path (a detour of up
+    # to twice the straight distance plus 1 cm); the others are never evaluated
+    from_p = np.linalg.norm(grid.uv - uvP, axis=1)
+    from_q = np.linalg.norm(grid.uv - uvQ, axis=1)
+    near_pq = from_p + from_q <= 2.0 * float(np.linalg.norm(d)) + 0.01
+    near_pq[[grid.p_index, grid.q_index]] = True
+    sel = np.flatnonzero(near_pq)
+    T = motion.pose(t_nodes[sel])
+    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips[sel]) + T[:, :3, 3]
+    res = f.ik(targets, q0, tol_m=1e-4, max_iter=20, restarts=False)
+    margin = f.limit_margin(res.q)
+    cost = np.full(grid.uv.shape[0], np.inf)
+    cost[sel] = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
+    cost[sel[~res.success]] = _UNREACHABLE_COST
+    q_nodes = np.stack(
+        [np.interp(t_nodes[sel], t_others, q_others[:, j]) for j in range(q_others.shape[1])],
+        axis=1,
+    )
+    gap = _finger_gap(hand, finger, res.q, q_nodes)
+    cost[sel] += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
+    # forbidden: nearer than the gap, but never more than P and Q themselves allow (the
+    # capsules are conservative: a finger that holds P may already be "within" them)
+    ends = np.isin(sel, [grid.p_index, grid.q_index])
+    allowed = min(p.finger_gap_m, float(gap[ends].min()) - _FINGER_GAP_SLACK_M)
+    in_flight = (from_p[sel] > taper) & (from_q[sel] > taper)
+    cost[sel[in_flight & (gap < allowed)]] = np.inf
+    if others_tips.size:
+        # under another fingertip: forbidden, but never more than P and Q themselves are
+        # (a P right beside another finger would otherwise be walled in)
+        dist = np.linalg.norm(tips[:, None, :] - others_tips[None], axis=2).min(axis=1)
+        at_ends = float(dist[[grid.p_index, grid.q_index]].min())
+        keep = min(2 * f.tip_radius + p.contact_keepout_m, at_ends - _FINGER_GAP_SLACK_M)
+        cost[dist < keep] = np.inf
+    cost[[grid.p_index, grid.q_index]] = np.minimum(cost[[grid.p_index, grid.q_index]], 0.0)
+    # decisions must not follow last-bit noise: costs on a 1e-9 lattice
+    finite = np.isfinite(cost)
+    cost[finite] = np.round(cost[finite], 9)
+    gpath = shortest_grid_path(grid, cost, cost_weight=p.limit_weight)
+    tip_path = inflate_path(
+        obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
+    )
+    return gpath, tip_path
+
+
+def _finger_gap(hand: Hand, finger: str, q_finger: np.ndarray, q_others: np.ndarray) -> np.ndarray:
+    """Lower bound ``(M,)`` on the distance between the finger (at each ``q_finger`` row)
+    and the other fingers (at the matching ``q_others`` row, ``(M, nq)``)."""
+    f = hand.finger(finger)
+    other_ids = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
+    q_full = np.array(q_others, float)
+    q_full[:, f.q_indices] = q_finger
+    return capsule_gap(hand, list(f.geometry_ids), other_ids, q_full)
+
+
+def _attempt(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    finger: str,
+    t_start: float,
+    grid: SurfaceGrid,
+    gpath: GridPath,
+    tip_path: TipPath,
+    q0: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    p: RegraspParams,
+    stages: _Stages,
+) -> RegraspResult:
+    f = hand.finger(finger)
+    pts = tip_path.points_object
+    m = min(p.m, len(tip_path))
+    poly = approximate_polygon(pts, m, closed=False, deviation=p.deviation, method=p.method)
+    W = poly.vertices
+    stages.lap("hopfield")
+
+    # C1 shape-preserving curve through the waypoints, by chord length
+    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(W, axis=0), axis=1))])
+    curve = PchipInterpolator(chord, W, axis=0)
+    u_fine = np.linspace(0.0, chord[-1], 2001)
+    c_fine = curve(u_fine)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(c_fine, axis=0), axis=1))])
+    n_t = max(int(np.ceil(p.duration_s / p.sample_dt_s)), 8) + 1
+    times = t_start + np.linspace(0.0, p.duration_s, n_t)
+    progress = minimum_jerk(np.linspace(0.0, 1.0, n_t))
+    u = np.interp(progress * arc[-1], arc, u_fine)
+    tip_obj = curve(u)
+    tip_obj[0], tip_obj[-1] = pts[0], pts[-1]
+    # where along the surface path each sample is (for the lift-off/landing zones)
+    a_way = tip_path.arc_length_m[poly.indices]
+    a_samples = np.interp(u, chord, a_way)
+    taper = tip_path.taper_m
+    in_flight = (a_samples >= taper) & (a_samples <= tip_path.length_m - taper)
+    required = np.where(in_flight, p.clearance_m, 0.0)
+    planned = obj.signed_distance(tip_obj) - f.tip_radius
+    short = planned < required - _PENETRATION_TOL_M
+    if short.any():
+        i = int(np.argmax(required - planned))
+        raise PlanningError(
+            f"the waypoint curve keeps only {1e3 * planned[i]:.2f} mm of the required "
+            f"{1e3 * required[i]:.2f} mm",
+            finger=finger,
+            time_s=float(times[i]),
+            kind=FailureKind.OBJECT_CLEARANCE,
+            measured=float(planned[i]),
+            required=float(required[i]),
+        )
+    waypoint_times = (
+        np.interp(np.interp(chord, u_fine, arc) / arc[-1], progress, times - t_start) + t_start
+    )
+    stages.lap("timing")
+
+    T = motion.pose(times)
+    q = _follow(f, times, T, tip_obj, q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p)
+    vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
+    ratio = vel / f.velocity_limit
+    if (ratio > 1.0).any():
+        i, j = (int(v) for v in np.unravel_index(np.argmax(ratio), vel.shape))
+        raise PlanningError(
+            f"joint {f.joint_names[j]} would move at {vel[i, j]:.2f} rad/s "
+            f"(limit {f.velocity_limit[j]:.2f})",
+            finger=finger,
+            time_s=float(times[i]),
+            kind=FailureKind.VELOCITY,
+            measured=float(vel[i, j]),
+            required=float(f.velocity_limit[j]),
+        )
+    stages.lap("ik")
+
+    q_full = np.array(q_hand(times), dtype=float)
+    q_full[:, f.q_indices] = q
+    report = verify_finger_motion(
+        hand,
+        obj,
+        finger,
+        times,
+        q_full,
+        T,
+        tip_clearance_m=required,
+        link_clearance_m=np.maximum(required, p.link_clearance_m),
+        finger_clearance_m=p.finger_clearance_m,
+    )
+    stages.lap("verify")
+    if not report.ok:
+        worst = report.worst_failure
+        if worst is None:  # the report is not ok only with a failure
+            raise AssertionError("verification failed without a failure")
+        raise VerificationError(
+            f"Coal check failed ({worst.describe()})",
+            finger=finger,
+            time_s=report.time_s,
+            kind=worst.failure_kind,
+            measured=worst.value,
+            required=worst.required,
+        )
+    # smallest Coal distance of the whole finger to the object in flight (between the
+    # lift-off and landing zones; the middle half of the motion if the path is short)
+    flight = in_flight if in_flight.any() else (np.abs(progress - 0.5) <= 0.25)
+    lc = LinkClearance(hand, finger, obj, include_tip=True)
+    min_clear = float(lc(q_full[flight], T[flight]).min())
+    # the tip as executed (within the flight tolerance of the planned curve)
+    tip_palm = f.fk(q)
+    tip_exec = np.einsum("nji,nj->ni", T[:, :3, :3], tip_palm - T[:, :3, 3])
+    return RegraspResult(
+        finger=finger,
+        t_start=float(t_start),
+        t_end=float(times[-1]),
+        P_object=np.zeros(3),
+        n_P_object=np.zeros(3),
+        Q_object=np.zeros(3),
+        n_Q_object=np.zeros(3),
+        grid=grid,
+        grid_path=gpath,
+        tip_path=tip_path,
+        polygon=poly,
+        waypoints_object=W,
+        waypoint_times_s=waypoint_times,
+        times_s=times,
+        q=q,
+        tip_object=tip_exec,
+        report=report,
+        min_clearance_m=min_clear,
+        params=p,
+    )
+
+
+_IK_CHUNK = 16  # samples solved per IK batch, each warm-started from the previous batch
+
+
+def _follow(
+    f: Finger,
+    times: np.ndarray,
+    T: np.ndarray,
+    tip_obj: np.ndarray,
+    q0: np.ndarray,
+    tol: np.ndarray,
+    p: RegraspParams,
+) -> np.ndarray:
+    """Joint trajectory ``(S, k)`` whose tip follows ``tip_obj`` (object frame) within
+    ``tol`` ``(S,)`` [m] per sample, by warm-started batched IK in chunks."""
+    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tip_obj) + T[:, :3, 3]
+    q = np.empty((times.size, f.k))
+    prev = q0
+    for s0 in range(0, times.size, _IK_CHUNK):
+        s1 = min(s0 + _IK_CHUNK, times.size)
+        # warm start only: a restart may jump to another IK branch (a joint flip)
+        res = f.ik(targets[s0:s1], prev, tol_m=p.ik_tol_m, restarts=False)
+        bad = res.error_m > tol[s0:s1]
+        if bad.any():
+            i = int(np.argmax(res.error_m - tol[s0:s1]))
+            raise PlanningError(
+                f"IK cannot follow the path (residual {1e3 * res.error_m[i]:.2f} mm, "
+                f"tolerance {1e3 * tol[s0 + i]:.3f} mm)",
+                finger=f.name,
+                time_s=float(times[s0 + i]),
+                kind=FailureKind.IK_UNREACHABLE,
+                measured=float(res.error_m[i]),
+                required=float(tol[s0 + i]),
+            )
+        q[s0:s1] = res.q
+        prev = res.q[-1]
+    return q

@@ -1,0 +1,423 @@
+"""Restarts, perturbations and local search around the competitive Hopfield network.
+
+Closing the gap to the optimum (a departure from the paper): the plain network stops in a
+local minimum. :func:`competitive_hopfield` keeps the plain run from the paper's initial
+state and then tries more initial states (on closed curves the equidistant state shifted
+by half a spacing, a greedy bottom-up merge, a greedy top-down split) and perturbations
+(one or two columns' vertices relocated to other chords; several columns removed and
+greedily re-inserted), each followed by re-convergence of the same network. A result is
+accepted only if its energy is lower, so the answer is never worse than the plain network.
+
+The network itself (states, input, energy, sweeps) is :mod:`regrasp_pin.polygon.hopfield`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import positive_int
+from ..exceptions import InputError
+from .hopfield import (
+    MAX_SWEEPS,
+    NetworkRun,
+    check_deviation_matrix,
+    check_state,
+    column_groups,
+    initial_state,
+    make_increasing,
+    polygon_energy,
+    run_from,
+    update_columns,
+    window_costs,
+    winners,
+)
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class HopfieldResult:
+    """Result of :func:`competitive_hopfield`.
+
+    Attributes:
+        indices: Best vertex indices found, shape ``(m,)``, ordered.
+        energy: Their energy (sum of chord deviations).
+        sweeps: Total sweeps over all network runs.
+        energy_history: The plain run's energies (before and after each sweep), followed by
+            the best energy after each further initial state or perturbation round;
+            never increasing.
+        plain_indices: Result of the plain network from the paper's initial state, ``(m,)``.
+        plain_energy: Its energy; ``energy <= plain_energy`` always.
+        plain_sweeps: Sweeps of the plain run.
+        plain_max_span: ``max_span`` of the plain run (see :class:`NetworkRun`).
+    """
+
+    indices: np.ndarray
+    energy: float
+    sweeps: int
+    energy_history: np.ndarray
+    plain_indices: np.ndarray
+    plain_energy: float
+    plain_sweeps: int
+    plain_max_span: int
+
+
+# ------------------------------------------------ improvement: starts and moves
+def _chords(s: np.ndarray, closed: bool) -> tuple[np.ndarray, np.ndarray]:
+    return (s, np.append(s[1:], s[0])) if closed else (s[:-1], s[1:])
+
+
+def _insertion(
+    H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best point to insert into every chord: (point, new local cost, current chord cost)."""
+    a, b = _chords(s, closed)
+    pts, cost, _span = window_costs(H, HT, a, b)
+    j = winners(cost)
+    r = np.arange(a.shape[0])
+    return pts[r, j], cost[r, j], H[a, b]
+
+
+def _split_gain(new: np.ndarray, old: np.ndarray) -> np.ndarray:
+    """Energy change of splitting chords; unavailable (inf) chords are split first, no NaN."""
+    gain = np.full(new.shape, np.inf)
+    fin = np.isfinite(old) & np.isfinite(new)
+    gain[fin] = new[fin] - old[fin]
+    must = ~np.isfinite(old) & np.isfinite(new)
+    gain[must] = -np.inf
+    return gain
+
+
+def _relocations(
+    H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool, count: int
+) -> list[tuple[float, np.ndarray]]:
+    """The ``count`` best moves of one or two vertices into other chords: (energy change,
+    state), best first.
+
+    Removing vertex ``i`` and inserting the best point of a chord not adjacent to it changes
+    the energy by the sum of the two exact local changes.
+    """
+    m = s.shape[0]
+    x, new, old = _insertion(H, HT, s, closed)
+    gain_ins = _split_gain(new, old)  # chord j = (s[j], s[j+1])
+    i = np.arange(m)
+    prev, nxt = s[i - 1], s[(i + 1) % m]
+    with np.errstate(invalid="ignore"):
+        gain_rem = H[prev, nxt] - H[prev, s] - H[s, nxt]
+    gain_rem = np.where(np.isfinite(gain_rem), gain_rem, np.inf)
+    if not closed:
+        gain_rem[0] = gain_rem[-1] = np.inf
+    total = gain_rem[:, None] + gain_ins[None, :]
+    # inserting into a chord adjacent to the removed vertex is a plain network move
+    nc = total.shape[1]
+    total[i, i % nc] = np.inf
+    total[i, (i - 1) % nc] = np.inf
+    flat = total.ravel()
+    count = min(count, flat.shape[0])
+    best = np.argpartition(flat, count - 1)[:count] if count < flat.shape[0] else np.arange(count)
+    moves = []
+    for k in best.tolist():
+        if np.isfinite(flat[k]):
+            ri, cj = divmod(k, nc)
+            moves.append((float(flat[k]), np.sort(np.append(np.delete(s, ri), x[cj]))))
+    moves += _pair_relocations(H, s, closed, x, gain_ins, count)
+    moves.sort(key=lambda mv: mv[0])
+    return moves[:count]
+
+
+def _pair_relocations(
+    H: np.ndarray,
+    s: np.ndarray,
+    closed: bool,
+    x: np.ndarray,
+    gain_ins: np.ndarray,
+    count: int,
+) -> list[tuple[float, np.ndarray]]:
+    """The ``count`` best moves of two neighbouring vertices into two other chords.
+
+    Removing vertices ``i, i+1`` merges three chords into one; with ``"max"`` a long chord
+    costs little more than a short one, so this is how spare vertices get parked.
+    """
+    m, nc = s.shape[0], gain_ins.shape[0]
+    if m < (4 if closed else 5) or nc < 5:
+        return []
+    i = np.arange(m) if closed else np.arange(1, m - 2)
+    a, b, c, d = s[(i - 1) % m], s[i], s[(i + 1) % m], s[(i + 2) % m]
+    with np.errstate(invalid="ignore"):
+        gain_rem = H[a, d] - H[a, b] - H[b, c] - H[c, d]
+    order = np.argsort(gain_ins, kind="stable")[:5]
+    moves = []
+    for k in np.argsort(np.where(np.isfinite(gain_rem), gain_rem, np.inf))[:count].tolist():
+        if not np.isfinite(gain_rem[k]):
+            break
+        r = int(i[k])
+        hit = {(r - 1) % nc, r % nc, (r + 1) % nc}  # chords replaced by the merge
+        free = [j for j in order.tolist() if j not in hit][:2]
+        if len(free) < 2:
+            continue
+        gain = float(gain_rem[k] + gain_ins[free[0]] + gain_ins[free[1]])
+        if not np.isfinite(gain):
+            continue
+        kept = np.delete(s, [r, (r + 1) % m])
+        moves.append((gain, np.sort(np.concatenate([kept, x[free]]))))
+    return moves
+
+
+def _insert_greedy(
+    H: np.ndarray, HT: np.ndarray, s: np.ndarray, closed: bool, count: int
+) -> np.ndarray | None:
+    """Insert ``count`` vertices one by one, each at the best split; None if impossible."""
+    for _ in range(count):
+        x, new, old = _insertion(H, HT, s, closed)
+        gain = _split_gain(new, old)
+        if np.isneginf(gain).any():  # an unavailable chord: split it at its cheapest point
+            cand = np.where(np.isneginf(gain), new, np.inf)
+            j = int(np.argmin(cand))
+        else:
+            j = int(np.argmin(gain))
+            if not np.isfinite(gain[j]):
+                return None
+        s = np.sort(np.append(s, x[j]))
+    return s
+
+
+def _converge(
+    H: np.ndarray,
+    HT: np.ndarray,
+    s: np.ndarray,
+    groups: list[np.ndarray],
+    closed: bool,
+    dirty: np.ndarray | None = None,
+) -> tuple[np.ndarray, int]:
+    """Run the network until no column moves (in place); returns (state, sweeps).
+
+    Only columns whose neighbours moved since their last update (``dirty``) can change,
+    so only those compete; a sweep visits each column group once.
+    """
+    m = s.shape[0]
+    dirty = np.ones(m, dtype=bool) if dirty is None else dirty.copy()
+    if not closed:
+        dirty[0] = dirty[-1] = False
+    sweeps = 0
+    while dirty.any():
+        sweeps += 1
+        for g in groups:
+            cols = g[dirty[g]]
+            if cols.size == 0:
+                continue
+            moved, _span = update_columns(H, HT, s, cols)
+            dirty[cols] = False
+            if moved.size:
+                dirty[(moved - 1) % m] = True
+                dirty[(moved + 1) % m] = True
+                if not closed:
+                    dirty[0] = dirty[-1] = False
+    return (np.sort(s) if closed else s), sweeps
+
+
+def _changed_columns(old: np.ndarray, new: np.ndarray, n: int) -> np.ndarray:
+    """Columns of ``new`` whose vertex or neighbours differ from ``old`` (cyclic)."""
+    k, j = np.arange(old.shape[0]), np.arange(new.shape[0])
+    prev_old = np.full(n, -1)
+    next_old = np.full(n, -1)
+    prev_old[old] = old[k - 1]
+    next_old[old] = old[(k + 1) % k.shape[0]]
+    return (prev_old[new] != new[j - 1]) | (next_old[new] != new[(j + 1) % j.shape[0]])
+
+
+def _local_search(
+    H: np.ndarray,
+    HT: np.ndarray,
+    s: np.ndarray,
+    closed: bool,
+    trials: int = 2,
+    budget: int = 10_000,
+) -> tuple[np.ndarray, float, int]:
+    """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
+
+    After the network has converged, the ``trials`` most promising relocations of one
+    vertex to another chord are tried: one that lowers the energy at once is taken; one
+    that does not is kept only if the network, re-converged from it, ends lower.
+    """
+    groups = column_groups(s.shape[0], closed)
+    s, sweeps = _converge(H, HT, s.copy(), groups, closed)
+    energy = polygon_energy(H, s, closed=closed)
+    n = H.shape[0]
+    for _ in range(budget):
+        improved = False
+        for gain, moved in _relocations(H, HT, s, closed, trials):
+            dirty = _changed_columns(s, moved, n)
+            if gain < 0:
+                s, sw = _converge(H, HT, moved, groups, closed, dirty)
+            else:
+                moved, sw = _converge(H, HT, moved, groups, closed, dirty)
+                if not polygon_energy(H, moved, closed=closed) < energy:
+                    sweeps += sw
+                    continue
+                s = moved
+            sweeps += sw
+            energy = polygon_energy(H, s, closed=closed)
+            improved = True
+            break
+        if not improved:
+            break
+    return s, energy, sweeps
+
+
+def _greedy_merge(H: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
+    """Bottom-up start: from all points, repeatedly drop the vertices cheapest to remove.
+
+    Each round selects the cheapest half of the surplus and drops every other vertex of each
+    run of adjacent selected ones (so no two dropped vertices are neighbours).
+    """
+    n = H.shape[0]
+    s = np.arange(n)
+    while s.shape[0] > m:
+        k = s.shape[0]
+        idx = np.arange(k)
+        prev, nxt = s[idx - 1], s[(idx + 1) % k]
+        with np.errstate(invalid="ignore"):
+            cost = H[prev, nxt] - H[prev, s] - H[s, nxt]
+        cost = np.where(np.isfinite(cost), cost, np.inf)
+        if not closed:
+            cost[0] = cost[-1] = np.inf
+        # rank by cost, ties broken by a fixed scrambled order of the positions
+        prio = (idx * 2654435761) % 4294967296
+        rank = np.empty(k, dtype=np.int64)
+        rank[np.lexsort((prio, cost))] = idx
+        take = max(1, (k - m) // 2)
+        sel = (rank < take) & np.isfinite(cost)
+        if not sel.any():
+            return None
+        # within each run of consecutive selected vertices keep every other one
+        pos = np.flatnonzero(sel)
+        run_start = np.concatenate([[True], np.diff(pos) > 1])
+        first = np.maximum.accumulate(np.where(run_start, np.arange(pos.size), 0))
+        drop = pos[(np.arange(pos.size) - first) % 2 == 0]
+        if closed and drop.size > 1 and drop[0] == 0 and drop[-1] == k - 1:
+            drop = drop[:-1]
+        s = np.delete(s, drop)
+    return s
+
+
+def _greedy_split(H: np.ndarray, HT: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
+    """Top-down start: repeatedly insert the vertex that lowers the energy most.
+
+    It starts from the fewest evenly spaced (by index) vertices whose chords are all
+    available in ``H``.
+    """
+    n = H.shape[0]
+    low = 3 if closed else 2
+    for k in range(low, m + 1):
+        grid = np.linspace(0, n if closed else n - 1, k, endpoint=not closed)
+        s = make_increasing(np.round(grid).astype(np.int64), n, closed)
+        if np.isfinite(polygon_energy(H, s, closed=closed)):
+            return _insert_greedy(H, HT, s, closed, m - k)
+    return None
+
+
+def competitive_hopfield(
+    H: np.ndarray,
+    m: int,
+    *,
+    closed: bool = False,
+    initial: object = None,
+    points: object = None,
+    restarts: int = 6,
+    seed: int = 0,
+    plain: NetworkRun | None = None,
+    trials: int = 2,
+) -> HopfieldResult:
+    """Polygonal approximation with the competitive Hopfield network, plus restarts.
+
+    First the plain network of the paper runs from its initial state (``initial``, or the
+    equidistant state of :func:`initial_state`). Then, to escape its local minimum, the
+    same network is re-converged from further states: the equidistant state shifted by half
+    a spacing (closed curves), a greedy bottom-up merge, a greedy top-down split, and
+    ``restarts`` rounds of
+    perturbation (remove a few vertices, re-insert them greedily). Only strictly better
+    results are kept, so the answer is never worse than the plain network.
+
+    Every state is polished by a local search: the network converges, then the ``trials``
+    most promising relocations of one vertex to another chord are tried, each followed by
+    re-convergence; the first that lowers the energy is kept and the search repeats.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``; ``inf`` marks chords that may not be used.
+        m: Number of vertices (``2 <= m <= n``; ``3 <= m`` if closed).
+        closed: Closed curve.
+        initial: Initial state, shape ``(m,)``; default: equidistant along ``points`` (or
+            along the index if ``points`` is None).
+        points: Curve points ``(n, d)`` used for the equidistant initial states.
+        restarts: Number of perturbation rounds after the deterministic starts (0: none).
+        seed: Seed of the perturbation draws.
+        plain: The plain run from ``initial`` if already computed on this ``H`` (it is then
+            not repeated).
+        trials: Relocations tried (with re-convergence) when no single move helps.
+
+    Returns:
+        The best state, the plain network's result and the sweep/energy record.
+
+    Raises:
+        InputError: invalid ``H``, ``m``, ``initial``, ``restarts`` or ``trials``.
+    """
+    H = check_deviation_matrix(H)
+    n = H.shape[0]
+    m = positive_int(m, "m", 3 if closed else 2)
+    if m > n:
+        raise InputError("m", f"{m} exceeds the number of points n={n}", f"m <= {n}")
+    restarts = positive_int(restarts, "restarts", 0)
+    trials = positive_int(trials, "trials", 0)
+    if points is None:
+        points = np.arange(n, dtype=float)[:, None] * np.array([[1.0, 0.0]])
+    if initial is None:
+        initial = initial_state(points, m, closed=closed)
+    HT = np.ascontiguousarray(H.T)
+    if plain is None:
+        plain = run_from(H, HT, check_state(initial, n, closed), closed, MAX_SWEEPS)
+    best_s, best_e = plain.indices, plain.energy
+    history = list(plain.energy_history)
+    sweeps = plain.sweeps
+
+    def consider(s: np.ndarray | None) -> None:
+        nonlocal best_s, best_e, sweeps
+        if s is not None and s.shape[0] == m:
+            s2, e2, sw = _local_search(H, HT, s, closed, trials)
+            sweeps += sw
+            if e2 < best_e:
+                best_s, best_e = s2, e2
+        history.append(best_e)
+
+    consider(plain.indices)
+    if closed:  # the equidistant state shifted by half a spacing
+        consider(initial_state(points, m, closed=True, phase=0.5))
+    consider(_greedy_merge(H, m, closed))
+    consider(_greedy_split(H, HT, m, closed))
+    rng = np.random.default_rng(seed)
+    free = np.arange(m) if closed else np.arange(1, m - 1)
+    for _ in range(restarts):
+        if free.size == 0 or not np.isfinite(best_e):
+            break
+        if rng.random() < 0.5:  # a run of consecutive columns, up to most of them
+            k = int(rng.integers(1, max(1, (2 * free.size) // 3) + 1))
+            start = int(rng.integers(0, free.size))
+            drop = free[(start + np.arange(k)) % free.size]
+        else:
+            k = int(rng.integers(1, max(1, free.size // 3) + 1))
+            drop = rng.choice(free, size=k, replace=False)
+        s = _insert_greedy(H, HT, np.delete(best_s, drop), closed, k)
+        consider(s)
+    logger.debug("hopfield: plain %.6g -> best %.6g (%d sweeps)", plain.energy, best_e, sweeps)
+    return HopfieldResult(
+        indices=np.asarray(best_s),
+        energy=float(best_e),
+        sweeps=sweeps,
+        energy_history=np.asarray(history),
+        plain_indices=plain.indices,
+        plain_energy=plain.energy,
+        plain_sweeps=plain.sweeps,
+        plain_max_span=plain.max_span,
+    )

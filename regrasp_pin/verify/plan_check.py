@@ -1,0 +1,629 @@
+"""Independent re-check of a plan file with Pinocchio and Coal only.
+
+:func:`recheck_plan` reads nothing but the plan file's content -- the URDF path, the
+object's mesh vertices, the samples ``t``, ``q`` and ``T_palm_object`` and the
+phases -- and checks it with Pinocchio (kinematics) and Coal (distances). It uses none
+of regrasp_pin's own kinematics, IK or verification, so it catches what a bug there
+would hide. What it checks (the motion between two samples is linear interpolation of
+``q`` and of the object position, slerp of its rotation, as ``docs/plan_format.md``
+says):
+
+* every regrasp and every release, re-sampled so that no joint moves more than
+  ``max_step_rad`` between two samples: the moving finger's collision geometries
+  against the object (the worst penetration must stay within ``penetration_tol_m``)
+  and the geometries of every pair of different fingers (they must not touch);
+* at every sample of the plan (not densified), the geometries of every pair of
+  different fingers apart (fingers that hold can also collide);
+* every sample inside the joint limits (linear interpolation between samples inside
+  a box stays inside it, so the samples suffice);
+* the fewest fingers holding a contact at any instant (exact: the count is constant
+  between phase boundaries);
+* during every contact phase, the fingertip centre at ``p + r n`` of its contact (in
+  the object frame, moved by the object's pose) within ``contact_tol_m``;
+* every finger's phases follow each other without gap or overlap over the plan.
+
+Exact minima at little cost. Each geometry (and the object) is enclosed in a sphere
+(Coal's local AABB centre and radius); ``|c_a - c_b| - r_a - r_b`` is a lower bound on
+the signed distance of two bodies. Candidate (sample, pair) entries are visited in
+increasing order of that bound and Coal is called until the next bound is not below
+the smallest exact distance found, so the minimum reported is Coal's exact minimum
+over all densified samples and pairs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from .._validate import positive, positive_int
+from ..exceptions import InputError, ModelFileError
+from ..plan import ContactPhase
+
+if TYPE_CHECKING:
+    from ..plan import Plan, RegraspPhase, ReleasePhase
+
+__all__ = ["JointLimitViolation", "PlanCheck", "RegraspCheck", "recheck_plan"]
+
+_TIME_TOL_S = 1e-9  # a sample within this of a phase's ends belongs to the phase
+_JOINT_TOL_RAD = 1e-9  # accepted excess over a joint limit
+_GAP_TOL_S = 1e-6  # accepted gap or overlap between consecutive phases of a finger
+
+
+@dataclass(frozen=True)
+class RegraspCheck:
+    """The dense re-check of one regrasp phase.
+
+    Attributes:
+        finger: The moving finger.
+        t_start: Lift-off time [s].
+        t_end: Landing time [s].
+        n_samples: Densified samples checked.
+        min_object_distance_m: Smallest signed distance between the moving finger's
+            collision geometries and the object [m] (negative: penetration).
+        t_min_object_s: When it occurs [s].
+        min_finger_distance_m: Smallest signed distance between collision geometries of
+            two different fingers (any fingers, the palm excluded) [m].
+        t_min_finger_s: When it occurs [s].
+        finger_pair: The two fingers of that smallest distance.
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    n_samples: int
+    min_object_distance_m: float
+    t_min_object_s: float
+    min_finger_distance_m: float
+    t_min_finger_s: float
+    finger_pair: tuple[str, str]
+
+    @property
+    def penetration_m(self) -> float:
+        """Worst penetration of the moving finger into the object [m] (0 if none)."""
+        return max(0.0, -self.min_object_distance_m)
+
+
+@dataclass(frozen=True)
+class JointLimitViolation:
+    """The worst excess of one joint over its limits in the plan.
+
+    Attributes:
+        joint: Joint name (URDF).
+        t_s: When the excess is largest [s].
+        q_rad: The joint value there [rad].
+        lower_rad: Lower limit [rad].
+        upper_rad: Upper limit [rad].
+    """
+
+    joint: str
+    t_s: float
+    q_rad: float
+    lower_rad: float
+    upper_rad: float
+
+    @property
+    def excess_rad(self) -> float:
+        """How far outside ``[lower_rad, upper_rad]`` the value is [rad]."""
+        return max(self.lower_rad - self.q_rad, self.q_rad - self.upper_rad, 0.0)
+
+
+@dataclass(frozen=True)
+class PlanCheck:
+    """What :func:`recheck_plan` found.
+
+    Attributes:
+        ok: True when no problem was found.
+        regrasps: One :class:`RegraspCheck` per regrasp phase (time order), then one per
+            release phase.
+        joint_limit_violations: The joints that leave their limits (worst sample each).
+        min_holding: Fewest fingers holding a contact at any instant of the plan.
+        t_min_holding_s: A time when that happens [s].
+        min_finger_distance_samples_m: Smallest signed distance between geometries of
+            two different fingers at the plan's samples (every phase) [m].
+        t_min_finger_samples_s: When it occurs [s].
+        finger_pair_samples: The two fingers of that smallest distance.
+        max_contact_error_m: Largest distance between a holding fingertip's centre and
+            where its contact puts it, over the samples of every contact phase [m].
+        contact_error_finger: The finger of that largest error (None without contacts).
+        t_max_contact_error_s: When it occurs [s] (None without contacts).
+        problems: Every problem found, in plain words.
+    """
+
+    ok: bool
+    regrasps: tuple[RegraspCheck, ...]
+    joint_limit_violations: tuple[JointLimitViolation, ...]
+    min_holding: int
+    t_min_holding_s: float
+    min_finger_distance_samples_m: float
+    t_min_finger_samples_s: float
+    finger_pair_samples: tuple[str, str]
+    max_contact_error_m: float
+    contact_error_finger: str | None
+    t_max_contact_error_s: float | None
+    problems: tuple[str, ...]
+
+    @property
+    def worst_penetration_m(self) -> float:
+        """Worst penetration of a moving finger into the object over all regrasps [m]."""
+        return max((r.penetration_m for r in self.regrasps), default=0.0)
+
+    @property
+    def min_finger_distance_m(self) -> float:
+        """Smallest finger-finger distance over all regrasps [m] (inf without regrasps)."""
+        return min((r.min_finger_distance_m for r in self.regrasps), default=math.inf)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary (infinite distances become None)."""
+        d = asdict(self)
+        for k in ("max_contact_error_m", "min_finger_distance_samples_m"):
+            if not math.isfinite(d[k]):
+                d[k] = None
+        d["finger_pair_samples"] = list(d["finger_pair_samples"])
+        for r in d["regrasps"]:
+            for k in ("min_object_distance_m", "min_finger_distance_m"):
+                if not math.isfinite(r[k]):
+                    r[k] = None
+            r["finger_pair"] = list(r["finger_pair"])
+        d["problems"] = list(self.problems)
+        return d
+
+
+def recheck_plan(
+    plan: Plan,
+    *,
+    max_step_rad: float = 1e-3,
+    penetration_tol_m: float = 1e-4,
+    contact_tol_m: float = 1e-4,
+    min_holding: int = 3,
+) -> PlanCheck:
+    """Re-check a plan file with Pinocchio and Coal only (see the module docstring).
+
+    Args:
+        plan: The plan (e.g. from :meth:`~regrasp_pin.plan.Plan.load`).
+        max_step_rad: Largest joint step between two densified samples of a regrasp [rad].
+        penetration_tol_m: Largest accepted penetration of a moving finger into the
+            object [m].
+        contact_tol_m: Largest accepted fingertip-to-contact error while holding [m].
+        min_holding: Fewest fingers that must hold at every instant.
+
+    Returns:
+        A :class:`PlanCheck`; ``ok`` is False when any check fails, with one line per
+        failure in ``problems``.
+
+    Raises:
+        InputError: non-positive tolerances, or a plan whose fingers, joints or frames
+            are not in its URDF, or whose ``q`` does not fit the URDF.
+        ModelFileError: the plan's URDF cannot be loaded.
+    """
+    max_step = positive(max_step_rad, "max_step_rad")
+    pen_tol = positive(penetration_tol_m, "penetration_tol_m", allow_zero=True)
+    tip_tol = positive(contact_tol_m, "contact_tol_m", allow_zero=True)
+    need = positive_int(min_holding, "min_holding", minimum=0)
+    scene = _Scene(plan)
+    problems: list[str] = []
+
+    problems += _phase_gaps(plan)
+    violations = _joint_limits(scene)
+    for v in violations:
+        problems.append(
+            f"joint {v.joint} at t={v.t_s:.3f} s is {v.q_rad:.4f} rad, outside "
+            f"[{v.lower_rad:.4f}, {v.upper_rad:.4f}] rad"
+        )
+
+    n_hold, t_hold = _min_holding(plan)
+    if n_hold < need:
+        problems.append(f"only {n_hold} fingers hold at t={t_hold:.3f} s (need {need})")
+
+    tips, R_geom, x_geom = scene.kinematics(plan.q)
+    err, err_finger, err_t = _contact_error(scene, tips)
+    if err_finger is not None and err > tip_tol:
+        problems.append(
+            f"{err_finger} at t={err_t:.3f} s is {err * 1e3:.3f} mm from its contact "
+            f"(tolerance {tip_tol * 1e3:.3f} mm)"
+        )
+
+    d_ff, k_ff, pair_ff = _min_finger_distance(scene, R_geom, x_geom)
+    if d_ff <= 0.0:
+        problems.append(
+            f"{pair_ff[0]} and {pair_ff[1]} touch at t={plan.t[k_ff]:.3f} s "
+            f"(distance {d_ff * 1e3:.3f} mm)"
+        )
+
+    checks = []
+    moves: list[RegraspPhase | ReleasePhase] = [*plan.regrasps(), *plan.releases()]
+    for phase in moves:
+        rc = _check_regrasp(scene, phase, max_step)
+        checks.append(rc)
+        if rc.min_object_distance_m < -pen_tol:
+            problems.append(
+                f"{rc.finger} ({phase.kind} at {rc.t_start:.3f} s) penetrates the object by "
+                f"{rc.penetration_m * 1e3:.3f} mm at t={rc.t_min_object_s:.3f} s "
+                f"(tolerance {pen_tol * 1e3:.3f} mm)"
+            )
+        if rc.min_finger_distance_m <= 0.0:
+            a, b = rc.finger_pair
+            problems.append(
+                f"{a} and {b} touch during the {phase.kind} of {rc.finger} at {rc.t_start:.3f} s "
+                f"(distance {rc.min_finger_distance_m * 1e3:.3f} mm at "
+                f"t={rc.t_min_finger_s:.3f} s)"
+            )
+    return PlanCheck(
+        ok=not problems,
+        regrasps=tuple(checks),
+        joint_limit_violations=tuple(violations),
+        min_holding=n_hold,
+        t_min_holding_s=t_hold,
+        min_finger_distance_samples_m=d_ff,
+        t_min_finger_samples_s=float(plan.t[k_ff]),
+        finger_pair_samples=pair_ff,
+        max_contact_error_m=err,
+        contact_error_finger=err_finger,
+        t_max_contact_error_s=err_t,
+        problems=tuple(problems),
+    )
+
+
+# ---------------------------------------------------------------------- the scene
+class _Scene:
+    """The hand (Pinocchio model and collision geometries) and the object (Coal) of a plan."""
+
+    def __init__(self, plan: Plan) -> None:
+        import coal
+        import pinocchio as pin
+
+        self.plan = plan
+        urdf = str(plan.urdf_path)
+        try:
+            self.model = pin.buildModelFromUrdf(urdf, mimic=True)
+            self.geom = pin.buildGeomFromUrdf(self.model, urdf, pin.COLLISION)
+        except (RuntimeError, ValueError) as exc:
+            raise ModelFileError(urdf, f"cannot be loaded by Pinocchio ({exc})") from None
+        if plan.q.shape[1] != self.model.nq:
+            raise InputError(
+                "plan.q",
+                f"has {plan.q.shape[1]} columns but the URDF has nq={self.model.nq}",
+                "q in the order of pin.buildModelFromUrdf(urdf, mimic=True)",
+            )
+        self.data = self.model.createData()
+        self.gdata = pin.GeometryData(self.geom)
+        pts = coal.StdVec_Vec3s()
+        pts.extend([np.asarray(v, float) for v in plan.object["vertices"]])
+        self.obj = coal.Convex.convexHull(pts, False, None)
+        verts = np.asarray(plan.object["vertices"], float)
+        lo, hi = verts.min(axis=0), verts.max(axis=0)
+        self.obj_center = 0.5 * (lo + hi)
+        self.obj_radius = float(np.max(np.linalg.norm(verts - self.obj_center, axis=1)))
+
+        # which finger moves each geometry: the finger whose joints are its ancestors
+        joint_finger: dict[int, str] = {}
+        fingers = plan.hand["fingers"]
+        for name, f in fingers.items():
+            for j in f["joints"]:
+                if not self.model.existJointName(j):
+                    raise InputError("plan.hand", f"finger {name!r}: joint {j!r} is not in {urdf}")
+                joint_finger[self.model.getJointId(j)] = name
+        self.geom_finger: list[str | None] = []
+        self.geom_center: list[np.ndarray] = []
+        self.geom_radius: list[float] = []
+        for g in self.geom.geometryObjects:
+            j, owner = int(g.parentJoint), None
+            while j > 0 and owner is None:
+                owner = joint_finger.get(j)
+                j = int(self.model.parents[j])
+            self.geom_finger.append(owner)
+            g.geometry.computeLocalAABB()
+            self.geom_center.append(np.array(g.geometry.aabb_center, float))
+            self.geom_radius.append(float(g.geometry.aabb_radius))
+        self.tip_frames: dict[str, int] = {}
+        for name, f in fingers.items():
+            if not self.model.existFrame(f["tip_frame"]):
+                raise InputError(
+                    "plan.hand", f"finger {name!r}: frame {f['tip_frame']!r} is not in {urdf}"
+                )
+            self.tip_frames[name] = self.model.getFrameId(f["tip_frame"])
+        self.finger_geoms = [g for g, f in enumerate(self.geom_finger) if f is not None]
+        ids = self.finger_geoms
+        self.ff_pairs = np.array(
+            [
+                (a, b)
+                for a in range(len(ids))
+                for b in range(a + 1, len(ids))
+                if self.geom_finger[ids[a]] != self.geom_finger[ids[b]]
+            ],
+            dtype=np.int64,
+        ).reshape(-1, 2)
+        for name in plan.phases:
+            if name not in fingers:
+                raise InputError("plan.phases", f"finger {name!r} is not in plan.hand.fingers")
+        self.slerp = Slerp(plan.t, Rotation.from_quat(plan.T_palm_object[:, 3:]))
+
+    def object_poses(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Object rotations ``(K, 3, 3)`` and positions ``(K, 3)`` [m] at ``times`` [s]."""
+        p = self.plan
+        x = np.stack([np.interp(times, p.t, p.T_palm_object[:, j]) for j in range(3)], axis=1)
+        return self.slerp(times).as_matrix(), x
+
+    def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fingertip frame origins and the finger geometries' placements (palm frame).
+
+        Args:
+            q: Configurations ``(K, nq)`` [rad].
+
+        Returns:
+            ``tips (K, F, 3)`` [m] (fingers in ``tip_frames`` order), and rotations
+            ``(K, G, 3, 3)`` and translations ``(K, G, 3)`` [m] of the geometries
+            :attr:`finger_geoms`.
+        """
+        import pinocchio as pin
+
+        m, d, ids = self.model, self.data, self.finger_geoms
+        frames = list(self.tip_frames.values())
+        tips = np.empty((q.shape[0], len(frames), 3))
+        R = np.empty((q.shape[0], len(ids), 3, 3))
+        x = np.empty((q.shape[0], len(ids), 3))
+        for k in range(q.shape[0]):
+            pin.forwardKinematics(m, d, q[k])
+            pin.updateFramePlacements(m, d)
+            pin.updateGeometryPlacements(m, d, self.geom, self.gdata)
+            for i, fid in enumerate(frames):
+                tips[k, i] = d.oMf[fid].translation
+            for i, g in enumerate(ids):
+                M = self.gdata.oMg[g]
+                R[k, i] = M.rotation
+                x[k, i] = M.translation
+        return tips, R, x
+
+
+# ---------------------------------------------------------------------- the checks
+def _phase_gaps(plan: Plan) -> list[str]:
+    """Gaps, overlaps or uncovered ends in each finger's phases."""
+    out = []
+    t0, t1 = float(plan.t[0]), float(plan.t[-1])
+    for name, phases in plan.phases.items():
+        if not phases:
+            out.append(f"{name} has no phase")
+            continue
+        ps = sorted(phases, key=lambda p: p.t_start)
+        if abs(ps[0].t_start - t0) > _GAP_TOL_S:
+            out.append(f"{name}'s first phase starts at {ps[0].t_start:.3f} s, not {t0:.3f} s")
+        if abs(ps[-1].t_end - t1) > _GAP_TOL_S:
+            out.append(f"{name}'s last phase ends at {ps[-1].t_end:.3f} s, not {t1:.3f} s")
+        for a, b in zip(ps[:-1], ps[1:], strict=True):
+            if abs(b.t_start - a.t_end) > _GAP_TOL_S:
+                out.append(
+                    f"{name}: {a.kind} phase ends at {a.t_end:.3f} s but the next "
+                    f"({b.kind}) starts at {b.t_start:.3f} s"
+                )
+        for p in ps:
+            if p.t_end < p.t_start:
+                out.append(f"{name}: {p.kind} phase ends before it starts ({p.t_start:.3f} s)")
+    return out
+
+
+def _joint_limits(scene: _Scene) -> list[JointLimitViolation]:
+    """The worst sample of every joint that leaves its limits."""
+    m, plan = scene.model, scene.plan
+    lo, hi = np.asarray(m.lowerPositionLimit), np.asarray(m.upperPositionLimit)
+    excess = np.maximum(lo - plan.q, plan.q - hi)  # (S, nq)
+    out = []
+    for iq in np.flatnonzero(np.max(excess, axis=0) > _JOINT_TOL_RAD):
+        k = int(np.argmax(excess[:, iq]))
+        out.append(
+            JointLimitViolation(
+                joint=_joint_name_of_q(m, int(iq)),
+                t_s=float(plan.t[k]),
+                q_rad=float(plan.q[k, iq]),
+                lower_rad=float(lo[iq]),
+                upper_rad=float(hi[iq]),
+            )
+        )
+    return out
+
+
+def _joint_name_of_q(model: Any, iq: int) -> str:
+    for j in range(1, model.njoints):
+        jm = model.joints[j]
+        if jm.idx_q <= iq < jm.idx_q + jm.nq:
+            return str(model.names[j])
+    return f"q[{iq}]"
+
+
+def _min_holding(plan: Plan) -> tuple[int, float]:
+    """Fewest fingers in a contact phase at any instant, and the first time it happens.
+
+    The count only changes at phase ends, so it is evaluated exactly at every phase end
+    and midway between consecutive ends (phases are closed intervals).
+    """
+    contacts = [
+        (p.t_start, p.t_end)
+        for phases in plan.phases.values()
+        for p in phases
+        if p.kind == "contact"
+    ]
+    owner = [name for name, phases in plan.phases.items() for p in phases if p.kind == "contact"]
+    t0, t1 = float(plan.t[0]), float(plan.t[-1])
+    ends = np.unique(np.clip([t0, t1, *[t for c in contacts for t in c]], t0, t1))
+    probe = np.sort(np.concatenate([ends, 0.5 * (ends[:-1] + ends[1:])]))
+    if not contacts:
+        return 0, t0
+    c = np.array(contacts)
+    inside = (c[:, None, 0] - _TIME_TOL_S <= probe) & (probe <= c[:, None, 1] + _TIME_TOL_S)
+    names = sorted(set(owner))
+    per_finger = np.zeros((len(names), probe.size), bool)
+    for i, name in enumerate(owner):
+        per_finger[names.index(name)] |= inside[i]
+    count = per_finger.sum(axis=0)
+    k = int(np.argmin(count))
+    return int(count[k]), float(probe[k])
+
+
+def _contact_error(scene: _Scene, tips: np.ndarray) -> tuple[float, str | None, float | None]:
+    """Largest fingertip-to-contact error over the samples of every contact phase.
+
+    ``tips`` are the fingertip frame origins at the plan's samples ``(S, F, 3)`` [m].
+    """
+    plan = scene.plan
+    R, x = scene.object_poses(plan.t)
+    order = list(scene.tip_frames)
+    worst: tuple[float, str | None, float | None] = (0.0, None, None)
+    for name, phases in plan.phases.items():
+        r = float(plan.hand["fingers"][name]["tip_radius"])
+        i_f = order.index(name)
+        for ph in phases:
+            if not isinstance(ph, ContactPhase):
+                continue
+            sel = np.flatnonzero(
+                (plan.t >= ph.t_start - _TIME_TOL_S) & (plan.t <= ph.t_end + _TIME_TOL_S)
+            )
+            if sel.size == 0:
+                continue
+            centre_object = np.asarray(ph.p_object, float) + r * np.asarray(ph.n_object, float)
+            want = np.einsum("kij,j->ki", R[sel], centre_object) + x[sel]
+            err = np.linalg.norm(tips[sel, i_f] - want, axis=1)
+            k = int(np.argmax(err))
+            if worst[1] is None or err[k] > worst[0]:
+                worst = (float(err[k]), name, float(plan.t[sel[k]]))
+    return worst
+
+
+def _densify(plan: Plan, sel: np.ndarray, max_step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Times ``(K,)`` and configurations ``(K, nq)`` between the samples ``sel`` so that no
+    joint moves more than ``max_step`` between two consecutive ones (ends included)."""
+    t, q = plan.t[sel], plan.q[sel]
+    if sel.size == 1:
+        return t, q
+    steps = np.ceil(np.max(np.abs(np.diff(q, axis=0)), axis=1) / max_step).astype(int)
+    steps = np.maximum(steps, 1)
+    seg = np.repeat(np.arange(steps.size), steps)
+    frac = np.concatenate([np.arange(n) / n for n in steps])
+    times = np.append(t[seg] + frac * (t[seg + 1] - t[seg]), t[-1])
+    qs = np.vstack([q[seg] + frac[:, None] * (q[seg + 1] - q[seg]), q[-1:]])
+    return times, qs
+
+
+def _check_regrasp(
+    scene: _Scene, phase: RegraspPhase | ReleasePhase, max_step: float
+) -> RegraspCheck:
+    """Densify one regrasp; the moving finger against the object, all fingers pairwise."""
+    import coal
+
+    plan = scene.plan
+    sel = np.flatnonzero(
+        (plan.t >= phase.t_start - _TIME_TOL_S) & (plan.t <= phase.t_end + _TIME_TOL_S)
+    )
+    if sel.size == 0:  # a regrasp between two samples: check the segment around it
+        k = int(np.clip(np.searchsorted(plan.t, phase.t_start), 1, plan.t.size - 1))
+        sel = np.array([k - 1, k])
+    times, q = _densify(plan, sel, max_step)
+    R_obj, x_obj = scene.object_poses(times)
+    _, R, x = scene.kinematics(q)
+    ids = scene.finger_geoms
+    objs = scene.geom.geometryObjects
+    req = coal.DistanceRequest()
+
+    # the moving finger's geometries against the object
+    moving = [i for i, g in enumerate(ids) if scene.geom_finger[g] == phase.finger]
+    c_geom = _centres(scene, R, x)[:, moving]  # (K, M, 3)
+    c_obj = np.einsum("kij,j->ki", R_obj, scene.obj_center) + x_obj  # (K, 3)
+    radius = np.array([scene.geom_radius[ids[i]] for i in moving])
+    lower = np.linalg.norm(c_geom - c_obj[:, None], axis=2) - radius - scene.obj_radius
+
+    def d_object(k: int, j: int) -> float:
+        i = moving[j]
+        return coal.distance(
+            objs[ids[i]].geometry,
+            coal.Transform3s(R[k, i], x[k, i]),
+            scene.obj,
+            coal.Transform3s(R_obj[k], x_obj[k]),
+            req,
+            coal.DistanceResult(),
+        )
+
+    d_obj, (k_obj, _) = _exact_min(lower, d_object)
+    d_ff, k_ff, pair = _min_finger_distance(scene, R, x)
+    return RegraspCheck(
+        finger=phase.finger,
+        t_start=float(phase.t_start),
+        t_end=float(phase.t_end),
+        n_samples=int(times.size),
+        min_object_distance_m=float(d_obj),
+        t_min_object_s=float(times[k_obj]),
+        min_finger_distance_m=float(d_ff),
+        t_min_finger_s=float(times[k_ff]),
+        finger_pair=pair,
+    )
+
+
+def _centres(scene: _Scene, R: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Centres ``(K, G, 3)`` [m] of the finger geometries' bounding spheres."""
+    local = np.array([scene.geom_center[g] for g in scene.finger_geoms])  # (G, 3)
+    return np.einsum("kgij,gj->kgi", R, local) + x
+
+
+def _min_finger_distance(
+    scene: _Scene, R: np.ndarray, x: np.ndarray
+) -> tuple[float, int, tuple[str, str]]:
+    """Smallest signed distance between geometries of two different fingers.
+
+    Args:
+        scene: The scene.
+        R, x: Placements of :attr:`_Scene.finger_geoms`, ``(K, G, 3, 3)`` and ``(K, G, 3)``.
+
+    Returns:
+        ``(distance [m], sample index, (finger, finger))``; ``inf`` without pairs.
+    """
+    import coal
+
+    pairs, ids = scene.ff_pairs, scene.finger_geoms
+    if pairs.size == 0:
+        return math.inf, 0, ("", "")
+    c = _centres(scene, R, x)
+    radius = np.array([scene.geom_radius[g] for g in ids])
+    lower = (
+        np.linalg.norm(c[:, pairs[:, 0]] - c[:, pairs[:, 1]], axis=2)
+        - radius[pairs[:, 0]]
+        - radius[pairs[:, 1]]
+    )
+    objs = scene.geom.geometryObjects
+    req = coal.DistanceRequest()
+
+    def d_pair(k: int, j: int) -> float:
+        a, b = pairs[j]
+        return coal.distance(
+            objs[ids[a]].geometry,
+            coal.Transform3s(R[k, a], x[k, a]),
+            objs[ids[b]].geometry,
+            coal.Transform3s(R[k, b], x[k, b]),
+            req,
+            coal.DistanceResult(),
+        )
+
+    d, (k, j) = _exact_min(lower, d_pair)
+    a, b = pairs[j]
+    return d, k, (str(scene.geom_finger[ids[a]]), str(scene.geom_finger[ids[b]]))
+
+
+def _exact_min(lower: np.ndarray, exact: Any) -> tuple[float, tuple[int, int]]:
+    """The exact minimum of ``exact(k, j)`` over all entries of ``lower`` (K, J).
+
+    ``lower[k, j]`` must be a lower bound of ``exact(k, j)``. Entries are evaluated in
+    increasing order of their bound until the next bound is not below the best exact
+    value: every entry left has a value at least its bound, hence at least the best.
+    """
+    flat = lower.ravel()
+    if flat.size == 0:
+        return math.inf, (0, 0)
+    order = np.argsort(flat, kind="stable")
+    best, arg = math.inf, int(order[0])
+    for idx in order:
+        if flat[idx] >= best:
+            break
+        k, j = divmod(int(idx), lower.shape[1])
+        d = float(exact(k, j))
+        if d < best:
+            best, arg = d, int(idx)
+    return best, divmod(arg, lower.shape[1])
