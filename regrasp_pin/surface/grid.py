@@ -19,110 +19,30 @@ to the next through their shared edge). The grid is a square lattice of step
 ``spacing_m`` anchored at P with its first axis along the unfolded P -> Q direction;
 its nodes are joined by the 16-neighbour stencil (8 king and 8 knight moves) wherever
 the straight segment stays inside the region. Build with :func:`build_surface_grid`,
-solve with :func:`regrasp_pin.surface.path.shortest_grid_path`.
+solve with :func:`regrasp_pin.surface.path.shortest_grid_path`. The region is chosen in
+:mod:`.region` and unfolded in :mod:`.unfolding`.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
 
 from .._validate import as_array, frozen, positive, positive_int
-from ..exceptions import GeometryError, InputError
-from ..model.objects import ConvexObject, FaceAdjacency
+from ..exceptions import InputError
+from ..model.objects import ConvexObject
+from .region import ON_SURFACE_TOL_M, choose_region
+from .unfolding import UNFOLD_TOL_M, FaceUnfolding, depths, lift, segments_inside, unfold_faces
 
 __all__ = ["FaceUnfolding", "SurfaceGrid", "build_surface_grid", "unfold_faces"]
 
 log = logging.getLogger(__name__)
 
-ON_SURFACE_TOL_M = 1e-6  # P and Q must lie this close to the surface [m]
-_TOL_M = 1e-9  # geometric slack for containment and touching tests [m]
 # Half of the 16-neighbour stencil in lattice steps (the other half is the reverse).
 _STENCIL = np.array([(1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)])
-
-
-def _rot2(angle_rad: float) -> np.ndarray:
-    c, s = math.cos(angle_rad), math.sin(angle_rad)
-    return np.array([[c, -s], [s, c]])
-
-
-def _cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
-@dataclass(frozen=True, eq=False)
-class FaceUnfolding:
-    """Where one face of the object lies in the unfolded plane.
-
-    The map is the rigid motion ``x_unfolded = rotation @ uv_face + translation`` from
-    the face's own ``(u, v)`` coordinates (:class:`regrasp_pin.model.objects.Face`) to the
-    unfolded plane; it preserves lengths and orientation (seen from outside).
-
-    Attributes:
-        face_id: Id of the face in ``obj.faces``.
-        rotation: 2-D rotation, shape (2, 2).
-        translation: Translation [m], shape (2,).
-        polygon_uv: The face polygon in the unfolded plane [m], shape (k, 2),
-            counter-clockwise.
-        parent: Face this one was unfolded about (None for the root face, P's face).
-        hinge_uv: The edge shared with ``parent`` in the unfolded plane [m], shape (2, 2),
-            ordered counter-clockwise around the parent (None for the root).
-        origin_object: Face frame origin in the object frame [m], shape (3,).
-        u_object: Face frame first axis, shape (3,).
-        v_object: Face frame second axis, shape (3,).
-        normal_object: Outward unit normal of the face, shape (3,).
-    """
-
-    face_id: int
-    rotation: np.ndarray
-    translation: np.ndarray
-    polygon_uv: np.ndarray
-    parent: int | None
-    hinge_uv: np.ndarray | None
-    origin_object: np.ndarray
-    u_object: np.ndarray
-    v_object: np.ndarray
-    normal_object: np.ndarray
-
-    def to_unfolded(self, uv_face: np.ndarray) -> np.ndarray:
-        """Unfolded coordinates of face coordinates.
-
-        Args:
-            uv_face: Coordinates in the face's ``(u, v)`` frame [m], shape (N, 2).
-
-        Returns:
-            Unfolded coordinates [m], shape (N, 2).
-        """
-        return np.asarray(uv_face, dtype=float) @ self.rotation.T + self.translation
-
-    def to_face(self, uv_unfolded: np.ndarray) -> np.ndarray:
-        """Face coordinates of unfolded coordinates (inverse of :meth:`to_unfolded`).
-
-        Args:
-            uv_unfolded: Unfolded coordinates [m], shape (N, 2).
-
-        Returns:
-            Coordinates in the face's ``(u, v)`` frame [m], shape (N, 2).
-        """
-        return (np.asarray(uv_unfolded, dtype=float) - self.translation) @ self.rotation
-
-    def to_object(self, uv_unfolded: np.ndarray) -> np.ndarray:
-        """Points of the face plane, object frame, from unfolded coordinates.
-
-        Args:
-            uv_unfolded: Unfolded coordinates [m], shape (N, 2).
-
-        Returns:
-            Points in the object frame [m], shape (N, 3).
-        """
-        uv = self.to_face(uv_unfolded)
-        return self.origin_object + uv[:, :1] * self.u_object + uv[:, 1:] * self.v_object
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,9 +112,9 @@ class SurfaceGrid:
             Indices into :attr:`unfoldings`, shape (K,) int (ties: the first face).
         """
         uv = as_array(uv_unfolded, "uv_unfolded", (None, 2))
-        return np.argmax(_depths(uv, self.unfoldings), axis=1)
+        return np.argmax(depths(uv, self.unfoldings), axis=1)
 
-    def contains(self, uv_unfolded: np.ndarray, tol_m: float = _TOL_M) -> np.ndarray:
+    def contains(self, uv_unfolded: np.ndarray, tol_m: float = UNFOLD_TOL_M) -> np.ndarray:
         """Whether unfolded points lie in the region (within ``tol_m``).
 
         Args:
@@ -205,7 +125,7 @@ class SurfaceGrid:
             Boolean mask, shape (K,).
         """
         uv = as_array(uv_unfolded, "uv_unfolded", (None, 2))
-        return np.max(_depths(uv, self.unfoldings), axis=1) >= -tol_m
+        return np.max(depths(uv, self.unfoldings), axis=1) >= -tol_m
 
     def segments_inside(self, a_uv: np.ndarray, b_uv: np.ndarray) -> np.ndarray:
         """Whether straight unfolded segments ``a -> b`` stay inside the region.
@@ -221,7 +141,7 @@ class SurfaceGrid:
         """
         a = as_array(a_uv, "a_uv", (None, 2))
         b = as_array(b_uv, "b_uv", (a.shape[0], 2))
-        return _segments_inside(a, b, self.unfoldings)
+        return segments_inside(a, b, self.unfoldings)
 
     def to_object(
         self, uv_unfolded: np.ndarray, face_ids: np.ndarray | None = None
@@ -241,7 +161,7 @@ class SurfaceGrid:
                 face id is not a face of the region.
         """
         uv = as_array(uv_unfolded, "uv_unfolded", (None, 2))
-        depth = _depths(uv, self.unfoldings)
+        depth = depths(uv, self.unfoldings)
         if face_ids is None:
             piece = np.argmax(depth, axis=1)
         else:
@@ -262,260 +182,9 @@ class SurfaceGrid:
         worst = -float(np.min(np.max(depth, axis=1), initial=0.0))
         if worst > ON_SURFACE_TOL_M:
             raise InputError("uv_unfolded", f"a point lies {worst:.3g} m outside the region")
-        return _lift(self.unfoldings, uv, piece)
+        return lift(self.unfoldings, uv, piece)
 
 
-def _lift(
-    pieces: Sequence[FaceUnfolding], uv: np.ndarray, piece: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Object-frame points, normals and face ids of unfolded points mapped by ``pieces[piece]``."""
-    rot = np.stack([f.rotation for f in pieces])[piece]  # (K, 2, 2)
-    tra = np.stack([f.translation for f in pieces])[piece]
-    uv_face = np.einsum("kji,kj->ki", rot, uv - tra)  # rotation^T (x - t)
-    origin = np.stack([f.origin_object for f in pieces])[piece]
-    u = np.stack([f.u_object for f in pieces])[piece]
-    v = np.stack([f.v_object for f in pieces])[piece]
-    normal = np.stack([f.normal_object for f in pieces])[piece]
-    points = origin + uv_face[:, :1] * u + uv_face[:, 1:] * v
-    fid = np.array([f.face_id for f in pieces], dtype=np.int64)[piece]
-    return points, normal, fid
-
-
-# ---------------------------------------------------------------------- unfolding
-def unfold_faces(
-    obj: ConvexObject,
-    face_ids: Sequence[int],
-    parents: Sequence[int | None] | None = None,
-) -> tuple[FaceUnfolding, ...]:
-    """Unfold faces into the plane of the first one, each about the edge it shares with its parent.
-
-    Args:
-        obj: The convex object.
-        face_ids: Faces to unfold; the first is the root (its ``(u, v)`` frame is the
-            unfolded frame).
-        parents: Parent face of each face (None for the root); every parent must come
-            earlier in ``face_ids`` and share an edge with the face. Default: a chain,
-            each face unfolded about the previous one.
-
-    Returns:
-        One :class:`FaceUnfolding` per face, in the order of ``face_ids``.
-
-    Raises:
-        InputError: if a face id is out of range or the lists do not fit.
-        GeometryError: if a face and its parent share no edge.
-    """
-    ids = [int(i) for i in face_ids]
-    if not ids:
-        raise InputError("face_ids", "is empty", "at least one face id")
-    n_faces = len(obj.faces)
-    for i in ids:
-        if not 0 <= i < n_faces:
-            raise InputError("face_ids", f"{i} is not a face id", f"ids in [0, {n_faces})")
-    if parents is None:
-        parents = [None, *ids[:-1]]
-    if len(parents) != len(ids) or parents[0] is not None:
-        raise InputError("parents", "must hold one parent per face, None for the first")
-    adjacency = _adjacency_map(obj)
-    done: dict[int, FaceUnfolding] = {}
-    out = []
-    for fid, parent in zip(ids, parents, strict=True):  # per face (a handful)
-        face = obj.faces[fid]
-        if parent is None:
-            rot, tra, hinge = np.eye(2), np.zeros(2), None
-        else:
-            if parent not in done:
-                raise InputError("parents", f"parent {parent} of face {fid} comes later")
-            adj = adjacency.get((min(fid, parent), max(fid, parent)))
-            if adj is None:
-                raise GeometryError(f"faces {parent} and {fid} share no edge: cannot unfold")
-            rot, tra, hinge = _hinge_map(obj, done[parent], fid, adj)
-        unf = FaceUnfolding(
-            face_id=fid,
-            rotation=frozen(rot),
-            translation=frozen(tra),
-            polygon_uv=frozen(face.polygon_uv @ rot.T + tra),
-            parent=parent,
-            hinge_uv=None if hinge is None else frozen(hinge),
-            origin_object=face.origin,
-            u_object=face.u,
-            v_object=face.v,
-            normal_object=face.normal,
-        )
-        done[fid] = unf
-        out.append(unf)
-    return tuple(out)
-
-
-def _adjacency_map(obj: ConvexObject) -> dict[tuple[int, int], FaceAdjacency]:
-    return {(a.face_a, a.face_b): a for a in obj.face_adjacency}
-
-
-def _hinge_map(
-    obj: ConvexObject, parent: FaceUnfolding, fid: int, adj: FaceAdjacency
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rigid map of face ``fid`` that lays its shared edge onto the parent's unfolded edge."""
-    pface, face = obj.faces[parent.face_id], obj.faces[fid]
-    e0, e1 = adj.edge if adj.face_a == parent.face_id else adj.edge[::-1]  # CCW around parent
-    hinge = parent.to_unfolded(pface.to_uv(np.stack([e0, e1])))  # (2, 2)
-    c = face.to_uv(np.stack([e0, e1]))
-    dh, dc = hinge[1] - hinge[0], c[1] - c[0]
-    rot = _rot2(math.atan2(dh[1], dh[0]) - math.atan2(dc[1], dc[0]))
-    return rot, hinge[0] - rot @ c[0], hinge
-
-
-# ---------------------------------------------------------------------- 2-D geometry
-def _halfplanes(pieces: Sequence[FaceUnfolding]) -> tuple[np.ndarray, np.ndarray]:
-    """Inward unit edge normals (F, k, 2) and biases (F, k), padded by repeating edge 0."""
-    k = max(p.polygon_uv.shape[0] for p in pieces)
-    normals = np.empty((len(pieces), k, 2))
-    bias = np.empty((len(pieces), k))
-    for i, p in enumerate(pieces):  # per face (a handful)
-        a = p.polygon_uv
-        e = np.roll(a, -1, axis=0) - a
-        m = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None]
-        c = np.sum(a * m, axis=1)
-        pad = k - a.shape[0]
-        normals[i] = np.concatenate([m, np.repeat(m[:1], pad, axis=0)])
-        bias[i] = np.concatenate([c, np.repeat(c[:1], pad)])
-    return normals, bias
-
-
-def _depths(uv: np.ndarray, pieces: Sequence[FaceUnfolding]) -> np.ndarray:
-    """Signed depth [m] of points inside each piece (min over its edges), shape (N, F)."""
-    normals, bias = _halfplanes(pieces)
-    return np.min(np.einsum("nd,fkd->nfk", uv, normals) - bias, axis=2)
-
-
-def _segments_inside(
-    a: np.ndarray, b: np.ndarray, pieces: Sequence[FaceUnfolding], tol_m: float = _TOL_M
-) -> np.ndarray:
-    """Whether each segment ``a -> b`` is covered by the union of the convex pieces.
-
-    Each piece clips the segment to a parameter interval (Cyrus-Beck); the segment is
-    inside when the intervals cover ``[0, 1]`` without a gap.
-    """
-    normals, bias = _halfplanes(pieces)
-    d = b - a
-    da = np.einsum("nd,fkd->nfk", a, normals) - bias + tol_m  # depth at a, with slack
-    dd = np.einsum("nd,fkd->nfk", d, normals)  # rate of change along the segment
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bound = -da / dd
-    enter = np.where(dd > 0, bound, -np.inf)
-    leave = np.where(dd < 0, bound, np.inf)
-    never = (dd == 0) & (da < 0)
-    t0 = np.maximum(np.max(enter, axis=2), 0.0)
-    t1 = np.minimum(np.min(leave, axis=2), 1.0)
-    empty = (t0 > t1) | np.any(never, axis=2)
-    t0 = np.where(empty, np.inf, t0)
-    order = np.argsort(t0, axis=1)
-    t0 = np.take_along_axis(t0, order, axis=1)
-    t1 = np.take_along_axis(t1, order, axis=1)
-    reach = np.zeros(a.shape[0])
-    eps = 1e-12
-    for j in range(t0.shape[1]):  # per piece (a handful), vectorized over segments
-        ok = t0[:, j] <= reach + eps
-        reach = np.where(ok, np.maximum(reach, t1[:, j]), reach)
-    return reach >= 1.0 - eps
-
-
-def _polygons_overlap(a: np.ndarray, b: np.ndarray, tol_m: float = _TOL_M) -> bool:
-    """Separating-axis test: do two convex polygons share interior (more than touch)?"""
-    for poly in (a, b):
-        e = np.roll(poly, -1, axis=0) - poly
-        axes = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None]
-        pa, pb = a @ axes.T, b @ axes.T
-        if np.any(
-            (pa.max(axis=0) <= pb.min(axis=0) + tol_m) | (pb.max(axis=0) <= pa.min(axis=0) + tol_m)
-        ):
-            return False
-    return True
-
-
-def _clamp_into(uv: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Nearest point of a closed convex polygon to a 2-D point (the point if inside)."""
-    a = poly
-    e = np.roll(a, -1, axis=0) - a
-    m = np.stack([-e[:, 1], e[:, 0]], axis=1)
-    if np.all(np.sum((uv - a) * m, axis=1) >= 0):
-        return uv
-    t = np.clip(np.sum((uv - a) * e, axis=1) / np.sum(e * e, axis=1), 0.0, 1.0)
-    foot = a + t[:, None] * e
-    return foot[int(np.argmin(np.linalg.norm(foot - uv, axis=1)))]
-
-
-def _region_geodesic(p_uv: np.ndarray, q_uv: np.ndarray, pieces: Sequence[FaceUnfolding]) -> float:
-    """Shortest P -> Q route inside the region: Dijkstra over the visibility graph of
-    P, Q and the endpoints of the hinges (the only possible reflex corners)."""
-    if _segments_inside(p_uv[None], q_uv[None], pieces)[0]:
-        return float(np.linalg.norm(q_uv - p_uv))
-    hinge_ends = [h for p in pieces if p.hinge_uv is not None for h in p.hinge_uv]
-    pts = np.vstack([p_uv, q_uv, *hinge_ends]) if hinge_ends else np.vstack([p_uv, q_uv])
-    i, j = np.triu_indices(pts.shape[0], k=1)
-    ok = _segments_inside(pts[i], pts[j], pieces)
-    length = np.linalg.norm(pts[j] - pts[i], axis=1)
-    ok &= length > 0
-    graph = csr_matrix((length[ok], (i[ok], j[ok])), shape=(pts.shape[0],) * 2)
-    return float(dijkstra(graph, directed=False, indices=0)[1])
-
-
-# ---------------------------------------------------------------------- region choice
-def _faces_holding(obj: ConvexObject, p: np.ndarray, argument: str) -> list[int]:
-    """Faces that hold a surface point (several on an edge or a vertex), sorted by id."""
-    dist = float(obj.signed_distance(p[None])[0])
-    if abs(dist) > ON_SURFACE_TOL_M:
-        raise InputError(
-            argument,
-            f"is not on the object surface (distance {dist:.3g} m)",
-            f"a point within {ON_SURFACE_TOL_M:g} m of the surface",
-        )
-    tol = 2 * ON_SURFACE_TOL_M
-    plane = np.abs(obj.normals @ p - obj.offsets)
-    ids = [
-        f.id
-        for f in obj.faces
-        if plane[f.id] <= tol and bool(f.contains_uv(f.to_uv(p[None]), -tol)[0])
-    ]
-    return ids or [int(obj.supporting_face(p[None])[0])]
-
-
-def _chains(
-    obj: ConvexObject, starts: list[int], goals: list[int], max_faces: int
-) -> list[tuple[int, ...]]:
-    """All simple chains of adjacent faces from a start face to a goal face (depth-first)."""
-    neighbours: dict[int, list[int]] = {f.id: [] for f in obj.faces}
-    for adj in obj.face_adjacency:
-        neighbours[adj.face_a].append(adj.face_b)
-        neighbours[adj.face_b].append(adj.face_a)
-    goal_set = set(goals)
-    out: list[tuple[int, ...]] = []
-    stack: list[tuple[int, ...]] = [(s,) for s in reversed(starts)]
-    while stack:
-        chain = stack.pop()
-        if chain[-1] in goal_set:
-            out.append(chain)
-            continue
-        if len(chain) < max_faces:
-            stack.extend(
-                chain + (n,) for n in sorted(neighbours[chain[-1]], reverse=True) if n not in chain
-            )
-    return out
-
-
-def _chain_overlaps(pieces: Sequence[FaceUnfolding]) -> bool:
-    """Whether two faces that are not consecutive in the chain overlap once unfolded."""
-    return any(
-        _polygons_overlap(pieces[i].polygon_uv, pieces[j].polygon_uv)
-        for i in range(len(pieces))
-        for j in range(i + 2, len(pieces))
-    )
-
-
-def _face_uv(obj: ConvexObject, fid: int, p: np.ndarray) -> np.ndarray:
-    face = obj.faces[fid]
-    return _clamp_into(face.to_uv(p[None]), face.polygon_uv).reshape(2)
-
-
-# ---------------------------------------------------------------------- grid
 def build_surface_grid(
     obj: ConvexObject,
     P_object: np.ndarray,
@@ -562,8 +231,6 @@ def build_surface_grid(
     n_max = positive_int(max_faces, "max_faces", minimum=1)
     p = as_array(P_object, "P_object", (3,))
     q = as_array(Q_object, "Q_object", (3,))
-    p_faces = _faces_holding(obj, p, "P_object")
-    q_faces = _faces_holding(obj, q, "Q_object")
     gap = float(np.linalg.norm(q - p))
     if gap < 0.5 * s:
         raise InputError(
@@ -572,43 +239,14 @@ def build_surface_grid(
             f"a point at least spacing_m / 2 = {0.5 * s:g} m from P",
         )
 
-    # Candidates by their straight unfolded distance, a lower bound of their route.
-    candidates = []
-    for chain in _chains(obj, p_faces, q_faces, n_max):  # few chains of few faces
-        pieces = unfold_faces(obj, chain)
-        p_uv = _face_uv(obj, chain[0], p)
-        q_uv = pieces[-1].to_unfolded(_face_uv(obj, chain[-1], q)[None])[0]
-        bound = float(np.linalg.norm(q_uv - p_uv))
-        candidates.append(((bound, len(chain), chain), pieces, p_uv, q_uv))
-    candidates.sort(key=lambda c: c[0])
-    best: tuple[float, int, tuple[int, ...]] | None = None
-    best_pieces: tuple[FaceUnfolding, ...] = ()
-    for (bound, n_chain, chain), pieces, p_uv, q_uv in candidates:
-        if best is not None and (bound, n_chain, chain) >= best:
-            break  # no later chain can beat the best route
-        if _chain_overlaps(pieces):
-            continue
-        key = (_region_geodesic(p_uv, q_uv, pieces), n_chain, chain)
-        if np.isfinite(key[0]) and (best is None or key < best):
-            best, best_pieces = key, pieces
-    if best is None:
-        raise GeometryError(
-            f"the region cannot be unfolded: no chain of at most {n_max} adjacent faces "
-            f"joins P's face {p_faces} to Q's face {q_faces} without overlapping"
-        )
-    geodesic, _, chain = best
-    pieces = best_pieces
-    if len(chain) == 1 and include_neighbours:
-        pieces = _with_neighbours(obj, pieces)
-
-    p_uv = _face_uv(obj, chain[0], p)
-    q_uv = pieces[len(chain) - 1].to_unfolded(_face_uv(obj, chain[-1], q)[None])[0]
+    region = choose_region(obj, p, q, n_max, include_neighbours)
+    chain, pieces, p_uv, q_uv = region.chain, region.pieces, region.p_uv, region.q_uv
     uv, edges = _lattice(p_uv, q_uv, s, pieces)
     lengths = np.linalg.norm(uv[edges[:, 1]] - uv[edges[:, 0]], axis=1)
     m = uv.shape[0]
-    piece = np.argmax(_depths(uv, pieces), axis=1)
+    piece = np.argmax(depths(uv, pieces), axis=1)
     piece[0], piece[m - 1] = 0, len(chain) - 1  # P on its face, Q on its face
-    points, normals, face_ids = _lift(pieces, uv, piece)
+    points, normals, face_ids = lift(pieces, uv, piece)
     log.debug("surface grid: faces %s, %d nodes, %d edges", chain, m, edges.shape[0])
     return SurfaceGrid(
         uv=frozen(uv),
@@ -624,26 +262,8 @@ def build_surface_grid(
         spacing_m=s,
         P_object=frozen(points[0].copy()),
         Q_object=frozen(points[m - 1].copy()),
-        geodesic_m=float(geodesic),
+        geodesic_m=region.geodesic_m,
     )
-
-
-def _with_neighbours(
-    obj: ConvexObject, pieces: tuple[FaceUnfolding, ...]
-) -> tuple[FaceUnfolding, ...]:
-    """Add the faces adjacent to the single root face that do not overlap the others."""
-    root = pieces[0].face_id
-    others = sorted(
-        a.face_b if a.face_a == root else a.face_a
-        for a in obj.face_adjacency
-        if root in (a.face_a, a.face_b)
-    )
-    star = unfold_faces(obj, [root, *others], [None] * 1 + [root] * len(others))
-    kept = [pieces[0]]
-    for cand in star[1:]:  # per neighbour (a handful)
-        if not any(_polygons_overlap(cand.polygon_uv, k.polygon_uv) for k in kept[1:]):
-            kept.append(cand)
-    return tuple(kept)
 
 
 def _lattice(
@@ -658,8 +278,8 @@ def _lattice(
     ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
     ij = np.stack([ii.ravel(), jj.ravel()], axis=1)
     uv = p_uv + s * (ij @ axes)
-    depth = _depths(uv, pieces)  # (N, F)
-    member = depth >= -_TOL_M
+    depth = depths(uv, pieces)  # (N, F)
+    member = depth >= -UNFOLD_TOL_M
     keep = np.any(member, axis=1)
     keep &= np.linalg.norm(uv - q_uv, axis=1) > 1e-6 * s  # Q is added as its own node
     p_cell = (0 - lo[0]) * ii.shape[1] + (0 - lo[1])
@@ -686,7 +306,7 @@ def _lattice(
     near = np.flatnonzero(np.linalg.norm(uv_nodes - q_uv, axis=1) <= 2 * s * (1 + 1e-9))
     edges = np.concatenate([edges, np.stack([near, np.full(near.size, q_id)], axis=1)])
     uv_nodes = np.vstack([uv_nodes, q_uv])
-    q_member = _depths(q_uv[None], pieces) >= -_TOL_M
+    q_member = depths(q_uv[None], pieces) >= -UNFOLD_TOL_M
     member = np.vstack([member, q_member])
     # An edge is valid if one piece holds both ends (pieces are convex) or, failing
     # that, if its segment is covered by the union of the pieces.
@@ -694,5 +314,5 @@ def _lattice(
     cross = np.flatnonzero(~same)
     ok = same.copy()
     if cross.size:
-        ok[cross] = _segments_inside(uv_nodes[edges[cross, 0]], uv_nodes[edges[cross, 1]], pieces)
+        ok[cross] = segments_inside(uv_nodes[edges[cross, 0]], uv_nodes[edges[cross, 1]], pieces)
     return uv_nodes, edges[ok].astype(np.int64)
