@@ -48,14 +48,12 @@ from ..plan import ContactPhase, Plan, RegraspPhase, ReleasePhase
 from .proximity import holding_proximity
 from .regrasp import RegraspParams, RegraspResult
 from .release import Release, plan_release
-from .schedule import LiftOffWindow, held_until, lift_off_window, start_times
+from .schedule import TIME_TOL_S, LiftOffWindow, held_until, lift_off_window, start_times
 from .search import Found, RegraspSearch, SearchBudget
 
 __all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation"]
 
 log = logging.getLogger(__name__)
-
-_TIME_TOL_S = 1e-9  # times closer than this are the same time
 
 
 @dataclass(frozen=True)
@@ -326,8 +324,8 @@ def plan_manipulation(
 
 
 def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:
-    grid = np.arange(motion.t_start, motion.t_end + _TIME_TOL_S, dt_s)
-    if grid[-1] < motion.t_end - _TIME_TOL_S:
+    grid = np.arange(motion.t_start, motion.t_end + TIME_TOL_S, dt_s)
+    if grid[-1] < motion.t_end - TIME_TOL_S:
         grid = np.append(grid, motion.t_end)
     grid[-1] = min(grid[-1], motion.t_end)
     return grid
@@ -350,7 +348,7 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
     limits (or infeasible), or a holding finger near another finger (holding, idle,
     or let go and still; ``gone``: fingers that are neither, e.g. one about to let go)."""
     p = ctx.params
-    times = ctx.grid[ctx.grid >= state.now - _TIME_TOL_S]
+    times = ctx.grid[ctx.grid >= state.now - TIME_TOL_S]
     base = ctx.base_q.copy()
     for n, rel in state.released.items():  # where a finger that let go stays
         base[ctx.hand.fingers[n].q_indices] = rel.q[-1]
@@ -380,7 +378,7 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
         # a hold that will be lost triggers at least one regrasp (and the lead) before:
         # a margin that closes fast (a link nearing the object) leaves no time otherwise
         due = lost - p.regrasp.duration_s - p.lead_s
-        if lost < ctx.motion.t_end - p.dt_s - _TIME_TOL_S and (t is None or due < t):
+        if lost < ctx.motion.t_end - p.dt_s - TIME_TOL_S and (t is None or due < t):
             t = max(due, state.now, h.t_from)
             why = f"its hold is lost after t={lost:.3f} s ({loss})"
         if t is not None:
@@ -390,7 +388,7 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
 
 def _loss_reason(h: Holding, lost_s: float) -> str:
     """Why the hold ends right after ``lost_s`` [s] (the track's reason there)."""
-    k = int(np.searchsorted(h.track.times_s, lost_s + _TIME_TOL_S))
+    k = int(np.searchsorted(h.track.times_s, lost_s + TIME_TOL_S))
     reasons = h.track.reasons
     return reasons[min(k, len(reasons) - 1)] or "it leaves the joint limits"
 
@@ -406,7 +404,7 @@ def _contenders(triggers: list[_Trigger], ctx: _Context) -> list[_Trigger]:
         return []
     p = ctx.params
     horizon = triggers[0].time_s + p.regrasp.duration_s + p.lead_s
-    contenders = [e for e in triggers if e.time_s <= horizon + _TIME_TOL_S]
+    contenders = [e for e in triggers if e.time_s <= horizon + TIME_TOL_S]
     return sorted(contenders, key=lambda e: (round(e.lost_s, 9), round(e.time_s, 9), e.finger))
 
 
@@ -457,7 +455,7 @@ def _advance(
     why = f"{reason} {why}"
     if (
         win.preferred_s + D > motion.t_end
-        and trig.lost_s >= motion.t_end - p.dt_s - _TIME_TOL_S
+        and trig.lost_s >= motion.t_end - p.dt_s - TIME_TOL_S
         and holds_to_end(h.track, t_trig, p.contact)
     ):
         # too late to regrasp, but the contact stays inside the joint limits (within the
@@ -537,7 +535,7 @@ def _advance(
             if released is None:
                 raise
             return released
-    if abs(found.result.t_start - starts[0]) > _TIME_TOL_S:
+    if abs(found.result.t_start - starts[0]) > TIME_TOL_S:
         why += (
             f"; lifted off at t={found.result.t_start:.3f} s: "
             "no verified regrasp at the start times tried before"
@@ -590,7 +588,7 @@ def _check_landing(
     landed[id(res)] = hold
     lost = held_until(hold.track, p.contact)
     need = min(res.t_end + p.regrasp.duration_s, ctx.motion.t_end - p.dt_s)
-    if lost >= need - _TIME_TOL_S:
+    if lost >= need - TIME_TOL_S:
         return None
     return Attempt(
         FailureKind.SHORT_HOLD,
@@ -637,7 +635,7 @@ def _refuse_dead_end(
         and e.finger in state.holding
         and e.finger not in state.held_to_end
         and e.lost_near != name
-        and e.lost_s < min(land, end) - _TIME_TOL_S
+        and e.lost_s < min(land, end) - TIME_TOL_S
     ]
     if lost:
         first = min(lost, key=lambda e: (round(e.lost_s, 9), e.finger))
@@ -669,7 +667,7 @@ def _try_release(
     """
     p, motion = ctx.params, ctx.motion
     name = trig.finger
-    end = motion.t_end - p.dt_s - _TIME_TOL_S
+    end = motion.t_end - p.dt_s - TIME_TOL_S
     if not p.release or win.empty or trig.lost_s >= end:
         return None
     without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
@@ -684,7 +682,7 @@ def _try_release(
     tried: list[str] = []
     for k in range(p.max_starts):
         t_r = win.latest_s - k * p.start_step_s
-        if t_r < win.earliest_s - _TIME_TOL_S or ctx.budget.exhausted:
+        if t_r < win.earliest_s - TIME_TOL_S or ctx.budget.exhausted:
             break
         t_r = max(t_r, win.earliest_s)
         q_r = holding_q(ctx.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
@@ -789,9 +787,9 @@ def _next_deadline(
         (e.lost_s, e.finger)
         for e in triggers
         if e.finger != trig.finger
-        and e.lost_s < ctx.motion.t_end - _TIME_TOL_S
+        and e.lost_s < ctx.motion.t_end - TIME_TOL_S
         and e.lost_s <= win.preferred_s + 2 * D + p.lead_s
-        and e.lost_s >= win.earliest_s + D + _TIME_TOL_S
+        and e.lost_s >= win.earliest_s + D + TIME_TOL_S
     ]
     return min(soon) if soon else None
 
@@ -945,7 +943,7 @@ def _backtrack(
             options.append((f"{trig.finger} before {step.trig.finger}", early, {}))
         if timing:
             end_by = trig.lost_s - D
-            if end_by > step.before.now + D + _TIME_TOL_S:
+            if end_by > step.before.now + D + TIME_TOL_S:
                 options.append(
                     (
                         f"{step.trig.finger} lands by t={end_by:.3f} s",
@@ -1018,9 +1016,9 @@ def _assemble(
     """
     keep = np.ones(grid.size, bool)
     for r in regrasps:
-        keep &= ~((grid > r.t_start - 1e-9) & (grid < r.t_end + 1e-9))
+        keep &= ~((grid > r.t_start - TIME_TOL_S) & (grid < r.t_end + TIME_TOL_S))
     times = np.unique(np.round(np.concatenate([grid[keep]] + [r.times_s for r in regrasps]), 9))
-    times = times[times <= until + 1e-9]
+    times = times[times <= until + TIME_TOL_S]
     if times.size < 2:
         times = np.array([motion.t_start, max(until, motion.t_start + params.dt_s)])
     q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
@@ -1029,13 +1027,13 @@ def _assemble(
         in_air = np.zeros(times.size, bool)
         for r in regrasps:
             if r.finger == name:
-                sel = (times >= r.t_start - 1e-9) & (times <= r.t_end + 1e-9)
+                sel = (times >= r.t_start - TIME_TOL_S) & (times <= r.t_end + TIME_TOL_S)
                 for j in range(f.k):
                     q[sel, f.q_indices[j]] = np.interp(times[sel], r.times_s, r.q[:, j])
                 in_air |= sel
         for h in [*history[name], *([holding[name]] if name in holding else [])]:
             b = h.t_to if h.t_to is not None else until
-            sel = (times >= h.t_from - 1e-9) & (times <= b + 1e-9) & ~in_air
+            sel = (times >= h.t_from - TIME_TOL_S) & (times <= b + TIME_TOL_S) & ~in_air
             if sel.any():
                 q[np.ix_(np.flatnonzero(sel), f.q_indices)] = holding_q(
                     hand, motion, name, h, times[sel], params.contact.ik_tol_m

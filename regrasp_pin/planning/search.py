@@ -42,13 +42,12 @@ from ..model.objects import ConvexObject, SurfaceSample
 from .outcomes import dominant_kind, failure_summary
 from .proximity import clear_of_fingers
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .schedule import TIME_TOL_S
 from .timing import duration_for_move, stretched_duration
 
 __all__ = ["Found", "RegraspSearch", "SearchBudget"]
 
 log = logging.getLogger(__name__)
-
-_TIME_TOL_S = 1e-9
 
 
 @dataclass
@@ -170,7 +169,7 @@ class RegraspSearch:
         ).reshape(-1, 3)
         attempts: list[Attempt] = []
         for start in starts:
-            if start + d_min > end_by + _TIME_TOL_S:
+            if start + d_min > end_by + TIME_TOL_S:
                 attempts.append(
                     Attempt(
                         FailureKind.TOO_LATE,
@@ -293,7 +292,7 @@ class RegraspSearch:
         )
         for _ in range(self.stretches + 1):
             what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
-            if start + duration > end_by + _TIME_TOL_S:
+            if start + duration > end_by + TIME_TOL_S:
                 attempts.append(
                     Attempt(
                         FailureKind.TOO_LATE,
@@ -305,7 +304,7 @@ class RegraspSearch:
                     )
                 )
                 break
-            if duration > chosen_for + _TIME_TOL_S:
+            if duration > chosen_for + TIME_TOL_S:
                 # Q was chosen for an earlier arrival: the arrival time may prefer another
                 chosen_for = duration
                 try:
