@@ -23,6 +23,7 @@ from regrasp_pin import (
     LinkClearance,
     ObjectMotion,
     RegraspError,
+    RegraspResult,
     build_manifold,
     exit_times,
     plan_regrasp,
@@ -30,7 +31,8 @@ from regrasp_pin import (
 )
 
 
-def main(out: Path = Path("out/examples")) -> None:
+def main(out: Path = Path("out/examples")) -> RegraspResult:
+    """Plan one verified regrasp of the Allegro index finger; return it."""
     hand = Hand.allegro()
     finger = hand.fingers["index"]
     q_rest = hand.neutral()
@@ -105,7 +107,7 @@ def main(out: Path = Path("out/examples")) -> None:
             f"verified by Coal ({result.report.n_samples} samples), min clearance "
             f"{1e3 * result.min_clearance_m:.2f} mm, {result.planning_ms:.0f} ms"
         )
-        return
+        return result
     raise RuntimeError("no verified regrasp for the five best new contacts")
 
 

@@ -11,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-from regrasp_pin import Box, Hand, ObjectMotion, build_manifold
+from regrasp_pin import Box, Hand, Manifold, ObjectMotion, SurfaceSample, build_manifold
 
 
-def main(out: Path = Path("out/examples")) -> None:
+def main(out: Path = Path("out/examples")) -> tuple[Manifold, SurfaceSample]:
+    """Print how much of the box the index finger can touch over time; return its
+    manifold and the surface sample it was built on."""
     hand = Hand.five_finger()
     box = Box((0.04, 0.06, 0.04))
     T0 = np.eye(4)
@@ -34,11 +36,12 @@ def main(out: Path = Path("out/examples")) -> None:
     try:
         from regrasp_pin.plotting.manifold import plot_manifold
     except ImportError:  # matplotlib missing: pip install regrasp-pin[viz]
-        return
+        return man, sample
     out.mkdir(parents=True, exist_ok=True)
     fig = plot_manifold(man, times_idx=[0, 10, 20, 30])
     fig.savefig(out / "manifold.png", dpi=100)
     print(f"figure: {out / 'manifold.png'}")
+    return man, sample
 
 
 if __name__ == "__main__":

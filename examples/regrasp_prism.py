@@ -16,7 +16,8 @@ import numpy as np
 from regrasp_pin import build_manifold, make_scenario, plan_manipulation, track_contact
 
 
-def main(out: Path = Path("out/examples")) -> None:
+def main(out: Path = Path("out/examples")) -> Path:
+    """Walk through the paper's scenario stage by stage; return the saved plan file."""
     scen = make_scenario("five_finger", "hexagon")
     hand, obj, motion, grasp = scen.hand, scen.obj, scen.motion, scen.grasp
     fingers = scen.params.fingers
@@ -58,7 +59,9 @@ def main(out: Path = Path("out/examples")) -> None:
         f"min clearance in flight {1e3 * r.min_clearance_m:.2f} mm, closest other finger "
         f"{1e3 * r.report.min_finger_finger_m:.2f} mm"
     )
-    print(f"plan written to {result.plan.save(out / 'plan.json')}")
+    path = result.plan.save(out / "plan.json")
+    print(f"plan written to {path}")
+    return path
 
 
 if __name__ == "__main__":
