@@ -67,8 +67,8 @@ import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Box, Hand, ObjectMotion, RegraspError
-from regrasp_pin.grasp.contact import LinkClearance
 from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.planning.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
 
 try:

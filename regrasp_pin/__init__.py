@@ -24,11 +24,12 @@ from .exceptions import (
     VerificationError,
 )
 from .grasp.choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
-from .grasp.contact import ContactModel, FingerClearance, LinkClearance
+from .grasp.contact import ContactModel
 from .grasp.holding import holding_hand
 from .grasp.manifold import Manifold, build_manifold
 from .grasp.quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
 from .grasp.tracking import ContactTrack, track_contact
+from .model.clearance import FingerClearance, LinkClearance
 from .model.hand import Finger, Hand
 from .model.ik import IKResult
 from .model.kinematics import FingerChain

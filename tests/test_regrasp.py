@@ -35,8 +35,8 @@ from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, VerificationError
-from regrasp_pin.grasp.contact import LinkClearance
 from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box

@@ -22,9 +22,10 @@ from conftest import assert_close
 
 from regrasp_pin.exceptions import InputError, UnknownNameError
 from regrasp_pin.grasp.choice import exit_times
-from regrasp_pin.grasp.contact import ContactModel, LinkClearance
+from regrasp_pin.grasp.contact import ContactModel
 from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.grasp.tracking import track_contact
+from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box

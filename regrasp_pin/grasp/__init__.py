@@ -5,7 +5,8 @@ Takes the hand, the object and its motion. Gives:
 - :mod:`.manifold`: each finger's joint-space manifold of the object surface over
   time, with the joint limits as boundary planes (Fig. 2);
 - :mod:`.contact`: the contact model (when a contact is usable: inside the limits with
-  a margin, the pad facing the surface, the links clear) and link clearances;
+  a margin, the pad facing the surface, the links clear:
+  :class:`~regrasp_pin.model.clearance.LinkClearance`);
 - :mod:`.tracking` and :mod:`.holding`: a held contact followed by IK over time, when
   its hold ends, and the holding hand's configurations;
 - :mod:`.choice`: the initial grasp and the new contact Q (the paper's conditions
@@ -14,7 +15,7 @@ Takes the hand, the object and its motion. Gives:
 """
 
 from .choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
-from .contact import ContactModel, FingerClearance, LinkClearance
+from .contact import ContactModel
 from .holding import Holding, holding_hand
 from .manifold import Manifold, build_manifold
 from .quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
@@ -23,10 +24,8 @@ from .tracking import ContactTrack, track_contact
 __all__ = [
     "ContactModel",
     "ContactTrack",
-    "FingerClearance",
     "Grasp",
     "Holding",
-    "LinkClearance",
     "Manifold",
     "NewContact",
     "build_manifold",

@@ -26,9 +26,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..exceptions import ContactError, FailureKind, InputError
+from ..model.clearance import FingerClearance, LinkClearance
 from ..model.hand import Finger, Hand
 from ..model.objects import ConvexObject, SurfaceSample
-from .contact import ContactModel, FingerClearance, LinkClearance
+from .contact import ContactModel
 from .manifold import Manifold
 from .quality import ferrari_canny_epsilon
 

@@ -17,17 +17,13 @@ Frames: contact points and normals in the object frame; the object pose
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import dataclass
 
-import coal
 import numpy as np
-import pinocchio as pin
 
-from ..model.hand import Finger, Hand
-from ..model.objects import ConvexObject
+from ..model.hand import Finger
 
-__all__ = ["ContactModel", "FingerClearance", "LinkClearance", "pad_cosines", "tip_targets"]
+__all__ = ["ContactModel", "pad_cosines", "tip_targets"]
 
 
 @dataclass(frozen=True)
@@ -106,124 +102,3 @@ def pad_cosines(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.n
     R, _ = finger.chain.poses(q)
     pad = R @ finger.pad_axis_tip
     return -np.einsum("ij,ij->i", pad, normals_palm)
-
-
-class LinkClearance:
-    """Coal distances between one finger's collision geometries and the object.
-
-    Args:
-        hand: The hand.
-        finger: Finger name.
-        obj: The object (its Coal geometry, object frame at the centre of mass).
-        include_tip: Also measure the fingertip link's geometries.
-        tip_only: Measure only the fingertip link's geometries.
-    """
-
-    def __init__(
-        self,
-        hand: Hand,
-        finger: str,
-        obj: ConvexObject,
-        *,
-        include_tip: bool = False,
-        tip_only: bool = False,
-    ):
-        self.hand = hand
-        self.finger = hand.finger(finger)
-        self.obj_geom = obj.coal_geometry()
-        ids = self.finger.geometry_ids
-        tip = self.finger.tip_geometry_ids
-        if tip_only:
-            ids = tuple(g for g in ids if g in tip)
-        elif not include_tip:
-            ids = tuple(g for g in ids if g not in tip)
-        self.geometry_ids = ids
-        self._data = hand.model.createData()
-        self._gdata = pin.GeometryData(hand.collision_model)
-        self._req = coal.DistanceRequest()
-        self._res = coal.DistanceResult()
-
-    def __call__(self, q_full: np.ndarray, T_palm_object: np.ndarray) -> np.ndarray:
-        """Smallest distance [m] per configuration.
-
-        Args:
-            q_full: ``(N, nq)`` full hand configurations.
-            T_palm_object: ``(N, 4, 4)`` object poses (or one ``(4, 4)`` for all).
-
-        Returns:
-            ``(N,)`` minimum over the finger's (non-tip) geometries of the Coal distance
-            to the object [m] (negative when penetrating); ``inf`` if there is none.
-        """
-        q_full = np.atleast_2d(q_full)
-        T = np.broadcast_to(T_palm_object, (q_full.shape[0], 4, 4))
-        out = np.full(q_full.shape[0], np.inf)
-        if not self.geometry_ids:
-            return out
-        model, cm = self.hand.model, self.hand.collision_model
-        objs = cm.geometryObjects
-        for i, (q, Ti) in enumerate(zip(q_full, T, strict=True)):
-            pin.forwardKinematics(model, self._data, q)
-            pin.updateGeometryPlacements(model, self._data, cm, self._gdata)
-            tf_obj = coal.Transform3s(Ti[:3, :3], Ti[:3, 3])
-            best = np.inf
-            for g in self.geometry_ids:
-                self._res.clear()
-                d = coal.distance(
-                    objs[g].geometry,
-                    self._gdata.oMg[g],
-                    self.obj_geom,
-                    tf_obj,
-                    self._req,
-                    self._res,
-                )
-                best = min(best, d)
-            out[i] = best
-        return out
-
-
-class FingerClearance:
-    """Coal distances between one finger's collision geometries and the other fingers'.
-
-    Args:
-        hand: The hand.
-        finger: Finger name.
-        others: The fingers to measure against (default: every other finger).
-    """
-
-    def __init__(self, hand: Hand, finger: str, others: Iterable[str] | None = None):
-        self.hand = hand
-        self.finger = hand.finger(finger)
-        mine = set(self.finger.geometry_ids)
-        keep = set(hand.finger_names if others is None else others) - {finger}
-        self.pairs = [
-            (a, b)
-            for name, other in hand.fingers.items()
-            if name in keep
-            for a in self.finger.geometry_ids
-            for b in other.geometry_ids
-            if b not in mine
-        ]
-        self._data = hand.model.createData()
-        self._gdata = pin.GeometryData(hand.collision_model)
-        self._req = coal.DistanceRequest()
-        self._res = coal.DistanceResult()
-
-    def __call__(self, q_full: np.ndarray) -> float:
-        """Smallest distance [m] between this finger and any other finger at ``q_full``."""
-        model, cm = self.hand.model, self.hand.collision_model
-        pin.forwardKinematics(model, self._data, np.asarray(q_full, float))
-        pin.updateGeometryPlacements(model, self._data, cm, self._gdata)
-        objs = cm.geometryObjects
-        best = np.inf
-        for a, b in self.pairs:
-            self._res.clear()
-            d = coal.distance(
-                objs[a].geometry,
-                self._gdata.oMg[a],
-                objs[b].geometry,
-                self._gdata.oMg[b],
-                self._req,
-                self._res,
-            )
-            best = min(best, d)
-        return float(best)

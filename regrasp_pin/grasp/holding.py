@@ -112,7 +112,7 @@ def rest_configuration(
     the object over the motion (Coal), chosen among a few fixed postures; the other
     fingers at the middle of their limits.
     """
-    from .contact import LinkClearance
+    from ..model.clearance import LinkClearance
 
     q = hand.neutral()
     if not idle:

@@ -17,10 +17,11 @@ import numpy as np
 
 from .._validate import as_array
 from ..exceptions import InputError
+from ..model.clearance import LinkClearance
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
-from .contact import ContactModel, LinkClearance, pad_cosines, tip_targets
+from .contact import ContactModel, pad_cosines, tip_targets
 
 __all__ = ["ContactTrack", "track_contact"]
 

@@ -8,10 +8,13 @@ over time. Gives:
 - :mod:`.objects`: convex objects (boxes, prisms, extrusions, hulls of points) with
   their faces (:mod:`.faces`), surface samples and exact signed distances;
 - :mod:`.motion`: the object's pose ``T_palm_object(t)`` at any time;
+- :mod:`.clearance`: exact Coal distances from a finger to the object and to the
+  other fingers at given configurations (Pinocchio's collision pairs);
 - :mod:`.distances`: batched distance bounds between the hand's collision geometries
   (capsules, support functions) with exact Coal distances where they decide.
 """
 
+from .clearance import FingerClearance, LinkClearance
 from .hand import Finger, Hand, allegro_urdf_path, five_finger_urdf_path
 from .ik import IKResult, solve_position_ik
 from .kinematics import FingerChain
@@ -37,8 +40,10 @@ __all__ = [
     "FaceAdjacency",
     "Finger",
     "FingerChain",
+    "FingerClearance",
     "Hand",
     "IKResult",
+    "LinkClearance",
     "ObjectMotion",
     "Prism",
     "SurfaceSample",

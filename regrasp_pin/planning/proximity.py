@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..grasp.contact import FingerClearance
 from ..grasp.holding import Holding
+from ..model.clearance import FingerClearance
 from ..model.distances import capsule_gap
 from ..model.hand import Hand
 

@@ -44,7 +44,7 @@ from scipy.interpolate import PchipInterpolator
 
 from .._validate import as_array, positive
 from ..exceptions import Attempt, FailureKind, InputError, PlanningError, VerificationError
-from ..grasp.contact import LinkClearance
+from ..model.clearance import LinkClearance
 from ..model.distances import capsule_gap
 from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion

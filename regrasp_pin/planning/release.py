@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exceptions import FailureKind, PlanningError
-from ..grasp.contact import LinkClearance, tip_targets
+from ..grasp.contact import tip_targets
+from ..model.clearance import LinkClearance
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject

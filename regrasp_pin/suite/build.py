@@ -11,8 +11,9 @@ from scipy.spatial.transform import Rotation
 
 from .._validate import positive_int
 from ..exceptions import Attempt, ContactError
-from ..grasp.contact import ContactModel, FingerClearance
+from ..grasp.contact import ContactModel
 from ..grasp.holding import rest_configuration
+from ..model.clearance import FingerClearance
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject

@@ -1,0 +1,142 @@
+"""Exact clearances (regrasp_pin.model.clearance).
+
+Scene (palm frame): the five-finger hand and a box 40 x 60 x 40 mm. ``LinkClearance``
+is checked against Pinocchio's distance pipeline (the object added to a fresh
+GeometryModel, ``pin.computeDistances`` over explicit collision pairs);
+``FingerClearance``, which is built on that pipeline, against ``coal.distance`` called
+pair by pair on the placements Pinocchio gives.
+"""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import assert_close
+from scipy.spatial.transform import Rotation
+
+from regrasp_pin.model.clearance import FingerClearance, LinkClearance
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.objects import Box
+
+
+@pytest.fixture(scope="module")
+def hand() -> Hand:
+    return Hand.five_finger()
+
+
+@pytest.fixture(scope="module")
+def box() -> Box:
+    return Box((0.04, 0.06, 0.04))
+
+
+def _pinocchio_distances(hand: Hand, geometry_ids, others, q_full, T_palm_object=None, obj=None):
+    """Smallest distance between ``geometry_ids`` and ``others`` (or the object)."""
+    gm = pin.GeometryModel()
+    for g in hand.collision_model.geometryObjects:
+        gm.addGeometryObject(pin.GeometryObject(g))
+    if obj is not None:
+        placement = pin.SE3(T_palm_object[:3, :3], T_palm_object[:3, 3])
+        oid = gm.addGeometryObject(pin.GeometryObject("object", 0, placement, obj.coal_geometry()))
+        others = [oid]
+    for a in geometry_ids:
+        for b in others:
+            gm.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+    data = hand.model.createData()
+    gdata = pin.GeometryData(gm)
+    pin.computeDistances(hand.model, data, gm, gdata, q_full)
+    return min(r.min_distance for r in gdata.distanceResults)
+
+
+def _coal_pairs(hand: Hand, geometry_ids, others, q_full) -> float:
+    """Smallest ``coal.distance`` between ``geometry_ids`` and ``others``, pair by pair."""
+    data = hand.model.createData()
+    gdata = pin.GeometryData(hand.collision_model)
+    pin.updateGeometryPlacements(hand.model, data, hand.collision_model, gdata, q_full)
+    objs = hand.collision_model.geometryObjects
+    best = np.inf
+    for a in geometry_ids:
+        for b in others:
+            res = coal.DistanceResult()
+            d = coal.distance(
+                objs[a].geometry, gdata.oMg[a], objs[b].geometry, gdata.oMg[b],
+                coal.DistanceRequest(), res,
+            )  # fmt: skip
+            best = min(best, d)
+    return best
+
+
+@pytest.mark.parametrize("finger", ["thumb", "index", "little"])
+def test_link_clearance_matches_pinocchio_distances(hand, box, finger):
+    rng = np.random.default_rng(3)
+    f = hand.finger(finger)
+    lc = LinkClearance(hand, finger, box)
+    lc_tip = LinkClearance(hand, finger, box, include_tip=True)
+    assert set(lc.geometry_ids) == set(f.geometry_ids) - set(f.tip_geometry_ids)
+    assert lc.geometry_ids and f.tip_geometry_ids
+    q = rng.uniform(f.lower, f.upper, (6, f.k))
+    q_full = hand.to_full(finger, q)
+    T = np.tile(np.eye(4), (6, 1, 1))
+    T[:, :3, :3] = Rotation.random(6, random_state=4).as_matrix()
+    # object near the finger: centred between the tip and the middle of the finger
+    T[:, :3, 3] = 0.5 * f.fk(q) + rng.uniform(-0.01, 0.01, (6, 3))
+    got = lc(q_full, T)
+    got_tip = lc_tip(q_full, T)
+    for i in range(6):
+        expected = _pinocchio_distances(hand, lc.geometry_ids, None, q_full[i], T[i], box)
+        expected_tip = _pinocchio_distances(hand, f.geometry_ids, None, q_full[i], T[i], box)
+        assert_close(got[i], expected, atol=1e-9, what=f"links, config {i}")
+        assert_close(got_tip[i], expected_tip, atol=1e-9, what=f"with tip, config {i}")
+    assert np.all(got_tip <= got + 1e-12)
+    # one pose for all configurations broadcasts
+    assert_close(
+        lc(q_full, T[0]),
+        [lc(q_full[i : i + 1], T[0])[0] for i in range(6)],
+        atol=0.0,
+        what="broadcast pose",
+    )
+
+
+def test_link_clearance_is_negative_when_the_object_swallows_a_link(hand, box):
+    f = hand.finger("index")
+    q_full = hand.to_full("index", f.q_mid)
+    lc = LinkClearance(hand, "index", box)
+    # the object's centre on the proximal joint: the box surrounds the first link
+    data = hand.model.createData()
+    pin.forwardKinematics(hand.model, data, q_full)
+    T = np.eye(4)
+    T[:3, 3] = data.oMi[int(f.chain.joint_ids[1])].translation
+    assert lc(q_full[None], T)[0] < 0.0
+    T[:3, 3] = [1.0, 1.0, 1.0]  # far away: about the distance to the box
+    assert lc(q_full[None], T)[0] > 1.0
+
+
+def test_finger_clearance_matches_coal_pair_by_pair(hand):
+    rng = np.random.default_rng(5)
+    for finger in ("index", "thumb"):
+        fc = FingerClearance(hand, finger)
+        mine = hand.finger(finger).geometry_ids
+        others = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
+        for _ in range(3):
+            q = hand.neutral()
+            for f in hand.fingers.values():
+                q[f.q_indices] = rng.uniform(f.lower, f.upper)
+            expected = _coal_pairs(hand, mine, others, q)
+            assert_close(fc(q), expected, atol=1e-9, what=f"{finger} to the other fingers")
+
+
+def test_finger_clearance_sees_two_fingers_pressed_together(hand):
+    # index and middle both abducted toward each other until their links overlap
+    fc = FingerClearance(hand, "index")
+    q = hand.neutral()
+    base = fc(q)
+    idx, mid = hand.finger("index"), hand.finger("middle")
+    # turn each abduction joint to the end that brings it toward the other finger
+    best = base
+    for a in (idx.lower[0], idx.upper[0]):
+        for b in (mid.lower[0], mid.upper[0]):
+            q2 = q.copy()
+            q2[idx.q_indices[0]], q2[mid.q_indices[0]] = a, b
+            best = min(best, fc(q2))
+    assert best < base
