@@ -2,7 +2,7 @@
 
 Scene (palm frame: x toward the fingers, z out of the palm): the five-finger hand and a
 box 40 x 60 x 40 mm. Tip targets and pad cosines are checked against their formulas
-written out per point (the Coal clearances: tests/test_clearance.py).
+written out per point (the Coal clearances: tests/test_model_clearance.py).
 """
 
 from __future__ import annotations

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_pin.model.objects import Box, Prism
+from regrasp_pin.exceptions import GeometryError
+from regrasp_pin.model.objects import Box, ConvexMesh, Prism
 from regrasp_pin.surface.unfolding import (
     depths,
     lift,
@@ -24,6 +25,22 @@ from tests.conftest import assert_close
 @pytest.fixture(scope="module")
 def box() -> Box:
     return Box((0.06, 0.04, 0.04))
+
+
+@pytest.fixture(scope="module")
+def mesh() -> ConvexMesh:
+    return ConvexMesh(np.random.default_rng(7).normal(size=(30, 3)) * 0.03)
+
+
+@pytest.fixture(scope="module")
+def prism() -> Prism:
+    return Prism(6, 0.03, 0.05)
+
+
+def _random_in_face(face, rng, n) -> np.ndarray:
+    """Random points of a convex face: convex combinations of its vertices."""
+    w = rng.dirichlet(np.ones(face.polygon.shape[0]), size=n)
+    return w @ face.polygon
 
 
 def _face(obj, normal) -> int:
@@ -89,3 +106,36 @@ def test_lift_maps_unfolded_points_back_onto_their_faces(obj):
         assert_close(
             normals, np.broadcast_to(obj.normals[piece.face_id], normals.shape), atol=1e-15
         )
+
+
+@pytest.mark.parametrize("name", ["box", "prism", "mesh"])
+def test_unfolding_across_each_edge_preserves_the_geodesic(name, request):
+    """Two points on faces sharing an edge: their unfolded distance is the length of the
+    straight surface line across the edge, hypot(a_p + a_q, alpha_p - alpha_q), where a is
+    the distance to the edge line and alpha the coordinate along it."""
+    obj = request.getfixturevalue(name)
+    rng = np.random.default_rng(1)
+    for adj in obj.face_adjacency:
+        fa, fb = obj.faces[adj.face_a], obj.faces[adj.face_b]
+        unf_a, unf_b = unfold_faces(obj, [adj.face_a, adj.face_b])
+        p, q = _random_in_face(fa, rng, 5), _random_in_face(fb, rng, 5)
+        e0 = adj.edge[0]
+        e = (adj.edge[1] - adj.edge[0]) / np.linalg.norm(adj.edge[1] - adj.edge[0])
+        alpha_p, alpha_q = (p - e0) @ e, (q - e0) @ e
+        a_p = np.linalg.norm(p - e0 - alpha_p[:, None] * e, axis=1)
+        a_q = np.linalg.norm(q - e0 - alpha_q[:, None] * e, axis=1)
+        expected = np.hypot(a_p + a_q, alpha_p - alpha_q)
+        got = np.linalg.norm(
+            unf_a.to_unfolded(fa.to_uv(p)) - unf_b.to_unfolded(fb.to_uv(q)), axis=1
+        )
+        assert_close(got, expected, atol=1e-12, what=f"faces {adj.face_a}-{adj.face_b}")
+        # The shared edge lands at the same place from both faces, and the round trip
+        # unfolded -> object is exact.
+        assert_close(unf_b.to_unfolded(fb.to_uv(adj.edge)), unf_b.hinge_uv, atol=1e-12)
+        assert_close(unf_b.to_object(unf_b.to_unfolded(fb.to_uv(q))), q, atol=1e-12)
+
+
+def test_unfold_rejects_faces_that_share_no_edge(box):
+    top, bottom = _face(box, [0, 0, 1]), _face(box, [0, 0, -1])
+    with pytest.raises(GeometryError, match="share no edge"):
+        unfold_faces(box, [top, bottom])
