@@ -214,6 +214,26 @@ def test_an_exhausted_budget_ends_typed_with_the_partial_plan():
     assert exc.partial is not None and not exc.partial.regrasps()
 
 
+def test_a_budget_that_runs_out_while_backing_up_is_the_failure(monkeypatch):
+    """Suite spec 6 fails at t=0 (finger-busy, see above) and the planner would back up;
+    with the budget gone at that moment the failure is ``budget``, not the finger-busy
+    it could not back out of, and the message still names that failure."""
+    from regrasp_pin.planning import planner
+
+    def out_of_time(ctx, *args, **kwargs):
+        ctx.budget.deadline = float("-inf")  # the budget runs out here
+        return None
+
+    monkeypatch.setattr(planner, "_another_first", out_of_time)
+    scen = build_scenario(generate_specs(7, seed=0)[6])
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    exc = err.value
+    assert exc.kind == FailureKind.BUDGET
+    assert "while backing up from a finger-busy failure" in exc.reason
+    assert exc.partial is not None
+
+
 def test_a_finger_lets_go_when_no_regrasp_can_land_before_the_end(tmp_path):
     """60 deg at 20 deg/s: a contact is lost too close to the end for any regrasp; the
     others hold to the end, so the finger lets go. The release is in the plan file and

@@ -18,7 +18,8 @@ landing) at least as long as the shortest regrasp takes, or to the end. When a f
 finds none, the planner backs up once per failure (at most ``max_backtracks`` times):
 the previous regrasp is planned again to land before this finger's window closes, or, if
 time was not the problem, to land elsewhere. Every search shares one budget
-(``budget_s``). A hold that is lost too close to the end for any regrasp, while the
+(``budget_s``); a failure that could not be backed out of because the budget was gone
+is a ``budget`` failure (its message names the failure). A hold that is lost too close to the end for any regrasp, while the
 others hold in force closure to the end, is let go (:mod:`.planning.release`: a verified
 back-off; a ``release`` phase).
 A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
@@ -282,7 +283,8 @@ def plan_manipulation(
             state = _advance(ctx, state, trig, triggers, steps)
         except PlanningError as exc:
             redone = None
-            if backtracks < params.max_backtracks:
+            may_back_up = backtracks < params.max_backtracks
+            if may_back_up:
                 backtracks += 1
                 redone = _another_first(ctx, state, contenders, triggers, steps)
                 if redone is None and steps:
@@ -291,12 +293,18 @@ def plan_manipulation(
                 stage["regrasps"] = time.perf_counter() - t0
                 when = exc.time_s if exc.time_s is not None else trig.time_s
                 until = min(max(min(when, trig.time_s), state.now), motion.t_end)
+                cut_short = may_back_up and ctx.budget.exhausted
                 raise PlanningError(
-                    exc.reason,
+                    (
+                        f"the search budget ran out while backing up from a "
+                        f"{exc.kind.value} failure: {exc.reason}"
+                        if cut_short and exc.kind != FailureKind.BUDGET
+                        else exc.reason
+                    ),
                     finger=exc.finger or trig.finger,
                     time_s=when,
                     partial=_plan_until(ctx, state, until),
-                    kind=exc.kind,
+                    kind=FailureKind.BUDGET if cut_short else exc.kind,
                     measured=exc.measured,
                     required=exc.required,
                     attempts=exc.attempts,
