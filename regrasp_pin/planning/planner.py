@@ -19,9 +19,9 @@ finds none, the planner backs up once per failure (at most ``max_backtracks`` ti
 the previous regrasp is planned again to land before this finger's window closes, or, if
 time was not the problem, to land elsewhere. Every search shares one budget
 (``budget_s``); a failure that could not be backed out of because the budget was gone
-is a ``budget`` failure (its message names the failure). A hold that is lost too close to the end for any regrasp, while the
-others hold in force closure to the end, is let go (:mod:`.planning.release`: a verified
-back-off; a ``release`` phase).
+is a ``budget`` failure (its message names the failure). A hold that is lost too close
+to the end for any regrasp, while the others hold in force closure to the end, is let
+go (:mod:`.planning.release`: a verified back-off; a ``release`` phase).
 A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
 finger, the time, the kind of the failure, every attempt and the partial plan up to
 that time.
