@@ -159,8 +159,15 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out/suite"), help="output folder")
     parser.add_argument("--jobs", type=int, default=1, help="processes (1: in this one)")
     parser.add_argument("--budget", type=float, default=60.0, help="planning budget [s]")
-    parser.add_argument("--baseline", type=Path, help="a previous results.jsonl to compare")
+    parser.add_argument(
+        "--baseline", type=Path, help="a previous results.jsonl (or its folder) to compare"
+    )
     args = parser.parse_args()
+    if args.baseline is not None:  # checked now, not after the whole run
+        if args.baseline.is_dir():
+            args.baseline = args.baseline / "results.jsonl"
+        if not args.baseline.is_file():
+            parser.error(f"--baseline: no such file {args.baseline} (a results.jsonl)")
 
     args.out.mkdir(parents=True, exist_ok=True)
     if args.neighbours:
