@@ -50,3 +50,8 @@ def held_grasp(scen):
         for n in p.fingers
     }
     return grid, base, holding
+
+
+def face_with_normal(obj, normal) -> int:
+    """Id of the face of ``obj`` whose outward normal is closest to ``normal``."""
+    return int(np.argmax(obj.normals @ np.asarray(normal, dtype=float)))

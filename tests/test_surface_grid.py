@@ -15,7 +15,7 @@ from regrasp_pin.exceptions import GeometryError, InputError
 from regrasp_pin.model.objects import Box, ConvexMesh, Prism
 from regrasp_pin.surface.grid import build_surface_grid
 from regrasp_pin.surface.path import shortest_grid_path
-from tests.conftest import assert_close
+from tests.conftest import assert_close, face_with_normal
 
 SPACING = 0.002
 
@@ -35,10 +35,6 @@ def prism() -> Prism:
     return Prism(6, 0.03, 0.05)
 
 
-def _face_with_normal(obj, normal) -> int:
-    return int(np.argmax(obj.normals @ np.asarray(normal, dtype=float)))
-
-
 def _random_in_face(face, rng, n) -> np.ndarray:
     """Random points of a convex face: convex combinations of its vertices."""
     w = rng.dirichlet(np.ones(face.polygon.shape[0]), size=n)
@@ -52,7 +48,7 @@ def test_top_to_side_geodesic_is_the_unfolded_straight_line(box):
     P, Q = np.array([0.0, 0.005, 0.02]), np.array([0.03, -0.01, 0.0])
     grid = build_surface_grid(box, P, Q, spacing_m=SPACING)
     expected = math.hypot(0.05, 0.015)
-    top, side = _face_with_normal(box, [0, 0, 1]), _face_with_normal(box, [1, 0, 0])
+    top, side = face_with_normal(box, [0, 0, 1]), face_with_normal(box, [1, 0, 0])
     assert grid.face_chain == (top, side)
     assert_close(
         np.linalg.norm(grid.uv[grid.q_index] - grid.uv[grid.p_index]),
@@ -71,7 +67,7 @@ def test_top_to_bottom_goes_over_the_nearest_side(box):
     10 + 40 + 10 = 60 mm (over a y face it would be 20 + 40 + 20 = 80 mm)."""
     P, Q = np.array([0.02, 0.0, 0.02]), np.array([0.02, 0.0, -0.02])
     grid = build_surface_grid(box, P, Q, spacing_m=SPACING)
-    assert grid.face_chain[1] == _face_with_normal(box, [1, 0, 0])
+    assert grid.face_chain[1] == face_with_normal(box, [1, 0, 0])
     assert_close(grid.geodesic_m, 0.06, atol=1e-12)
     path = shortest_grid_path(grid)
     assert 0.06 - 1e-12 <= path.length_m <= 1.03 * 0.06
@@ -83,7 +79,7 @@ def test_point_on_an_edge_may_use_either_face(box):
     """P on the top/+x edge and Q on the +x face share the +x face: one face, straight."""
     P, Q = np.array([0.03, 0.0, 0.02]), np.array([0.03, 0.01, -0.01])
     grid = build_surface_grid(box, P, Q, spacing_m=SPACING)
-    assert grid.face_chain == (_face_with_normal(box, [1, 0, 0]),)
+    assert grid.face_chain == (face_with_normal(box, [1, 0, 0]),)
     assert_close(grid.geodesic_m, np.linalg.norm(Q - P), atol=1e-12)
 
 

@@ -14,7 +14,7 @@ import pytest
 from regrasp_pin.exceptions import GeometryError, InputError
 from regrasp_pin.model.objects import Box
 from regrasp_pin.surface.region import choose_region
-from tests.conftest import assert_close
+from tests.conftest import assert_close, face_with_normal
 
 
 @pytest.fixture(scope="module")
@@ -22,13 +22,9 @@ def box() -> Box:
     return Box((0.06, 0.04, 0.04))
 
 
-def _face(obj, normal) -> int:
-    return int(np.argmax(obj.normals @ np.asarray(normal, dtype=float)))
-
-
 def test_one_face_with_and_without_its_neighbours(box):
     P, Q = np.array([-0.01, 0.0, 0.02]), np.array([0.02, 0.01, 0.02])
-    top = _face(box, [0, 0, 1])
+    top = face_with_normal(box, [0, 0, 1])
     alone = choose_region(box, P, Q, max_faces=4, include_neighbours=False)
     assert alone.chain == (top,) and len(alone.pieces) == 1
     assert_close(alone.geodesic_m, float(np.linalg.norm(Q - P)), atol=1e-12)
@@ -36,7 +32,7 @@ def test_one_face_with_and_without_its_neighbours(box):
     star = choose_region(box, P, Q, max_faces=4, include_neighbours=True)
     assert star.chain == (top,)
     assert sorted(p.face_id for p in star.pieces[1:]) == sorted(
-        _face(box, n) for n in ([1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0])
+        face_with_normal(box, n) for n in ([1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0])
     )
 
 
@@ -46,9 +42,9 @@ def test_the_chain_with_the_shortest_route_is_chosen(box):
     P, Q = np.array([0.02, 0.0, 0.02]), np.array([0.02, 0.0, -0.02])
     region = choose_region(box, P, Q, max_faces=4, include_neighbours=True)
     assert region.chain == (
-        _face(box, [0, 0, 1]),
-        _face(box, [1, 0, 0]),
-        _face(box, [0, 0, -1]),
+        face_with_normal(box, [0, 0, 1]),
+        face_with_normal(box, [1, 0, 0]),
+        face_with_normal(box, [0, 0, -1]),
     )
     assert_close(region.geodesic_m, 0.06, atol=1e-12)
     with pytest.raises(GeometryError, match="region cannot be unfolded"):
@@ -58,7 +54,7 @@ def test_the_chain_with_the_shortest_route_is_chosen(box):
 def test_adjacent_faces_unfold_to_the_straight_line(box):
     P, Q = np.array([0.0, 0.005, 0.02]), np.array([0.03, -0.01, 0.0])
     region = choose_region(box, P, Q, max_faces=4, include_neighbours=True)
-    assert region.chain == (_face(box, [0, 0, 1]), _face(box, [1, 0, 0]))
+    assert region.chain == (face_with_normal(box, [0, 0, 1]), face_with_normal(box, [1, 0, 0]))
     assert_close(region.geodesic_m, math.hypot(0.05, 0.015), atol=1e-12)
 
 

@@ -19,7 +19,7 @@ from regrasp_pin.surface.unfolding import (
     segments_inside,
     unfold_faces,
 )
-from tests.conftest import assert_close
+from tests.conftest import assert_close, face_with_normal
 
 
 @pytest.fixture(scope="module")
@@ -43,12 +43,8 @@ def _random_in_face(face, rng, n) -> np.ndarray:
     return w @ face.polygon
 
 
-def _face(obj, normal) -> int:
-    return int(np.argmax(obj.normals @ np.asarray(normal, dtype=float)))
-
-
 def test_depth_is_the_distance_to_the_nearest_edge(box):
-    (top,) = unfold_faces(box, [_face(box, [0, 0, 1])])
+    (top,) = unfold_faces(box, [face_with_normal(box, [0, 0, 1])])
     centre = top.polygon_uv.mean(axis=0)
     rng = np.random.default_rng(0)
     uv = centre + rng.uniform([-0.03, -0.02], [0.03, 0.02], (200, 2))
@@ -65,7 +61,7 @@ def test_depth_is_the_distance_to_the_nearest_edge(box):
 
 
 def test_segments_inside_the_region_and_across_a_hinge(box):
-    top_id, side_id = _face(box, [0, 0, 1]), _face(box, [1, 0, 0])
+    top_id, side_id = face_with_normal(box, [0, 0, 1]), face_with_normal(box, [1, 0, 0])
     top, side = unfold_faces(box, [top_id, side_id])
     a = top.polygon_uv.mean(axis=0)[None]
     b = side.polygon_uv.mean(axis=0)[None]
@@ -136,6 +132,6 @@ def test_unfolding_across_each_edge_preserves_the_geodesic(name, request):
 
 
 def test_unfold_rejects_faces_that_share_no_edge(box):
-    top, bottom = _face(box, [0, 0, 1]), _face(box, [0, 0, -1])
+    top, bottom = face_with_normal(box, [0, 0, 1]), face_with_normal(box, [0, 0, -1])
     with pytest.raises(GeometryError, match="share no edge"):
         unfold_faces(box, [top, bottom])

@@ -209,7 +209,7 @@ def choose_new_contact(
         exit_tolerance_s=exit_tolerance_s,
     )
     lasts = usable[-1, idx].copy()
-    order = ranked.order(ranked.t_exit, lasts)
+    order = ranked.order(lasts)
     if link_check and rerank > 0:
         # the manifold knows nothing of the finger's other links: the first candidates'
         # exit times are cut where a link would come within the trigger distance of the
@@ -221,7 +221,7 @@ def choose_new_contact(
         )
         lasts[top] &= last
         ranked = replace(ranked, t_exit=t_exit)
-        head = ranked.order(t_exit, lasts)
+        head = ranked.order(lasts)
         order = np.concatenate([head[np.isin(head, top)], order[rerank:]])
     screen = _Screen(
         hand,
@@ -274,9 +274,10 @@ class _Ranking:
     idx: np.ndarray
     exit_tolerance_s: float
 
-    def order(self, t_exit: np.ndarray, lasts: np.ndarray) -> np.ndarray:
+    def order(self, lasts: np.ndarray) -> np.ndarray:
         """Candidate positions, best first (``lasts``: usable to the end)."""
         # the order must not follow last-bit noise of the IK: keys on a 1e-9 lattice
+        t_exit = self.t_exit
         margin_key, dist_key = np.round(self.margin, 9), np.round(self.dist, 9)
         if self.exit_tolerance_s > 0:
             # exit times within the tolerance of each other count as ties; among them the
@@ -306,13 +307,8 @@ class _Screen:
         q_hand_arrive: np.ndarray | None,
         finger_clearance_m: float,
     ) -> None:
-        self.hand, self.finger, self.manifold, self.sample, self.ka = (
-            hand,
-            finger,
-            manifold,
-            sample,
-            ka,
-        )
+        self.hand, self.finger, self.manifold, self.sample = hand, finger, manifold, sample
+        self.ka = ka
         self.other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
         self.other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
         self.mu, self.scale = mu, obj.radius_m

@@ -87,11 +87,13 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
     )
     lines.append("planning time per scenario: " + _stats((r.plan_s for r in planned), "s"))
     lines.append("build time per scenario: " + _stats((r.build_s for r in res), "s"))
-    got = [r for r in planned if r.planned_until_s is not None and r.duration_s]
+    got = [
+        r.planned_until_s / r.duration_s
+        for r in planned
+        if r.planned_until_s is not None and r.duration_s
+    ]
     if got:
-        reached = np.mean(
-            [float(r.planned_until_s or 0.0) / float(r.duration_s or 1.0) for r in got]
-        )
+        reached = np.mean(got)
         lines.append(f"motion planned before success or failure: {reached:.0%} on average")
     touching = [
         r

@@ -64,7 +64,7 @@ def choose_region(
         candidates.append(((bound, len(chain), chain), pieces, p_uv, q_uv))
     candidates.sort(key=lambda c: c[0])
     best: tuple[float, int, tuple[int, ...]] | None = None
-    best_pieces: tuple[FaceUnfolding, ...] = ()
+    best_uv: tuple[tuple[FaceUnfolding, ...], np.ndarray, np.ndarray] | None = None
     for (bound, n_chain, chain), pieces, p_uv, q_uv in candidates:
         if best is not None and (bound, n_chain, chain) >= best:
             break  # no later chain can beat the best route
@@ -72,18 +72,16 @@ def choose_region(
             continue
         key = (_region_geodesic(p_uv, q_uv, pieces), n_chain, chain)
         if np.isfinite(key[0]) and (best is None or key < best):
-            best, best_pieces = key, pieces
-    if best is None:
+            best, best_uv = key, (pieces, p_uv, q_uv)
+    if best is None or best_uv is None:
         raise GeometryError(
             f"the region cannot be unfolded: no chain of at most {max_faces} adjacent faces "
             f"joins P's face {p_faces} to Q's face {q_faces} without overlapping"
         )
     geodesic, _, chain = best
-    pieces = best_pieces
+    pieces, p_uv, q_uv = best_uv
     if len(chain) == 1 and include_neighbours:
-        pieces = _with_neighbours(obj, pieces)
-    p_uv = _face_uv(obj, chain[0], p)
-    q_uv = pieces[len(chain) - 1].to_unfolded(_face_uv(obj, chain[-1], q)[None])[0]
+        pieces = _with_neighbours(obj, pieces)  # the root piece stays first: same P, Q
     return Region(tuple(chain), pieces, p_uv, q_uv, float(geodesic))
 
 
