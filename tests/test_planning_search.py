@@ -15,6 +15,7 @@ from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import Attempt, FailureKind, PlanningError
 from regrasp_pin.grasp.holding import holding_q
 from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.model.scene import Scene
 from regrasp_pin.planning.search import RegraspSearch, SearchBudget
 
 FINGER = "index"
@@ -32,7 +33,7 @@ def problem():
         for n in p.fingers
     }
     search = RegraspSearch(
-        hand, scen.obj, motion, manifolds, sample, regrasp=p.regrasp, contact=p.contact
+        Scene(hand, scen.obj, motion), manifolds, sample, regrasp=p.regrasp, contact=p.contact
     )
     h = holding[FINGER]
     t_trig, _ = h.track.trigger()

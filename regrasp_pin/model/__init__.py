@@ -8,6 +8,7 @@ over time. Gives:
 - :mod:`.objects`: convex objects (boxes, prisms, extrusions, hulls of points) with
   their faces (:mod:`.faces`), surface samples and exact signed distances;
 - :mod:`.motion`: the object's pose ``T_palm_object(t)`` at any time;
+- :mod:`.scene`: the three as one frozen value that the later stages read;
 - :mod:`.clearance`: exact Coal distances from a finger to the object and to the
   other fingers at given configurations (Pinocchio's collision pairs);
 - :mod:`.distances`: batched distance bounds between the hand's collision geometries
@@ -30,6 +31,7 @@ from .objects import (
     SurfaceSample,
     object_from_params,
 )
+from .scene import Scene
 
 __all__ = [
     "Box",
@@ -46,6 +48,7 @@ __all__ = [
     "LinkClearance",
     "ObjectMotion",
     "Prism",
+    "Scene",
     "SurfaceSample",
     "allegro_urdf_path",
     "five_finger_urdf_path",

@@ -45,6 +45,7 @@ from ..grasp.quality import ferrari_canny_epsilon
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
+from ..model.scene import Scene
 from ..plan import ContactPhase, Plan, RegraspPhase, ReleasePhase
 from .proximity import holding_proximity
 from .regrasp import RegraspParams, RegraspResult
@@ -155,9 +156,7 @@ class _Step:
 
 @dataclass
 class _Context:
-    hand: Hand
-    obj: ConvexObject
-    motion: ObjectMotion
+    scene: Scene
     grid: np.ndarray
     params: PlannerParams
     active: tuple[str, ...]
@@ -238,10 +237,9 @@ def plan_manipulation(
         for name in active
     }
     stage["tracking"] = time.perf_counter() - t0
+    scene = Scene(hand, obj, motion)
     search = RegraspSearch(
-        hand,
-        obj,
-        motion,
+        scene,
         manifolds,
         sample,
         regrasp=params.regrasp,
@@ -252,9 +250,7 @@ def plan_manipulation(
         exit_tolerance_s=params.exit_tolerance_s,
     )
     ctx = _Context(
-        hand,
-        obj,
-        motion,
+        scene,
         grid,
         params,
         active,
@@ -359,15 +355,15 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
     times = ctx.grid[ctx.grid >= state.now - TIME_TOL_S]
     base = ctx.base_q.copy()
     for n, rel in state.released.items():  # where a finger that let go stays
-        base[ctx.hand.fingers[n].q_indices] = rel.q[-1]
+        base[ctx.scene.hand.fingers[n].q_indices] = rel.q[-1]
     prox = holding_proximity(
-        ctx.hand,
+        ctx.scene.hand,
         state.holding,
         times,
         base,
         trigger_m=p.contact.finger_trigger_m,
         lost_m=p.regrasp.finger_clearance_m,
-        still=[n for n in ctx.hand.finger_names if n not in state.holding and n not in gone],
+        still=[n for n in ctx.scene.hand.finger_names if n not in state.holding and n not in gone],
     )
     out = []
     for name, h in state.holding.items():
@@ -386,7 +382,7 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
         # a hold that will be lost triggers at least one regrasp (and the lead) before:
         # a margin that closes fast (a link nearing the object) leaves no time otherwise
         due = lost - p.regrasp.duration_s - p.lead_s
-        if lost < ctx.motion.t_end - p.dt_s - TIME_TOL_S and (t is None or due < t):
+        if lost < ctx.scene.motion.t_end - p.dt_s - TIME_TOL_S and (t is None or due < t):
             t = max(due, state.now, h.t_from)
             why = f"its hold is lost after t={lost:.3f} s ({loss})"
         if t is not None:
@@ -455,7 +451,7 @@ def _advance(
     exclude: list[np.ndarray] | None = None,
 ) -> _State:
     """The state after ``trig``: its finger held to the end, or one verified regrasp."""
-    p, motion = ctx.params, ctx.motion
+    p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
     D = p.regrasp.duration_s
     name, t_trig, reason = trig.finger, trig.time_s, trig.reason
     h = state.holding[name]
@@ -505,7 +501,7 @@ def _advance(
             name,
             (h.p, h.n),
             starts,
-            lambda t: holding_q(ctx.hand, motion, name, h, np.array([t]), p.contact.ik_tol_m)[0],
+            lambda t: holding_q(hand, motion, name, h, np.array([t]), p.contact.ik_tol_m)[0],
             others,
             _q_hand(ctx, state, stay),
             ctx.budget,
@@ -570,7 +566,7 @@ def _fingers_that_stay(
         )
     p_stay = np.array([state.holding[n].p for n in stay])
     n_stay = np.array([state.holding[n].n for n in stay])
-    eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=ctx.obj.radius_m)
+    eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=ctx.scene.obj.radius_m)
     if eps_stay <= 0.0:
         raise PlanningError(
             f"{trig.reason} at t={trig.time_s:.3f} s, but without it the other fingers are "
@@ -595,7 +591,7 @@ def _check_landing(
     hold = _landing_hold(ctx, name, res)
     landed[id(res)] = hold
     lost = held_until(hold.track, p.contact)
-    need = min(res.t_end + p.regrasp.duration_s, ctx.motion.t_end - p.dt_s)
+    need = min(res.t_end + p.regrasp.duration_s, ctx.scene.motion.t_end - p.dt_s)
     if lost >= need - TIME_TOL_S:
         return None
     return Attempt(
@@ -614,9 +610,9 @@ def _check_landing(
 def _landing_hold(ctx: _Context, name: str, res: RegraspResult) -> Holding:
     """The hold that follows a regrasp's landing."""
     return start_holding(
-        ctx.hand,
-        ctx.obj,
-        ctx.motion,
+        ctx.scene.hand,
+        ctx.scene.obj,
+        ctx.scene.motion,
         ctx.grid,
         name,
         res.Q_object,
@@ -635,7 +631,7 @@ def _refuse_dead_end(
     does, that finger would lose its hold while this one is in the air."""
     p, name = ctx.params, trig.finger
     land = win.earliest_s + p.regrasp.duration_s
-    end = ctx.motion.t_end - p.dt_s
+    end = ctx.scene.motion.t_end - p.dt_s
     lost = [
         e
         for e in triggers
@@ -673,7 +669,7 @@ def _try_release(
     this one has gone (a neighbour it was closing in on no longer ends their hold). The
     release times tried are the latest in the window first, then earlier ones.
     """
-    p, motion = ctx.params, ctx.motion
+    p, motion = ctx.params, ctx.scene.motion
     name = trig.finger
     end = motion.t_end - p.dt_s - TIME_TOL_S
     if not p.release or win.empty or trig.lost_s >= end:
@@ -693,7 +689,7 @@ def _try_release(
         if t_r < win.earliest_s - TIME_TOL_S or ctx.budget.exhausted:
             break
         t_r = max(t_r, win.earliest_s)
-        q_r = holding_q(ctx.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
+        q_r = holding_q(ctx.scene.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
         for park in (None, _park(ctx, name)):
             rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
             if rel is not None:
@@ -711,8 +707,8 @@ def _park(ctx: _Context, name: str) -> np.ndarray:
     """Where ``name`` goes after letting go: its posture clearest of the object over the
     motion (:func:`~.holding.rest_configuration`), computed once."""
     if name not in ctx.parks:
-        q = rest_configuration(ctx.hand, ctx.obj, ctx.motion, [name])
-        ctx.parks[name] = q[ctx.hand.fingers[name].q_indices]
+        q = rest_configuration(ctx.scene.hand, ctx.scene.obj, ctx.scene.motion, [name])
+        ctx.parks[name] = q[ctx.scene.hand.fingers[name].q_indices]
     return ctx.parks[name]
 
 
@@ -731,9 +727,9 @@ def _release_at(
     p, h = ctx.params, state.holding[name]
     try:
         return plan_release(
-            ctx.hand,
-            ctx.obj,
-            ctx.motion,
+            ctx.scene.hand,
+            ctx.scene.obj,
+            ctx.scene.motion,
             name,
             t_r,
             (h.p, h.n),
@@ -795,7 +791,7 @@ def _next_deadline(
         (e.lost_s, e.finger)
         for e in triggers
         if e.finger != trig.finger
-        and e.lost_s < ctx.motion.t_end - TIME_TOL_S
+        and e.lost_s < ctx.scene.motion.t_end - TIME_TOL_S
         and e.lost_s <= win.preferred_s + 2 * D + p.lead_s
         and e.lost_s >= win.earliest_s + D + TIME_TOL_S
     ]
@@ -804,7 +800,12 @@ def _next_deadline(
 
 def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarray], np.ndarray]:
     """Hand configurations over time with the ``stay`` fingers holding (exact IK)."""
-    hand, motion, tol, base_q = ctx.hand, ctx.motion, ctx.params.contact.ik_tol_m, ctx.base_q
+    hand, motion, tol, base_q = (
+        ctx.scene.hand,
+        ctx.scene.motion,
+        ctx.params.contact.ik_tol_m,
+        ctx.base_q,
+    )
 
     def q_hand(times: np.ndarray) -> np.ndarray:
         q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
@@ -988,9 +989,9 @@ def _plan_until(ctx: _Context, state: _State, until: float, *, final: bool = Fal
         hold = ContactPhase(finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n)
         phases[n] = [*state.phases[n], *([hold] if final or h.t_from < until else [])]
     return _assemble(
-        ctx.hand,
-        ctx.obj,
-        ctx.motion,
+        ctx.scene.hand,
+        ctx.scene.obj,
+        ctx.scene.motion,
         ctx.grid,
         state.history,
         state.holding,

@@ -49,6 +49,7 @@ from ..model.distances import capsule_gap
 from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
+from ..model.scene import Scene
 from ..polygon.approximate import PolygonResult, approximate_polygon
 from ..surface.grid import SurfaceGrid, build_surface_grid
 from ..surface.inflation import TipPath, grid_inflation, inflate_path
@@ -298,6 +299,9 @@ def plan_regrasp(
     t_others = float(t_start) + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
     q_others = np.asarray(q_hand(t_others), float)
     stages.lap("others")
+    task = _Task(
+        Scene(hand, obj, motion), f, float(t_start), q0, grid, q_hand, others, t_others, q_others
+    )
 
     attempts: list[Attempt] = []
     last: PlanningError | None = None
@@ -309,14 +313,10 @@ def plan_regrasp(
         try:
             key = (p_try.inflation_factor, p_try.limit_weight, p_try.finger_gap_m)
             if key not in paths:
-                paths[key] = _surface_path(
-                    hand, f.name, obj, motion, grid, t_start, q0, others, p_try, t_others, q_others
-                )
+                paths[key] = _surface_path(task, p_try)
             gpath, tip_path = paths[key]
             stages.lap("path")
-            result = _attempt(
-                hand, obj, motion, f.name, t_start, grid, gpath, tip_path, q0, q_hand, p_try, stages
-            )
+            result = _attempt(task, gpath, tip_path, p_try, stages)
         except PlanningError as exc:
             attempts.append(exc.as_attempt(_describe(p_try)))
             last = exc
@@ -400,29 +400,36 @@ def _next_variant(p: RegraspParams, kind: FailureKind, base: RegraspParams) -> R
     return None
 
 
-def _surface_path(
-    hand: Hand,
-    finger: str,
-    obj: ConvexObject,
-    motion: ObjectMotion,
-    grid: SurfaceGrid,
-    t_start: float,
-    q0: np.ndarray,
-    others_tips: np.ndarray,
-    p: RegraspParams,
-    t_others: np.ndarray,
-    q_others: np.ndarray,
-) -> tuple[GridPath, TipPath]:
+@dataclass(frozen=True)
+class _Task:
+    """One regrasp to plan: what stays the same over its path variants.
+
+    ``q0`` is the finger at lift-off; ``q_hand`` maps times to the hand with the other
+    fingers holding, ``q_others`` ``(T, nq)`` is that hand at times ``t_others``, and
+    ``others_tips`` ``(F, 3)`` are their tip centres in the object frame [m].
+    """
+
+    scene: Scene
+    finger: Finger
+    t_start: float
+    q0: np.ndarray
+    grid: SurfaceGrid
+    q_hand: Callable[[np.ndarray], np.ndarray]
+    others_tips: np.ndarray
+    t_others: np.ndarray
+    q_others: np.ndarray
+
+
+def _surface_path(task: _Task, p: RegraspParams) -> tuple[GridPath, TipPath]:
     """Grid path weighing distance, joint limits and the other fingers, lifted onto the
     inflated surface.
 
-    ``q_others`` ``(T, nq)`` is the hand at times ``t_others`` (the other fingers
-    holding). Each node is judged at the time the tip passes over it: its IK margin
+    Each node is judged at the time the tip passes over it: its IK margin
     costs, and where the finger's links (conservative capsules) come within
     ``p.finger_gap_m`` of another finger the node is forbidden (outside the lift-off
     and landing zones); nearer than ``_FINGER_GAP_M`` it costs more.
     """
-    f = hand.finger(finger)
+    f, grid, t_start = task.finger, task.grid, task.t_start
     height = p.inflation_factor * p.clearance_m
     taper = p.taper_m if p.taper_m is not None else height
     h_nodes = grid_inflation(grid, height, taper)
@@ -439,18 +446,19 @@ def _surface_path(
     near_pq = from_p + from_q <= 2.0 * float(np.linalg.norm(d)) + 0.01
     near_pq[[grid.p_index, grid.q_index]] = True
     sel = np.flatnonzero(near_pq)
-    T = motion.pose(t_nodes[sel])
+    T = task.scene.motion.pose(t_nodes[sel])
     targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips[sel]) + T[:, :3, 3]
-    res = f.ik(targets, q0, tol_m=1e-4, max_iter=20, restarts=False)
+    res = f.ik(targets, task.q0, tol_m=1e-4, max_iter=20, restarts=False)
     margin = f.limit_margin(res.q)
     cost = np.full(grid.uv.shape[0], np.inf)
     cost[sel] = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
     cost[sel[~res.success]] = _UNREACHABLE_COST
+    t_others, q_others = task.t_others, task.q_others
     q_nodes = np.stack(
         [np.interp(t_nodes[sel], t_others, q_others[:, j]) for j in range(q_others.shape[1])],
         axis=1,
     )
-    gap = _finger_gap(hand, finger, res.q, q_nodes)
+    gap = _finger_gap(task.scene.hand, f.name, res.q, q_nodes)
     cost[sel] += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
     # forbidden: nearer than the gap, but never more than P and Q themselves allow (the
     # capsules are conservative: a finger that holds P may already be "within" them)
@@ -458,6 +466,7 @@ def _surface_path(
     allowed = min(p.finger_gap_m, float(gap[ends].min()) - _FINGER_GAP_SLACK_M)
     in_flight = (from_p[sel] > taper) & (from_q[sel] > taper)
     cost[sel[in_flight & (gap < allowed)]] = np.inf
+    others_tips = task.others_tips
     if others_tips.size:
         # under another fingertip: forbidden, but never more than P and Q themselves are
         # (a P right beside another finger would otherwise be walled in)
@@ -471,7 +480,7 @@ def _surface_path(
     cost[finite] = np.round(cost[finite], 9)
     gpath = shortest_grid_path(grid, cost, cost_weight=p.limit_weight)
     tip_path = inflate_path(
-        obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
+        task.scene.obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
     )
     return gpath, tip_path
 
@@ -487,20 +496,11 @@ def _finger_gap(hand: Hand, finger: str, q_finger: np.ndarray, q_others: np.ndar
 
 
 def _attempt(
-    hand: Hand,
-    obj: ConvexObject,
-    motion: ObjectMotion,
-    finger: str,
-    t_start: float,
-    grid: SurfaceGrid,
-    gpath: GridPath,
-    tip_path: TipPath,
-    q0: np.ndarray,
-    q_hand: Callable[[np.ndarray], np.ndarray],
-    p: RegraspParams,
-    stages: _Stages,
+    task: _Task, gpath: GridPath, tip_path: TipPath, p: RegraspParams, stages: _Stages
 ) -> RegraspResult:
-    f = hand.finger(finger)
+    hand, obj, motion = task.scene.hand, task.scene.obj, task.scene.motion
+    f, t_start = task.finger, task.t_start
+    finger = f.name
     pts = tip_path.points_object
     m = min(p.m, len(tip_path))
     poly = approximate_polygon(pts, m, closed=False, deviation=p.deviation, method=p.method)
@@ -544,7 +544,9 @@ def _attempt(
     stages.lap("timing")
 
     T = motion.pose(times)
-    q = _follow(f, times, T, tip_obj, q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p)
+    q = _follow(
+        f, times, T, tip_obj, task.q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p
+    )
     vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
     ratio = vel / f.velocity_limit
     if (ratio > 1.0).any():
@@ -560,7 +562,7 @@ def _attempt(
         )
     stages.lap("ik")
 
-    q_full = np.array(q_hand(times), dtype=float)
+    q_full = np.array(task.q_hand(times), dtype=float)
     q_full[:, f.q_indices] = q
     report = verify_finger_motion(
         hand,
@@ -602,7 +604,7 @@ def _attempt(
         n_P_object=np.zeros(3),
         Q_object=np.zeros(3),
         n_Q_object=np.zeros(3),
-        grid=grid,
+        grid=task.grid,
         grid_path=gpath,
         tip_path=tip_path,
         polygon=poly,

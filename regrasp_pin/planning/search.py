@@ -36,9 +36,8 @@ from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
 from ..grasp.choice import NewContact, choose_new_contact
 from ..grasp.contact import ContactModel
 from ..grasp.manifold import Manifold
-from ..model.hand import Hand
-from ..model.motion import ObjectMotion
-from ..model.objects import ConvexObject, SurfaceSample
+from ..model.objects import SurfaceSample
+from ..model.scene import Scene
 from .outcomes import dominant_kind, failure_summary
 from .proximity import clear_of_fingers
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
@@ -95,9 +94,7 @@ class RegraspSearch:
     """The fixed context of the regrasp searches of one manipulation plan.
 
     Attributes:
-        hand: The hand.
-        obj: The object.
-        motion: The object's motion.
+        scene: The hand, the object and its motion.
         manifolds: Joint-space manifolds per finger (to choose Q).
         sample: The surface sample the manifolds are built on.
         regrasp: Parameters of one regrasp (its ``duration_s`` is the shortest).
@@ -112,9 +109,7 @@ class RegraspSearch:
         stretches: Most duration stretches for one Q after velocity failures.
     """
 
-    hand: Hand
-    obj: ConvexObject
-    motion: ObjectMotion
+    scene: Scene
     manifolds: Mapping[str, Manifold]
     sample: SurfaceSample
     regrasp: RegraspParams
@@ -162,10 +157,12 @@ class RegraspSearch:
             PlanningError: nothing verified; its ``kind`` is the dominant cause, its
                 ``attempts`` every failure.
         """
-        end_by = self.motion.t_end if end_by_s is None else min(end_by_s, self.motion.t_end)
+        end_by = (
+            self.scene.motion.t_end if end_by_s is None else min(end_by_s, self.scene.motion.t_end)
+        )
         d_min = self.regrasp.duration_s
         others_tips = np.array(
-            [p + self.hand.finger(n).tip_radius * nn for n, (p, nn) in others.items()]
+            [p + self.scene.hand.finger(n).tip_radius * nn for n, (p, nn) in others.items()]
         ).reshape(-1, 3)
         attempts: list[Attempt] = []
         for start in starts:
@@ -216,10 +213,10 @@ class RegraspSearch:
         q_hand: Callable[[np.ndarray], np.ndarray],
         excluded: list[np.ndarray],
     ) -> NewContact:
-        f = self.hand.finger(finger)
+        f = self.scene.hand.finger(finger)
         return choose_new_contact(
-            self.hand,
-            self.obj,
+            self.scene.hand,
+            self.scene.obj,
             self.manifolds[finger],
             self.sample,
             t_arrive,
@@ -249,7 +246,7 @@ class RegraspSearch:
         the trigger distance) at the manifold's times from index ``ka`` on."""
         m = self.manifolds[finger]
         return clear_of_fingers(
-            self.hand,
+            self.scene.hand,
             finger,
             m.q[ka:, points],
             q_hand(m.times_s[ka:]),
@@ -260,7 +257,7 @@ class RegraspSearch:
     def _exclude_radius(self, finger: str) -> float:
         if self.exclude_radius_m is not None:
             return self.exclude_radius_m
-        return 0.5 * self.hand.finger(finger).tip_radius
+        return 0.5 * self.scene.hand.finger(finger).tip_radius
 
     def _try_candidate(
         self,
@@ -278,7 +275,7 @@ class RegraspSearch:
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
     ) -> Found | bool | None:
         """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q)."""
-        f = self.hand.finger(finger)
+        f = self.scene.hand.finger(finger)
         d_min = self.regrasp.duration_s
         where = f"start {start:.2f} s"
         try:
@@ -316,9 +313,9 @@ class RegraspSearch:
             budget.plans += 1
             try:
                 result = plan_regrasp(
-                    self.hand,
-                    self.obj,
-                    self.motion,
+                    self.scene.hand,
+                    self.scene.obj,
+                    self.scene.motion,
                     finger,
                     start,
                     P[0],

@@ -1,0 +1,25 @@
+"""The scene bundles a hand, an object and a motion, and refuses anything else."""
+
+import pytest
+
+from regrasp_pin.exceptions import InputError
+from regrasp_pin.model.scene import Scene
+from regrasp_pin.scenarios import make_scenario
+
+
+def test_scene_holds_its_three_parts_frozen():
+    scen = make_scenario("five_finger", "hexagon")
+    scene = Scene(scen.hand, scen.obj, scen.motion)
+    assert (scene.hand, scene.obj, scene.motion) == (scen.hand, scen.obj, scen.motion)
+    with pytest.raises(AttributeError):
+        scene.hand = scen.hand  # type: ignore[misc]
+
+
+@pytest.mark.parametrize("wrong", ["hand", "obj", "motion"])
+def test_scene_names_the_argument_of_the_wrong_type(wrong):
+    scen = make_scenario("five_finger", "hexagon")
+    parts = {"hand": scen.hand, "obj": scen.obj, "motion": scen.motion}
+    parts[wrong] = "not it"
+    with pytest.raises(InputError) as err:
+        Scene(**parts)
+    assert err.value.argument == wrong
