@@ -1,7 +1,7 @@
 """The plan file: a whole-hand manipulation plan as JSON (format ``regrasp_pin.plan/1``).
 
 A plan stores, at strictly increasing times ``t`` [s], the full hand configuration
-``q`` (in the order of ``pin.buildModelFromUrdf(urdf, mimic=True)``) and the object pose
+``q`` (in the order of the hand's Pinocchio model, :meth:`Plan.load_hand`) and the object pose
 ``T_palm_object`` as ``[x, y, z, qx, qy, qz, qw]`` (palm frame). Linear interpolation of
 ``q`` and slerp of the pose between consecutive samples *is* the motion that was
 verified. ``phases`` says, per finger, when it held which contact and when it
@@ -24,7 +24,15 @@ if TYPE_CHECKING:  # imported lazily at run time
     from .model.hand import Hand
     from .model.objects import ConvexObject
 
-__all__ = ["PLAN_FORMAT", "ContactPhase", "Plan", "RegraspPhase", "ReleasePhase", "repo_root"]
+__all__ = [
+    "PLAN_FORMAT",
+    "ContactPhase",
+    "Plan",
+    "RegraspPhase",
+    "ReleasePhase",
+    "hand_record",
+    "repo_root",
+]
 
 PLAN_FORMAT = "regrasp_pin.plan/1"
 
@@ -32,6 +40,28 @@ PLAN_FORMAT = "regrasp_pin.plan/1"
 def repo_root() -> Path:
     """The folder that holds ``urdf/`` for the bundled hands (the repository root)."""
     return Path(__file__).resolve().parent.parent
+
+
+def hand_record(hand: Hand) -> dict[str, Any]:
+    """The plan file's ``hand`` entry: what rebuilds the hand, here or elsewhere.
+
+    The URDF's absolute path and its text, the folder it was in (meshes are looked up
+    there), how it was loaded (``palm_frame``, ``locked``, ``couplings``) and the fingers.
+    """
+    urdf = hand.urdf_path.resolve()
+    record: dict[str, Any] = {
+        "name": hand.name,
+        "urdf": str(urdf),
+        "urdf_text": hand.urdf_text,
+        "package_dirs": [str(urdf.parent)],
+        "fingers": {
+            n: {"tip_frame": f.tip_frame, "tip_radius": f.tip_radius, "joints": list(f.joint_names)}
+            for n, f in hand.fingers.items()
+        },
+    }
+    if hand.load_options:
+        record["load_options"] = hand.load_options
+    return record
 
 
 @dataclass(frozen=True)
@@ -206,7 +236,8 @@ class Plan:
     """A whole-hand plan (see the module docstring).
 
     Attributes:
-        hand: ``{"name", "urdf", "fingers": {name: {"tip_frame", "tip_radius", "joints"}}}``.
+        hand: ``{"name", "urdf", "urdf_text", "package_dirs", "load_options", "fingers":
+            {name: {"tip_frame", "tip_radius", "joints"}}}`` (:func:`hand_record`).
         object: ``{"kind", "params", "vertices", "faces"}`` (mesh in the object frame).
         t: Sample times ``(S,)`` [s], strictly increasing.
         q: Full hand configurations ``(S, nq)`` [rad].
@@ -296,17 +327,50 @@ class Plan:
     # ------------------------------------------------------------- accessors
     @property
     def urdf_path(self) -> Path:
-        """Absolute path of the hand's URDF (bundled hands are relative to the repo)."""
+        """Path of the hand's URDF where the plan was made (older plans stored bundled
+        hands relative to the repository)."""
         p = Path(self.hand["urdf"])
         return p if p.is_absolute() else repo_root() / p
 
-    def load_hand(self) -> Hand:
-        """Rebuild the :class:`~regrasp_pin.model.hand.Hand` from the URDF and finger table."""
+    def load_hand(self, package_dirs: list[str | Path] | None = None) -> Hand:
+        """Rebuild the :class:`~regrasp_pin.model.hand.Hand` the plan was made with.
+
+        The URDF is read from :attr:`urdf_path` if it is there, else from the text stored
+        in the plan; meshes are looked up in ``package_dirs``, then in the folders the
+        plan stored, then where ``ROS_PACKAGE_PATH`` says (see docs/plan_format.md).
+
+        Raises:
+            ModelFileError: the URDF is neither at its path nor stored, or Pinocchio
+                cannot load it (a mesh that is not found names the folders searched).
+        """
         from .model.hand import Hand
 
-        fingers = {n: f["tip_frame"] for n, f in self.hand["fingers"].items()}
-        radii = {n: float(f["tip_radius"]) for n, f in self.hand["fingers"].items()}
-        return Hand.from_urdf(self.urdf_path, fingers, tip_radius=radii, name=self.hand.get("name"))
+        h = self.hand
+        fingers = {n: f["tip_frame"] for n, f in h["fingers"].items()}
+        radii = {n: float(f["tip_radius"]) for n, f in h["fingers"].items()}
+        options = dict(h.get("load_options", {}))
+        if "couplings" in options:
+            options["couplings"] = {k: tuple(v) for k, v in options["couplings"].items()}
+        return Hand.from_urdf(
+            self.urdf_path,
+            fingers,
+            tip_radius=radii,
+            name=h.get("name"),
+            urdf_text=None if self.urdf_path.is_file() else self._urdf_text(),
+            package_dirs=self._package_dirs(package_dirs),
+            **options,
+        )
+
+    def _urdf_text(self) -> str:
+        text = self.hand.get("urdf_text")
+        if not isinstance(text, str):
+            raise ModelFileError(self.urdf_path, "no such URDF file, and the plan stores no text")
+        return text
+
+    def _package_dirs(self, given: list[str | Path] | None) -> list[str] | None:
+        stored = [str(d) for d in self.hand.get("package_dirs", [])]
+        dirs = [str(d) for d in (given or [])] + stored
+        return dirs or None
 
     def load_object(self) -> ConvexObject:
         """Rebuild the object from its kind and parameters."""

@@ -1,7 +1,10 @@
-"""Shared test helpers: ``assert_close`` with an explicit tolerance, and a scenario's
-initial grasp held without regrasping."""
+"""Shared test helpers: ``assert_close`` with an explicit tolerance, a scenario's
+initial grasp held without regrasping, and where the third-party Shadow Hand is."""
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import numpy as np
 
@@ -55,3 +58,19 @@ def held_grasp(scen):
 def face_with_normal(obj, normal) -> int:
     """Id of the face of ``obj`` whose outward normal is closest to ``normal``."""
     return int(np.argmax(obj.normals @ np.asarray(normal, dtype=float)))
+
+
+#: The Shadow Hand's hand file; its URDF lives outside the repository (../shared/hands).
+SHADOW_HAND_FILE = Path(__file__).resolve().parents[1] / "examples" / "hands" / "shadow_hand.json"
+
+
+def shadow_urdf() -> Path:
+    """The Shadow Hand URDF named by :data:`SHADOW_HAND_FILE`; skips the test (saying
+    where it looked) when the third-party hands folder is not on this machine."""
+    import pytest
+
+    rel = json.loads(SHADOW_HAND_FILE.read_text())["urdf"]
+    urdf = (SHADOW_HAND_FILE.parent / rel).resolve()
+    if not urdf.is_file():
+        pytest.skip(f"third-party hand models absent: no Shadow Hand URDF at {urdf}")
+    return urdf

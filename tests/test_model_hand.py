@@ -103,8 +103,12 @@ def test_bad_inputs(five, tmp_path):
         Hand.from_urdf(tmp_path / "missing.urdf", {"a": "b"}, tip_radius=0.01)
     bad = tmp_path / "bad.urdf"
     bad.write_text("<robot><link")
-    with pytest.raises(ModelFileError, match="cannot be loaded"):
+    with pytest.raises(ModelFileError, match="bad.urdf.*not valid XML"):
         Hand.from_urdf(bad, {"a": "b"}, tip_radius=0.01)
+    unparsable = tmp_path / "unparsable.urdf"
+    unparsable.write_text("<robot><link/></robot>")  # XML, but not a URDF Pinocchio takes
+    with pytest.raises(ModelFileError, match="cannot be loaded by Pinocchio"):
+        Hand.from_urdf(unparsable, {"a": "b"}, tip_radius=0.01)
     with pytest.raises(InputError, match="tip_radius"):
         Hand.from_urdf(five_finger_urdf_path(), {"index": "index_tip"}, tip_radius=-1)
     f = five.fingers["index"]

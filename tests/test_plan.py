@@ -6,10 +6,10 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import SHADOW_HAND_FILE, assert_close, shadow_urdf
 
 from regrasp_pin import Box, ContactPhase, Hand, InputError, ModelFileError, Plan, RegraspPhase
-from regrasp_pin.plan import PLAN_FORMAT
+from regrasp_pin.plan import PLAN_FORMAT, hand_record
 
 
 def _plan() -> Plan:
@@ -120,3 +120,41 @@ def test_bad_plans(tmp_path):
     doc["phases"]["index"][0]["kind"] = "hover"
     with pytest.raises(InputError, match="unknown phase kind"):
         Plan.from_dict(doc)
+
+
+def _moved(record: dict, tmp_path) -> dict:
+    """The hand record as read on another machine: the URDF is no longer at its path."""
+    return {**record, "urdf": str(tmp_path / "elsewhere" / "hand.urdf")}
+
+
+def test_hand_opens_from_the_stored_urdf_text(tmp_path):
+    """A plan made from an installed package (or another checkout) still opens: the
+    URDF's text travels with it."""
+    hand = Hand.five_finger()
+    plan = _plan()
+    plan.hand = _moved(hand_record(hand), tmp_path)
+    rebuilt = plan.load_hand()
+    assert rebuilt.model.nq == hand.model.nq and rebuilt.finger_names == hand.finger_names
+    q = np.random.default_rng(0).uniform(hand.finger("index").lower, hand.finger("index").upper)
+    assert_close(rebuilt.finger("index").fk(q), hand.finger("index").fk(q), atol=1e-15)
+    plan.hand = {k: v for k, v in plan.hand.items() if k != "urdf_text"}
+    with pytest.raises(ModelFileError, match="stores no text"):
+        plan.load_hand()
+
+
+def test_shadow_plan_hand_keeps_its_load_options_and_meshes(tmp_path):
+    """Palm frame, locked wrist and couplings are stored; meshes are found through the
+    stored folder, or a folder given when the plan is opened."""
+    shadow_urdf()
+    hand = Hand.from_file(SHADOW_HAND_FILE)
+    record = json.loads(json.dumps(hand_record(hand)))  # as written to and read from a file
+    plan = _plan()
+    plan.hand = _moved(record, tmp_path)
+    rebuilt = plan.load_hand()
+    assert rebuilt.model.nq == hand.model.nq
+    assert rebuilt.finger("index").joint_names == ("FFJ4", "FFJ3", "FFJ2")
+    assert rebuilt.collision_model.ngeoms == hand.collision_model.ngeoms
+    plan.hand = {**plan.hand, "package_dirs": []}
+    with pytest.raises(ModelFileError):
+        plan.load_hand()  # no folder holds the meshes
+    assert plan.load_hand(package_dirs=[shadow_urdf().parent]).model.nq == hand.model.nq

@@ -15,10 +15,12 @@ Bundled hands:
 from __future__ import annotations
 
 import importlib.metadata
-from collections.abc import Mapping
+import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -27,8 +29,12 @@ from .._validate import as_array, as_batch, positive
 from ..exceptions import InputError, ModelFileError, UnknownNameError
 from .ik import IKResult, solve_position_ik
 from .kinematics import FingerChain
+from .urdf import HandModels, load_hand_models
 
 __all__ = ["Finger", "Hand", "five_finger_urdf_path", "allegro_urdf_path"]
+
+#: Optional keys of a hand file (:meth:`Hand.from_file`).
+_HAND_FILE_OPTIONAL = ("name", "pad_axes", "palm_frame", "locked", "couplings", "package_dirs")
 
 #: Tip frames of the bundled five-finger hand.
 FIVE_FINGER_TIPS = {
@@ -251,6 +257,8 @@ class Hand:
         urdf_path: Path of the URDF the hand was loaded from.
         fingers: Mapping finger name -> :class:`Finger`, in the given order.
         name: Short name (``"five_finger"``, ``"allegro"`` or the URDF stem).
+        load_options: ``palm_frame``, ``locked`` and ``couplings`` as given to
+            :meth:`from_urdf` (JSON values; empty when none was given).
     """
 
     def __init__(
@@ -268,6 +276,11 @@ class Hand:
         self.urdf_path = urdf_path
         self.fingers = fingers
         self.name = name
+        #: How the URDF was loaded (``palm_frame``, ``locked``, ``couplings``), as JSON
+        #: values: with the URDF, what rebuilds the same models.
+        self.load_options: dict[str, Any] = {}
+        #: The URDF's text as it was loaded.
+        self.urdf_text: str = ""
 
     def __repr__(self) -> str:
         return f"Hand({self.name!r}, fingers={self.finger_names}, nq={self.model.nq})"
@@ -299,12 +312,17 @@ class Hand:
         tip_radius: float | Mapping[str, float],
         pad_axes: Mapping[str, object] | None = None,
         name: str | None = None,
+        palm_frame: str | None = None,
+        locked: Mapping[str, float] | None = None,
+        couplings: Mapping[str, tuple[str, float, float]] | None = None,
+        package_dirs: Sequence[str | Path] | None = None,
+        urdf_text: str | None = None,
     ) -> Hand:
         """Load any hand URDF.
 
         Args:
-            path: URDF file. Meshes referenced by ``package://`` are looked up next to
-                the URDF's package folder.
+            path: URDF file. Meshes referenced by ``package://`` or by a relative path
+                are looked up in the URDF's folder and its ancestors.
             fingers: Mapping finger name -> tip frame name (the frame at the centre of
                 the fingertip sphere).
             tip_radius: Fingertip sphere radius [m], one for all or one per finger.
@@ -313,27 +331,50 @@ class Hand:
                 last joint of the finger flexes (with its limits' sign), which points
                 out of the pad for a flexion joint.
             name: Short name; default the URDF file stem.
+            palm_frame: The frame that is the palm: the joints between the URDF's root
+                and it (a wrist, an arm) are locked and every position is expressed in
+                this frame. None: the URDF's root frame is the palm frame.
+            locked: Values [rad] of the locked joints by name (default each joint's
+                neutral value); any other joint named here is locked too.
+            couplings: ``{joint: (leader, multiplier, offset)}``: ``joint = multiplier *
+                leader + offset`` [rad], as a URDF ``<mimic>`` tag would say (for
+                example the Shadow Hand's ``{"FFJ1": ("FFJ2", 1.0, 0.0)}``). The URDF's
+                own mimic tags are applied the same way, in any joint order.
+            package_dirs: Folders searched first for meshes (``package://`` and relative
+                paths).
+            urdf_text: The URDF's text, when ``path`` no longer holds it (a plan opened
+                on another machine); ``path`` then only names it.
+
+        See :mod:`regrasp_pin.model.urdf` for how the models are built (collision
+        meshes become their convex hulls).
 
         Raises:
             ModelFileError: the file does not exist or cannot be parsed.
-            UnknownNameError: a tip frame is not in the model (lists the valid frames).
-            InputError: bad radius or pad axis, or a finger chain that is not revolute.
+            UnknownNameError: a tip frame, the palm frame or a joint is not in the model
+                (lists the valid names).
+            InputError: bad radius or pad axis, a finger chain that is not revolute, a
+                joint on two fingers' chains (name a ``palm_frame`` beyond it), a bad
+                locked value or coupling.
         """
         urdf = Path(path)
-        if not urdf.is_file():
-            raise ModelFileError(urdf, "no such URDF file")
+        if urdf_text is None:
+            if not urdf.is_file():
+                raise ModelFileError(urdf, "no such URDF file")
+            try:
+                urdf_text = urdf.read_text()
+            except (OSError, UnicodeDecodeError) as exc:
+                raise ModelFileError(urdf, f"cannot be read ({exc})") from None
         if not isinstance(fingers, Mapping) or not fingers:
             raise InputError("fingers", "is empty or not a mapping", "{finger name: tip frame}")
-        try:
-            model = pin.buildModelFromUrdf(str(urdf), mimic=True)
-            # package://NAME/... resolves against every ancestor folder of the URDF
-            pkg_dirs = [str(p) for p in urdf.resolve().parents]
-            collision = pin.buildGeomFromUrdf(
-                model, str(urdf), pin.COLLISION, package_dirs=pkg_dirs
-            )
-            visual = pin.buildGeomFromUrdf(model, str(urdf), pin.VISUAL, package_dirs=pkg_dirs)
-        except (RuntimeError, ValueError) as exc:
-            raise ModelFileError(urdf, f"cannot be loaded by Pinocchio: {exc}") from None
+        models = load_hand_models(
+            urdf,
+            urdf_text,
+            palm_frame=palm_frame,
+            locked=locked,
+            couplings=couplings,
+            package_dirs=package_dirs,
+        )
+        model, collision, visual = models.model, models.collision_model, models.visual_model
 
         frame_names = [f.name for f in model.frames]
         built: dict[str, Finger] = {}
@@ -380,7 +421,50 @@ class Hand:
                 geometry_ids=geom_ids,
                 tip_geometry_ids=tip_ids,
             )
-        return cls(model, collision, visual, urdf, built, name or urdf.stem)
+        _check_disjoint(model, built)
+        hand = cls(model, collision, visual, urdf, built, name or urdf.stem)
+        hand.load_options = _load_options(palm_frame, models, couplings)
+        hand.urdf_text = urdf_text
+        return hand
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Hand:
+        """Load a hand described by a JSON hand file.
+
+        The file holds :meth:`from_urdf`'s arguments: ``urdf`` (a path relative to the
+        hand file, or absolute), ``fingers``, ``tip_radius`` and optionally ``name``,
+        ``pad_axes``, ``palm_frame``, ``locked``, ``couplings`` (``{joint: [leader,
+        multiplier, offset]}``) and ``package_dirs`` (relative to the hand file). See
+        ``examples/hands/shadow_hand.json``.
+
+        Raises:
+            ModelFileError: the file cannot be read or is not JSON.
+            InputError: a missing or unknown key (lists the accepted ones), and whatever
+                :meth:`from_urdf` raises.
+        """
+        spec_path = Path(path)
+        try:
+            spec = json.loads(spec_path.read_text())
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ModelFileError(spec_path, f"cannot be read ({exc})") from None
+        except json.JSONDecodeError as exc:
+            raise ModelFileError(spec_path, f"is not JSON ({exc})") from None
+        accepted = ("urdf", "fingers", "tip_radius", *_HAND_FILE_OPTIONAL)
+        if not isinstance(spec, dict):
+            raise InputError(str(spec_path), "is not a JSON object", f"an object with {accepted}")
+        for key in spec:
+            if key not in accepted:
+                raise UnknownNameError(f"{spec_path.name} key", key, accepted)
+        for key in ("urdf", "fingers", "tip_radius"):
+            if key not in spec:
+                raise InputError(str(spec_path), f"has no {key!r}", f"the keys {accepted}")
+        base = spec_path.resolve().parent
+        options = {k: spec[k] for k in _HAND_FILE_OPTIONAL if k in spec}
+        if "package_dirs" in options:
+            options["package_dirs"] = [base / d for d in options["package_dirs"]]
+        return cls.from_urdf(
+            base / spec["urdf"], spec["fingers"], tip_radius=spec["tip_radius"], **options
+        )
 
     # ------------------------------------------------------------------ access
     @property
@@ -482,6 +566,37 @@ def _finger_geometries(
             if int(geom.parentJoint) == tip_joint:
                 tip_ids.append(gid)
     return tuple(ids), tuple(tip_ids)
+
+
+def _check_disjoint(model: pin.Model, fingers: Mapping[str, Finger]) -> None:
+    """InputError naming a joint that two fingers' chains share."""
+    owner: dict[int, str] = {}
+    for f in fingers.values():
+        for jid in f.chain.joint_ids:
+            other = owner.setdefault(int(jid), f.name)
+            if other != f.name:
+                joint = model.names[int(jid)]
+                raise InputError(
+                    "fingers",
+                    f"joint {joint!r} is on the chains of both {other!r} and {f.name!r}",
+                    f"fingers with joints of their own: pass palm_frame= a frame beyond "
+                    f"{joint!r} (its joints are then locked)",
+                )
+
+
+def _load_options(
+    palm_frame: str | None,
+    models: HandModels,
+    couplings: Mapping[str, tuple[str, float, float]] | None,
+) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    if palm_frame is not None:
+        out["palm_frame"] = palm_frame
+    if models.locked:
+        out["locked"] = dict(models.locked)
+    if couplings:
+        out["couplings"] = {k: [v[0], float(v[1]), float(v[2])] for k, v in couplings.items()}
+    return out
 
 
 def _mimics(model: pin.Model, jid: int, drivers: np.ndarray) -> bool:

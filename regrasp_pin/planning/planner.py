@@ -46,7 +46,7 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from ..model.scene import Scene
-from ..plan import ContactPhase, Plan, RegraspPhase, ReleasePhase
+from ..plan import ContactPhase, Plan, RegraspPhase, ReleasePhase, hand_record
 from .proximity import holding_proximity
 from .regrasp import RegraspParams, RegraspResult
 from .release import Release, plan_release
@@ -1047,14 +1047,7 @@ def _assemble(
                 q[np.ix_(np.flatnonzero(sel), f.q_indices)] = holding_q(
                     hand, motion, name, h, times[sel], params.contact.ik_tol_m
                 )
-    hand_dict = {
-        "name": hand.name,
-        "urdf": _urdf_entry(hand),
-        "fingers": {
-            n: {"tip_frame": f.tip_frame, "tip_radius": f.tip_radius, "joints": list(f.joint_names)}
-            for n, f in hand.fingers.items()
-        },
-    }
+    hand_dict = hand_record(hand)
     verts, faces = obj.mesh()
     obj_dict = {
         "kind": obj.kind,
@@ -1071,13 +1064,3 @@ def _assemble(
         phases={n: list(ps) for n, ps in phases.items()},
         summary={},
     )
-
-
-def _urdf_entry(hand: Hand) -> str:
-    from ..plan import repo_root
-
-    path = hand.urdf_path.resolve()
-    try:
-        return str(path.relative_to(repo_root()))
-    except ValueError:
-        return str(path)

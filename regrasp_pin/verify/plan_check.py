@@ -40,7 +40,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from .._validate import positive, positive_int
-from ..exceptions import InputError, ModelFileError
+from ..exceptions import InputError
 from ..plan import ContactPhase
 
 if TYPE_CHECKING:
@@ -277,16 +277,14 @@ class _Scene:
 
         self.plan = plan
         urdf = str(plan.urdf_path)
-        try:
-            self.model = pin.buildModelFromUrdf(urdf, mimic=True)
-            self.geom = pin.buildGeomFromUrdf(self.model, urdf, pin.COLLISION)
-        except (RuntimeError, ValueError) as exc:
-            raise ModelFileError(urdf, f"cannot be loaded by Pinocchio ({exc})") from None
+        # the models only (Pinocchio and Coal); none of the planner's own kinematics
+        hand = plan.load_hand()
+        self.model, self.geom = hand.model, hand.collision_model
         if plan.q.shape[1] != self.model.nq:
             raise InputError(
                 "plan.q",
-                f"has {plan.q.shape[1]} columns but the URDF has nq={self.model.nq}",
-                "q in the order of pin.buildModelFromUrdf(urdf, mimic=True)",
+                f"has {plan.q.shape[1]} columns but the hand's model has nq={self.model.nq}",
+                "q in the order of the model of Plan.load_hand()",
             )
         self.data = self.model.createData()
         self.gdata = pin.GeometryData(self.geom)

@@ -14,7 +14,7 @@ import numpy as np
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import Box
-from ..plan import ContactPhase, Plan, RegraspPhase, repo_root
+from ..plan import ContactPhase, Plan, RegraspPhase, hand_record
 
 __all__ = ["synthetic_manifold", "synthetic_plan"]
 
@@ -23,21 +23,6 @@ BOX_CENTRE_PALM_M = (0.06, 0.02, 0.04)
 #: Holding fingers and the outward normal (object frame) of the face each one touches.
 HOLDING = {"thumb": (0.0, 0.0, 1.0), "index": (1.0, 0.0, 0.0), "middle": (1.0, 0.0, 0.0)}
 MIN_SEPARATION_M = 0.01
-
-
-def _hand_record(hand: Hand) -> dict:
-    try:
-        urdf = str(hand.urdf_path.resolve().relative_to(repo_root()))
-    except ValueError:
-        urdf = str(hand.urdf_path.resolve())
-    return {
-        "name": hand.name,
-        "urdf": urdf,
-        "fingers": {
-            n: {"tip_frame": f.tip_frame, "tip_radius": f.tip_radius, "joints": list(f.joint_names)}
-            for n, f in hand.fingers.items()
-        },
-    }
 
 
 def _best_contacts(hand: Hand, box: Box, T0: np.ndarray, finger: str, spacing_m: float):
@@ -151,7 +136,7 @@ def synthetic_plan(duration_s: float = 1.0, dt_s: float = 0.02) -> Plan:
             ContactPhase(name, float(t_land), float(t[-1]), Q, n),
         ]
     return Plan(
-        hand=_hand_record(hand),
+        hand=hand_record(hand),
         object=box.to_dict(),
         t=t,
         q=q,
