@@ -69,6 +69,23 @@ def positive(value: float, argument: str, *, allow_zero: bool = False) -> float:
     return v
 
 
+#: Largest length a hand-held object or its distance from the palm can have [m]: a
+#: larger one is a length in millimetres by mistake.
+MAX_LENGTH_M = 1.0
+
+
+def hand_scale(length_m: float, argument: str) -> float:
+    """Return ``length_m`` if it is at most :data:`MAX_LENGTH_M`; else an InputError that
+    says lengths are in metres."""
+    if length_m > MAX_LENGTH_M:
+        raise InputError(
+            argument,
+            f"is {length_m:g} m, larger than anything a hand holds ({MAX_LENGTH_M:g} m)",
+            f"lengths in metres (32 mm is 0.032, not 32; here {length_m / 1000:g}?)",
+        )
+    return length_m
+
+
 def positive_int(value: object, argument: str, minimum: int = 1) -> int:
     """Return ``int(value)`` if it is an integer >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):

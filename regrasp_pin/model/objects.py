@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_array, frozen, positive, positive_int
+from .._validate import as_array, frozen, hand_scale, positive, positive_int
 from ..exceptions import InputError
 from ._polyhedra import (
     convex_hull,
@@ -119,6 +119,8 @@ class ConvexObject:
         if kind not in _KINDS:
             raise InputError("kind", f"{kind!r} is not known", f"one of {_KINDS}")
         pts = as_array(vertices_object, "vertices", (None, 3))
+        if pts.size:
+            hand_scale(float(np.ptp(pts, axis=0).max()), "vertices")
         tol = positive(coplanar_tol, "coplanar_tol")
         verts, polys = hull_polygons(pts, tol)
         self.kind = kind
@@ -390,6 +392,7 @@ class Box(ConvexObject):
         s = as_array(size, "size", (3,))
         if np.any(s <= 0):
             raise InputError("size", f"{s.tolist()} has a side <= 0", "three sides > 0 [m]")
+        hand_scale(float(s.max()), "size")
         corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
         super().__init__(0.5 * corners * s, kind="box", params={"size": s.tolist()})
 
@@ -413,7 +416,8 @@ class ExtrudedPolygon(ConvexObject):
                 or not convex.
         """
         poly = convex_polygon_ccw(polygon_xy)
-        h = positive(height_m, "height_m")
+        h = hand_scale(positive(height_m, "height_m"), "height_m")
+        hand_scale(float(np.abs(poly).max()), "polygon_xy")
         poly = poly - polygon_centroid(poly)
         super().__init__(
             extrude(poly, h),
@@ -440,8 +444,8 @@ class Prism(ExtrudedPolygon):
             InputError: for ``n_sides < 3`` or non-positive sizes.
         """
         n = positive_int(n_sides, "n_sides", minimum=3)
-        r = positive(circumradius_m, "circumradius_m")
-        h = positive(height_m, "height_m")
+        r = hand_scale(positive(circumradius_m, "circumradius_m"), "circumradius_m")
+        h = hand_scale(positive(height_m, "height_m"), "height_m")
         ang = (2 * np.arange(n) + 1) * math.pi / n
         super().__init__(r * np.stack([np.cos(ang), np.sin(ang)], axis=1), h)
         self.kind = "prism"

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
+from .._validate import hand_scale
 from ..exceptions import InputError
 from .hand import Hand
 from .motion import ObjectMotion
@@ -21,6 +24,9 @@ __all__ = ["Scene"]
 @dataclass(frozen=True)
 class Scene:
     """A hand manipulating a convex object along a motion.
+
+    Raises InputError for a part of the wrong type, or a motion that takes the object
+    farther than 1 m from the palm (a length in millimetres by mistake).
 
     Attributes:
         hand: The hand (palm frame = the hand model's root frame).
@@ -40,3 +46,14 @@ class Scene:
         ):
             if not isinstance(value, cls):
                 raise InputError(name, f"is a {type(value).__name__}", f"a {cls.__name__}")
+        # a pose tens of metres from the palm is a length in millimetres by mistake
+        far = np.linalg.norm(self.motion.T_palm_object[:, :3, 3], axis=1)
+        i = int(np.argmax(far))
+        try:
+            hand_scale(float(far[i]), "motion")
+        except InputError as exc:
+            raise InputError(
+                "motion",
+                f"puts the object {far[i]:g} m from the palm at t={self.motion.times_s[i]:g} s",
+                exc.expected,
+            ) from None

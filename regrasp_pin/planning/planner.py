@@ -191,11 +191,14 @@ def plan_manipulation(
         A :class:`ManipulationPlan`.
 
     Raises:
+        InputError: a part of the wrong type, a motion that takes the object more than
+            1 m from the palm (lengths in millimetres by mistake).
         ContactError: no initial grasp.
         PlanningError: the motion cannot be achieved; ``kind`` says why, ``attempts``
             holds every failed attempt of the last search and ``partial`` the plan up
             to the failure.
     """
+    scene = Scene(hand, obj, motion)  # checks types and scale before any work
     params = params or PlannerParams()
     budget = SearchBudget.seconds(params.budget_s)  # the whole call, manifolds included
     active = tuple(params.fingers) if params.fingers else hand.finger_names
@@ -237,7 +240,6 @@ def plan_manipulation(
         for name in active
     }
     stage["tracking"] = time.perf_counter() - t0
-    scene = Scene(hand, obj, motion)
     search = RegraspSearch(
         scene,
         manifolds,
