@@ -15,8 +15,12 @@ planning times, and every scenario whose outcome changed. Writes ``results.jsonl
 (one :class:`~regrasp_pin.suite.ScenarioResult` per line, in spec order),
 ``skipped.jsonl`` and ``summary.txt`` into ``--out``, with the plans and partial plans.
 
-Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--out out/suite]
-[--jobs 1] [--budget 60] [--baseline old/results.jsonl]``.
+``--hand`` picks the hands (bundled names or JSON hand files such as
+``examples/hands/shadow_hand.json``; a hand file's canonical pose is searched once per
+process, :func:`regrasp_pin.scenarios.setup_pose`).
+
+Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
+[--out out/suite] [--jobs 1] [--budget 60] [--baseline old/results.jsonl]``.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from regrasp_pin.scenarios import HANDS
 from regrasp_pin.suite import (
     MAX_DRAWS_PER_SCENARIO,
     ScenarioResult,
@@ -156,6 +161,14 @@ def main() -> None:
     parser.add_argument(
         "--neighbours", action="store_true", help="the demo and its neighbours instead"
     )
+    parser.add_argument(
+        "--hand",
+        action="append",
+        dest="hands",
+        metavar="NAME|FILE.json",
+        help="a bundled hand or a JSON hand file (repeat for several; default: the bundled "
+        "five_finger and allegro), e.g. examples/hands/shadow_hand.json",
+    )
     parser.add_argument("--out", type=Path, default=Path("out/suite"), help="output folder")
     parser.add_argument("--jobs", type=int, default=1, help="processes (1: in this one)")
     parser.add_argument("--budget", type=float, default=60.0, help="planning budget [s]")
@@ -169,14 +182,20 @@ def main() -> None:
         if not args.baseline.is_file():
             parser.error(f"--baseline: no such file {args.baseline} (a results.jsonl)")
 
+    hands = tuple(str(Path(h).resolve()) if h.endswith(".json") else h for h in args.hands or HANDS)
+    for h in hands:
+        if h.endswith(".json") and not Path(h).is_file():
+            parser.error(f"--hand: no such hand file {h}")
+        if not h.endswith(".json") and h not in HANDS:
+            parser.error(f"--hand: {h!r} is neither a bundled hand {HANDS} nor a .json file")
     args.out.mkdir(parents=True, exist_ok=True)
     if args.neighbours:
-        specs = neighbour_specs()
+        specs = neighbour_specs(hands)
         n, skip = len(specs), False
         what = f"the demo and its neighbours ({n} scenarios)"
     else:
         n, skip = args.n, True
-        specs = generate_specs(MAX_DRAWS_PER_SCENARIO * n, args.seed)
+        specs = generate_specs(MAX_DRAWS_PER_SCENARIO * n, args.seed, hands)
         what = f"suite seed {args.seed}: {n} scenarios with an initial grasp"
     print(f"{what}, {args.jobs} process(es), budget {args.budget:g} s, output {args.out}")
     t0 = time.perf_counter()

@@ -254,6 +254,13 @@ class Plan:
     phases: dict[str, list[Phase]]
     summary: dict[str, Any] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        phases = {f: len(ps) for f, ps in self.phases.items()}
+        return (
+            f"Plan(hand={self.hand.get('name')!r}, object={self.object.get('kind')!r}, "
+            f"{self.t.size} samples over [{self.t[0]:g}, {self.t[-1]:g}] s, phases={phases})"
+        )
+
     def __post_init__(self) -> None:
         self.t = as_array(self.t, "t", (None,))
         if self.t.size < 2 or np.any(np.diff(self.t) <= 0):

@@ -14,17 +14,20 @@ thumb's contact, which makes the thumb's contact fixed in space.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import functools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ._validate import choice, positive
-from .exceptions import InputError
+from ._validate import as_array, choice, positive, positive_int
+from .exceptions import Attempt, ContactError, FailureKind, InputError, ModelFileError
 from .grasp.choice import Grasp, initial_grasp
 from .grasp.contact import ContactModel
 from .grasp.manifold import build_manifold
+from .model.clearance import palm_clearance
 from .model.hand import Hand
 from .model.motion import ObjectMotion
 from .model.objects import Box, ConvexObject, Prism
@@ -37,8 +40,11 @@ __all__ = [
     "Scenario",
     "describe",
     "grasp_for_motion",
+    "hand_label",
     "hand_model",
+    "is_hand_file",
     "make_scenario",
+    "scenario_for_hand",
     "scenario_params",
     "setup_fingers",
     "setup_pose",
@@ -46,6 +52,8 @@ __all__ = [
 ]
 
 HANDS = ("five_finger", "allegro")
+#: A pivot finger's contact normal must be this close to the turn's axis (cos 10 deg).
+_END_FACE_COS = float(np.cos(np.radians(10.0)))
 OBJECTS = ("hexagon", "octagon", "box")
 
 
@@ -89,8 +97,8 @@ _SETUP = {
 
 
 def make_scenario(
-    hand: str = "five_finger",
-    obj: str = "hexagon",
+    hand: str | Hand = "five_finger",
+    obj: str | ConvexObject = "hexagon",
     *,
     angle_deg: float | None = None,
     rate_deg_s: float = 20.0,
@@ -99,9 +107,15 @@ def make_scenario(
 ) -> Scenario:
     """Build the canonical scenario (see the module docstring).
 
+    With a :class:`~regrasp_pin.model.hand.Hand` or a hand file's path for ``hand``, or
+    a :class:`~regrasp_pin.model.objects.ConvexObject` for ``obj``, the scenario is
+    built by :func:`scenario_for_hand` (the object placed by a search, turned about the
+    thumb's contact), with every finger of a hand given as a ``Hand``.
+
     Args:
-        hand: ``"five_finger"`` (bundled) or ``"allegro"`` (example-robot-data).
-        obj: ``"hexagon"``, ``"octagon"`` (prisms) or ``"box"``.
+        hand: ``"five_finger"`` (bundled), ``"allegro"`` (example-robot-data), a JSON
+            hand file's path, or any :class:`~regrasp_pin.model.hand.Hand`.
+        obj: ``"hexagon"``, ``"octagon"`` (prisms), ``"box"``, or any convex object.
         angle_deg: Total turn [deg]; its sign gives the direction. Default 100.
         rate_deg_s: Turning speed [deg/s] (> 0).
         dt_s: Sampling step of the motion [s].
@@ -115,6 +129,24 @@ def make_scenario(
         InputError: non-positive rate, zero or non-finite angle.
         ContactError: no initial grasp (should not happen for the bundled setups).
     """
+    if isinstance(hand, Hand) or isinstance(obj, ConvexObject) or is_hand_file(hand):
+        h = hand if isinstance(hand, Hand) else hand_model(hand)
+        names = h.finger_names if isinstance(hand, Hand) else setup_fingers(hand)
+        o = (
+            obj
+            if isinstance(obj, ConvexObject)
+            else setup_objects("five_finger")[choice(obj, "obj", OBJECTS)]()
+        )
+        return scenario_for_hand(
+            h,
+            o,
+            fingers=names,
+            angle_deg=100.0 if angle_deg is None else angle_deg,
+            rate_deg_s=rate_deg_s,
+            dt_s=dt_s,
+            seed=seed,
+        )
+    assert isinstance(hand, str) and isinstance(obj, str)
     choice(hand, "hand", HANDS)
     choice(obj, "obj", OBJECTS)
     rate = positive(rate_deg_s, "rate_deg_s")
@@ -154,37 +186,87 @@ def make_scenario(
 
 
 # ------------------------------------------------------------------ building blocks
+def is_hand_file(hand: object) -> bool:
+    """True for a JSON hand file's path (:meth:`~.hand.Hand.from_file`), which the setup
+    functions below take besides the bundled hands' names."""
+    return isinstance(hand, str) and hand.endswith(".json")
+
+
+def _check_hand(hand: object) -> str:
+    if is_hand_file(hand):
+        assert isinstance(hand, str)
+        if not Path(hand).is_file():
+            raise ModelFileError(hand, "no such hand file")
+        return hand
+    return choice(hand, "hand", HANDS)
+
+
+def hand_label(hand: str) -> str:
+    """A short name for a bundled hand or a hand file (its stem)."""
+    return Path(hand).stem if is_hand_file(hand) else hand
+
+
 def hand_model(hand: str) -> Hand:
-    """A new :class:`~.hand.Hand` for ``"five_finger"`` or ``"allegro"``.
+    """A new :class:`~.hand.Hand` for ``"five_finger"``, ``"allegro"`` or a hand file.
 
     Raises:
-        UnknownNameError: unknown hand.
+        UnknownNameError: unknown hand name.
+        ModelFileError: no such hand file.
     """
-    choice(hand, "hand", HANDS)
+    hand = _check_hand(hand)
+    if is_hand_file(hand):
+        return Hand.from_file(hand)
     return Hand.five_finger() if hand == "five_finger" else Hand.allegro()
 
 
 def setup_pose(hand: str) -> np.ndarray:
     """The hand's canonical object pose ``T_palm_object`` ``(4, 4)`` (prism axis = object z).
 
+    For a hand file it is found once per process: the first pose at which
+    :func:`scenario_for_hand` builds the canonical scenario (the five-finger hand's
+    hexagonal prism turned 100 deg at 20 deg/s about the thumb's contact).
+
     Raises:
         UnknownNameError: unknown hand.
+        ContactError: a hand file's hand cannot grasp the canonical prism anywhere.
     """
-    setup = _SETUP[choice(hand, "hand", HANDS)]
+    hand = _check_hand(hand)
+    if is_hand_file(hand):
+        return _found_pose(hand).copy()
+    setup = _SETUP[hand]
     T0 = np.eye(4)
     T0[:3, :3] = setup["rotation"].as_matrix()
     T0[:3, 3] = setup["position"]
     return T0
 
 
+@functools.cache
+def _found_pose(hand_file: str) -> np.ndarray:
+    h = hand_model(hand_file)
+    scen = scenario_for_hand(
+        h, setup_objects(hand_file)["hexagon"](), fingers=setup_fingers(hand_file)
+    )
+    return scen.motion.pose(scen.motion.t_start)
+
+
 def setup_objects(hand: str) -> dict[str, Callable[[], ConvexObject]]:
-    """The hand's canonical objects by name, each as a function that builds it."""
-    return dict(_SETUP[choice(hand, "hand", HANDS)]["objects"])
+    """The hand's canonical objects by name, each as a function that builds it (a hand
+    file gets the five-finger hand's)."""
+    hand = _check_hand(hand)
+    return dict(_SETUP["five_finger" if is_hand_file(hand) else hand]["objects"])
 
 
 def setup_fingers(hand: str) -> tuple[str, ...]:
-    """The fingers that take part in the hand's canonical scenario."""
-    return tuple(_SETUP[choice(hand, "hand", HANDS)]["fingers"])
+    """The fingers that take part in the hand's canonical scenario (a hand file: all)."""
+    hand = _check_hand(hand)
+    if is_hand_file(hand):
+        return _file_fingers(hand)
+    return tuple(_SETUP[hand]["fingers"])
+
+
+@functools.cache
+def _file_fingers(hand_file: str) -> tuple[str, ...]:
+    return hand_model(hand_file).finger_names
 
 
 def grasp_for_motion(
@@ -256,23 +338,26 @@ def turn_about_thumb_contact(
     rate_rad_s: float,
     duration_s: float,
     dt_s: float,
+    *,
+    finger: str = "thumb",
 ) -> ObjectMotion:
-    """A turn about the axis through the thumb's contact, along the thumb's contact normal.
+    """A turn about the axis through a finger's contact, along its contact normal.
 
     Args:
         T_palm_object: Object pose at the start ``(4, 4)``.
-        grasp: The grasp (its thumb contact, object frame).
+        grasp: The grasp (its contacts, object frame).
         axis_palm: The reference axis (palm frame); the turn's axis points the same way.
         rate_rad_s: Signed turning rate [rad/s].
         duration_s: Duration [s].
         dt_s: Sampling step [s].
+        finger: The finger whose contact is the pivot (default the thumb).
 
     Returns:
-        The motion: the thumb's contact point stays fixed in the palm frame.
+        The motion: that finger's contact point stays fixed in the palm frame.
     """
     R0 = T_palm_object[:3, :3]
-    pivot = R0 @ grasp.points_object["thumb"] + T_palm_object[:3, 3]
-    axis = -(R0 @ grasp.normals_object["thumb"])
+    pivot = R0 @ grasp.points_object[finger] + T_palm_object[:3, 3]
+    axis = -(R0 @ grasp.normals_object[finger])
     axis *= np.sign(axis @ axis_palm) or 1.0
     return ObjectMotion.constant_twist(
         T_palm_object,
@@ -281,6 +366,143 @@ def turn_about_thumb_contact(
         rate_rad_s=rate_rad_s,
         duration_s=duration_s,
         dt_s=dt_s,
+    )
+
+
+def scenario_for_hand(
+    hand: Hand,
+    obj: ConvexObject,
+    *,
+    fingers: Sequence[str] | None = None,
+    angle_deg: float = 100.0,
+    rate_deg_s: float = 20.0,
+    pivot: str | None = "thumb",
+    pose: np.ndarray | None = None,
+    dt_s: float = 0.01,
+    seed: int = 0,
+    attempts: int = 6,
+    contact: ContactModel | None = None,
+) -> Scenario:
+    """A scenario for any hand: the object placed where the fingers can grasp it, turned.
+
+    The object's start pose is ``pose`` or, by default, found in the fingers' common
+    workspace (:func:`~regrasp_pin.placing.candidate_placements`, best first). At each
+    candidate pose an initial force-closure grasp is chosen for a turn about the
+    object's z axis through its centre (:func:`grasp_for_motion`); with a ``pivot``
+    finger the turn is then placed about the axis through that finger's contact along
+    its normal, as in :func:`make_scenario`, so that the pivot finger pins the object
+    while the others walk around it. The first pose (of at most ``attempts``) with a
+    grasp, at which the object also stays clear of the palm over the whole motion, is
+    the scenario's.
+
+    Args:
+        hand: Any hand (:meth:`~regrasp_pin.model.hand.Hand.from_urdf`).
+        obj: The object.
+        fingers: The fingers that grasp; default all of the hand's.
+        angle_deg: Total turn [deg], signed, non-zero.
+        rate_deg_s: Turning speed [deg/s] (> 0).
+        pivot: The finger whose contact the turn's axis passes through, or None for the
+            axis through the object's centre. The default ``"thumb"`` falls back to None
+            when no grasping finger is called so.
+        pose: Object pose at the start ``(4, 4)`` (palm frame); default: searched.
+        dt_s: Sampling step of the motion [s].
+        seed: Seed of the workspace sampling and the grasp search.
+        attempts: Most candidate poses given to the grasp search.
+        contact: Contact model; default :class:`~regrasp_pin.grasp.contact.ContactModel`.
+
+    Returns:
+        The :class:`Scenario`, with :func:`scenario_params` for the fingers.
+
+    Raises:
+        InputError: bad angle, rate or pose; a pivot that is not a grasping finger.
+        UnknownNameError: an unknown finger.
+        ContactError: no candidate pose has a grasp with the object clear of the palm;
+            ``attempts`` lists each pose tried and why it failed.
+    """
+    from .placing import candidate_placements
+
+    names = tuple(fingers) if fingers is not None else hand.finger_names
+    for n in names:
+        hand.finger(n)
+    if pivot == "thumb" and "thumb" not in names:
+        pivot = None
+    if pivot is not None and pivot not in names:
+        raise InputError("pivot", f"{pivot!r} is not a grasping finger", f"one of {names} or None")
+    rate = positive(rate_deg_s, "rate_deg_s")
+    angle = float(angle_deg)
+    if not np.isfinite(angle) or angle == 0:
+        raise InputError("angle_deg", f"{angle_deg!r} is not allowed", "a finite non-zero angle")
+    contact = contact or ContactModel()
+    if pose is not None:
+        poses = [as_array(pose, "pose", (4, 4))]
+    else:
+        found = candidate_placements(hand, obj, names, contact=contact, pivot=pivot, seed=seed)
+        poses = [p.T_palm_object for p in found[: positive_int(attempts, "attempts")]]
+    rate_rad = np.sign(angle) * np.radians(rate)
+    duration = abs(angle) / rate
+    failed: list[Attempt] = []
+    for i, T0 in enumerate(poses):
+        what = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
+        axis0 = T0[:3, :3] @ np.array([0.0, 0.0, 1.0])
+        turn0 = ObjectMotion.constant_twist(
+            T0,
+            axis_palm=axis0,
+            point_palm=T0[:3, 3],
+            rate_rad_s=rate_rad,
+            duration_s=duration,
+            dt_s=dt_s,
+        )
+        try:
+            grasp = grasp_for_motion(
+                hand, obj, turn0, names, contact=contact, grasp_dt_s=0.05, seed=seed
+            )
+        except ContactError as exc:
+            failed.append(exc.as_attempt(what))
+            continue
+        if pivot is not None and abs(float(grasp.normals_object[pivot][2])) < _END_FACE_COS:
+            failed.append(
+                Attempt(
+                    kind=FailureKind.NO_CANDIDATE,
+                    finger=pivot,
+                    what=f"{what}: the {pivot} grasps a side, not an end face of the turn",
+                )
+            )
+            continue
+        motion = (
+            turn0
+            if pivot is None
+            else turn_about_thumb_contact(T0, grasp, axis0, rate_rad, duration, dt_s, finger=pivot)
+        )
+        poses_t = motion.pose(np.linspace(motion.t_start, motion.t_end, 21))
+        gap = float(palm_clearance(hand, obj, poses_t).min())
+        if gap < 0.0:
+            failed.append(
+                Attempt(
+                    kind=FailureKind.OBJECT_CLEARANCE,
+                    measured=gap,
+                    required=0.0,
+                    what=f"{what}: the object hits the palm during the turn",
+                )
+            )
+            continue
+        axis_text = (
+            "an axis through its centre"
+            if pivot is None
+            else f"the axis through the {pivot}'s contact"
+        )
+        return Scenario(
+            name=f"{hand.name}-{obj.kind}",
+            hand=hand,
+            obj=obj,
+            motion=motion,
+            grasp=grasp,
+            params=scenario_params(names, contact),
+            description=describe(hand, obj, names, angle, rate, obj.kind, axis_text),
+        )
+    raise ContactError(
+        f"no start pose of the {obj.kind} lets the {hand.name} hand grasp it ({len(poses)} tried)",
+        kind=FailureKind.NO_CANDIDATE,
+        attempts=failed,
     )
 
 

@@ -158,3 +158,10 @@ def test_shadow_plan_hand_keeps_its_load_options_and_meshes(tmp_path):
     with pytest.raises(ModelFileError):
         plan.load_hand()  # no folder holds the meshes
     assert plan.load_hand(package_dirs=[shadow_urdf().parent]).model.nq == hand.model.nq
+
+
+def test_repr_is_short():
+    """A plan's repr names it; it does not print the URDF text and every sample."""
+    text = repr(_plan())
+    assert text.startswith("Plan(hand='five_finger', object='box', 11 samples")
+    assert len(text) < 200

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, positive
+from .._validate import as_array, frozen, positive
 from ..exceptions import InputError
 from ..model.hand import Finger
 from ..model.ik import solve_position_ik
@@ -155,10 +155,12 @@ def workspace_voxels(
     return WorkspaceVoxels(origin=origin, voxel_m=voxel_m, occupied=occ)
 
 
+@functools.lru_cache(maxsize=64)
 def pad_directions(
     finger: Finger, extend_rad: float = 0.0, n: int = 20000
 ) -> tuple[np.ndarray, float]:
-    """Pad directions ``(M, 3)`` (palm frame) sampled over the joint box, and a slack.
+    """Pad directions ``(M, 3)`` (palm frame, read-only) sampled over the joint box, and
+    a slack; cached per finger (the sample is seeded, the same every time).
 
     The slack [cos units] bounds how much the best pad direction for any normal can
     exceed the best sampled one (the angular sampling step), so that
@@ -172,7 +174,7 @@ def pad_directions(
     # the pad turns at most sqrt(k) * step [rad] between a configuration and its
     # nearest sample; 1 - cos(x) <= x and the cosine moves by at most that angle
     step = float(np.prod(hi - lo) / n) ** (1.0 / finger.k)
-    return pads, float(min(1.0, np.sqrt(finger.k) * step))
+    return frozen(pads), float(min(1.0, np.sqrt(finger.k) * step))
 
 
 def build_manifold(

@@ -21,7 +21,31 @@ import pinocchio as pin
 from .hand import Hand
 from .objects import ConvexObject
 
-__all__ = ["FingerClearance", "LinkClearance"]
+__all__ = ["FingerClearance", "LinkClearance", "palm_clearance"]
+
+
+def palm_clearance(hand: Hand, obj: ConvexObject, T_palm_object: np.ndarray) -> np.ndarray:
+    """Coal distances ``(N,)`` [m] from the object at poses ``(N, 4, 4)`` to the hand's
+    geometry that no finger moves (the palm; a locked wrist or arm), at the neutral
+    configuration; ``inf`` when there is none."""
+    moved = {g for f in hand.fingers.values() for g in f.geometry_ids}
+    cm = hand.collision_model
+    ids = [g for g in range(cm.ngeoms) if g not in moved]
+    T = np.asarray(T_palm_object, float).reshape(-1, 4, 4)
+    out = np.full(T.shape[0], np.inf)
+    if not ids:
+        return out
+    data, gdata = hand.model.createData(), pin.GeometryData(cm)
+    pin.forwardKinematics(hand.model, data, hand.neutral())
+    pin.updateGeometryPlacements(hand.model, data, cm, gdata)
+    shape, req, res = obj.coal_geometry(), coal.DistanceRequest(), coal.DistanceResult()
+    for i, Ti in enumerate(T):
+        tf = coal.Transform3s(Ti[:3, :3], Ti[:3, 3])
+        for g in ids:
+            res.clear()
+            d = coal.distance(cm.geometryObjects[g].geometry, gdata.oMg[g], shape, tf, req, res)
+            out[i] = min(out[i], d)
+    return out
 
 
 class LinkClearance:

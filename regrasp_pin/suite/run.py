@@ -19,6 +19,7 @@ from .._validate import known_fields, positive
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
 from ..planning.planner import plan_manipulation
+from ..scenarios import hand_label
 from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
 from .specs import ScenarioSpec
@@ -177,7 +178,7 @@ def run_scenario(
     budget = positive(budget_s, "budget_s")
     result = ScenarioResult(
         name=spec.name,
-        hand=spec.hand,
+        hand=hand_label(spec.hand),
         object_kind=spec.object.kind,
         motion_kind=spec.motion.kind,
         ok=False,

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from .._validate import as_array, choice, known_fields, positive, positive_int
 from ..exceptions import InputError
 from ..model.objects import Box, ConvexMesh, ConvexObject, Prism
-from ..scenarios import HANDS, setup_objects
+from ..scenarios import HANDS, hand_label, is_hand_file, setup_objects
 
 __all__ = [
     "MOTION_KINDS",
@@ -195,7 +195,8 @@ class ScenarioSpec:
 
     Attributes:
         name: Unique name in its suite.
-        hand: ``"five_finger"`` or ``"allegro"``.
+        hand: ``"five_finger"``, ``"allegro"`` or the path of a JSON hand file
+            (:meth:`~regrasp_pin.model.hand.Hand.from_file`).
         object: The object.
         motion: The motion.
         position_offset_m: Added to the hand's canonical object position, palm frame [m].
@@ -224,7 +225,8 @@ class ScenarioSpec:
     grasp_clearance_m: float | None = None
 
     def __post_init__(self) -> None:
-        choice(self.hand, "hand", HANDS)
+        if not is_hand_file(self.hand):
+            choice(self.hand, "hand", HANDS)
         if not isinstance(self.object, ObjectSpec):
             raise InputError("object", f"is a {type(self.object).__name__}", "an ObjectSpec")
         if not isinstance(self.motion, MotionSpec):
@@ -293,9 +295,9 @@ def _unit(rng: np.random.Generator) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def _draw_spec(i: int, seed: int) -> ScenarioSpec:
+def _draw_spec(i: int, seed: int, hands: tuple[str, ...] = HANDS) -> ScenarioSpec:
     """Spec ``i`` of the suite ``seed`` (see the module docstring for the balance)."""
-    hand = HANDS[i % 2]
+    hand = hands[i % len(hands)]
     kind = OBJECT_KINDS[i % 3]
     motion_kind = MOTION_KINDS[(i + i // 6) % 3]
     sign = 1.0 if (i // 2) % 2 == 0 else -1.0
@@ -339,7 +341,10 @@ def _draw_spec(i: int, seed: int) -> ScenarioSpec:
     grasp_dt = float(np.clip(GRASP_STEP_DEG / rate, *GRASP_DT_RANGE_S))
     horizon = GRASP_HORIZON_DEG / rate
     return ScenarioSpec(
-        name=f"s{seed}-{i:03d}-{hand}-{obj.label}-{motion_kind}-{angle:+.0f}deg-{rate:.0f}dps",
+        name=(
+            f"s{seed}-{i:03d}-{hand_label(hand)}-{obj.label}-{motion_kind}-{angle:+.0f}deg-"
+            f"{rate:.0f}dps"
+        ),
         hand=hand,
         object=obj,
         motion=motion,
@@ -351,33 +356,45 @@ def _draw_spec(i: int, seed: int) -> ScenarioSpec:
     )
 
 
-def generate_specs(n: int, seed: int = 0) -> list[ScenarioSpec]:
+def _hands(hands: tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    if not hands:
+        raise InputError("hands", "is empty", f"names of {HANDS} or hand files")
+    for h in hands:
+        if not is_hand_file(h):
+            choice(h, "hands", HANDS)
+    return tuple(hands)
+
+
+def generate_specs(n: int, seed: int = 0, hands: tuple[str, ...] = HANDS) -> list[ScenarioSpec]:
     """The first ``n`` specs of the suite ``seed`` (deterministic, prefix-stable).
 
     Args:
         n: How many specs (>= 0).
         seed: Suite seed (>= 0); spec ``i`` is drawn from ``default_rng([seed, i])``.
+        hands: The hands, in turn: bundled names or hand files.
 
     Returns:
         ``n`` specs; hands alternate, object kinds and motion kinds cycle, so every
         prefix is balanced (see the module docstring).
 
     Raises:
-        InputError: negative ``n`` or ``seed``.
+        InputError: negative ``n`` or ``seed``, no hands.
+        UnknownNameError: an unknown hand name.
     """
     n = positive_int(n, "n", minimum=0)
     seed = positive_int(seed, "seed", minimum=0)
-    return [_draw_spec(i, seed) for i in range(n)]
+    hands = _hands(hands)
+    return [_draw_spec(i, seed, hands) for i in range(n)]
 
 
-def neighbour_specs() -> list[ScenarioSpec]:
+def neighbour_specs(hands: tuple[str, ...] = HANDS) -> list[ScenarioSpec]:
     """The canonical demo and its neighbours, as
-    :func:`~regrasp_pin.scenarios.make_scenario` builds them: both hands x the hexagonal
+    :func:`~regrasp_pin.scenarios.make_scenario` builds them: each hand x the hexagonal
     prism x turns of
     :data:`NEIGHBOUR_ANGLES_DEG` x rates :data:`NEIGHBOUR_RATES_DEG_S`, about the thumb's
-    contact, no offsets, grasp seed 0, grasp manifolds every 0.05 s (30 specs)."""
+    contact, no offsets, grasp seed 0, grasp manifolds every 0.05 s (15 specs a hand)."""
     out = []
-    for hand in HANDS:
+    for hand in _hands(hands):
         p = setup_objects(hand)["hexagon"]().params
         obj = ObjectSpec(
             "prism",
@@ -389,7 +406,7 @@ def neighbour_specs() -> list[ScenarioSpec]:
             for rate in NEIGHBOUR_RATES_DEG_S:
                 out.append(
                     ScenarioSpec(
-                        name=f"{hand}-hexagon-{angle:+.0f}deg-{rate:.0f}dps",
+                        name=f"{hand_label(hand)}-hexagon-{angle:+.0f}deg-{rate:.0f}dps",
                         hand=hand,
                         object=obj,
                         motion=MotionSpec("contact-axis", angle, rate),

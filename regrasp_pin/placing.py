@@ -1,0 +1,223 @@
+"""Placing an object in any hand: start poses where the fingers can grasp it.
+
+The ready-made scenarios (:mod:`regrasp_pin.scenarios`) know where the bundled hands
+hold their objects. For any other hand, :func:`candidate_placements` finds object poses
+``T_palm_object`` in the fingers' common workspace, best first:
+
+1. **Where.** Each finger's tip-centre workspace is sampled (seeded, uniform in its joint
+   box). A centre ``c`` can hold the object when every finger has tips in the shell
+   where a fingertip touching the object can be, ``r_in + r_tip <= |p - c| <= r_out +
+   r_tip`` (``r_in``, ``r_out``: the object's in- and circumradius about its centre).
+   Centres on a 1 cm lattice are scored by the smallest such count over the fingers;
+   the best few, at least 2 cm apart, are kept.
+2. **How turned.** At each centre the object's z axis (a prism's axis) is pointed along
+   each of nine fixed palm-frame directions (the axes and the diagonals). With a
+   ``pivot`` finger, first along that finger's mean pad direction there (over its
+   workspace samples in the shell): the pivot then presses squarely on an end face,
+   the face a turn about the object's axis leaves in place.
+3. **Screened.** For each pose, each finger's usable contacts at the start are counted
+   (IK inside the limits with the choice margin, pad facing the surface: its joint-space
+   manifold at one time, :func:`~regrasp_pin.grasp.manifold.build_manifold`). A pose
+   scores the smallest count over the fingers; poses that put the object within
+   ``palm_clearance_m`` of the palm (the geometry that no finger moves) are dropped.
+
+Scores are integer counts and ties keep the fixed order above, so the ranking is the
+same on every machine. Whether a force-closure grasp exists, and lasts under the
+motion, is decided afterwards by the grasp search
+(:func:`~regrasp_pin.scenarios.scenario_for_hand`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ._validate import positive, positive_int
+from .exceptions import InputError
+from .grasp.contact import ContactModel
+from .grasp.manifold import build_manifold
+from .model.clearance import palm_clearance
+from .model.hand import Hand
+from .model.motion import ObjectMotion
+from .model.objects import ConvexObject
+
+__all__ = ["Placement", "candidate_placements", "workspace_centres"]
+
+#: Directions (palm frame) along which the object's z axis is tried, in this order.
+AXES = tuple(
+    np.array(v, float) / np.linalg.norm(v)
+    for v in [
+        (1, 0, 0),
+        (0, 1, 0),
+        (0, 0, 1),
+        (1, 1, 0),
+        (1, -1, 0),
+        (1, 0, 1),
+        (1, 0, -1),
+        (0, 1, 1),
+        (0, 1, -1),
+    ]
+)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """An object pose at the start and how many usable contacts each finger has there.
+
+    Attributes:
+        T_palm_object: ``(4, 4)`` object pose in the palm frame.
+        usable: Finger -> number of usable contact points (surface sample) at this pose.
+    """
+
+    T_palm_object: np.ndarray
+    usable: dict[str, int]
+
+    @property
+    def score(self) -> int:
+        """The smallest number of usable contacts over the fingers."""
+        return min(self.usable.values())
+
+
+@dataclass(frozen=True)
+class _Workspace:
+    """Tip-centre samples ``(S, 3)`` and pad directions ``(S, 3)`` of one finger."""
+
+    tips: np.ndarray
+    pads: np.ndarray
+    tip_radius: float
+
+
+def _workspaces(
+    hand: Hand, fingers: Sequence[str], samples: int, seed: int
+) -> dict[str, _Workspace]:
+    rng = np.random.default_rng(seed)
+    out = {}
+    for name in fingers:
+        f = hand.finger(name)
+        q = rng.uniform(f.lower, f.upper, (samples, f.k))
+        out[name] = _Workspace(f.fk(q), f.pad_normals(q), f.tip_radius)
+    return out
+
+
+def _shell(obj: ConvexObject) -> tuple[float, float]:
+    """In- and circumradius of the object about its centre [m]."""
+    r_in = float(-obj.signed_distance(np.zeros((1, 3)))[0])
+    return r_in, float(np.linalg.norm(obj.vertices, axis=1).max())
+
+
+def workspace_centres(
+    hand: Hand,
+    obj: ConvexObject,
+    fingers: Sequence[str],
+    *,
+    count: int = 3,
+    lattice_m: float = 0.01,
+    samples: int = 3000,
+    seed: int = 0,
+) -> np.ndarray:
+    """Up to ``count`` object centres ``(C, 3)`` (palm frame) where every finger can reach
+    the object's surface, best first (see the module docstring, step 1).
+
+    Raises:
+        InputError: a non-positive count, lattice or sample number.
+    """
+    count = positive_int(count, "count")
+    step = positive(lattice_m, "lattice_m")
+    samples = positive_int(samples, "samples")
+    r_in, r_out = _shell(obj)
+    spaces = _workspaces(hand, fingers, samples, seed)
+    tips = [(w.tips, w.tip_radius) for w in spaces.values()]
+    allp = np.concatenate([p for p, _ in tips])
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    axes = [np.arange(a, b + step, step) for a, b in zip(lo, hi, strict=True)]
+    centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    score = np.full(len(centres), np.iinfo(np.int64).max)
+    for p, r_tip in tips:
+        n = np.zeros(len(centres), np.int64)
+        for s in range(0, len(centres), 512):
+            d = np.linalg.norm(centres[s : s + 512, None, :] - p[None], axis=2)
+            n[s : s + 512] = ((d >= r_in + r_tip) & (d <= r_out + r_tip)).sum(axis=1)
+        score = np.minimum(score, n)
+    order = np.lexsort((np.arange(len(centres)), -score))  # best first, ties by index
+    chosen: list[np.ndarray] = []
+    for i in order:
+        if score[i] == 0 or len(chosen) == count:
+            break
+        if all(np.linalg.norm(centres[i] - c) >= 2 * step - 1e-9 for c in chosen):
+            chosen.append(centres[i])
+    return np.array(chosen).reshape(-1, 3)
+
+
+def candidate_placements(
+    hand: Hand,
+    obj: ConvexObject,
+    fingers: Sequence[str],
+    *,
+    contact: ContactModel | None = None,
+    centres: int = 3,
+    sample_spacing_m: float = 0.004,
+    palm_clearance_m: float = 0.003,
+    pivot: str | None = None,
+    seed: int = 0,
+) -> list[Placement]:
+    """Object poses at which every finger has usable contacts, best first.
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        fingers: The fingers that will grasp.
+        contact: Contact model (margins, pad cone); default :class:`ContactModel`.
+        centres: How many workspace centres to try (:func:`workspace_centres`).
+        sample_spacing_m: Surface sample spacing of the screen [m].
+        palm_clearance_m: Poses nearer than this to the palm's geometry are dropped [m].
+        pivot: A finger whose pad should face an end face (see step 2), or None.
+        seed: Seed of the workspace sampling.
+
+    Returns:
+        The screened placements with a positive score, highest score first (ties in
+        the fixed order of centres and :data:`AXES`).
+
+    Raises:
+        InputError: no fingers, or a bad spacing or clearance.
+        UnknownNameError: an unknown finger.
+    """
+    if not fingers:
+        raise InputError("fingers", "is empty", "one or more finger names")
+    contact = contact or ContactModel()
+    spacing = positive(sample_spacing_m, "sample_spacing_m")
+    clearance = positive(palm_clearance_m, "palm_clearance_m", allow_zero=True)
+    if pivot is not None and pivot not in fingers:
+        raise InputError("pivot", f"{pivot!r} is not one of the fingers", f"one of {fingers}")
+    sample = obj.sample_surface(spacing)
+    r_in, r_out = _shell(obj)
+    out: list[Placement] = []
+    for c in workspace_centres(hand, obj, fingers, count=centres, seed=seed):
+        axes = list(AXES)
+        if pivot is not None:
+            w = _workspaces(hand, [pivot], 3000, seed)[pivot]
+            d = np.linalg.norm(w.tips - c, axis=1)
+            near = (d >= r_in + w.tip_radius) & (d <= r_out + w.tip_radius)
+            mean_pad = w.pads[near].sum(axis=0)
+            if near.any() and np.linalg.norm(mean_pad) > 1e-9:
+                axes.insert(0, mean_pad / np.linalg.norm(mean_pad))
+        for axis in axes:
+            T = np.eye(4)
+            T[:3, :3] = Rotation.align_vectors([axis], [[0.0, 0.0, 1.0]])[0].as_matrix()
+            T[:3, 3] = c
+            if palm_clearance(hand, obj, T[None])[0] < clearance:
+                continue
+            still = ObjectMotion.from_poses(np.array([0.0, 1.0]), np.stack([T, T]))
+            usable = {}
+            for name in fingers:
+                m = build_manifold(
+                    hand.finger(name), sample, still, np.array([0.0]), contact=contact
+                )
+                usable[name] = int(m.usable(contact.choice_margin_rad)[0].sum())
+            placement = Placement(T, usable)
+            if placement.score > 0:
+                out.append(placement)
+    order = sorted(range(len(out)), key=lambda i: (-out[i].score, i))
+    return [out[i] for i in order]
