@@ -45,12 +45,13 @@ from .model.objects import (
     SurfaceSample,
     object_from_params,
 )
+from .placing import Placement, candidate_placements
 from .plan import ContactPhase, Plan, RegraspPhase
 from .planning.planner import ManipulationPlan, PlannerParams, plan_manipulation
 from .planning.regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .polygon.approximate import PolygonResult, approximate_polygon
 from .polygon.deviation import deviation_matrix
-from .scenarios import Scenario, make_scenario
+from .scenarios import Scenario, make_scenario, scenario_for_hand
 from .surface.grid import SurfaceGrid, build_surface_grid
 from .surface.inflation import TipPath, grid_inflation, inflate_path, inflation_height
 from .surface.path import GridPath, shortest_grid_path
@@ -120,6 +121,9 @@ __all__ = [
     "initial_grasp",
     "is_force_closure",
     "make_scenario",
+    "scenario_for_hand",
+    "candidate_placements",
+    "Placement",
     "object_from_params",
     "plan_manipulation",
     "plan_regrasp",

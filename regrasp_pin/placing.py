@@ -12,13 +12,15 @@ hold their objects. For any other hand, :func:`candidate_placements` finds objec
    the best few, at least 2 cm apart, are kept.
 2. **How turned.** At each centre the object's z axis (a prism's axis) is pointed along
    each of nine fixed palm-frame directions (the axes and the diagonals). With a
-   ``pivot`` finger, first along that finger's mean pad direction there (over its
-   workspace samples in the shell): the pivot then presses squarely on an end face,
-   the face a turn about the object's axis leaves in place.
+   ``pivot`` finger, first along the opposition axis (from the pivot's tips in the
+   shell to the other fingers') and along the pivot's mean pad direction there: the
+   pivot then presses on an end face, the face a turn about the object's axis leaves
+   in place.
 3. **Screened.** For each pose, each finger's usable contacts at the start are counted
    (IK inside the limits with the choice margin, pad facing the surface: its joint-space
-   manifold at one time, :func:`~regrasp_pin.grasp.manifold.build_manifold`). A pose
-   scores the smallest count over the fingers; poses that put the object within
+   manifold at one time, :func:`~regrasp_pin.grasp.manifold.build_manifold`); the
+   pivot's count only those on an end face (normal within 10 deg of the object's z
+   axis). A pose scores the smallest count over the fingers; poses that put the object within
    ``palm_clearance_m`` of the palm (the geometry that no finger moves) are dropped.
 
 Scores are integer counts and ties keep the fixed order above, so the ranking is the
@@ -44,7 +46,10 @@ from .model.hand import Hand
 from .model.motion import ObjectMotion
 from .model.objects import ConvexObject
 
-__all__ = ["Placement", "candidate_placements", "workspace_centres"]
+__all__ = ["END_FACE_COS", "Placement", "candidate_placements", "workspace_centres"]
+
+#: A pivot's contact normal must be this close to the object's z axis (cos 10 deg).
+END_FACE_COS = float(np.cos(np.radians(10.0)))
 
 #: Directions (palm frame) along which the object's z axis is tried, in this order.
 AXES = tuple(
@@ -106,6 +111,35 @@ def _shell(obj: ConvexObject) -> tuple[float, float]:
     """In- and circumradius of the object about its centre [m]."""
     r_in = float(-obj.signed_distance(np.zeros((1, 3)))[0])
     return r_in, float(np.linalg.norm(obj.vertices, axis=1).max())
+
+
+def _pivot_axes(
+    hand: Hand,
+    fingers: Sequence[str],
+    pivot: str,
+    centre: np.ndarray,
+    shell: tuple[float, float],
+    seed: int,
+) -> list[np.ndarray]:
+    """Object axes that put the pivot on an end face: the opposition axis (from the
+    pivot's reachable tips to the other fingers') and the pivot's mean pad direction,
+    both over the samples in the contact shell about ``centre``."""
+    spaces = _workspaces(hand, fingers, 3000, seed)
+    near = {}
+    for name, w in spaces.items():
+        d = np.linalg.norm(w.tips - centre, axis=1)
+        near[name] = (d >= shell[0] + w.tip_radius) & (d <= shell[1] + w.tip_radius)
+    out = []
+    w = spaces[pivot]
+    others = [spaces[n].tips[near[n]] for n in fingers if n != pivot and near[n].any()]
+    if near[pivot].any() and others:
+        v = np.mean([o.mean(axis=0) for o in others], axis=0) - w.tips[near[pivot]].mean(axis=0)
+        if np.linalg.norm(v) > 1e-9:
+            out.append(v / np.linalg.norm(v))
+    pad = w.pads[near[pivot]].sum(axis=0)
+    if np.linalg.norm(pad) > 1e-9:
+        out.append(pad / np.linalg.norm(pad))
+    return out
 
 
 def workspace_centres(
@@ -197,12 +231,7 @@ def candidate_placements(
     for c in workspace_centres(hand, obj, fingers, count=centres, seed=seed):
         axes = list(AXES)
         if pivot is not None:
-            w = _workspaces(hand, [pivot], 3000, seed)[pivot]
-            d = np.linalg.norm(w.tips - c, axis=1)
-            near = (d >= r_in + w.tip_radius) & (d <= r_out + w.tip_radius)
-            mean_pad = w.pads[near].sum(axis=0)
-            if near.any() and np.linalg.norm(mean_pad) > 1e-9:
-                axes.insert(0, mean_pad / np.linalg.norm(mean_pad))
+            axes = _pivot_axes(hand, fingers, pivot, c, (r_in, r_out), seed) + axes
         for axis in axes:
             T = np.eye(4)
             T[:3, :3] = Rotation.align_vectors([axis], [[0.0, 0.0, 1.0]])[0].as_matrix()
@@ -215,7 +244,10 @@ def candidate_placements(
                 m = build_manifold(
                     hand.finger(name), sample, still, np.array([0.0]), contact=contact
                 )
-                usable[name] = int(m.usable(contact.choice_margin_rad)[0].sum())
+                ok = m.usable(contact.choice_margin_rad)[0]
+                if name == pivot:  # only its contacts on an end face count
+                    ok = ok & (np.abs(sample.normals[:, 2]) >= END_FACE_COS)
+                usable[name] = int(ok.sum())
             placement = Placement(T, usable)
             if placement.score > 0:
                 out.append(placement)

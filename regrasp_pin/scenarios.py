@@ -52,8 +52,6 @@ __all__ = [
 ]
 
 HANDS = ("five_finger", "allegro")
-#: A pivot finger's contact normal must be this close to the turn's axis (cos 10 deg).
-_END_FACE_COS = float(np.cos(np.radians(10.0)))
 OBJECTS = ("hexagon", "octagon", "box")
 
 
@@ -391,9 +389,9 @@ def scenario_for_hand(
     object's z axis through its centre (:func:`grasp_for_motion`); with a ``pivot``
     finger the turn is then placed about the axis through that finger's contact along
     its normal, as in :func:`make_scenario`, so that the pivot finger pins the object
-    while the others walk around it. The first pose (of at most ``attempts``) with a
-    grasp, at which the object also stays clear of the palm over the whole motion, is
-    the scenario's.
+    while the others walk around it, and the grasp is chosen again for that turn. The
+    first pose (of at most ``attempts``) with a grasp, at which the object also stays
+    clear of the palm over the whole motion, is the scenario's.
 
     Args:
         hand: Any hand (:meth:`~regrasp_pin.model.hand.Hand.from_urdf`).
@@ -419,7 +417,7 @@ def scenario_for_hand(
         ContactError: no candidate pose has a grasp with the object clear of the palm;
             ``attempts`` lists each pose tried and why it failed.
     """
-    from .placing import candidate_placements
+    from .placing import END_FACE_COS, candidate_placements
 
     names = tuple(fingers) if fingers is not None else hand.finger_names
     for n in names:
@@ -459,7 +457,7 @@ def scenario_for_hand(
         except ContactError as exc:
             failed.append(exc.as_attempt(what))
             continue
-        if pivot is not None and abs(float(grasp.normals_object[pivot][2])) < _END_FACE_COS:
+        if pivot is not None and abs(float(grasp.normals_object[pivot][2])) < END_FACE_COS:
             failed.append(
                 Attempt(
                     kind=FailureKind.NO_CANDIDATE,
@@ -468,11 +466,19 @@ def scenario_for_hand(
                 )
             )
             continue
-        motion = (
-            turn0
-            if pivot is None
-            else turn_about_thumb_contact(T0, grasp, axis0, rate_rad, duration, dt_s, finger=pivot)
-        )
+        motion = turn0
+        if pivot is not None:
+            # the turn about the pivot's contact, and the grasp chosen again for it
+            motion = turn_about_thumb_contact(
+                T0, grasp, axis0, rate_rad, duration, dt_s, finger=pivot
+            )
+            try:
+                grasp = grasp_for_motion(
+                    hand, obj, motion, names, contact=contact, grasp_dt_s=0.05, seed=seed
+                )
+            except ContactError as exc:
+                failed.append(exc.as_attempt(f"{what}, about the {pivot}'s contact"))
+                continue
         poses_t = motion.pose(np.linspace(motion.t_start, motion.t_end, 21))
         gap = float(palm_clearance(hand, obj, poses_t).min())
         if gap < 0.0:

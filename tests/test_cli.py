@@ -49,6 +49,8 @@ def test_demo_json_writes_plan_and_figures(tmp_path, capsys):
 def test_bad_arguments_are_reported(capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["demo", "--hand", "robotiq"])
-    assert "invalid choice" in capsys.readouterr().err
+    assert (
+        "not a hand: expected five_finger, allegro or a .json hand file" in capsys.readouterr().err
+    )
     assert main(["view", "/nonexistent/plan.json", "--html", "x.html"]) == 2
     assert "no such plan file" in capsys.readouterr().err

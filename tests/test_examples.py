@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import shadow_urdf
+from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Hand
 from regrasp_pin.plan import Plan
@@ -73,3 +75,16 @@ def test_examples_are_listed():
     listed = (EXAMPLES / "README.md").read_text()
     for script in EXAMPLES.glob("*.py"):
         assert script.name in listed, script.name
+
+
+def test_shadow_hand_plans_a_full_turn_that_passes_the_recheck(tmp_path, capsys):
+    """The real Shadow Hand (third-party models, skipped when absent): a prism turned
+    at least 90 deg with at least 3 regrasps, every one re-checked from the plan file."""
+    shadow_urdf()
+    path = _run("shadow_hand", tmp_path, capsys)
+    plan = Plan.load(path)
+    check = recheck_plan(plan)
+    assert check.ok, check.problems
+    assert len(check.regrasps) >= 3
+    R = Rotation.from_quat(plan.T_palm_object[[0, -1], 3:])
+    assert np.degrees((R[1] * R[0].inv()).magnitude()) >= 90.0 - 1e-6

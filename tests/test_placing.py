@@ -56,21 +56,31 @@ def test_placements_are_ranked_clear_of_the_palm_and_reachable(five, hexagon):
         candidate_placements(five, hexagon, FINGERS, pivot="little")
 
 
-def test_scenario_for_hand_pins_the_pivot_contact(five, hexagon):
-    """The grasp's contacts are where the fingertips are (FK), the thumb's contact is on
-    an end face, and the motion leaves it fixed in the palm frame."""
+def test_scenario_for_hand_turns_about_the_thumbs_end_face(five, hexagon):
+    """The grasp's contacts are where the fingertips are (FK); the object turns about
+    its own axis direction, about a point of the thumb's end face that stays fixed in
+    the palm frame, near the thumb's contact."""
     scen = scenario_for_hand(five, hexagon, fingers=FINGERS, angle_deg=90.0, rate_deg_s=30.0)
-    g = scen.grasp
+    g, motion = scen.grasp, scen.motion
+    T0 = motion.pose(0.0)
     for name in FINGERS:
         f = five.finger(name)
-        T0 = scen.motion.pose(0.0)
         centre = T0[:3, :3] @ (g.points_object[name] + f.tip_radius * g.normals_object[name])
         assert_close(f.fk(g.q[name]), centre + T0[:3, 3], atol=2e-5, what=name)
-    assert abs(g.normals_object["thumb"][2]) > np.cos(np.radians(10.0))
-    times = np.linspace(scen.motion.t_start, scen.motion.t_end, 7)
-    pivot = scen.motion.transform_points(times, np.repeat(g.points_object["thumb"][None], 7, 0))
-    assert_close(pivot, np.repeat(pivot[:1], 7, 0), atol=1e-9, what="pivot")
-    turned = scen.motion.pose(scen.motion.t_end)[:3, :3] @ scen.motion.pose(0.0)[:3, :3].T
+    times = np.linspace(motion.t_start, motion.t_end, 7)[1:]
+    T = motion.pose(times)
+    # points x (object frame) with T(t) x = T(0) x for every t: the turn's axis
+    A = np.concatenate([Ti[:3, :3] - T0[:3, :3] for Ti in T])
+    b = np.concatenate([T0[:3, 3] - Ti[:3, 3] for Ti in T])
+    x0 = np.linalg.lstsq(A, b, rcond=None)[0]
+    assert_close(A @ x0, b, atol=1e-9, what="fixed point")
+    axis = np.linalg.svd(A)[2][-1]  # the null direction of A
+    assert abs(axis[2]) > 1 - 1e-9, "the turn is about the object's z axis"
+    thumb = g.points_object["thumb"]
+    on_face = x0 + (thumb[2] - x0[2]) * np.array([0.0, 0.0, 1.0])
+    assert abs(abs(thumb[2]) - hexagon.params["height_m"] / 2) < 1e-9, "thumb on an end face"
+    assert np.linalg.norm(on_face - thumb) < 0.005
+    turned = T[-1][:3, :3] @ T0[:3, :3].T
     assert_close(np.degrees(np.arccos((np.trace(turned) - 1) / 2)), 90.0, atol=1e-6)
 
 

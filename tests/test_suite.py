@@ -16,7 +16,13 @@ from scipy.spatial.transform import Rotation
 
 import regrasp_pin.suite
 from regrasp_pin import ferrari_canny_epsilon, make_scenario
-from regrasp_pin.exceptions import ContactError, FailureKind, InputError, UnknownNameError
+from regrasp_pin.exceptions import (
+    ContactError,
+    FailureKind,
+    InputError,
+    ModelFileError,
+    UnknownNameError,
+)
 from regrasp_pin.scenarios import setup_pose
 from regrasp_pin.suite import (
     MOTION_KINDS,
@@ -289,3 +295,32 @@ def test_run_scenario_records_a_missing_grasp_as_data():
 def test_every_exported_name_imports():
     for name in regrasp_pin.suite.__all__:
         assert getattr(regrasp_pin.suite, name) is not None, name
+
+
+def _hand_file(tmp_path) -> str:
+    """A JSON hand file for the bundled five-finger URDF (any URDF would do)."""
+    from regrasp_pin.model.hand import FIVE_FINGER_TIPS, five_finger_urdf_path
+
+    path = tmp_path / "my_hand.json"
+    spec = {"urdf": str(five_finger_urdf_path()), "fingers": FIVE_FINGER_TIPS, "tip_radius": 0.008}
+    path.write_text(json.dumps(spec))
+    return str(path)
+
+
+def test_hand_files_join_the_suite(tmp_path):
+    """Specs for a hand file alternate with the bundled hands, are named after its stem,
+    and round-trip through JSON; a missing file or an unknown name is refused."""
+    hand = _hand_file(tmp_path)
+    mixed = generate_specs(6, 0, hands=("five_finger", hand))
+    assert [s.hand for s in mixed] == ["five_finger", hand] * 3
+    assert all("-my_hand-" in s.name for s in mixed[1::2])
+    assert ScenarioSpec.from_dict(json.loads(json.dumps(mixed[1].to_dict()))) == mixed[1]
+    neighbours = neighbour_specs(hands=(hand,))
+    assert len(neighbours) == 15 and all(s.name.startswith("my_hand-") for s in neighbours)
+    with pytest.raises(UnknownNameError):
+        generate_specs(2, 0, hands=("shadow",))
+    with pytest.raises(InputError):
+        generate_specs(2, 0, hands=())
+    missing = dataclasses.replace(mixed[1], hand=str(tmp_path / "gone.json"))
+    with pytest.raises(ModelFileError, match="no such hand file"):
+        build_scenario(missing)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..planning.planner import ManipulationPlan
+    from ..scenarios import Scenario
 
 NAME = "demo"
 HELP = "Plan the canonical regrasping scenario, print a summary, write plan.json and figures."
@@ -19,7 +20,19 @@ HELP = "Plan the canonical regrasping scenario, print a summary, write plan.json
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``demo`` options to ``parser``."""
     parser.add_argument("--out", default="out", help="output folder (default: out/)")
-    parser.add_argument("--hand", choices=("five_finger", "allegro"), default="five_finger")
+    parser.add_argument(
+        "--hand",
+        type=_hand,
+        default="five_finger",
+        metavar="{five_finger,allegro,FILE.json}",
+        help="a bundled hand or a JSON hand file (e.g. examples/hands/shadow_hand.json)",
+    )
+    parser.add_argument(
+        "--fingers",
+        type=lambda v: tuple(f for f in v.split(",") if f),
+        help="comma-separated fingers that grasp (default: the hand's canonical ones; "
+        "all of a hand file's)",
+    )
     parser.add_argument(
         "--object", dest="obj", choices=("hexagon", "octagon", "box"), default="hexagon"
     )
@@ -30,6 +43,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--meshcat", action="store_true", help="show the plan live in meshcat")
     parser.add_argument("--html", metavar="FILE", help="export the plan as static HTML")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _hand(value: str) -> str:
+    if value in ("five_finger", "allegro") or value.endswith(".json"):
+        return value
+    raise argparse.ArgumentTypeError(
+        f"{value!r} is not a hand: expected five_finger, allegro or a .json hand file"
+    )
 
 
 def summary_rows(result: ManipulationPlan) -> list[dict]:
@@ -60,15 +81,27 @@ def summary_rows(result: ManipulationPlan) -> list[dict]:
     return rows
 
 
+def _scenario(args: argparse.Namespace) -> Scenario:
+    from ..scenarios import hand_model, make_scenario, scenario_for_hand, setup_objects
+
+    if not args.fingers:
+        return make_scenario(args.hand, args.obj, angle_deg=args.angle, rate_deg_s=args.rate)
+    return scenario_for_hand(
+        hand_model(args.hand),
+        setup_objects(args.hand)[args.obj](),
+        fingers=args.fingers,
+        angle_deg=100.0 if args.angle is None else args.angle,
+        rate_deg_s=args.rate,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     """Plan the demo scenario, print its table and write the outputs; return the exit status."""
     from ..exceptions import PlanningError
     from ..planning.planner import plan_manipulation
-    from ..scenarios import make_scenario
 
     t0 = time.perf_counter()
-    angle = args.angle if args.angle is not None else None
-    scen = make_scenario(args.hand, args.obj, angle_deg=angle, rate_deg_s=args.rate)
+    scen = _scenario(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if not args.json:
