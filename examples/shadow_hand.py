@@ -7,7 +7,7 @@ away, each finger's distal joint J1 follows its J2 (a coupling the URDF does not
 declare), and the collision meshes (in millimetres, scale 0.001) become convex hulls.
 
 No setup is hand-written for it: :func:`regrasp_pin.scenarios.scenario_for_hand`
-places a hexagonal prism where the thumb and three fingers can grasp it
+places an octagonal prism where the thumb and three fingers can grasp it
 (:mod:`regrasp_pin.placing`) and turns it about the thumb's contact. The planner keeps
 the prism in force closure while the fingers regrasp; the plan is saved, reloaded and
 re-checked with Pinocchio and Coal alone.
@@ -28,14 +28,14 @@ HAND_FILE = Path(__file__).resolve().parent / "hands" / "shadow_hand.json"
 #: The thumb pins the prism; of the others, the little finger reaches farthest (its
 #: extra metacarpal joint LFJ5), so it takes the ring finger's place.
 FINGERS = ("thumb", "index", "middle", "little")
-ANGLE_DEG = 100.0
+ANGLE_DEG = -100.0
 RATE_DEG_S = 20.0
 
 
 def main(out: Path = Path("out/examples")) -> Path:
     """Plan, save and re-check the Shadow Hand's manipulation; return the plan's path."""
     hand = Hand.from_file(HAND_FILE)
-    prism = Prism(6, 0.030, 0.040)
+    prism = Prism(8, 0.040, 0.050)  # octagonal: circumradius 40 mm, 50 mm long
     scen = scenario_for_hand(
         hand, prism, fingers=FINGERS, angle_deg=ANGLE_DEG, rate_deg_s=RATE_DEG_S
     )

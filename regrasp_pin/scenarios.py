@@ -15,8 +15,8 @@ thumb's contact, which makes the thumb's contact fixed in space.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -279,6 +279,7 @@ def grasp_for_motion(
     seed: int = 0,
     trials: int = 80,
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
+    keep: Mapping[str, int] | None = None,
 ) -> Grasp:
     """The initial grasp chosen for ``motion`` (:func:`~.contact_choice.initial_grasp`).
 
@@ -300,6 +301,8 @@ def grasp_for_motion(
         trials: Randomized combinations tried by the grasp search.
         finger_clearance: Optional ``q_fingers -> distance [m]``; grasps at which it is
             <= 0 are rejected.
+        keep: Fingers whose contact is given: finger -> index in the surface sample
+            (``Grasp.indices`` of an earlier grasp); that point is their only candidate.
 
     Returns:
         The :class:`~.contact_choice.Grasp` at the motion's start.
@@ -317,6 +320,11 @@ def grasp_for_motion(
     manifolds = {
         n: build_manifold(hand.fingers[n], sample, motion, times, contact=contact) for n in fingers
     }
+    for name, index in (keep or {}).items():
+        only = np.zeros(len(sample), bool)
+        only[index] = True
+        m = manifolds[name]
+        manifolds[name] = replace(m, inside=m.inside & only[None, :])
     return initial_grasp(
         hand,
         obj,
@@ -389,7 +397,8 @@ def scenario_for_hand(
     object's z axis through its centre (:func:`grasp_for_motion`); with a ``pivot``
     finger the turn is then placed about the axis through that finger's contact along
     its normal, as in :func:`make_scenario`, so that the pivot finger pins the object
-    while the others walk around it, and the grasp is chosen again for that turn. The
+    while the others walk around it, and the other fingers' contacts are chosen again
+    for that turn. The
     first pose (of at most ``attempts``) with a grasp, at which the object also stays
     clear of the palm over the whole motion, is the scenario's.
 
@@ -472,9 +481,16 @@ def scenario_for_hand(
             motion = turn_about_thumb_contact(
                 T0, grasp, axis0, rate_rad, duration, dt_s, finger=pivot
             )
-            try:
+            try:  # the pivot's contact stays, fixed in space; the others are chosen again
                 grasp = grasp_for_motion(
-                    hand, obj, motion, names, contact=contact, grasp_dt_s=0.05, seed=seed
+                    hand,
+                    obj,
+                    motion,
+                    names,
+                    contact=contact,
+                    grasp_dt_s=0.05,
+                    seed=seed,
+                    keep={pivot: grasp.indices[pivot]},
                 )
             except ContactError as exc:
                 failed.append(exc.as_attempt(f"{what}, about the {pivot}'s contact"))

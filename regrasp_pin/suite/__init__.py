@@ -8,10 +8,14 @@ many problems at once, the same ones on every machine.
   (hand, object, pose offsets, motion, seeds) as plain JSON values.
 * :func:`generate_specs` draws specs deterministically: spec ``i`` depends only on
   ``(seed, i)`` (``numpy.random.default_rng([seed, i])``), so a longer suite starts
-  with the shorter one. Hands alternate (``i % 2``), object kinds cycle (``i % 3``)
-  and motion kinds cycle shifted by ``i // 6``, so every prefix is balanced over each
-  and every 18 consecutive specs hold each hand x object x motion combination once.
-  :func:`neighbour_specs` are the canonical demo and its 29 neighbours.
+  with the shorter one. Hands alternate (``i % len(hands)``; the bundled two by
+  default, or any JSON hand files, :meth:`~regrasp_pin.model.hand.Hand.from_file`),
+  object kinds cycle (``i % 3``) and motion kinds cycle shifted by ``i // 6``, so
+  every prefix is balanced over each and, with two hands, every 18 consecutive specs
+  hold each hand x object x motion combination once. :func:`neighbour_specs` are the
+  canonical demo and its neighbours, 15 per hand. A hand file's canonical pose is
+  found by :func:`~regrasp_pin.scenarios.setup_pose` (a placement search, once per
+  process) and its canonical objects are the five-finger hand's.
 * :func:`build_scenario` (:mod:`.build`) builds a spec the way
   :func:`~regrasp_pin.scenarios.make_scenario` does: the object at the hand's
   canonical pose composed with the spec's offsets, an initial grasp chosen by
