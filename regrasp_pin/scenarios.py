@@ -23,7 +23,14 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ._validate import as_array, choice, positive, positive_int
-from .exceptions import Attempt, ContactError, FailureKind, InputError, ModelFileError
+from .exceptions import (
+    Attempt,
+    ContactError,
+    FailureKind,
+    InputError,
+    ModelFileError,
+    UnknownNameError,
+)
 from .grasp.choice import Grasp, initial_grasp
 from .grasp.contact import ContactModel
 from .grasp.manifold import build_manifold
@@ -248,23 +255,55 @@ def _found_pose(hand_file: str) -> np.ndarray:
 
 
 def setup_objects(hand: str) -> dict[str, Callable[[], ConvexObject]]:
-    """The hand's canonical objects by name, each as a function that builds it (a hand
-    file gets the five-finger hand's)."""
+    """The hand's canonical objects by name, each as a function that builds it.
+
+    A hand file gets the five-finger hand's, scaled by its ``scenario.object_scale``
+    (default 1).
+    """
     hand = _check_hand(hand)
-    return dict(_SETUP["five_finger" if is_hand_file(hand) else hand]["objects"])
+    if not is_hand_file(hand):
+        return dict(_SETUP[hand]["objects"])
+    k = _file_scenario(hand)[1]
+    return {
+        name: functools.partial(_scaled, make, k)
+        for name, make in _SETUP["five_finger"]["objects"].items()
+    }
+
+
+def _scaled(make: Callable[[], ConvexObject], k: float) -> ConvexObject:
+    """The object ``make()`` with its lengths times ``k`` (a prism or a box)."""
+    obj = make()
+    if isinstance(obj, Prism):
+        p = obj.params
+        return Prism(int(p["n_sides"]), k * p["circumradius_m"], k * p["height_m"])
+    return Box(tuple(k * np.asarray(obj.params["size"], float)))
 
 
 def setup_fingers(hand: str) -> tuple[str, ...]:
-    """The fingers that take part in the hand's canonical scenario (a hand file: all)."""
+    """The fingers that take part in the hand's canonical scenario (a hand file: its
+    ``scenario.fingers``, default all)."""
     hand = _check_hand(hand)
     if is_hand_file(hand):
-        return _file_fingers(hand)
+        return _file_scenario(hand)[0]
     return tuple(_SETUP[hand]["fingers"])
 
 
 @functools.cache
-def _file_fingers(hand_file: str) -> tuple[str, ...]:
-    return hand_model(hand_file).finger_names
+def _file_scenario(hand_file: str) -> tuple[tuple[str, ...], float]:
+    """A hand file's ``scenario`` entry: the grasping fingers and the object scale."""
+    import json
+
+    entry = json.loads(Path(hand_file).read_text()).get("scenario", {})
+    if not isinstance(entry, dict) or set(entry) - {"fingers", "object_scale"}:
+        raise InputError(
+            f"{hand_file}: scenario", f"is {entry!r}", "{'fingers': [...], 'object_scale': k}"
+        )
+    names = hand_model(hand_file).finger_names
+    fingers = tuple(entry.get("fingers", names))
+    for n in fingers:
+        if n not in names:
+            raise UnknownNameError(f"{hand_file}: scenario.fingers", n, names)
+    return fingers, positive(entry.get("object_scale", 1.0), f"{hand_file}: scenario.object_scale")
 
 
 def grasp_for_motion(

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from conftest import assert_close
 
 from regrasp_pin import make_scenario
+from regrasp_pin.exceptions import InputError, UnknownNameError
 from regrasp_pin.grasp.choice import exit_times
 from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.model.hand import FIVE_FINGER_TIPS, five_finger_urdf_path
+from regrasp_pin.scenarios import setup_fingers, setup_objects
 
 
 @pytest.fixture(scope="module")
@@ -37,3 +42,28 @@ def test_the_thumb_holds_through_the_whole_turn(scen):
     assert exit_times(usable[:, [i]], times, 0)[0] == pytest.approx(times[-1])
     q = m.q[:, i]
     assert_close(q, np.broadcast_to(q[0], q.shape), atol=1e-4, what="thumb q")
+
+
+def test_a_hand_files_scenario_entry_picks_fingers_and_scales_objects(tmp_path):
+    def hand_file(name, scenario):
+        path = tmp_path / f"{name}.json"
+        spec = {
+            "urdf": str(five_finger_urdf_path()),
+            "fingers": FIVE_FINGER_TIPS,
+            "tip_radius": 0.008,
+            "scenario": scenario,
+        }
+        path.write_text(json.dumps(spec))
+        return str(path)
+
+    f = hand_file("scaled", {"fingers": ["thumb", "index", "middle"], "object_scale": 1.5})
+    assert setup_fingers(f) == ("thumb", "index", "middle")
+    base, scaled = setup_objects("five_finger"), setup_objects(f)
+    for name in ("hexagon", "octagon", "box"):
+        assert_close(scaled[name]().vertices, 1.5 * base[name]().vertices, atol=1e-15, what=name)
+    everything = hand_file("plain", {})
+    assert setup_fingers(everything) == tuple(FIVE_FINGER_TIPS)
+    with pytest.raises(UnknownNameError):
+        setup_fingers(hand_file("typo", {"fingers": ["pinky"]}))
+    with pytest.raises(InputError):
+        setup_fingers(hand_file("extra", {"speed": 2}))

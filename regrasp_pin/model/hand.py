@@ -434,8 +434,10 @@ class Hand:
         The file holds :meth:`from_urdf`'s arguments: ``urdf`` (a path relative to the
         hand file, or absolute), ``fingers``, ``tip_radius`` and optionally ``name``,
         ``pad_axes``, ``palm_frame``, ``locked``, ``couplings`` (``{joint: [leader,
-        multiplier, offset]}``) and ``package_dirs`` (relative to the hand file). See
-        ``examples/hands/shadow_hand.json``.
+        multiplier, offset]}``) and ``package_dirs`` (relative to the hand file). A
+        ``scenario`` entry is for :mod:`regrasp_pin.scenarios` (which fingers grasp in
+        the ready-made scenarios, how their objects are scaled) and is not read here.
+        See ``examples/hands/shadow_hand.json``.
 
         Raises:
             ModelFileError: the file cannot be read or is not JSON.
@@ -449,7 +451,7 @@ class Hand:
             raise ModelFileError(spec_path, f"cannot be read ({exc})") from None
         except json.JSONDecodeError as exc:
             raise ModelFileError(spec_path, f"is not JSON ({exc})") from None
-        accepted = ("urdf", "fingers", "tip_radius", *_HAND_FILE_OPTIONAL)
+        accepted = ("urdf", "fingers", "tip_radius", "scenario", *_HAND_FILE_OPTIONAL)
         if not isinstance(spec, dict):
             raise InputError(str(spec_path), "is not a JSON object", f"an object with {accepted}")
         for key in spec:
