@@ -53,7 +53,7 @@ def hand_record(hand: Hand) -> dict[str, Any]:
         "name": hand.name,
         "urdf": str(urdf),
         "urdf_text": hand.urdf_text,
-        "package_dirs": [str(urdf.parent)],
+        "package_dirs": [str(d) for d in hand.package_dirs] + [str(urdf.parent)],
         "fingers": {
             n: {"tip_frame": f.tip_frame, "tip_radius": f.tip_radius, "joints": list(f.joint_names)}
             for n, f in hand.fingers.items()
@@ -342,8 +342,9 @@ class Plan:
     def load_hand(self, package_dirs: list[str | Path] | None = None) -> Hand:
         """Rebuild the :class:`~regrasp_pin.model.hand.Hand` the plan was made with.
 
-        The URDF is read from :attr:`urdf_path` if it is there, else from the text stored
-        in the plan; meshes are looked up in ``package_dirs``, then in the folders the
+        The URDF is the text stored in the plan (the model the plan was made with, even
+        if the file at :attr:`urdf_path` changed since), or that file for plans that
+        store no text; meshes are looked up in ``package_dirs``, then in the folders the
         plan stored, then where ``ROS_PACKAGE_PATH`` says (see docs/plan_format.md).
 
         Raises:
@@ -363,16 +364,18 @@ class Plan:
             fingers,
             tip_radius=radii,
             name=h.get("name"),
-            urdf_text=None if self.urdf_path.is_file() else self._urdf_text(),
+            urdf_text=self._urdf_text(),
             package_dirs=self._package_dirs(package_dirs),
             **options,
         )
 
-    def _urdf_text(self) -> str:
+    def _urdf_text(self) -> str | None:
         text = self.hand.get("urdf_text")
-        if not isinstance(text, str):
+        if isinstance(text, str):
+            return text
+        if not self.urdf_path.is_file():
             raise ModelFileError(self.urdf_path, "no such URDF file, and the plan stores no text")
-        return text
+        return None
 
     def _package_dirs(self, given: list[str | Path] | None) -> list[str] | None:
         stored = [str(d) for d in self.hand.get("package_dirs", [])]

@@ -137,11 +137,10 @@ def make_scenario(
     if isinstance(hand, Hand) or isinstance(obj, ConvexObject) or is_hand_file(hand):
         h = hand if isinstance(hand, Hand) else hand_model(hand)
         names = h.finger_names if isinstance(hand, Hand) else setup_fingers(hand)
-        o = (
-            obj
-            if isinstance(obj, ConvexObject)
-            else setup_objects("five_finger")[choice(obj, "obj", OBJECTS)]()
+        named = setup_objects(
+            hand if isinstance(hand, str) and is_hand_file(hand) else "five_finger"
         )
+        o = obj if isinstance(obj, ConvexObject) else named[choice(obj, "obj", OBJECTS)]()
         return scenario_for_hand(
             h,
             o,
@@ -228,8 +227,8 @@ def setup_pose(hand: str) -> np.ndarray:
     """The hand's canonical object pose ``T_palm_object`` ``(4, 4)`` (prism axis = object z).
 
     For a hand file it is found once per process: the first pose at which
-    :func:`scenario_for_hand` builds the canonical scenario (the five-finger hand's
-    hexagonal prism turned 100 deg at 20 deg/s about the thumb's contact).
+    :func:`scenario_for_hand` builds a canonical scenario (the hand's canonical objects
+    in turn, turned 100 deg at 20 deg/s either way about the thumb's contact).
 
     Raises:
         UnknownNameError: unknown hand.
@@ -237,7 +236,10 @@ def setup_pose(hand: str) -> np.ndarray:
     """
     hand = _check_hand(hand)
     if is_hand_file(hand):
-        return _found_pose(hand).copy()
+        found = _found_pose(*_file_key(hand))
+        if isinstance(found, ContactError):
+            raise found
+        return found.copy()
     setup = _SETUP[hand]
     T0 = np.eye(4)
     T0[:3, :3] = setup["rotation"].as_matrix()
@@ -245,13 +247,32 @@ def setup_pose(hand: str) -> np.ndarray:
     return T0
 
 
+def _file_key(hand_file: str) -> tuple[str, int]:
+    """A hand file's cache key: its resolved path and modification time (an edited
+    file is read again)."""
+    path = Path(hand_file).resolve()
+    return str(path), path.stat().st_mtime_ns
+
+
 @functools.cache
-def _found_pose(hand_file: str) -> np.ndarray:
+def _found_pose(hand_file: str, _mtime_ns: int) -> np.ndarray | ContactError:
+    """The first canonical object and turn direction (hexagon, octagon, box; +100 then
+    -100 deg) for which :func:`scenario_for_hand` finds a start pose, and that pose;
+    the ContactError of the last attempt if none does (cached too, not searched again)."""
     h = hand_model(hand_file)
-    scen = scenario_for_hand(
-        h, setup_objects(hand_file)["hexagon"](), fingers=setup_fingers(hand_file)
-    )
-    return scen.motion.pose(scen.motion.t_start)
+    failure: ContactError | None = None
+    for make in setup_objects(hand_file).values():
+        for angle in (100.0, -100.0):
+            try:
+                scen = scenario_for_hand(
+                    h, make(), fingers=setup_fingers(hand_file), angle_deg=angle
+                )
+            except ContactError as exc:
+                failure = exc
+                continue
+            return scen.motion.pose(scen.motion.t_start)
+    assert failure is not None
+    return failure
 
 
 def setup_objects(hand: str) -> dict[str, Callable[[], ConvexObject]]:
@@ -263,7 +284,7 @@ def setup_objects(hand: str) -> dict[str, Callable[[], ConvexObject]]:
     hand = _check_hand(hand)
     if not is_hand_file(hand):
         return dict(_SETUP[hand]["objects"])
-    k = _file_scenario(hand)[1]
+    k = _file_scenario(*_file_key(hand))[1]
     return {
         name: functools.partial(_scaled, make, k)
         for name, make in _SETUP["five_finger"]["objects"].items()
@@ -284,21 +305,22 @@ def setup_fingers(hand: str) -> tuple[str, ...]:
     ``scenario.fingers``, default all)."""
     hand = _check_hand(hand)
     if is_hand_file(hand):
-        return _file_scenario(hand)[0]
+        return _file_scenario(*_file_key(hand))[0]
     return tuple(_SETUP[hand]["fingers"])
 
 
 @functools.cache
-def _file_scenario(hand_file: str) -> tuple[tuple[str, ...], float]:
+def _file_scenario(hand_file: str, _mtime_ns: int) -> tuple[tuple[str, ...], float]:
     """A hand file's ``scenario`` entry: the grasping fingers and the object scale."""
     import json
 
-    entry = json.loads(Path(hand_file).read_text()).get("scenario", {})
+    spec = json.loads(Path(hand_file).read_text())
+    entry = spec.get("scenario", {})
     if not isinstance(entry, dict) or set(entry) - {"fingers", "object_scale"}:
         raise InputError(
             f"{hand_file}: scenario", f"is {entry!r}", "{'fingers': [...], 'object_scale': k}"
         )
-    names = hand_model(hand_file).finger_names
+    names = tuple(spec.get("fingers", {}))
     fingers = tuple(entry.get("fingers", names))
     for n in fingers:
         if n not in names:
@@ -360,6 +382,12 @@ def grasp_for_motion(
         n: build_manifold(hand.fingers[n], sample, motion, times, contact=contact) for n in fingers
     }
     for name, index in (keep or {}).items():
+        if name not in manifolds:
+            raise UnknownNameError("keep", name, list(manifolds))
+        if not isinstance(index, (int, np.integer)) or not 0 <= index < len(sample):
+            raise InputError(
+                f"keep[{name!r}]", f"{index!r}", f"an index into the {len(sample)} samples"
+            )
         only = np.zeros(len(sample), bool)
         only[index] = True
         m = manifolds[name]

@@ -7,10 +7,9 @@ from regrasp_pin.model.scene import Scene
 from regrasp_pin.scenarios import make_scenario
 
 
-def test_scene_holds_its_three_parts_frozen():
+def test_scene_is_frozen():
     scen = make_scenario("five_finger", "hexagon")
     scene = Scene(scen.hand, scen.obj, scen.motion)
-    assert (scene.hand, scene.obj, scene.motion) == (scen.hand, scen.obj, scen.motion)
     with pytest.raises(AttributeError):
         scene.hand = scen.hand  # type: ignore[misc]
 

@@ -239,3 +239,15 @@ def test_palm_frame_locks_what_is_above_it(tmp_path):
     palm_inv = data.oMf[full.getFrameId("l1")].inverse()
     expected = (palm_inv * data.oMf[full.getFrameId("tip")]).translation
     assert_close(f.fk([0.4, 0.5]), expected, atol=1e-12)
+
+
+def test_a_mimic_tag_across_the_palm_frame_is_named(tmp_path):
+    """j2 mimics j1, but the palm at l1 locks j1 and leaves j2 free: refused, naming
+    the tag; with the palm at l2 both are locked and the tag goes with them."""
+    urdf = tmp_path / "chain.urdf"
+    urdf.write_text(_chain_urdf('<mimic joint="j1" multiplier="1.0" offset="0.0"/>'))
+    with pytest.raises(InputError) as err:
+        Hand.from_urdf(urdf, {"f": "tip"}, tip_radius=0.005, palm_frame="l1")
+    assert err.value.argument == "URDF <mimic> of 'j2'"
+    hand = Hand.from_urdf(urdf, {"f": "tip"}, tip_radius=0.005, palm_frame="l2")
+    assert hand.finger("f").joint_names == ("j3",)

@@ -165,3 +165,18 @@ def test_repr_is_short():
     text = repr(_plan())
     assert text.startswith("Plan(hand='five_finger', object='box', 11 samples")
     assert len(text) < 200
+
+
+def test_the_stored_urdf_wins_over_a_changed_file(tmp_path):
+    """A plan rebuilds the hand it was made with, even if the file at its path changed."""
+    from regrasp_pin.model.hand import FIVE_FINGER_TIPS, five_finger_urdf_path
+
+    urdf = tmp_path / "hand.urdf"
+    urdf.write_text(five_finger_urdf_path().read_text())
+    hand = Hand.from_urdf(urdf, FIVE_FINGER_TIPS, tip_radius=0.008)
+    plan = _plan()
+    plan.hand = hand_record(hand)
+    urdf.write_text(urdf.read_text().replace('upper="1.745329"', 'upper="0.5"'))
+    rebuilt = plan.load_hand()
+    assert_close(rebuilt.finger("index").upper, hand.finger("index").upper, atol=0.0)
+    assert Hand.from_urdf(urdf, FIVE_FINGER_TIPS, tip_radius=0.008).finger("index").upper.min() < 1

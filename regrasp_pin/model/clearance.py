@@ -25,12 +25,11 @@ __all__ = ["FingerClearance", "LinkClearance", "palm_clearance"]
 
 
 def palm_clearance(hand: Hand, obj: ConvexObject, T_palm_object: np.ndarray) -> np.ndarray:
-    """Coal distances ``(N,)`` [m] from the object at poses ``(N, 4, 4)`` to the hand's
-    geometry that no finger moves (the palm; a locked wrist or arm), at the neutral
-    configuration; ``inf`` when there is none."""
-    moved = {g for f in hand.fingers.values() for g in f.geometry_ids}
+    """Coal distances ``(N,)`` [m] from the object at poses ``(N, 4, 4)`` (palm frame) to
+    the hand's fixed geometry, the geometry no joint moves (the palm; a locked wrist or
+    arm); ``inf`` when there is none."""
     cm = hand.collision_model
-    ids = [g for g in range(cm.ngeoms) if g not in moved]
+    ids = [g for g in range(cm.ngeoms) if int(cm.geometryObjects[g].parentJoint) == 0]
     T = np.asarray(T_palm_object, float).reshape(-1, 4, 4)
     out = np.full(T.shape[0], np.inf)
     if not ids:

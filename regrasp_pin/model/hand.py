@@ -257,8 +257,9 @@ class Hand:
         urdf_path: Path of the URDF the hand was loaded from.
         fingers: Mapping finger name -> :class:`Finger`, in the given order.
         name: Short name (``"five_finger"``, ``"allegro"`` or the URDF stem).
-        load_options: ``palm_frame``, ``locked`` and ``couplings`` as given to
-            :meth:`from_urdf` (JSON values; empty when none was given).
+        load_options: ``palm_frame``, ``locked`` (every joint locked and its value, those
+            locked by default above the palm included) and ``couplings`` (as given) of
+            :meth:`from_urdf`, as JSON values; empty when none applies.
     """
 
     def __init__(
@@ -281,6 +282,8 @@ class Hand:
         self.load_options: dict[str, Any] = {}
         #: The URDF's text as it was loaded.
         self.urdf_text: str = ""
+        #: Folders given for its meshes (besides the URDF's own folder).
+        self.package_dirs: tuple[Path, ...] = ()
 
     def __repr__(self) -> str:
         return f"Hand({self.name!r}, fingers={self.finger_names}, nq={self.model.nq})"
@@ -425,6 +428,7 @@ class Hand:
         hand = cls(model, collision, visual, urdf, built, name or urdf.stem)
         hand.load_options = _load_options(palm_frame, models, couplings)
         hand.urdf_text = urdf_text
+        hand.package_dirs = tuple(Path(d) for d in package_dirs or ())
         return hand
 
     @classmethod
@@ -441,8 +445,9 @@ class Hand:
 
         Raises:
             ModelFileError: the file cannot be read or is not JSON.
-            InputError: a missing or unknown key (lists the accepted ones), and whatever
-                :meth:`from_urdf` raises.
+            InputError: a missing key, a ``urdf`` that is not a string, ``package_dirs``
+                that is not a list of strings, and whatever :meth:`from_urdf` raises.
+            UnknownNameError: an unknown key (lists the accepted ones).
         """
         spec_path = Path(path)
         try:
@@ -460,10 +465,17 @@ class Hand:
         for key in ("urdf", "fingers", "tip_radius"):
             if key not in spec:
                 raise InputError(str(spec_path), f"has no {key!r}", f"the keys {accepted}")
+        if not isinstance(spec["urdf"], str):
+            raise InputError(f"{spec_path.name}: urdf", f"is {spec['urdf']!r}", "a path string")
         base = spec_path.resolve().parent
         options = {k: spec[k] for k in _HAND_FILE_OPTIONAL if k in spec}
         if "package_dirs" in options:
-            options["package_dirs"] = [base / d for d in options["package_dirs"]]
+            dirs = options["package_dirs"]
+            if not isinstance(dirs, list) or not all(isinstance(d, str) for d in dirs):
+                raise InputError(
+                    f"{spec_path.name}: package_dirs", f"is {dirs!r}", "a list of paths"
+                )
+            options["package_dirs"] = [base / d for d in dirs]
         return cls.from_urdf(
             base / spec["urdf"], spec["fingers"], tip_radius=spec["tip_radius"], **options
         )

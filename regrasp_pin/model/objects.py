@@ -417,7 +417,7 @@ class ExtrudedPolygon(ConvexObject):
         """
         poly = convex_polygon_ccw(polygon_xy)
         h = hand_scale(positive(height_m, "height_m"), "height_m")
-        hand_scale(float(np.abs(poly).max()), "polygon_xy")
+        hand_scale(float(np.ptp(poly, axis=0).max()), "polygon_xy")
         poly = poly - polygon_centroid(poly)
         super().__init__(
             extrude(poly, h),

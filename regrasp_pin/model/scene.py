@@ -1,9 +1,9 @@
 """The problem every stage reads: a hand, an object and the object's motion.
 
-These three travel together from :func:`~regrasp_pin.plan_manipulation` down to the
-verifier; :class:`Scene` carries them as one frozen value (as pink's
-``Configuration`` carries model, data and q), so that a stage takes the scene and only
-the arguments that are its own.
+These three travel together from :func:`~regrasp_pin.plan_manipulation` down to one
+regrasp's path and trajectory; :class:`Scene` carries them as one frozen value (as
+pink's ``Configuration`` carries model, data and q), so that a stage takes the scene
+and only the arguments that are its own.
 """
 
 from __future__ import annotations

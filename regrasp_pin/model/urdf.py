@@ -147,36 +147,33 @@ def load_hand_models(
             urdf, f"cannot be loaded by Pinocchio (meshes searched in {dirs[:3]}...): {exc}"
         ) from None
     given = _given_couplings(couplings)
-    merged = {c.follower: c for c in declared} | {c.follower: c for c in given}
     lock = _joints_to_lock(model, palm_frame, locked)
     if lock:
         q_ref = pin.neutral(model)
         for name, value in lock.items():
-            q_ref[model.joints[model.getJointId(name)].idx_q] = value
+            if value is not None:
+                q_ref[model.joints[model.getJointId(name)].idx_q] = value
         ids = [model.getJointId(n) for n in lock]
         model, (collision, visual) = pin.buildReducedModel(model, [collision, visual], ids, q_ref)
     if palm_frame is not None:
         _reroot(model, [collision, visual], palm_frame)
-    model = _couple(model, list(merged.values()), set(lock))
+    applied = _applicable(declared, given, set(lock))
+    model = _couple(model, applied, set(lock))
     _convex_meshes(collision)
-    return HandModels(model, collision, visual, lock, tuple(merged.values()))
+    values = {n: v for n, v in lock.items() if v is not None}
+    return HandModels(model, collision, visual, values, tuple(applied))
 
 
 # ------------------------------------------------------------------ locking the palm
 def _joints_to_lock(
     model: pin.Model, palm_frame: str | None, locked: Mapping[str, float] | None
-) -> dict[str, float]:
-    """Joint name -> value for every joint to lock (validated)."""
+) -> dict[str, float | None]:
+    """Joint name -> value [rad] for every joint to lock (validated); None for a joint
+    of more than one variable above the palm, locked at its neutral configuration."""
     names = [model.names[j] for j in range(1, model.njoints)]
-    out: dict[str, float] = {}
+    out: dict[str, float | None] = {}
     if palm_frame is not None:
-        frames = [f.name for f in model.frames]
-        if not isinstance(palm_frame, str) or palm_frame not in frames:
-            raise UnknownNameError("palm_frame", palm_frame, frames)
-        j = int(model.frames[model.getFrameId(palm_frame)].parentJoint)
-        while j > 0:
-            out[model.names[j]] = math.nan
-            j = int(model.parents[j])
+        out.update(dict.fromkeys(_above(model, palm_frame), math.nan))
     if locked is not None:
         if not isinstance(locked, Mapping):
             raise InputError("locked", f"is a {type(locked).__name__}", "{joint name: value [rad]}")
@@ -184,18 +181,36 @@ def _joints_to_lock(
             if name not in names:
                 raise UnknownNameError("locked", name, names)
             out[name] = math.nan
+    given = locked or {}
     for name in out:
         jm = model.joints[model.getJointId(name)]
+        if jm.nq != 1 and name not in given:
+            out[name] = None  # a free-flyer, planar or continuous joint: at neutral
+            continue
         if jm.nq != 1:
             raise InputError(f"locked[{name!r}]", f"joint has nq={jm.nq}", "one-dof joints")
         lo = float(model.lowerPositionLimit[jm.idx_q])
         hi = float(model.upperPositionLimit[jm.idx_q])
         value = float(pin.neutral(model)[jm.idx_q])
-        if locked is not None and name in locked:
-            value = _finite(locked[name], f"locked[{name!r}]")
+        if name in given:
+            value = _finite(given[name], f"locked[{name!r}]")
         if not lo - 1e-12 <= value <= hi + 1e-12:
             raise InputError(f"locked[{name!r}]", f"{value:g} rad", f"within [{lo:g}, {hi:g}] rad")
         out[name] = value
+    return out
+
+
+def _above(model: pin.Model, palm_frame: str) -> list[str]:
+    """The joints between the model's root and ``palm_frame`` (UnknownNameError if no
+    such frame)."""
+    frames = [f.name for f in model.frames]
+    if not isinstance(palm_frame, str) or palm_frame not in frames:
+        raise UnknownNameError("palm_frame", palm_frame, frames)
+    out = []
+    j = int(model.frames[model.getFrameId(palm_frame)].parentJoint)
+    while j > 0:
+        out.append(model.names[j])
+        j = int(model.parents[j])
     return out
 
 
@@ -219,6 +234,30 @@ def _reroot(model: pin.Model, geometries: list[pin.GeometryModel], palm_frame: s
 
 
 # ------------------------------------------------------------------ couplings
+def _applicable(
+    declared: tuple[Coupling, ...], given: list[Coupling], locked: set[str]
+) -> list[Coupling]:
+    """The given couplings over the URDF's mimic tags (a follower named in both takes
+    the given one). A mimic tag between two locked joints (an arm's, above the palm) is
+    dropped; one between a locked and a free joint is an error that names it."""
+    mine = {c.follower for c in given}
+    out = []
+    for c in declared:
+        if c.follower in mine:
+            continue
+        ends = {c.follower, c.leader} & locked
+        if len(ends) == 2:
+            continue
+        if ends:
+            raise InputError(
+                f"URDF <mimic> of {c.follower!r}",
+                f"couples it to {c.leader!r} across the palm frame (one of them is locked)",
+                "a palm_frame above both joints or below both",
+            )
+        out.append(c)
+    return out + given
+
+
 def _given_couplings(couplings: Mapping[str, tuple[str, float, float]] | None) -> list[Coupling]:
     if couplings is None:
         return []

@@ -271,6 +271,7 @@ def plan_regrasp(
         VerificationError: no candidate passed the verification (finger, time, why).
         PlanningError: the path or the IK failed for every candidate.
     """
+    scene = Scene(hand, obj, motion)  # types and scale, before any work
     params = (params or RegraspParams()).validate()
     f = hand.finger(finger)
     P = as_array(P_object, "P_object", (3,))
@@ -299,9 +300,7 @@ def plan_regrasp(
     t_others = float(t_start) + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
     q_others = np.asarray(q_hand(t_others), float)
     stages.lap("others")
-    task = _Task(
-        Scene(hand, obj, motion), f, float(t_start), q0, grid, q_hand, others, t_others, q_others
-    )
+    task = _Task(scene, f, float(t_start), q0, grid, q_hand, others, t_others, q_others)
 
     attempts: list[Attempt] = []
     last: PlanningError | None = None

@@ -15,7 +15,8 @@ many problems at once, the same ones on every machine.
   hold each hand x object x motion combination once. :func:`neighbour_specs` are the
   canonical demo and its neighbours, 15 per hand. A hand file's canonical pose is
   found by :func:`~regrasp_pin.scenarios.setup_pose` (a placement search, once per
-  process) and its canonical objects are the five-finger hand's.
+  process) and its canonical objects are the five-finger hand's, scaled by the file's
+  ``scenario.object_scale``.
 * :func:`build_scenario` (:mod:`.build`) builds a spec the way
   :func:`~regrasp_pin.scenarios.make_scenario` does: the object at the hand's
   canonical pose composed with the spec's offsets, an initial grasp chosen by

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 from typing import Any
@@ -22,6 +23,8 @@ from ..scenarios import (
     describe,
     grasp_for_motion,
     hand_model,
+    is_hand_file,
+    scenario_for_hand,
     scenario_params,
     setup_fingers,
     setup_pose,
@@ -69,6 +72,8 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     ``"rotate-translate"``, the turn about the object's z axis for ``"contact-axis"``,
     whose motion is then placed about the thumb's contact (as
     :func:`~regrasp_pin.scenarios.make_scenario`; a neighbour spec builds the same scenario).
+    A hand file's ``"contact-axis"`` spec is built by
+    :func:`~regrasp_pin.scenarios.scenario_for_hand` at the spec's pose.
 
     Args:
         spec: The spec.
@@ -87,6 +92,21 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     T0[:3, 3] = T0[:3, 3] + np.asarray(spec.position_offset_m)
     fingers = setup_fingers(spec.hand)
     contact = ContactModel()
+    if is_hand_file(spec.hand) and m.kind == "contact-axis" and spec.grasp_clearance_m is None:
+        # any hand: as scenario_for_hand builds it (the pivot's contact kept, the other
+        # fingers' chosen again for the turn about it)
+        scen = scenario_for_hand(
+            h,
+            o,
+            fingers=fingers,
+            angle_deg=m.angle_deg,
+            rate_deg_s=m.rate_deg_s,
+            pose=T0,
+            dt_s=m.dt_s,
+            seed=spec.seed,
+            contact=contact,
+        )
+        return dataclasses.replace(scen, name=spec.name)
     rate_rad = np.sign(m.angle_deg) * np.radians(m.rate_deg_s)
     duration = m.duration_s
     if m.kind == "contact-axis":

@@ -1,12 +1,14 @@
 """Independent re-check of a plan file with Pinocchio and Coal only.
 
-:func:`recheck_plan` reads nothing but the plan file's content -- the URDF path, the
-object's mesh vertices, the samples ``t``, ``q`` and ``T_palm_object`` and the
-phases -- and checks it with Pinocchio (kinematics) and Coal (distances). It uses none
-of regrasp_pin's own kinematics, IK or verification, so it catches what a bug there
-would hide. What it checks (the motion between two samples is linear interpolation of
-``q`` and of the object position, slerp of its rotation, as ``docs/plan_format.md``
-says):
+:func:`recheck_plan` reads nothing but the plan file's content -- the hand's URDF
+and load options, the object's mesh vertices, the samples ``t``, ``q`` and
+``T_palm_object`` and the phases -- and checks it with Pinocchio (kinematics) and Coal
+(distances). It shares only the URDF loader with the planner
+(:meth:`~regrasp_pin.plan.Plan.load_hand`: palm frame, couplings, convex meshes; its
+tests compare it with Pinocchio on the unreduced URDF) and uses none of regrasp_pin's
+own kinematics, IK or verification, so it catches what a bug there would hide. What
+it checks (the motion between two samples is linear interpolation of ``q`` and of the
+object position, slerp of its rotation, as ``docs/plan_format.md`` says):
 
 * every regrasp and every release, re-sampled so that no joint moves more than
   ``max_step_rad`` between two samples: the moving finger's collision geometries
