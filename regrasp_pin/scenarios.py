@@ -59,6 +59,8 @@ __all__ = [
 ]
 
 HANDS = ("five_finger", "allegro")
+#: The grasp that picks a pivot's contact looks at the turn's first second only [s].
+_PIVOT_HORIZON_S = 1.0
 OBJECTS = ("hexagon", "octagon", "box")
 
 
@@ -238,7 +240,7 @@ def setup_pose(hand: str) -> np.ndarray:
     if is_hand_file(hand):
         found = _found_pose(*_file_key(hand))
         if isinstance(found, ContactError):
-            raise found
+            raise found.with_traceback(None)  # the cached error, its traceback reset
         return found.copy()
     setup = _SETUP[hand]
     T0 = np.eye(4)
@@ -455,6 +457,7 @@ def scenario_for_hand(
     seed: int = 0,
     attempts: int = 6,
     contact: ContactModel | None = None,
+    grasp_dt_s: float = 0.1,
 ) -> Scenario:
     """A scenario for any hand: the object placed where the fingers can grasp it, turned.
 
@@ -483,6 +486,8 @@ def scenario_for_hand(
         seed: Seed of the workspace sampling and the grasp search.
         attempts: Most candidate poses given to the grasp search.
         contact: Contact model; default :class:`~regrasp_pin.grasp.contact.ContactModel`.
+        grasp_dt_s: Time step of the grasp search's manifolds [s] (the planner's own
+            manifolds are 0.1 s apart; :func:`make_scenario` uses 0.05 s).
 
     Returns:
         The :class:`Scenario`, with :func:`scenario_params` for the fingers.
@@ -527,8 +532,16 @@ def scenario_for_hand(
             dt_s=dt_s,
         )
         try:
+            # the first grasp only finds the pivot's contact: the turn's first second
             grasp = grasp_for_motion(
-                hand, obj, turn0, names, contact=contact, grasp_dt_s=0.05, seed=seed
+                hand,
+                obj,
+                turn0,
+                names,
+                contact=contact,
+                grasp_dt_s=grasp_dt_s,
+                horizon_s=min(_PIVOT_HORIZON_S, duration) if pivot is not None else None,
+                seed=seed,
             )
         except ContactError as exc:
             failed.append(exc.as_attempt(what))
@@ -555,7 +568,7 @@ def scenario_for_hand(
                     motion,
                     names,
                     contact=contact,
-                    grasp_dt_s=0.05,
+                    grasp_dt_s=grasp_dt_s,
                     seed=seed,
                     keep={pivot: grasp.indices[pivot]},
                 )
