@@ -375,7 +375,10 @@ def generate_specs(n: int, seed: int = 0, hands: tuple[str, ...] = HANDS) -> lis
 
     Returns:
         ``n`` specs; hands alternate, object kinds and motion kinds cycle, so every
-        prefix is balanced (see the module docstring).
+        prefix is balanced (see the module docstring) for one or two hands. With a
+        multiple of three hands each hand would always get the same object kind (the
+        kind is ``i % 3``, kept so that the bundled suites stay the same): run such
+        hands one or two at a time.
 
     Raises:
         InputError: negative ``n`` or ``seed``, no hands.
