@@ -214,3 +214,25 @@ def test_holding_fingers_that_touch_are_reported(clean):
     assert set(chk.finger_pair_samples) == {"index", "middle"}
     assert chk.t_min_finger_samples_s >= 0.55 - 1e-9
     assert any(p.startswith("index and middle touch at t=") for p in chk.problems)
+
+
+def test_the_object_against_the_palm(clean):
+    """The smallest object-palm distance is Coal's at the plan's own poses (the same as
+    palm_clearance's), and an object moved into the palm is reported."""
+    from regrasp_pin.model.clearance import palm_clearance
+    from regrasp_pin.model.objects import object_from_params
+
+    plan, hand, _ = clean
+    chk = recheck_plan(plan)
+    obj = object_from_params(plan.object["kind"], plan.object["params"])
+    expected = palm_clearance(hand, obj, plan.poses())
+    assert chk.min_palm_distance_m > 0.01
+    assert chk.min_palm_distance_m == pytest.approx(float(expected.min()), abs=1e-9)
+    assert chk.t_min_palm_s == pytest.approx(float(plan.t[int(np.argmin(expected))]))
+    palm = next(o for o in hand.collision_model.geometryObjects if int(o.parentJoint) == 0)
+    moved = copy.deepcopy(plan)
+    moved.T_palm_object[-5:, :3] = palm.placement.translation  # the object's centre there
+    bad = recheck_plan(moved)
+    assert not bad.ok and bad.min_palm_distance_m < -0.005
+    assert any("enters the hand's fixed geometry" in p for p in bad.problems)
+    assert bad.t_min_palm_s >= plan.t[-5] - 1e-12

@@ -15,7 +15,9 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
   against the object (the worst penetration must stay within ``penetration_tol_m``)
   and the geometries of every pair of different fingers (they must not touch);
 * at every sample of the plan (not densified), the geometries of every pair of
-  different fingers apart (fingers that hold can also collide);
+  different fingers apart (fingers that hold can also collide), and the object out of
+  the hand's fixed geometry (the palm, a locked wrist: the geometry no joint moves)
+  within ``penetration_tol_m``;
 * every sample inside the joint limits (linear interpolation between samples inside
   a box stays inside it, so the samples suffice);
 * the fewest fingers holding a contact at any instant (exact: the count is constant
@@ -132,6 +134,11 @@ class PlanCheck:
             where its contact puts it, over the samples of every contact phase [m].
         contact_error_finger: The finger of that largest error (None without contacts).
         t_max_contact_error_s: When it occurs [s] (None without contacts).
+        min_palm_distance_m: Smallest signed distance between the object, at the plan's
+            samples, and the hand's fixed geometry (the geometry no joint moves: the
+            palm, a locked wrist) [m]; inf when the hand has none.
+        palm_geometry: The fixed geometry of that distance ("" without one).
+        t_min_palm_s: When it occurs [s].
         problems: Every problem found, in plain words.
     """
 
@@ -146,6 +153,9 @@ class PlanCheck:
     max_contact_error_m: float
     contact_error_finger: str | None
     t_max_contact_error_s: float | None
+    min_palm_distance_m: float
+    palm_geometry: str
+    t_min_palm_s: float
     problems: tuple[str, ...]
 
     @property
@@ -161,7 +171,7 @@ class PlanCheck:
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary (infinite distances become None)."""
         d = asdict(self)
-        for k in ("max_contact_error_m", "min_finger_distance_samples_m"):
+        for k in ("max_contact_error_m", "min_finger_distance_samples_m", "min_palm_distance_m"):
             if not math.isfinite(d[k]):
                 d[k] = None
         d["finger_pair_samples"] = list(d["finger_pair_samples"])
@@ -235,6 +245,14 @@ def recheck_plan(
             f"(distance {d_ff * 1e3:.3f} mm)"
         )
 
+    d_palm, k_palm, palm_geom = _min_palm_distance(scene)
+    if d_palm < -pen_tol:
+        problems.append(
+            f"the object enters the hand's fixed geometry {palm_geom!r} at "
+            f"t={plan.t[k_palm]:.3f} s by {-d_palm * 1e3:.3f} mm "
+            f"(tolerance {pen_tol * 1e3:.3f} mm)"
+        )
+
     checks = []
     moves: list[RegraspPhase | ReleasePhase] = [*plan.regrasps(), *plan.releases()]
     for phase in moves:
@@ -265,6 +283,9 @@ def recheck_plan(
         max_contact_error_m=err,
         contact_error_finger=err_finger,
         t_max_contact_error_s=err_t,
+        min_palm_distance_m=d_palm,
+        palm_geometry=palm_geom,
+        t_min_palm_s=float(plan.t[k_palm]),
         problems=tuple(problems),
     )
 
@@ -605,6 +626,44 @@ def _min_finger_distance(
     d, (k, j) = _exact_min(lower, d_pair)
     a, b = pairs[j]
     return d, k, (str(scene.geom_finger[ids[a]]), str(scene.geom_finger[ids[b]]))
+
+
+def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
+    """Smallest signed distance [m] between the object at the plan's samples and the
+    hand's fixed geometry (parent joint 0), its sample index and the geometry's name;
+    ``(inf, 0, "")`` without fixed geometry."""
+    import coal
+
+    objs = scene.geom.geometryObjects
+    fixed = [g for g, o in enumerate(objs) if int(o.parentJoint) == 0]
+    if not fixed:
+        return math.inf, 0, ""
+    R_obj, x_obj = scene.object_poses(scene.plan.t)
+    c_obj = x_obj + R_obj @ scene.obj_center
+    place = [objs[g].placement for g in fixed]
+    c_fix = np.array(
+        [
+            M.rotation @ scene.geom_center[g] + M.translation
+            for M, g in zip(place, fixed, strict=True)
+        ]
+    )
+    r_fix = np.array([scene.geom_radius[g] for g in fixed])
+    lower = np.linalg.norm(c_obj[:, None] - c_fix[None], axis=2) - r_fix[None] - scene.obj_radius
+    req = coal.DistanceRequest()
+
+    def d_fixed(k: int, j: int) -> float:
+        M = place[j]
+        return coal.distance(
+            objs[fixed[j]].geometry,
+            coal.Transform3s(M.rotation, M.translation),
+            scene.obj,
+            coal.Transform3s(R_obj[k], x_obj[k]),
+            req,
+            coal.DistanceResult(),
+        )
+
+    d, (k, j) = _exact_min(lower, d_fixed)
+    return d, k, str(objs[fixed[j]].name)
 
 
 def _exact_min(lower: np.ndarray, exact: Any) -> tuple[float, tuple[int, int]]:
