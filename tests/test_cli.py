@@ -25,6 +25,20 @@ def test_info_json(capsys):
     assert all(f["ik_success"] for f in doc["fingers"].values())
 
 
+def test_info_takes_a_hand_file(tmp_path, capsys):
+    """Any hand through a JSON hand file: here two fingers of the bundled URDF."""
+    from regrasp_pin.model.hand import five_finger_urdf_path
+
+    path = tmp_path / "two_fingers.json"
+    fingers = {"thumb": "thumb_tip", "index": "index_tip"}
+    spec = {"urdf": str(five_finger_urdf_path()), "fingers": fingers, "tip_radius": 0.008}
+    path.write_text(json.dumps(spec))
+    assert main(["info", "--hand", str(path), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["hand"] == "five_finger_hand" and set(doc["fingers"]) == set(fingers)
+    assert all(f["ik_success"] for f in doc["fingers"].values())
+
+
 def test_demo_json_writes_plan_and_figures(tmp_path, capsys):
     code = main(["demo", "--out", str(tmp_path), "--json"])
     assert code == 0

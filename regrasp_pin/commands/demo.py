@@ -9,6 +9,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ._args import HAND_METAVAR, hand_argument
+
 if TYPE_CHECKING:
     from ..planning.planner import ManipulationPlan
     from ..scenarios import Scenario
@@ -22,9 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out", help="output folder (default: out/)")
     parser.add_argument(
         "--hand",
-        type=_hand,
+        type=hand_argument,
         default="five_finger",
-        metavar="{five_finger,allegro,FILE.json}",
+        metavar=HAND_METAVAR,
         help="a bundled hand or a JSON hand file (e.g. examples/hands/shadow_hand.json)",
     )
     parser.add_argument(
@@ -43,14 +45,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--meshcat", action="store_true", help="show the plan live in meshcat")
     parser.add_argument("--html", metavar="FILE", help="export the plan as static HTML")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
-def _hand(value: str) -> str:
-    if value in ("five_finger", "allegro") or value.endswith(".json"):
-        return value
-    raise argparse.ArgumentTypeError(
-        f"{value!r} is not a hand: expected five_finger, allegro or a .json hand file"
-    )
 
 
 def summary_rows(result: ManipulationPlan) -> list[dict]:

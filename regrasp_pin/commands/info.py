@@ -5,13 +5,21 @@ from __future__ import annotations
 import argparse
 import json
 
+from ._args import HAND_METAVAR, hand_argument
+
 NAME = "info"
 HELP = "Show a hand's fingers, joint limits and a solved IK round trip."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``info`` options to ``parser``."""
-    parser.add_argument("--hand", choices=("five_finger", "allegro"), default="five_finger")
+    parser.add_argument(
+        "--hand",
+        type=hand_argument,
+        default="five_finger",
+        metavar=HAND_METAVAR,
+        help="a bundled hand or a JSON hand file (e.g. examples/hands/shadow_hand.json)",
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -19,9 +27,9 @@ def run(args: argparse.Namespace) -> int:
     """Print the hand's fingers, joints and limits; return the exit status."""
     import numpy as np
 
-    from ..model.hand import Hand
+    from ..scenarios import hand_model
 
-    hand = Hand.five_finger() if args.hand == "five_finger" else Hand.allegro()
+    hand = hand_model(args.hand)
     rng = np.random.default_rng(0)
     report = {"hand": hand.name, "urdf": str(hand.urdf_path), "nq": hand.model.nq, "fingers": {}}
     for f in hand.fingers.values():
