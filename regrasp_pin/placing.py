@@ -114,17 +114,15 @@ def _shell(obj: ConvexObject) -> tuple[float, float]:
 
 
 def _pivot_axes(
-    hand: Hand,
+    spaces: dict[str, _Workspace],
     fingers: Sequence[str],
     pivot: str,
     centre: np.ndarray,
     shell: tuple[float, float],
-    seed: int,
 ) -> list[np.ndarray]:
     """Object axes that put the pivot on an end face: the opposition axis (from the
     pivot's reachable tips to the other fingers') and the pivot's mean pad direction,
-    both over the samples in the contact shell about ``centre``."""
-    spaces = _workspaces(hand, fingers, 3000, seed)
+    both over the workspace samples in the contact shell about ``centre``."""
     near = {}
     for name, w in spaces.items():
         d = np.linalg.norm(w.tips - centre, axis=1)
@@ -226,12 +224,13 @@ def candidate_placements(
     if pivot is not None and pivot not in fingers:
         raise InputError("pivot", f"{pivot!r} is not one of the fingers", f"one of {fingers}")
     sample = obj.sample_surface(spacing)
-    r_in, r_out = _shell(obj)
+    shell = _shell(obj)
+    spaces = _workspaces(hand, fingers, 3000, seed) if pivot is not None else {}
     out: list[Placement] = []
     for c in workspace_centres(hand, obj, fingers, count=centres, seed=seed):
         axes = list(AXES)
         if pivot is not None:
-            axes = _pivot_axes(hand, fingers, pivot, c, (r_in, r_out), seed) + axes
+            axes = _pivot_axes(spaces, fingers, pivot, c, shell) + axes
         for axis in axes:
             T = np.eye(4)
             T[:3, :3] = Rotation.align_vectors([axis], [[0.0, 0.0, 1.0]])[0].as_matrix()

@@ -155,27 +155,15 @@ def make_scenario(
     assert isinstance(hand, str) and isinstance(obj, str)
     choice(hand, "hand", HANDS)
     choice(obj, "obj", OBJECTS)
-    rate = positive(rate_deg_s, "rate_deg_s")
-    angle = 100.0 if angle_deg is None else float(angle_deg)
-    if not np.isfinite(angle) or angle == 0:
-        raise InputError("angle_deg", f"{angle_deg!r} is not allowed", "a finite non-zero angle")
+    angle = 100.0 if angle_deg is None else angle_deg
+    rate_rad, duration = _turn_rate(angle, rate_deg_s)
     h = hand_model(hand)
     o = _SETUP[hand]["objects"][obj]()
     T0 = setup_pose(hand)
     fingers = setup_fingers(hand)
     contact = ContactModel()
-    rate_rad = np.sign(angle) * np.radians(rate)
-    duration = abs(angle) / rate
     # 1) grasp chosen for the turn about the object's own axis (its z axis)
-    axis0 = T0[:3, :3] @ np.array([0.0, 0.0, 1.0])
-    turn0 = ObjectMotion.constant_twist(
-        T0,
-        axis_palm=axis0,
-        point_palm=T0[:3, 3],
-        rate_rad_s=rate_rad,
-        duration_s=duration,
-        dt_s=dt_s,
-    )
+    axis0, turn0 = _own_axis_turn(T0, rate_rad, duration, dt_s)
     grasp = grasp_for_motion(h, o, turn0, fingers, contact=contact, grasp_dt_s=0.05, seed=seed)
     # 2) the same turn about the thumb's contact, along its normal
     motion = turn_about_thumb_contact(T0, grasp, axis0, rate_rad, duration, dt_s)
@@ -187,11 +175,39 @@ def make_scenario(
         motion=motion,
         grasp=grasp,
         params=params,
-        description=describe(h, o, fingers, angle, rate, f"{o.kind} ({obj})"),
+        description=describe(h, o, fingers, float(angle), float(rate_deg_s), f"{o.kind} ({obj})"),
     )
 
 
 # ------------------------------------------------------------------ building blocks
+def _turn_rate(angle_deg: float, rate_deg_s: float) -> tuple[float, float]:
+    """The signed rate [rad/s] and duration [s] of a turn by ``angle_deg`` at
+    ``rate_deg_s``; InputError for a rate that is not positive, an angle that is zero
+    or not finite."""
+    rate = positive(rate_deg_s, "rate_deg_s")
+    angle = float(angle_deg)
+    if not np.isfinite(angle) or angle == 0:
+        raise InputError("angle_deg", f"{angle_deg!r} is not allowed", "a finite non-zero angle")
+    return float(np.sign(angle) * np.radians(rate)), abs(angle) / rate
+
+
+def _own_axis_turn(
+    T0: np.ndarray, rate_rad: float, duration: float, dt_s: float
+) -> tuple[np.ndarray, ObjectMotion]:
+    """The object's z axis in the palm frame at ``T0``, and the turn about it through
+    the object's centre."""
+    axis0 = T0[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    turn0 = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=axis0,
+        point_palm=T0[:3, 3],
+        rate_rad_s=rate_rad,
+        duration_s=duration,
+        dt_s=dt_s,
+    )
+    return axis0, turn0
+
+
 def is_hand_file(hand: object) -> bool:
     """True for a JSON hand file's path (:meth:`~.hand.Hand.from_file`), which the setup
     functions below take besides the bundled hands' names."""
@@ -507,30 +523,17 @@ def scenario_for_hand(
         pivot = None
     if pivot is not None and pivot not in names:
         raise InputError("pivot", f"{pivot!r} is not a grasping finger", f"one of {names} or None")
-    rate = positive(rate_deg_s, "rate_deg_s")
-    angle = float(angle_deg)
-    if not np.isfinite(angle) or angle == 0:
-        raise InputError("angle_deg", f"{angle_deg!r} is not allowed", "a finite non-zero angle")
+    rate_rad, duration = _turn_rate(angle_deg, rate_deg_s)
     contact = contact or ContactModel()
     if pose is not None:
         poses = [as_array(pose, "pose", (4, 4))]
     else:
         found = candidate_placements(hand, obj, names, contact=contact, pivot=pivot, seed=seed)
         poses = [p.T_palm_object for p in found[: positive_int(attempts, "attempts")]]
-    rate_rad = np.sign(angle) * np.radians(rate)
-    duration = abs(angle) / rate
     failed: list[Attempt] = []
     for i, T0 in enumerate(poses):
         what = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
-        axis0 = T0[:3, :3] @ np.array([0.0, 0.0, 1.0])
-        turn0 = ObjectMotion.constant_twist(
-            T0,
-            axis_palm=axis0,
-            point_palm=T0[:3, 3],
-            rate_rad_s=rate_rad,
-            duration_s=duration,
-            dt_s=dt_s,
-        )
+        axis0, turn0 = _own_axis_turn(T0, rate_rad, duration, dt_s)
         try:
             # the first grasp only finds the pivot's contact: the turn's first second
             grasp = grasp_for_motion(
@@ -599,7 +602,9 @@ def scenario_for_hand(
             motion=motion,
             grasp=grasp,
             params=scenario_params(names, contact),
-            description=describe(hand, obj, names, angle, rate, obj.kind, axis_text),
+            description=describe(
+                hand, obj, names, float(angle_deg), float(rate_deg_s), obj.kind, axis_text
+            ),
         )
     raise ContactError(
         f"no start pose of the {obj.kind} lets the {hand.name} hand grasp it ({len(poses)} tried)",

@@ -34,16 +34,14 @@ def palm_clearance(hand: Hand, obj: ConvexObject, T_palm_object: np.ndarray) -> 
     out = np.full(T.shape[0], np.inf)
     if not ids:
         return out
-    data, gdata = hand.model.createData(), pin.GeometryData(cm)
-    pin.forwardKinematics(hand.model, data, hand.neutral())
-    pin.updateGeometryPlacements(hand.model, data, cm, gdata)
+    # on the root joint, a geometry's placement is where it is
+    fixed = [(cm.geometryObjects[g].geometry, cm.geometryObjects[g].placement) for g in ids]
     shape, req, res = obj.coal_geometry(), coal.DistanceRequest(), coal.DistanceResult()
     for i, Ti in enumerate(T):
         tf = coal.Transform3s(Ti[:3, :3], Ti[:3, 3])
-        for g in ids:
+        for geometry, placement in fixed:
             res.clear()
-            d = coal.distance(cm.geometryObjects[g].geometry, gdata.oMg[g], shape, tf, req, res)
-            out[i] = min(out[i], d)
+            out[i] = min(out[i], coal.distance(geometry, placement, shape, tf, req, res))
     return out
 
 
