@@ -5,9 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from regrasp_pin.exceptions import InputError
 from regrasp_pin.grasp.contact import ContactModel
 from regrasp_pin.grasp.tracking import ContactTrack
-from regrasp_pin.planning.schedule import LiftOffWindow, held_until, lift_off_window, start_times
+from regrasp_pin.planning.schedule import (
+    LiftOffWindow,
+    held_until,
+    lift_off_window,
+    regrasp_chain,
+    start_times,
+)
 
 
 def _track(margin: np.ndarray, error: np.ndarray | None = None) -> ContactTrack:
@@ -76,3 +83,46 @@ def test_a_window_at_one_instant_gives_one_start_and_a_tiny_one_is_not_oversampl
 def test_an_empty_window_has_no_start():
     win = LiftOffWindow("index", 1.0, earliest_s=1.2, latest_s=1.1, preferred_s=1.1)
     assert win.empty and start_times(win) == []
+
+
+def _brute_force_latest_start(lost: dict[str, float], d: float) -> float:
+    """The latest start of a back-to-back chain over every order (the chain's claim:
+    earliest loss first is the best order)."""
+    from itertools import permutations
+
+    best = -np.inf
+    for order in permutations(lost):
+        best = max(best, min(lost[n] - j * d for j, n in enumerate(order)))
+    return best
+
+
+def test_chain_starts_late_enough_for_every_hold_in_turn():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        names = ["thumb", "index", "middle", "ring"][: rng.integers(1, 5)]
+        lost = {n: float(rng.uniform(0.0, 3.0)) for n in names}
+        d = float(rng.uniform(0.1, 0.6))
+        chain = regrasp_chain(lost, d)
+        assert chain.latest_start_s == pytest.approx(_brute_force_latest_start(lost, d))
+        assert [lost[n] for n in chain.order] == sorted(lost.values())
+        # started then, back to back, every finger lifts off by its loss
+        for j, n in enumerate(chain.order):
+            assert chain.latest_start_s + j * d <= lost[n] + 1e-12
+        # the first must land by the latest start of the others' chain
+        rest = {n: lost[n] for n in chain.order[1:]}
+        if rest:
+            assert chain.land_by_s == pytest.approx(regrasp_chain(rest, d).latest_start_s)
+        else:
+            assert chain.land_by_s == np.inf
+
+
+def test_chain_names_the_binding_hold_and_breaks_ties_by_name():
+    chain = regrasp_chain({"ring": 2.0, "index": 1.0, "middle": 1.2}, 0.5)
+    assert chain.order == ("index", "middle", "ring")
+    assert chain.latest_start_s == pytest.approx(0.7)  # middle: 1.2 - 0.5
+    assert chain.binding == "middle"
+    tied = regrasp_chain({"ring": 1.0, "index": 1.0 + 1e-15}, 0.5)
+    assert tied.order == ("index", "ring")  # equal to 1e-9 s: by name
+    assert regrasp_chain({}, 0.5).order == ()
+    with pytest.raises(InputError, match="duration_s"):
+        regrasp_chain({"index": 1.0}, 0.0)

@@ -14,10 +14,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._validate import positive
 from ..grasp.contact import ContactModel
 from ..grasp.tracking import ContactTrack
 
-__all__ = ["LiftOffWindow", "held_until", "lift_off_window", "start_times"]
+__all__ = [
+    "Chain",
+    "LiftOffWindow",
+    "held_until",
+    "lift_off_window",
+    "regrasp_chain",
+    "start_times",
+]
 
 TIME_TOL_S = 1e-9  # times closer than this are the same time
 
@@ -82,6 +90,54 @@ def lift_off_window(
     latest = max(min(held_until(track, contact), lost_s), float(track.times_s[0]))
     preferred = min(max(trigger_s - lead_s, earliest_s), latest)
     return LiftOffWindow(finger, float(trigger_s), float(earliest_s), latest, preferred)
+
+
+@dataclass(frozen=True)
+class Chain:
+    """The regrasps that holds ending before the motion does force, one finger in the
+    air at a time, earliest loss first.
+
+    Attributes:
+        order: The fingers, earliest loss first (ties by name).
+        latest_start_s: The first of them must lift off by this time [s] so that each
+            later one still holds when its turn comes (``-inf`` for no finger).
+        land_by_s: The first must have landed by this time [s] for the same reason
+            (``inf`` when it is alone).
+        binding: The finger whose loss sets ``latest_start_s``.
+    """
+
+    order: tuple[str, ...]
+    latest_start_s: float
+    land_by_s: float
+    binding: str | None
+
+
+def regrasp_chain(lost: dict[str, float], duration_s: float) -> Chain:
+    """The chain of regrasps forced by holds lost at ``lost`` (finger -> time [s]).
+
+    With one finger in the air at a time and each regrasp taking at least
+    ``duration_s``, the holds lost at ``L_1 <= L_2 <= ...`` can all be kept only if the
+    regrasps go in that order (earliest deadline first; Jackson's rule) and the first
+    lifts off by ``min_j (L_j - (j - 1) D)``: the ``j``-th finger must still hold when
+    the ``j - 1`` regrasps before it have landed. The first must then land by
+    ``min_{j >= 2} (L_j - (j - 2) D)``. Times are compared as given (ties by name), so
+    the order does not follow last-bit noise of equal losses.
+
+    Args:
+        lost: When each hold that needs a regrasp is lost [s].
+        duration_s: The shortest regrasp [s].
+
+    Returns:
+        The :class:`Chain`.
+    """
+    positive(duration_s, "duration_s")
+    order = sorted(lost, key=lambda n: (round(lost[n], 9), n))
+    starts = [lost[n] - j * duration_s for j, n in enumerate(order)]
+    if not starts:
+        return Chain((), -np.inf, np.inf, None)
+    k = int(np.argmin(np.round(starts, 9)))  # first of equal minima
+    land_by = min(starts[1:], default=np.inf) + duration_s
+    return Chain(tuple(order), float(starts[k]), float(land_by), order[k])
 
 
 def start_times(
