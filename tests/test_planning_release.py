@@ -125,3 +125,25 @@ def test_an_unreachable_back_off_is_a_typed_failure(scene):
     err = info.value
     assert err.kind == FailureKind.IK_UNREACHABLE and err.finger == "index"
     assert err.measured > err.required == 1e-5
+
+
+def test_a_release_at_the_end_of_the_motion_is_too_late(scene):
+    scen, q_hand, h, q_r = scene
+    with pytest.raises(PlanningError) as info:
+        plan_release(
+            scen.hand,
+            scen.obj,
+            scen.motion,
+            "index",
+            scen.motion.t_end,
+            (h.p, h.n),
+            q_r,
+            q_hand,
+            clearance_m=CLEARANCE_M,
+            back_off_s=0.1,
+            dt_s=0.01,
+            link_clearance_m=0.0,
+            finger_clearance_m=0.0005,
+            ik_tol_m=1e-5,
+        )
+    assert info.value.kind == FailureKind.TOO_LATE and info.value.required == scen.motion.t_end

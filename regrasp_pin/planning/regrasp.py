@@ -55,7 +55,7 @@ from ..surface.grid import SurfaceGrid, build_surface_grid
 from ..surface.inflation import TipPath, grid_inflation, inflate_path
 from ..surface.path import GridPath, shortest_grid_path
 from ..verify.finger_motion import VerificationReport, verify_finger_motion
-from .timing import inverse_minimum_jerk, minimum_jerk
+from .timing import check_joint_speed, inverse_minimum_jerk, minimum_jerk
 
 __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
 
@@ -546,19 +546,7 @@ def _attempt(
     q = _follow(
         f, times, T, tip_obj, task.q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p
     )
-    vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
-    ratio = vel / f.velocity_limit
-    if (ratio > 1.0).any():
-        i, j = (int(v) for v in np.unravel_index(np.argmax(ratio), vel.shape))
-        raise PlanningError(
-            f"joint {f.joint_names[j]} would move at {vel[i, j]:.2f} rad/s "
-            f"(limit {f.velocity_limit[j]:.2f})",
-            finger=finger,
-            time_s=float(times[i]),
-            kind=FailureKind.VELOCITY,
-            measured=float(vel[i, j]),
-            required=float(f.velocity_limit[j]),
-        )
+    check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
     stages.lap("ik")
 
     q_full = np.array(task.q_hand(times), dtype=float)

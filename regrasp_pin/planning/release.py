@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from ..model.objects import ConvexObject
 from ..verify.finger_motion import verify_finger_motion
 from .timing import minimum_jerk
 
-__all__ = ["Release", "plan_release"]
+__all__ = ["Release", "plan_release", "verify_or_raise"]
 
 
 @dataclass(frozen=True)
@@ -99,11 +100,21 @@ def plan_release(
         The verified :class:`Release`.
 
     Raises:
-        PlanningError: the backed-off position is out of reach (``ik-unreachable``)
-            or the motion fails the Coal check (its kind, measured and required value).
+        PlanningError: the release is at the end of the motion (``too-late``), the
+            backed-off position is out of reach (``ik-unreachable``) or the motion
+            fails the Coal check (its kind, measured and required value).
     """
     f = hand.finger(finger)
     t_r, t_end = float(t_release_s), float(motion.t_end)
+    if t_r >= t_end - 1e-9:
+        raise PlanningError(
+            f"a release at t={t_r:.3f} s leaves no time to back off before the motion ends",
+            finger=finger,
+            time_s=t_r,
+            kind=FailureKind.TOO_LATE,
+            measured=t_r,
+            required=t_end,
+        )
     T_r = motion.pose(np.array([t_r]))[0]
     p, n = np.asarray(P[0], float), np.asarray(P[1], float)
     target = tip_targets(p[None], n[None], f.tip_radius + clearance_m, T_r[None])[0, 0]
@@ -135,7 +146,8 @@ def plan_release(
     q_full = q_hand(times)
     q_full[:, f.q_indices] = q
     T = motion.pose(times)
-    report = verify_finger_motion(
+    verify_or_raise(
+        "the release",
         hand,
         obj,
         finger,
@@ -146,18 +158,6 @@ def plan_release(
         link_clearance_m=link_clearance_m,
         finger_clearance_m=finger_clearance_m,
     )
-    if not report.ok:
-        worst = report.worst_failure
-        kind = FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind
-        raise PlanningError(
-            "the release fails the Coal check"
-            + ("" if worst is None else f" ({worst.kind}, {worst.value * 1e3:.2f} mm)"),
-            finger=finger,
-            time_s=report.time_s,
-            kind=kind,
-            measured=None if worst is None else worst.value,
-            required=None if worst is None else worst.required,
-        )
     after = times >= t_move[-1] - 1e-9
     clear = LinkClearance(hand, finger, obj, include_tip=True)(q_full[after], T[after])
     return Release(
@@ -168,4 +168,34 @@ def plan_release(
         times_s=times,
         q=q,
         min_clearance_m=float(clear.min()),
+    )
+
+
+def verify_or_raise(
+    what: str,
+    hand: Hand,
+    obj: ConvexObject,
+    finger: str,
+    times: np.ndarray,
+    q_full: np.ndarray,
+    T_palm_object: np.ndarray,
+    **clearances: Any,
+) -> None:
+    """Check a finger's motion with :func:`~regrasp_pin.verify.finger_motion.
+    verify_finger_motion` (``clearances``: its clearance keywords) and raise a
+    PlanningError of the worst failure's kind (``joint-limit`` if only a joint left
+    its limits), with its distance and the required one [m]; ``what`` names the motion
+    in the message."""
+    report = verify_finger_motion(hand, obj, finger, times, q_full, T_palm_object, **clearances)
+    if report.ok:
+        return
+    worst = report.worst_failure
+    raise PlanningError(
+        f"{what} fails the Coal check"
+        + ("" if worst is None else f" ({worst.kind}, {worst.value * 1e3:.2f} mm)"),
+        finger=finger,
+        time_s=report.time_s,
+        kind=FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind,
+        measured=None if worst is None else worst.value,
+        required=None if worst is None else worst.required,
     )

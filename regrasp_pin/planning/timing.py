@@ -11,12 +11,16 @@ trajectory that was actually solved still moves a joint too fast.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+
+from ..exceptions import FailureKind, PlanningError
 
 __all__ = [
     "MJ_PEAK",
     "PATH_FACTOR",
+    "check_joint_speed",
     "duration_for_move",
     "inverse_minimum_jerk",
     "minimum_jerk",
@@ -71,3 +75,28 @@ def stretched_duration(duration_s: float, speed_ratio: float, *, dt_s: float) ->
     """The duration [s] after which a trajectory that reached ``speed_ratio`` times a
     joint's velocity limit stays under it (time scaling: speeds fall as 1 / duration)."""
     return _round_up(duration_s * max(speed_ratio, 1.0) * STRETCH_MARGIN, dt_s)
+
+
+def check_joint_speed(
+    finger: str,
+    joint_names: Sequence[str],
+    velocity_limit: np.ndarray,
+    times: np.ndarray,
+    q: np.ndarray,
+) -> None:
+    """Raise a ``velocity`` PlanningError (the fastest joint, its speed and limit
+    [rad/s]) if a joint of ``q`` ``(S, k)`` [rad] moves faster than its limit between
+    the samples ``times`` ``(S,)`` [s]."""
+    vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
+    ratio = vel / velocity_limit
+    if (ratio > 1.0).any():
+        i, j = (int(v) for v in np.unravel_index(np.argmax(ratio), vel.shape))
+        raise PlanningError(
+            f"joint {joint_names[j]} would move at {vel[i, j]:.2f} rad/s "
+            f"(limit {velocity_limit[j]:.2f})",
+            finger=finger,
+            time_s=float(times[i]),
+            kind=FailureKind.VELOCITY,
+            measured=float(vel[i, j]),
+            required=float(velocity_limit[j]),
+        )
