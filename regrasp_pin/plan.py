@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # imported lazily at run time
 __all__ = [
     "PLAN_FORMAT",
     "ContactPhase",
+    "JoinPhase",
     "Plan",
     "RegraspPhase",
     "ReleasePhase",
@@ -180,7 +181,42 @@ class ReleasePhase:
         }
 
 
-Phase = ContactPhase | RegraspPhase | ReleasePhase
+@dataclass(frozen=True)
+class JoinPhase:
+    """A finger that took no part so far moves onto contact Q, from ``t_start`` to
+    ``t_end`` [s] (:mod:`~regrasp_pin.planning.join`); it holds Q from ``t_end``.
+
+    Attributes:
+        finger: Finger name.
+        t_start: When it starts to move [s].
+        t_end: When its pad touches Q [s].
+        Q_object: The new contact, object frame ``(3,)`` [m].
+        min_clearance_m: Smallest finger-object distance before the approach [m].
+        reason: Why it joins.
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    Q_object: np.ndarray
+    min_clearance_m: float
+    reason: str = ""
+    kind: str = field(default="join", init=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The phase as plan-file data (JSON types)."""
+        return {
+            "finger": self.finger,
+            "kind": self.kind,
+            "t_start": self.t_start,
+            "t_end": self.t_end,
+            "Q_object": np.asarray(self.Q_object).tolist(),
+            "min_clearance_m": self.min_clearance_m,
+            "reason": self.reason,
+        }
+
+
+Phase = ContactPhase | RegraspPhase | ReleasePhase | JoinPhase
 
 
 def _phase_from_dict(d: dict[str, Any]) -> Phase:
@@ -226,8 +262,19 @@ def _phase_from_dict(d: dict[str, Any]) -> Phase:
             min_clearance_m=float(d["min_clearance_m"]),
             reason=str(d.get("reason", "")),
         )
+    if d.get("kind") == "join":
+        return JoinPhase(
+            finger=d["finger"],
+            t_start=float(d["t_start"]),
+            t_end=float(d["t_end"]),
+            Q_object=np.asarray(d["Q_object"], float),
+            min_clearance_m=float(d["min_clearance_m"]),
+            reason=str(d.get("reason", "")),
+        )
     raise InputError(
-        "phases", f"unknown phase kind {d.get('kind')!r}", "'contact', 'regrasp' or 'release'"
+        "phases",
+        f"unknown phase kind {d.get('kind')!r}",
+        "'contact', 'regrasp', 'release' or 'join'",
     )
 
 
@@ -406,4 +453,9 @@ class Plan:
     def releases(self) -> list[ReleasePhase]:
         """All release phases, in time order."""
         out = [p for ps in self.phases.values() for p in ps if isinstance(p, ReleasePhase)]
+        return sorted(out, key=lambda p: p.t_start)
+
+    def joins(self) -> list[JoinPhase]:
+        """All join phases, in time order."""
+        out = [p for ps in self.phases.values() for p in ps if isinstance(p, JoinPhase)]
         return sorted(out, key=lambda p: p.t_start)

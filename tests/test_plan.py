@@ -9,7 +9,7 @@ import pytest
 from conftest import SHADOW_HAND_FILE, assert_close, shadow_urdf
 
 from regrasp_pin import Box, ContactPhase, Hand, InputError, ModelFileError, Plan, RegraspPhase
-from regrasp_pin.plan import PLAN_FORMAT, hand_record
+from regrasp_pin.plan import PLAN_FORMAT, JoinPhase, ReleasePhase, hand_record
 
 
 def _plan() -> Plan:
@@ -37,7 +37,14 @@ def _plan() -> Plan:
                 extra={"grid_path_object": [[0.0, 0.0, 0.0]]},
             ),
             ContactPhase("index", 0.8, 1.0, np.array([0.02, 0.01, 0.01]), np.array([1.0, 0, 0])),
-        ]
+        ],
+        "ring": [
+            ReleasePhase("ring", 0.2, 1.0, np.array([0.0, -0.02, 0.0]), 0.003, reason="gone"),
+        ],
+        "little": [
+            JoinPhase("little", 0.3, 0.7, np.array([0.0, -0.02, 0.01]), 0.002, reason="joins"),
+            ContactPhase("little", 0.7, 1.0, np.array([0.0, -0.02, 0.01]), np.array([0, -1.0, 0])),
+        ],
     }
     return Plan(
         hand={
@@ -81,6 +88,10 @@ def test_round_trip(tmp_path):
     r = back.regrasps()[0]
     assert r.reason == "joint limit" and r.extra["grid_path_object"] == [[0.0, 0.0, 0.0]]
     assert_close(r.waypoints_object, plan.phases["index"][1].waypoints_object, atol=0.0)
+    (rel,), (join,) = back.releases(), back.joins()
+    assert (rel.finger, rel.reason, join.finger, join.reason) == ("ring", "gone", "little", "joins")
+    assert_close(join.Q_object, [0.0, -0.02, 0.01], atol=0.0)
+    assert (join.t_start, join.t_end, join.min_clearance_m) == (0.3, 0.7, 0.002)
 
 
 def test_rebuilds_hand_object_and_poses():

@@ -139,6 +139,10 @@ def run(args: argparse.Namespace) -> int:
         "all_verified": all(r["verified"] for r in rows),
         "rows": rows,
         "releases": _release_rows(result),
+        "joins": [
+            {"finger": p.finger, "t_s": p.t_start, "t_end_s": p.t_end, "reason": p.reason}
+            for p in result.plan.joins()
+        ],
         "stage_s": result.stage_s,
         "total_s": elapsed,
         "plan": str(plan_path),
@@ -213,9 +217,13 @@ def _print_table(rows: list[dict], summary: dict) -> None:
         )
     for rel in summary["releases"]:
         print(
-            f"{rel['finger']} lets go at t={rel['t_s']:.2f} s (no regrasp can land before "
-            f"the end; the others hold), verified by Coal, {rel['min_clearance_mm']:.2f} mm "
-            "clear after backing off"
+            f"{rel['finger']} lets go at t={rel['t_s']:.2f} s (no verified regrasp), "
+            f"verified by Coal, {rel['min_clearance_mm']:.2f} mm clear after backing off"
+        )
+    for j in summary["joins"]:
+        print(
+            f"{j['finger']} joins at t={j['t_s']:.2f}-{j['t_end_s']:.2f} s ({j['reason']}), "
+            "verified by Coal"
         )
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in summary["stage_s"].items())
     print(f"stages: {stages}; total {summary['total_s']:.2f} s")

@@ -48,7 +48,7 @@ from ..exceptions import InputError
 from ..plan import ContactPhase
 
 if TYPE_CHECKING:
-    from ..plan import Plan, RegraspPhase, ReleasePhase
+    from ..plan import JoinPhase, Plan, RegraspPhase, ReleasePhase
 
 __all__ = ["JointLimitViolation", "PlanCheck", "RegraspCheck", "recheck_plan"]
 
@@ -254,7 +254,11 @@ def recheck_plan(
         )
 
     checks = []
-    moves: list[RegraspPhase | ReleasePhase] = [*plan.regrasps(), *plan.releases()]
+    moves: list[RegraspPhase | ReleasePhase | JoinPhase] = [
+        *plan.regrasps(),
+        *plan.releases(),
+        *plan.joins(),
+    ]
     for phase in moves:
         rc = _check_regrasp(scene, phase, max_step)
         checks.append(rc)
@@ -527,7 +531,7 @@ def _densify(plan: Plan, sel: np.ndarray, max_step: float) -> tuple[np.ndarray, 
 
 
 def _check_regrasp(
-    scene: _Scene, phase: RegraspPhase | ReleasePhase, max_step: float
+    scene: _Scene, phase: RegraspPhase | ReleasePhase | JoinPhase, max_step: float
 ) -> RegraspCheck:
     """Densify one regrasp; the moving finger against the object, all fingers pairwise."""
     import coal
