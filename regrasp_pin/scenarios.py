@@ -614,12 +614,13 @@ def scenario_for_hand(
 
 
 def scenario_params(fingers: tuple[str, ...], contact: ContactModel) -> PlannerParams:
-    """The planner settings of the ready-made scenarios."""
+    """The planner settings of the ready-made scenarios: a regrasp takes at least 0.25 s
+    (longer when the joint velocity limits need it), 3 mm from the object in flight."""
     return PlannerParams(
         fingers=fingers,
         manifold_dt_s=0.1,
         contact=contact,
-        regrasp=RegraspParams(clearance_m=0.003, duration_s=0.4),
+        regrasp=RegraspParams(clearance_m=0.003, duration_s=0.25),
     )
 
 

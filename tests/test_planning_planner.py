@@ -10,6 +10,8 @@ own kinematics or verification.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -185,14 +187,21 @@ def test_a_neighbour_that_cannot_be_planned_ends_typed_with_a_verified_partial_p
     assert all(r.min_object_distance_m >= -1e-4 for r in check.regrasps)
 
 
-def test_a_grasp_that_loses_two_holds_at_once_fails_at_once():
+def _spec_6():
     """Suite spec 6 (five-finger hand, pentagonal prism, -175 deg about the thumb's
-    contact): the index's and the middle's holds are both lost within the first
-    0.4 s, less than one regrasp apart. Whichever goes first, the other loses its hold
-    in the meantime: a finger-busy failure at the start that names the hold and the
-    landing, not a search that plans on into a state with a finger already lost."""
-    spec = generate_specs(7, seed=0)[6]
-    scen = build_scenario(spec)
+    contact) with regrasps of at least 0.4 s."""
+    scen = build_scenario(generate_specs(7, seed=0)[6])
+    slow = replace(scen.params.regrasp, duration_s=0.4)
+    return replace(scen, params=replace(scen.params, regrasp=slow))
+
+
+def test_a_grasp_that_loses_two_holds_at_once_fails_at_once():
+    """Suite spec 6 with regrasps of at least 0.4 s: the index's and the middle's
+    holds are both lost within the first 0.4 s, less than one regrasp apart. Whichever
+    goes first, the other loses its hold in the meantime: a finger-busy failure at the
+    start that names the hold and the landing, not a search that plans on into a state
+    with a finger already lost."""
+    scen = _spec_6()
     with pytest.raises(PlanningError) as err:
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
     exc = err.value
@@ -203,8 +212,6 @@ def test_a_grasp_that_loses_two_holds_at_once_fails_at_once():
 
 
 def test_an_exhausted_budget_ends_typed_with_the_partial_plan():
-    from dataclasses import replace
-
     scen = make_scenario("five_finger", "hexagon")
     params = replace(scen.params, budget_s=0.0)
     with pytest.raises(PlanningError) as err:
@@ -225,7 +232,7 @@ def test_a_budget_that_runs_out_while_backing_up_is_the_failure(monkeypatch):
         return None
 
     monkeypatch.setattr(planner, "_another_first", out_of_time)
-    scen = build_scenario(generate_specs(7, seed=0)[6])
+    scen = _spec_6()
     with pytest.raises(PlanningError) as err:
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
     exc = err.value
@@ -235,10 +242,10 @@ def test_a_budget_that_runs_out_while_backing_up_is_the_failure(monkeypatch):
 
 
 def test_a_finger_lets_go_when_no_regrasp_can_land_before_the_end(tmp_path):
-    """60 deg at 20 deg/s: a contact is lost too close to the end for any regrasp; the
+    """60 deg at 40 deg/s: a contact is lost too close to the end for any regrasp; the
     others hold to the end, so the finger lets go. The release is in the plan file and
     passes the same independent re-check as the regrasps."""
-    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=20)
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
     result = plan_manipulation(
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
     )
@@ -261,3 +268,23 @@ def test_a_finger_lets_go_when_no_regrasp_can_land_before_the_end(tmp_path):
     (after,) = [r for r in check.regrasps if r.t_start == pytest.approx(rel.t_start)]
     assert after.finger == rel.finger and after.min_object_distance_m >= -1e-4
     assert Plan.from_dict(plan.to_dict()).to_dict() == plan.to_dict()
+
+
+def test_holds_that_end_together_are_regrasped_in_turn(tmp_path):
+    """100 deg at 40 deg/s: the holds of the three regrasping fingers end within about
+    one second of each other, again and again, so waiting for each finger's own trigger
+    leaves the last one no time (a finger-busy failure before the chain rule). The
+    first finger of the chain goes early enough for every one to follow in turn: a full
+    plan, one finger in the air at a time, that passes the independent re-check."""
+    scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=40)
+    result = plan_manipulation(
+        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
+    )
+    plan = Plan.load(result.plan.save(tmp_path / "plan.json"))
+    moves = sorted([*plan.regrasps(), *plan.releases()], key=lambda r: r.t_start)
+    assert len(plan.regrasps()) >= 4
+    for a, b in zip(moves, moves[1:], strict=False):  # one finger in the air at a time
+        assert b.t_start >= a.t_end - 1e-9 or a.kind == "release"
+    check = recheck_plan(plan, max_step_rad=1e-3)
+    assert check.ok, check.problems
+    assert check.min_holding >= 3

@@ -15,6 +15,7 @@ carries every failed attempt and the partial plan:
   and durations, with a budget;
 - :mod:`.proximity`: holding fingers closing in on each other;
 - :mod:`.release`: a finger that lets go for the rest of the motion;
+- :mod:`.join`: a finger that took no part so far joins the grasp;
 - :mod:`.outcomes`: the dominant cause of a list of failed attempts.
 """
 

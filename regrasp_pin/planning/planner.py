@@ -19,9 +19,10 @@ finds none, the planner backs up once per failure (at most ``max_backtracks`` ti
 the previous regrasp is planned again to land before this finger's window closes, or, if
 time was not the problem, to land elsewhere. Every search shares one budget
 (``budget_s``); a failure that could not be backed out of because the budget was gone
-is a ``budget`` failure (its message names the failure). A hold that is lost too close
-to the end for any regrasp, while the others hold in force closure to the end, is let
-go (:mod:`.planning.release`: a verified back-off; a ``release`` phase).
+is a ``budget`` failure (its message names the failure). A hold that no regrasp can
+follow is let go (:mod:`.planning.release`: a verified back-off; a ``release``
+phase) if the others are enough to go on taking turns (more than ``min_holding``), or
+hold in force closure to the end.
 A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
 finger, the time, the kind of the failure, every attempt and the partial plan up to
 that time.
@@ -31,12 +32,12 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..exceptions import Attempt, FailureKind, PlanningError
+from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
 from ..grasp.choice import Grasp, initial_grasp
 from ..grasp.contact import ContactModel
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
@@ -46,11 +47,19 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from ..model.scene import Scene
-from ..plan import ContactPhase, Plan, RegraspPhase, ReleasePhase, hand_record
+from ..plan import ContactPhase, JoinPhase, Plan, RegraspPhase, ReleasePhase, hand_record
+from .join import Join, join_duration, plan_join
 from .proximity import holding_proximity
 from .regrasp import RegraspParams, RegraspResult
 from .release import Release, plan_release
-from .schedule import TIME_TOL_S, LiftOffWindow, held_until, lift_off_window, start_times
+from .schedule import (
+    TIME_TOL_S,
+    LiftOffWindow,
+    held_until,
+    lift_off_window,
+    regrasp_chain,
+    start_times,
+)
 from .search import Found, RegraspSearch, SearchBudget
 
 __all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation"]
@@ -85,8 +94,9 @@ class PlannerParams:
         regrasp: Parameters of each regrasp (``duration_s`` is the shortest duration;
             longer ones follow from the joint velocity limits).
         release: Let a finger go for the rest of the motion when its hold is lost with
-            no regrasp possible before the end, if the others hold in force closure to
-            the end (:mod:`.planning.release`).
+            no verified regrasp, if more than ``min_holding`` others remain to take
+            turns, or if the others hold in force closure to the end
+            (:mod:`.planning.release`).
         release_back_off_s: Duration of a release's back-off move [s].
     """
 
@@ -141,6 +151,7 @@ class _State:
     now: float  # no regrasp may start before this (one finger in the air)
     held_to_end: dict[str, str]
     released: dict[str, Release] = field(default_factory=dict)
+    joined: dict[str, Join] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -163,6 +174,7 @@ class _Context:
     search: RegraspSearch
     budget: SearchBudget
     base_q: np.ndarray
+    manifolds: dict[str, Manifold]
     tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
     parks: dict[str, np.ndarray] = field(default_factory=dict)  # where let-go fingers go
 
@@ -259,6 +271,7 @@ def plan_manipulation(
         search,
         budget,
         base_q,
+        manifolds,
     )
     state = _State(
         holding=holding,
@@ -322,6 +335,7 @@ def plan_manipulation(
             "initial_epsilon": grasp.epsilon,
             "held_to_end": dict(state.held_to_end),
             "released": {n: r.t_start for n, r in state.released.items()},
+            "joined": {n: j.t_start for n, j in state.joined.items()},
             "backtracks": backtracks,
             "stage_s": stage,
         }
@@ -389,7 +403,33 @@ def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[
             why = f"its hold is lost after t={lost:.3f} s ({loss})"
         if t is not None:
             out.append(_Trigger(t, name, why, lost, lost_near))
-    return sorted(out, key=lambda e: (round(e.time_s, 9), e.finger))
+    return sorted(_chain_first(ctx, state, out), key=lambda e: (round(e.time_s, 9), e.finger))
+
+
+def _chain_first(ctx: _Context, state: _State, triggers: list[_Trigger]) -> list[_Trigger]:
+    """``triggers`` with the first finger of the regrasp chain (:func:`regrasp_chain`)
+    triggered by the chain's latest start, if that comes before its own trigger: holds
+    that end close together cannot wait for each other's triggers."""
+    p = ctx.params
+    end = ctx.scene.motion.t_end - p.dt_s - TIME_TOL_S
+    lost = {e.finger: e.lost_s for e in triggers if e.lost_s < end}
+    chain = regrasp_chain(lost, p.regrasp.duration_s)
+    if len(chain.order) < 2:
+        return triggers
+    first = next(e for e in triggers if e.finger == chain.order[0])
+    if chain.latest_start_s >= first.time_s - TIME_TOL_S:
+        return triggers
+    h = state.holding[first.finger]
+    early = replace(
+        first,
+        time_s=max(chain.latest_start_s, state.now, h.t_from),
+        reason=(
+            f"{chain.binding}'s hold is lost at t={lost[chain.binding or '']:.3f} s, "
+            f"so the regrasps of {', '.join(chain.order)} must start by "
+            f"t={chain.latest_start_s:.3f} s"
+        ),
+    )
+    return [early if e is first else e for e in triggers]
 
 
 def _loss_reason(h: Holding, lost_s: float) -> str:
@@ -478,7 +518,7 @@ def _advance(
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
     if not starts:
         busy = win.empty
-        released = None if busy else _try_release(ctx, state, trig, win, stay, why)
+        released = None if busy else _let_go(ctx, state, trig, win, stay, why)
         if released is not None:
             return released
         raise PlanningError(
@@ -509,38 +549,30 @@ def _advance(
             ctx.budget,
             end_by_s=end_by,
             exclude=exclude,
-            landing_check=lambda res: _check_landing(ctx, name, res, landed),
+            landing_check=lambda res: _check_landing(ctx, name, res, landed, triggers),
         )
 
-    found = None
+    tries = (starts, end_by_s)
     nxt = _next_deadline(ctx, triggers, trig, win) if end_by_s is None else None
     if nxt is not None:
-        # first, land before the next finger's hold is lost (earliest deadline first)
+        # land in time for the holds lost next (earliest deadline first): landing later
+        # would leave the other fingers no time, a dead end rather than a plan; when no
+        # start is early enough, the holds may still end later than now foreseen (a
+        # neighbour's regrasp ends a proximity loss): search without the deadline
         deadline, other = nxt
         early = start_times(
             win, latest_s=deadline - D, step_s=p.start_step_s, max_starts=p.max_starts
         )
-        if not early:
-            raise PlanningError(
-                f"{reason} at t={t_trig:.3f} s, but no regrasp ({D:.2f} s) can land "
-                f"before {other}'s hold is lost at t={deadline:.3f} s",
-                finger=name,
-                time_s=t_trig,
-                kind=FailureKind.FINGER_BUSY,
-                measured=win.earliest_s + D,
-                required=deadline,
-            )
-        # landing later would leave the other finger no time: a dead end, not a plan
-        found = search(early, deadline)
-        why += f"; lands by t={deadline:.3f} s, before {other}'s hold is lost"
-    if found is None:
-        try:
-            found = search(starts, end_by_s)
-        except PlanningError:
-            released = _try_release(ctx, state, trig, win, stay, why)
-            if released is None:
-                raise
-            return released
+        if early:
+            tries = (early, deadline)
+            why += f"; lands by t={deadline:.3f} s, in time for {other}'s hold"
+    try:
+        found = search(*tries)
+    except PlanningError:
+        released = _let_go(ctx, state, trig, win, stay, why)
+        if released is None:
+            raise
+        return released
     if abs(found.result.t_start - starts[0]) > TIME_TOL_S:
         why += (
             f"; lifted off at t={found.result.t_start:.3f} s: "
@@ -556,7 +588,7 @@ def _fingers_that_stay(
     """The fingers that hold while ``trig.finger`` is in the air; PlanningError if they
     are fewer than ``min_holding`` or not in force closure without it."""
     p, name = ctx.params, trig.finger
-    stay = [n for n in ctx.active if n != name and n in state.holding]
+    stay = [n for n in ctx.scene.hand.finger_names if n != name and n in state.holding]
     if len(stay) < p.min_holding:
         raise PlanningError(
             f"only {len(stay)} fingers would hold (need {p.min_holding})",
@@ -583,33 +615,62 @@ def _fingers_that_stay(
 
 
 def _check_landing(
-    ctx: _Context, name: str, res: RegraspResult, landed: dict[int, Holding]
+    ctx: _Context,
+    name: str,
+    res: RegraspResult,
+    landed: dict[int, Holding],
+    triggers: list[_Trigger],
 ) -> Attempt | None:
-    """Follow the contact a verified regrasp lands on (kept in ``landed``); a
-    ``short-hold`` attempt if it is lost sooner after landing than the shortest regrasp
-    takes (no other finger could take its turn before this one must go again), unless
-    it is held to the end of the motion."""
+    """Follow the contact a verified regrasp lands on (kept in ``landed``) and judge
+    what it leaves: a ``short-hold`` attempt if it is lost sooner after landing than
+    the shortest regrasp takes (no other finger could take its turn before this one
+    must go again), unless it is held to the end of the motion; a ``finger-busy``
+    attempt if, with it, the holds of the fingers (``triggers``: the others' losses)
+    can no longer be regrasped in turn (:func:`regrasp_chain` must start before the
+    landing) while without it they could."""
     p = ctx.params
     hold = _landing_hold(ctx, name, res)
     landed[id(res)] = hold
     lost = held_until(hold.track, p.contact)
-    need = min(res.t_end + p.regrasp.duration_s, ctx.scene.motion.t_end - p.dt_s)
-    if lost >= need - TIME_TOL_S:
+    end = ctx.scene.motion.t_end - p.dt_s
+    need = min(res.t_end + p.regrasp.duration_s, end)
+    where = f"start {res.t_start:.2f} s, Q={np.round(res.Q_object, 4).tolist()}"
+    if lost < need - TIME_TOL_S:
+        return Attempt(
+            FailureKind.SHORT_HOLD,
+            name,
+            res.t_start,
+            measured=lost - res.t_end,
+            required=need - res.t_end,
+            what=f"{where}: held {lost - res.t_end:.2f} s after landing "
+            f"({_loss_reason(hold, lost)})",
+        )
+    losses = {
+        e.finger: e.lost_s
+        for e in triggers
+        if e.finger != name and e.lost_near != name and e.lost_s < end
+    }
+    if lost < end - TIME_TOL_S:
+        losses[name] = lost
+    chain = regrasp_chain(losses, p.regrasp.duration_s)
+    if len(chain.order) < 2 or chain.latest_start_s >= res.t_end - TIME_TOL_S:
         return None
+    without = regrasp_chain({n: t for n, t in losses.items() if n != name}, p.regrasp.duration_s)
+    if without.latest_start_s < res.t_end - TIME_TOL_S:
+        return None  # the others' turns were too tight before this landing: not its doing
     return Attempt(
-        FailureKind.SHORT_HOLD,
+        FailureKind.FINGER_BUSY,
         name,
         res.t_start,
-        measured=lost - res.t_end,
-        required=need - res.t_end,
-        what=(
-            f"start {res.t_start:.2f} s, Q={np.round(res.Q_object, 4).tolist()}: "
-            f"held {lost - res.t_end:.2f} s after landing ({_loss_reason(hold, lost)})"
-        ),
+        measured=res.t_end,
+        required=chain.latest_start_s,
+        what=f"{where}: lands at t={res.t_end:.2f} s, after the regrasps of "
+        f"{', '.join(chain.order)} must start (t={chain.latest_start_s:.2f} s, "
+        f"{chain.binding}'s hold)",
     )
 
 
-def _landing_hold(ctx: _Context, name: str, res: RegraspResult) -> Holding:
+def _landing_hold(ctx: _Context, name: str, res: RegraspResult | Join) -> Holding:
     """The hold that follows a regrasp's landing."""
     return start_holding(
         ctx.scene.hand,
@@ -666,10 +727,11 @@ def _try_release(
 ) -> _State | None:
     """The state after ``trig.finger`` lets go for the rest of the motion, or None.
 
-    Only when releases are allowed, the hold is lost before the end, and every finger
-    that stays holds to the end (no regrasp can follow: it would leave too few) once
-    this one has gone (a neighbour it was closing in on no longer ends their hold). The
-    release times tried are the latest in the window first, then earlier ones.
+    Only when releases are allowed and the hold is lost before the end, and, if the
+    fingers that stay are too few to take turns (no more than ``min_holding``), when
+    every one of them holds to the end once this one has gone (a neighbour it was
+    closing in on no longer ends their hold). The release times tried are the latest in
+    the window first, then earlier ones.
     """
     p, motion = ctx.params, ctx.scene.motion
     name = trig.finger
@@ -677,7 +739,7 @@ def _try_release(
     if not p.release or win.empty or trig.lost_s >= end:
         return None
     without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
-    if any(
+    if len(stay) <= p.min_holding and any(
         e.lost_s < end
         for e in _triggers(ctx, without, gone=(name,))
         if e.finger in stay and e.finger not in state.held_to_end
@@ -686,23 +748,32 @@ def _try_release(
     h = state.holding[name]
     q_hand = _q_hand(ctx, state, stay)
     tried: list[str] = []
-    for k in range(p.max_starts):
-        t_r = win.latest_s - k * p.start_step_s
-        if t_r < win.earliest_s - TIME_TOL_S or ctx.budget.exhausted:
-            break
-        t_r = max(t_r, win.earliest_s)
+    for t_r in _release_times(ctx, win):
         q_r = holding_q(ctx.scene.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
         for park in (None, _park(ctx, name)):
             rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
             if rel is not None:
                 log.info("%s lets go at t=%.3f s", name, t_r)
-                note = (
-                    f"{why}; no regrasp can land before the end: let go (the others hold "
-                    "to the end)"
+                others = (
+                    f"{len(stay)} others go on"
+                    if len(stay) > p.min_holding
+                    else "the others hold to the end"
                 )
+                note = f"{why}; no verified regrasp: let go ({others})"
                 return _apply_release(state, name, rel, note)
     log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
     return None
+
+
+def _release_times(ctx: _Context, win: LiftOffWindow) -> Iterator[float]:
+    """Release times to try [s]: the latest in the window first, then earlier ones by
+    ``start_step_s`` (at most ``max_starts``), while the budget lasts."""
+    p = ctx.params
+    for k in range(p.max_starts):
+        t_r = win.latest_s - k * p.start_step_s
+        if t_r < win.earliest_s - TIME_TOL_S or ctx.budget.exhausted:
+            return
+        yield max(t_r, win.earliest_s)
 
 
 def _park(ctx: _Context, name: str) -> np.ndarray:
@@ -769,6 +840,160 @@ def _apply_release(state: _State, name: str, rel: Release, why: str) -> _State:
     )
 
 
+def _let_go(
+    ctx: _Context,
+    state: _State,
+    trig: _Trigger,
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> _State | None:
+    """The state after ``trig.finger``, which has no verified regrasp, lets go
+    (:func:`_try_release`), or lets go with an idle finger joining in its place
+    (:func:`_try_handover`); None if neither verifies."""
+    return _try_release(ctx, state, trig, win, stay, why) or _try_handover(
+        ctx, state, trig, win, stay, why
+    )
+
+
+_JOIN_CANDIDATES = 3  # new contacts tried per joining finger and release time
+_JOIN_APPROACH_S = 0.1  # the joining fingertip's final approach along Q's normal [s]
+
+
+def _try_handover(
+    ctx: _Context,
+    state: _State,
+    trig: _Trigger,
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> _State | None:
+    """The state after ``trig.finger`` lets go and a finger that took no part so far
+    joins in its place (:mod:`.planning.join`), or None.
+
+    Only when releases are allowed and such a finger exists. The release times tried
+    are the latest in the window first; the joining fingers in the hand's order, each
+    with its best new contacts (:meth:`RegraspSearch.choose`, the paper's criterion);
+    the join starts when the release has backed off, the others holding.
+    """
+    p = ctx.params
+    name = trig.finger
+    idle = [n for n in ctx.scene.hand.finger_names if n not in state.phases]
+    if not p.release or not idle or win.empty:
+        return None
+    h = state.holding[name]
+    q_hand = _q_hand(ctx, state, stay)
+    for t_r in _release_times(ctx, win):
+        if t_r + p.release_back_off_s + p.regrasp.duration_s > ctx.scene.motion.t_end - p.dt_s:
+            continue  # no time for the other finger to join
+        q_r = holding_q(
+            ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), p.contact.ik_tol_m
+        )[0]
+        failed: list[str] = []
+        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, _park(ctx, name), failed)
+        if rel is None:
+            log.debug("%s cannot let go at %s", name, failed)
+            continue
+        for other in idle:
+            note = f"{why}; no verified regrasp: let go, {other} joins in its place"
+            after = _apply_release(state, name, rel, note)
+            joined = _join(ctx, after, other, t_r + p.release_back_off_s, stay, name)
+            if joined is not None:
+                log.info("%s lets go at t=%.3f s, %s joins", name, t_r, other)
+                return joined
+    return None
+
+
+def _join(
+    ctx: _Context, state: _State, name: str, t0: float, stay: list[str], instead_of: str
+) -> _State | None:
+    """The state after ``name`` (idle) joins from ``t0`` [s] with the ``stay`` fingers
+    holding; None if no new contact verifies or holds long enough."""
+    p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
+    f = hand.finger(name)
+    t_arrive = t0 + p.regrasp.duration_s
+    if t_arrive > motion.t_end - p.dt_s:
+        return None
+    if name not in ctx.manifolds:
+        m_times = ctx.manifolds[ctx.active[0]].times_s
+        ctx.manifolds[name] = build_manifold(
+            f, ctx.search.sample, motion, m_times, contact=p.contact
+        )
+    q_from = ctx.base_q[f.q_indices]
+    T = motion.pose(np.array([t_arrive]))[0]
+    tip_obj = T[:3, :3].T @ (f.fk(q_from) - T[:3, 3])  # the resting tip, object frame
+    k0 = int(np.argmin(np.linalg.norm(ctx.search.sample.points - tip_obj, axis=1)))
+    P = (ctx.search.sample.points[k0], ctx.search.sample.normals[k0])
+    others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
+    q_hand = _q_hand(ctx, state, stay)
+    excluded: list[np.ndarray] = []
+    for _ in range(_JOIN_CANDIDATES):
+        if ctx.budget.exhausted:
+            return None
+        try:
+            choice = ctx.search.choose(name, P, t_arrive, others, q_hand, excluded)
+            duration = join_duration(
+                q_from,
+                choice.q_arrive,
+                f.velocity_limit,
+                minimum_s=p.regrasp.duration_s,
+                approach_s=_JOIN_APPROACH_S,
+                dt_s=p.dt_s,
+            )
+            if t0 + duration > motion.t_end - p.dt_s:
+                return None  # no time left to hold Q
+            if t0 + duration > t_arrive + TIME_TOL_S:  # chosen for an earlier arrival
+                choice = ctx.search.choose(name, P, t0 + duration, others, q_hand, excluded)
+        except ContactError as exc:
+            log.debug("%s cannot join: %s", name, exc)
+            return None
+        excluded.append(choice.p_object)
+        try:
+            join = plan_join(
+                hand,
+                ctx.scene.obj,
+                motion,
+                name,
+                t0,
+                q_from,
+                (choice.p_object, choice.n_object),
+                choice.q_arrive,
+                q_hand,
+                duration_s=duration,
+                approach_s=_JOIN_APPROACH_S,
+                clearance_m=p.regrasp.clearance_m,
+                dt_s=p.dt_s,
+                link_clearance_m=p.regrasp.link_clearance_m,
+                finger_clearance_m=p.regrasp.finger_clearance_m,
+                ik_tol_m=p.contact.ik_tol_m,
+            )
+        except PlanningError as exc:
+            log.debug("%s cannot join: %s", name, exc)
+            continue
+        hold = _landing_hold(ctx, name, join)
+        lost = held_until(hold.track, p.contact)
+        if lost < min(join.t_end + p.regrasp.duration_s, motion.t_end - p.dt_s) - TIME_TOL_S:
+            log.debug("%s cannot join: Q held only to t=%.3f s", name, lost)
+            continue
+        phase = JoinPhase(
+            finger=name,
+            t_start=join.t_start,
+            t_end=join.t_end,
+            Q_object=join.Q_object,
+            min_clearance_m=join.min_clearance_m,
+            reason=f"joins in place of {instead_of}, which let go",
+        )
+        return replace(
+            state,
+            holding={**state.holding, name: hold},
+            history={**state.history, name: ()},
+            phases={**state.phases, name: (phase,)},
+            joined={**state.joined, name: join},
+            now=max(state.now, join.t_end),
+        )
+    return None
+
+
 def _hold_ends(state: _State, name: str, t_s: float, phase: RegraspPhase | ReleasePhase) -> _State:
     """``state`` with ``name``'s current hold ended at ``t_s`` [s] and ``phase`` after it
     (who holds what, and the time, are the caller's to change)."""
@@ -784,20 +1009,26 @@ def _hold_ends(state: _State, name: str, t_s: float, phase: RegraspPhase | Relea
 def _next_deadline(
     ctx: _Context, triggers: list[_Trigger], trig: _Trigger, win: LiftOffWindow
 ) -> tuple[float, str] | None:
-    """When the next finger's hold is lost, if that falls within two regrasps of this
-    finger's preferred start (and after one regrasp from its earliest): the time this
-    regrasp should have landed by, and that finger."""
+    """The time this regrasp should have landed by so that the other holds lost before
+    the end can each be regrasped in turn (:func:`regrasp_chain` over them; those lost
+    within one regrasp of the earliest start are dead ends, left out), if that falls
+    within two regrasps of this finger's preferred start; and the finger whose loss
+    sets it."""
     p = ctx.params
     D = p.regrasp.duration_s
-    soon = [
-        (e.lost_s, e.finger)
+    lost = {
+        e.finger: e.lost_s
         for e in triggers
         if e.finger != trig.finger
         and e.lost_s < ctx.scene.motion.t_end - TIME_TOL_S
-        and e.lost_s <= win.preferred_s + 2 * D + p.lead_s
         and e.lost_s >= win.earliest_s + D + TIME_TOL_S
-    ]
-    return min(soon) if soon else None
+    }
+    if not lost:
+        return None
+    chain = regrasp_chain(lost, D)  # the others' regrasps, in turn after this one
+    if chain.latest_start_s > win.preferred_s + 2 * D + p.lead_s:
+        return None
+    return chain.latest_start_s, chain.binding or ""
 
 
 def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarray], np.ndarray]:
@@ -998,7 +1229,7 @@ def _plan_until(ctx: _Context, state: _State, until: float, *, final: bool = Fal
         state.history,
         state.holding,
         phases,
-        [*state.regrasps, *state.released.values()],
+        [*state.regrasps, *state.released.values(), *state.joined.values()],
         until=until,
         params=ctx.params,
         base_q=ctx.base_q,
@@ -1013,7 +1244,7 @@ def _assemble(
     history: dict[str, tuple[Holding, ...]],
     holding: dict[str, Holding],
     phases: dict[str, list],
-    regrasps: list[RegraspResult | Release],
+    regrasps: list[RegraspResult | Release | Join],
     *,
     until: float,
     params: PlannerParams,

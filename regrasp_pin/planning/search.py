@@ -203,8 +203,7 @@ class RegraspSearch:
                     return found
         return self._fail(finger, starts, attempts, budget=False)
 
-    # ------------------------------------------------------------------ internals
-    def _choose(
+    def choose(
         self,
         finger: str,
         P: tuple[np.ndarray, np.ndarray],
@@ -213,6 +212,14 @@ class RegraspSearch:
         q_hand: Callable[[np.ndarray], np.ndarray],
         excluded: list[np.ndarray],
     ) -> NewContact:
+        """The best new contact Q for ``finger`` landing at ``t_arrive`` [s]
+        (:func:`~regrasp_pin.grasp.choice.choose_new_contact`: the paper's criterion, Q
+        clear of the ``others`` and, while it is held, of their fingers under
+        ``q_hand``), away from ``P`` and from the ``excluded`` points (object frame).
+
+        Raises:
+            ContactError: no candidate.
+        """
         f = self.scene.hand.finger(finger)
         return choose_new_contact(
             self.scene.hand,
@@ -234,6 +241,7 @@ class RegraspSearch:
             lasting=functools.partial(self._clear_of_others, finger, list(others), q_hand),
         )
 
+    # ------------------------------------------------------------------ internals
     def _clear_of_others(
         self,
         finger: str,
@@ -279,7 +287,7 @@ class RegraspSearch:
         d_min = self.regrasp.duration_s
         where = f"start {start:.2f} s"
         try:
-            choice = self._choose(finger, P, start + d_min, others, q_hand, excluded)
+            choice = self.choose(finger, P, start + d_min, others, q_hand, excluded)
         except ContactError as exc:
             attempts.append(exc.as_attempt(where))
             return None
@@ -305,7 +313,7 @@ class RegraspSearch:
                 # Q was chosen for an earlier arrival: the arrival time may prefer another
                 chosen_for = duration
                 try:
-                    choice = self._choose(finger, P, start + duration, others, q_hand, excluded)
+                    choice = self.choose(finger, P, start + duration, others, q_hand, excluded)
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))
                     break
