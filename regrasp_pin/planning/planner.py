@@ -890,7 +890,9 @@ def _try_handover(
             ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), p.contact.ik_tol_m
         )[0]
         failed: list[str] = []
-        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, _park(ctx, name), failed)
+        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, None, failed) or _release_at(
+            ctx, state, name, t_r, q_r, q_hand, _park(ctx, name), failed
+        )
         if rel is None:
             log.debug("%s cannot let go at %s", name, failed)
             continue
