@@ -20,7 +20,7 @@ planning times, and every scenario whose outcome changed. Writes ``results.jsonl
 process, :func:`regrasp_pin.scenarios.setup_pose`).
 
 Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
-[--out out/suite] [--jobs 1] [--budget 60] [--baseline old/results.jsonl]``.
+[--out out/suite] [--jobs 1] [--max-steps 400] [--budget S] [--baseline old/results.jsonl]``.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from regrasp_pin.planning.planner import PlannerParams
 from regrasp_pin.scenarios import HANDS
 from regrasp_pin.suite import (
     MAX_DRAWS_PER_SCENARIO,
@@ -80,7 +81,8 @@ def run(
     skip_no_grasp: bool,
     out: Path,
     jobs: int,
-    budget_s: float,
+    max_steps: int | None,
+    budget_s: float | None,
 ) -> tuple[list[ScenarioResult], list[ScenarioResult]]:
     """Run specs in order until ``n`` count (skipped ones do not), on ``jobs`` processes.
 
@@ -105,14 +107,20 @@ def run(
     nxt = 0
     if jobs <= 1:
         while len(counted) < n and nxt < len(specs):
-            take(nxt, run_scenario(specs[nxt], out_dir=out, budget_s=budget_s))
+            take(nxt, run_scenario(specs[nxt], out_dir=out, max_steps=max_steps, budget_s=budget_s))
             nxt += 1
     else:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             pending: dict[Future, int] = {}
             while True:
                 while len(counted) + len(pending) < n and nxt < len(specs):
-                    fut = pool.submit(run_scenario, specs[nxt], out_dir=out, budget_s=budget_s)
+                    fut = pool.submit(
+                        run_scenario,
+                        specs[nxt],
+                        out_dir=out,
+                        max_steps=max_steps,
+                        budget_s=budget_s,
+                    )
                     pending[fut] = nxt
                     nxt += 1
                 if not pending:
@@ -171,7 +179,17 @@ def main() -> None:
     )
     parser.add_argument("--out", type=Path, default=Path("out/suite"), help="output folder")
     parser.add_argument("--jobs", type=int, default=1, help="processes (1: in this one)")
-    parser.add_argument("--budget", type=float, default=60.0, help="planning budget [s]")
+    parser.add_argument(
+        "--max-steps",
+        type=int,
+        help="the planner's search budget in steps (default: PlannerParams.max_steps)",
+    )
+    parser.add_argument(
+        "--budget",
+        type=float,
+        help="an optional wall-clock limit of each planning [s] (default: none; the step "
+        "budget is the same on every machine, a time limit is not)",
+    )
     parser.add_argument(
         "--baseline", type=Path, help="a previous results.jsonl (or its folder) to compare"
     )
@@ -197,10 +215,18 @@ def main() -> None:
         n, skip = args.n, True
         specs = generate_specs(MAX_DRAWS_PER_SCENARIO * n, args.seed, hands)
         what = f"suite seed {args.seed}: {n} scenarios with an initial grasp"
-    print(f"{what}, {args.jobs} process(es), budget {args.budget:g} s, output {args.out}")
+    steps = args.max_steps or PlannerParams.max_steps
+    limit = "" if args.budget is None else f" and {args.budget:g} s"
+    print(f"{what}, {args.jobs} process(es), budget {steps} steps{limit}, output {args.out}")
     t0 = time.perf_counter()
     results, skipped = run(
-        specs, n, skip_no_grasp=skip, out=args.out, jobs=args.jobs, budget_s=args.budget
+        specs,
+        n,
+        skip_no_grasp=skip,
+        out=args.out,
+        jobs=args.jobs,
+        max_steps=args.max_steps,
+        budget_s=args.budget,
     )
     wall = time.perf_counter() - t0
     with (args.out / "results.jsonl").open("w") as f:  # in spec order

@@ -131,7 +131,7 @@ ADVICE = {
     FailureKind.SHORT_HOLD: "turn more slowly or place the object deeper in the fingers' workspace",
     FailureKind.FINGER_BUSY: "turn more slowly so that the fingers can take turns",
     FailureKind.TOO_FEW_FINGERS: "lower PlannerParams.min_holding or use more fingers",
-    FailureKind.BUDGET: "raise the planner's budget (PlannerParams.budget_s, candidates)",
+    FailureKind.BUDGET: "raise the planner's budget (PlannerParams.max_steps, or budget_s if set)",
 }
 
 

@@ -17,8 +17,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Plan, make_scenario, plan_manipulation
-from regrasp_pin.exceptions import FailureKind, PlanningError
+from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
 from regrasp_pin.grasp.tracking import track_contact
+from regrasp_pin.planning.planner import PlannerParams
 from regrasp_pin.planning.schedule import held_until
 from regrasp_pin.suite import build_scenario, generate_specs
 from regrasp_pin.verify.plan_check import recheck_plan
@@ -219,6 +220,34 @@ def test_an_exhausted_budget_ends_typed_with_the_partial_plan():
     exc = err.value
     assert exc.kind == FailureKind.BUDGET
     assert exc.partial is not None and not exc.partial.regrasps()
+
+
+@pytest.mark.parametrize("max_steps", [4, 9])
+def test_the_step_budget_stops_the_same_plan_at_the_same_step(demo, max_steps):
+    """The budget counts search steps, not seconds: a plan cut short by it is the start
+    of the full plan (the same regrasps, at the same times, onto the same Q), and a
+    regrasp takes at least two steps (its Q chosen, its path planned)."""
+    result, _, _, scen = demo
+    params = replace(scen.params, max_steps=max_steps)
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=params)
+    exc = err.value
+    assert exc.kind == FailureKind.BUDGET
+    cut = exc.partial.regrasps()
+    full = result.plan.regrasps()
+    assert 1 <= len(cut) <= (max_steps + 1) // 2 < len(full)
+    for a, b in zip(cut, full, strict=False):
+        assert (a.finger, a.t_start) == (b.finger, b.t_start)
+        np.testing.assert_allclose(a.Q_object, b.Q_object, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("max_steps", 0), ("budget_s", -1.0), ("dt_s", 0.0), ("candidates", 2.5)],
+)
+def test_planner_params_name_a_bad_value(field, value):
+    with pytest.raises(InputError, match=f"PlannerParams.{field}"):
+        PlannerParams(**{field: value})
 
 
 def test_a_budget_that_runs_out_while_backing_up_is_the_failure(monkeypatch):

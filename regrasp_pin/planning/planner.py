@@ -18,8 +18,9 @@ landing) at least as long as the shortest regrasp takes, or to the end. When a f
 finds none, the planner backs up once per failure (at most ``max_backtracks`` times):
 the previous regrasp is planned again to land before this finger's window closes, or, if
 time was not the problem, to land elsewhere. Every search shares one budget
-(``budget_s``); a failure that could not be backed out of because the budget was gone
-is a ``budget`` failure (its message names the failure). A hold that no regrasp can
+(``max_steps``, counted, not timed, so that it is the same on every machine); a failure
+that could not be backed out of because the budget was gone is a ``budget`` failure
+(its message names the failure). A hold that no regrasp can
 follow is let go (:mod:`.planning.release`: a verified back-off; a ``release``
 phase) if the others are enough to go on taking turns (more than ``min_holding``), or
 hold in force closure to the end.
@@ -37,6 +38,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._validate import positive, positive_int
 from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
 from ..grasp.choice import Grasp, initial_grasp
 from ..grasp.contact import ContactModel
@@ -82,9 +84,15 @@ class PlannerParams:
         start_step_s: Spacing of the lift-off times tried in a finger's window [s].
         max_starts: Most lift-off times tried per regrasp.
         max_backtracks: Most times the planner re-plans an earlier regrasp.
-        budget_s: Wall-clock budget of the whole call [s] (manifolds and tracking
-            included); past it no new regrasp attempt starts, and the planner stops
-            with a ``budget`` failure and the partial plan.
+        max_steps: The search budget of the whole call, in steps (a new contact
+            chosen, a regrasp planned, a release or a join tried; see
+            :class:`~.search.SearchBudget`): once spent, no new attempt starts and the
+            planner stops with a ``budget`` failure and the partial plan. Counted, not
+            timed, so that a plan is the same on every machine; 400 steps take up to
+            about 50 s on a 2-core machine.
+        budget_s: An optional wall-clock limit of the whole call [s] (manifolds and
+            tracking included) on top of ``max_steps``, with the same effect; None (the
+            default): none, so that the outcome never depends on the machine's speed.
         exit_tolerance_s: New contacts whose exit times differ by less than this are
             ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
         fingers: The fingers that take part (default: all). The others stay idle at
@@ -110,13 +118,30 @@ class PlannerParams:
     start_step_s: float = 0.1
     max_starts: int = 5
     max_backtracks: int = 8
-    budget_s: float = 60.0
+    max_steps: int = 400
+    budget_s: float | None = None
     fingers: tuple[str, ...] | None = None
     exit_tolerance_s: float = 0.25
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
     release: bool = True
     release_back_off_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("dt_s", "manifold_dt_s", "sample_spacing_m", "mu", "start_step_s"):
+            positive(getattr(self, name), f"PlannerParams.{name}")
+        for name in ("lead_s", "exit_tolerance_s", "release_back_off_s"):
+            positive(getattr(self, name), f"PlannerParams.{name}", allow_zero=True)
+        for name, least in (
+            ("min_holding", 1),
+            ("candidates", 1),
+            ("max_starts", 1),
+            ("max_backtracks", 0),
+            ("max_steps", 1),
+        ):
+            positive_int(getattr(self, name), f"PlannerParams.{name}", least)
+        if self.budget_s is not None:
+            positive(self.budget_s, "PlannerParams.budget_s", allow_zero=True)
 
 
 @dataclass
@@ -212,7 +237,7 @@ def plan_manipulation(
     """
     scene = Scene(hand, obj, motion)  # checks types and scale before any work
     params = params or PlannerParams()
-    budget = SearchBudget.seconds(params.budget_s)  # the whole call, manifolds included
+    budget = SearchBudget.of(params.max_steps, params.budget_s)  # the whole call
     active = tuple(params.fingers) if params.fingers else hand.finger_names
     for name in active:
         hand.finger(name)  # raises UnknownNameError listing the valid names
@@ -798,6 +823,7 @@ def _release_at(
     """A verified release of ``name`` at ``t_r`` (``park``: see plan_release), or None
     (the failure noted in ``tried``)."""
     p, h = ctx.params, state.holding[name]
+    ctx.budget.spend()
     try:
         return plan_release(
             ctx.scene.hand,
@@ -932,6 +958,7 @@ def _join(
     for _ in range(_JOIN_CANDIDATES):
         if ctx.budget.exhausted:
             return None
+        ctx.budget.spend(2)  # the choice of Q and the join
         try:
             choice = ctx.search.choose(name, P, t_arrive, others, q_hand, excluded)
             duration = join_duration(

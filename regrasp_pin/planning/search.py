@@ -51,27 +51,39 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class SearchBudget:
-    """What a search may spend: a wall-clock deadline and a number of regrasp plans.
+    """What a search may spend: a number of search steps and, optionally, wall-clock time.
+
+    A step is one attempt of the search: a choice of a new contact, a regrasp planned
+    and verified, a release or a join tried. Counting steps makes the budget the same on
+    every machine (a slower CPU takes longer, it does not plan less); the wall-clock
+    deadline is an optional guard on top, off by default.
 
     Attributes:
-        deadline: ``time.perf_counter()`` value after which no new attempt starts.
-        max_plans: Most calls of :func:`~regrasp_pin.planning.regrasp.plan_regrasp`.
-        plans: Calls made so far.
+        max_steps: Most steps.
+        deadline: ``time.perf_counter()`` value after which no new step starts
+            (``inf``: none).
+        steps: Steps taken so far.
     """
 
+    max_steps: int = 10_000
     deadline: float = float("inf")
-    max_plans: int = 10_000
-    plans: int = 0
+    steps: int = 0
 
     @classmethod
-    def seconds(cls, budget_s: float, max_plans: int = 10_000) -> SearchBudget:
-        """A budget of ``budget_s`` [s] of wall-clock time from now."""
-        return cls(deadline=time.perf_counter() + budget_s, max_plans=max_plans)
+    def of(cls, max_steps: int, budget_s: float | None = None) -> SearchBudget:
+        """A budget of ``max_steps`` steps and, if given, ``budget_s`` [s] of wall-clock
+        time from now."""
+        deadline = float("inf") if budget_s is None else time.perf_counter() + budget_s
+        return cls(max_steps=max_steps, deadline=deadline)
+
+    def spend(self, steps: int = 1) -> None:
+        """Count ``steps`` more steps."""
+        self.steps += steps
 
     @property
     def exhausted(self) -> bool:
-        """True once the deadline has passed or ``max_plans`` regrasps were planned."""
-        return self.plans >= self.max_plans or time.perf_counter() > self.deadline
+        """True once ``max_steps`` steps were taken or the deadline has passed."""
+        return self.steps >= self.max_steps or time.perf_counter() > self.deadline
 
 
 @dataclass(frozen=True)
@@ -287,6 +299,7 @@ class RegraspSearch:
         d_min = self.regrasp.duration_s
         where = f"start {start:.2f} s"
         try:
+            budget.spend()
             choice = self.choose(finger, P, start + d_min, others, q_hand, excluded)
         except ContactError as exc:
             attempts.append(exc.as_attempt(where))
@@ -313,12 +326,13 @@ class RegraspSearch:
                 # Q was chosen for an earlier arrival: the arrival time may prefer another
                 chosen_for = duration
                 try:
+                    budget.spend()
                     choice = self.choose(finger, P, start + duration, others, q_hand, excluded)
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))
                     break
                 what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
-            budget.plans += 1
+            budget.spend()
             try:
                 result = plan_regrasp(
                     self.scene.hand,

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import known_fields, positive
+from .._validate import known_fields, positive, positive_int
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
 from ..planning.planner import plan_manipulation
@@ -154,7 +154,11 @@ def _record_failure(result: ScenarioResult, exc: Exception, stage: str) -> None:
 
 
 def run_scenario(
-    spec: ScenarioSpec, *, out_dir: str | Path | None = None, budget_s: float = 60.0
+    spec: ScenarioSpec,
+    *,
+    out_dir: str | Path | None = None,
+    max_steps: int | None = None,
+    budget_s: float | None = None,
 ) -> ScenarioResult:
     """Build and plan one spec; re-check a full plan from its saved file.
 
@@ -169,13 +173,16 @@ def run_scenario(
         out_dir: Folder for ``<name>.json`` (a full plan) or ``<name>.partial.json``
             (the plan up to a failure); default: a temporary folder for the re-check
             only, removed afterwards.
-        budget_s: Planning budget [s], passed as ``PlannerParams.budget_s`` when the
-            planner has that field (otherwise ignored).
+        max_steps: The planner's search budget in steps (``PlannerParams.max_steps``;
+            None: the scenario's own), the same on every machine.
+        budget_s: An optional wall-clock limit of the planning [s]
+            (``PlannerParams.budget_s``; None: none).
 
     Returns:
         The :class:`ScenarioResult`.
     """
-    budget = positive(budget_s, "budget_s")
+    steps = None if max_steps is None else positive_int(max_steps, "max_steps")
+    budget = None if budget_s is None else positive(budget_s, "budget_s")
     result = ScenarioResult(
         name=spec.name,
         hand=hand_label(spec.hand),
@@ -200,9 +207,11 @@ def run_scenario(
     result.initial_finger_clearance_m = float(
         finger_clearance(scen.hand, scen.obj, scen.motion, fingers, 0.0)(grasp.q)
     )
-    params = scen.params
-    if any(f.name == "budget_s" for f in dataclasses.fields(params)):
-        params = dataclasses.replace(params, budget_s=budget)
+    params = dataclasses.replace(
+        scen.params,
+        max_steps=scen.params.max_steps if steps is None else steps,
+        budget_s=budget,
+    )
 
     t0 = time.perf_counter()
     try:
