@@ -9,7 +9,10 @@ carries every failed attempt and the partial plan:
   timing synchronized with the object (:mod:`.timing`), IK, and the Coal check
   (:mod:`regrasp_pin.verify`);
 - :mod:`.planner`: the whole hand over the whole motion (:func:`plan_manipulation`):
-  which finger lets go when, backtracking, releases;
+  which finger lets go when, and backtracking; its parameters in :mod:`.params`;
+- :mod:`.state`: where a plan stands and the triggers that follow from it;
+- :mod:`.letgo`: a finger with no verified regrasp lets go, or hands over to an idle
+  finger;
 - :mod:`.schedule`: a finger's lift-off window and the start times tried in it;
 - :mod:`.search`: one finger's regrasp as a search over start times, new contacts Q
   and durations, with a budget;

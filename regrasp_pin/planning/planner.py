@@ -21,9 +21,11 @@ time was not the problem, to land elsewhere. Every search shares one budget
 (``max_steps``, counted, not timed, so that it is the same on every machine); a failure
 that could not be backed out of because the budget was gone is a ``budget`` failure
 (its message names the failure). A hold that no regrasp can
-follow is let go (:mod:`.planning.release`: a verified back-off; a ``release``
-phase) if the others are enough to go on taking turns (more than ``min_holding``), or
-hold in force closure to the end.
+follow is let go (:mod:`.planning.letgo`: a verified back-off, a ``release`` phase, if
+the others are enough to go on taking turns (more than ``min_holding``) or hold in
+force closure to the end; or a hand-over to an idle finger, a ``join`` phase).
+Where the plan stands and the triggers that follow from it are in
+:mod:`.planning.state`; the parameters in :mod:`.planning.params`.
 A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
 finger, the time, the kind of the failure, every attempt and the partial plan up to
 that time.
@@ -33,15 +35,13 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._validate import positive, positive_int
-from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
+from ..exceptions import Attempt, FailureKind, PlanningError
 from ..grasp.choice import Grasp, initial_grasp
-from ..grasp.contact import ContactModel
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
 from ..grasp.manifold import Manifold, build_manifold
 from ..grasp.quality import ferrari_canny_epsilon
@@ -49,11 +49,12 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from ..model.scene import Scene
-from ..plan import ContactPhase, JoinPhase, Plan, RegraspPhase, ReleasePhase, hand_record
-from .join import Join, join_duration, plan_join
-from .proximity import holding_proximity
-from .regrasp import RegraspParams, RegraspResult
-from .release import Release, plan_release
+from ..plan import ContactPhase, Plan, RegraspPhase, hand_record
+from .join import Join
+from .letgo import let_go
+from .params import PlannerParams
+from .regrasp import RegraspResult
+from .release import Release
 from .schedule import (
     TIME_TOL_S,
     LiftOffWindow,
@@ -63,85 +64,20 @@ from .schedule import (
     start_times,
 )
 from .search import Found, RegraspSearch, SearchBudget
+from .state import (
+    PlanContext,
+    PlanState,
+    Trigger,
+    hold_ends,
+    landing_hold,
+    loss_reason,
+    pending_triggers,
+    q_hand_of,
+)
 
 __all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class PlannerParams:
-    """Parameters of the whole-hand planner.
-
-    Attributes:
-        dt_s: Time step of the holding phases [s].
-        manifold_dt_s: Time step of the joint-space manifolds used to choose Q [s].
-        sample_spacing_m: Surface sampling spacing for the manifolds [m].
-        lead_s: A regrasp preferably starts this long before its trigger [s].
-        min_holding: Fewest fingers that must hold while one is in the air.
-        mu: Friction coefficient for force closure.
-        candidates: How many new contacts Q to try per lift-off time.
-        start_step_s: Spacing of the lift-off times tried in a finger's window [s].
-        max_starts: Most lift-off times tried per regrasp.
-        max_backtracks: Most times the planner re-plans an earlier regrasp.
-        max_steps: The search budget of the whole call, in steps (a new contact
-            chosen, a regrasp planned, a release or a join tried; see
-            :class:`~.search.SearchBudget`): once spent, no new attempt starts and the
-            planner stops with a ``budget`` failure and the partial plan. Counted, not
-            timed, so that a plan is the same on every machine; 400 steps take up to
-            about 50 s on a 2-core machine.
-        budget_s: An optional wall-clock limit of the whole call [s] (manifolds and
-            tracking included) on top of ``max_steps``, with the same effect; None (the
-            default): none, so that the outcome never depends on the machine's speed.
-        exit_tolerance_s: New contacts whose exit times differ by less than this are
-            ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
-        fingers: The fingers that take part (default: all). The others stay idle at
-            the configuration of :func:`rest_configuration`, as obstacles that every
-            regrasp is verified against.
-        contact: The contact model (trigger margin, pad cone, tolerances).
-        regrasp: Parameters of each regrasp (``duration_s`` is the shortest duration;
-            longer ones follow from the joint velocity limits).
-        release: Let a finger go for the rest of the motion when its hold is lost with
-            no verified regrasp, if more than ``min_holding`` others remain to take
-            turns, or if the others hold in force closure to the end
-            (:mod:`.planning.release`).
-        release_back_off_s: Duration of a release's back-off move [s].
-    """
-
-    dt_s: float = 0.01
-    manifold_dt_s: float = 0.05
-    sample_spacing_m: float = 0.002
-    lead_s: float = 0.02
-    min_holding: int = 3
-    mu: float = 0.8
-    candidates: int = 6
-    start_step_s: float = 0.1
-    max_starts: int = 5
-    max_backtracks: int = 8
-    max_steps: int = 400
-    budget_s: float | None = None
-    fingers: tuple[str, ...] | None = None
-    exit_tolerance_s: float = 0.25
-    contact: ContactModel = field(default_factory=ContactModel)
-    regrasp: RegraspParams = field(default_factory=RegraspParams)
-    release: bool = True
-    release_back_off_s: float = 0.1
-
-    def __post_init__(self) -> None:
-        for name in ("dt_s", "manifold_dt_s", "sample_spacing_m", "mu", "start_step_s"):
-            positive(getattr(self, name), f"PlannerParams.{name}")
-        for name in ("lead_s", "exit_tolerance_s", "release_back_off_s"):
-            positive(getattr(self, name), f"PlannerParams.{name}", allow_zero=True)
-        for name, least in (
-            ("min_holding", 1),
-            ("candidates", 1),
-            ("max_starts", 1),
-            ("max_backtracks", 0),
-            ("max_steps", 1),
-        ):
-            positive_int(getattr(self, name), f"PlannerParams.{name}", least)
-        if self.budget_s is not None:
-            positive(self.budget_s, "PlannerParams.budget_s", allow_zero=True)
 
 
 @dataclass
@@ -166,42 +102,14 @@ class ManipulationPlan:
 
 
 @dataclass(frozen=True)
-class _State:
-    """Where the plan stands: who holds what since when, and what was done."""
-
-    holding: dict[str, Holding]
-    history: dict[str, tuple[Holding, ...]]
-    phases: dict[str, tuple]
-    regrasps: tuple[RegraspResult, ...]
-    now: float  # no regrasp may start before this (one finger in the air)
-    held_to_end: dict[str, str]
-    released: dict[str, Release] = field(default_factory=dict)
-    joined: dict[str, Join] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
 class _Step:
     """A regrasp decision that can be revisited: the state before it and its trigger."""
 
-    before: _State
-    trig: _Trigger
-    triggers: list[_Trigger]
+    before: PlanState
+    trig: Trigger
+    triggers: list[Trigger]
     Q_object: np.ndarray
     excluded: tuple[np.ndarray, ...] = ()
-
-
-@dataclass
-class _Context:
-    scene: Scene
-    grid: np.ndarray
-    params: PlannerParams
-    active: tuple[str, ...]
-    search: RegraspSearch
-    budget: SearchBudget
-    base_q: np.ndarray
-    manifolds: dict[str, Manifold]
-    tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
-    parks: dict[str, np.ndarray] = field(default_factory=dict)  # where let-go fingers go
 
 
 def plan_manipulation(
@@ -288,7 +196,7 @@ def plan_manipulation(
         candidates=params.candidates,
         exit_tolerance_s=params.exit_tolerance_s,
     )
-    ctx = _Context(
+    ctx = PlanContext(
         scene,
         grid,
         params,
@@ -298,7 +206,7 @@ def plan_manipulation(
         base_q,
         manifolds,
     )
-    state = _State(
+    state = PlanState(
         holding=holding,
         history={n: () for n in active},
         phases={n: () for n in active},
@@ -310,7 +218,7 @@ def plan_manipulation(
     steps: list[_Step] = []
     backtracks = 0
     while True:
-        triggers = _triggers(ctx, state)
+        triggers = pending_triggers(ctx, state)
         contenders = _contenders(triggers, ctx)
         if not contenders:
             break
@@ -376,95 +284,7 @@ def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:
     return grid
 
 
-@dataclass(frozen=True)
-class _Trigger:
-    """A finger that must let go: when, why, and until when it can still hold [s]
-    (``lost_near``: the finger whose approach ends the hold, if that is what ends it)."""
-
-    time_s: float
-    finger: str
-    reason: str
-    lost_s: float
-    lost_near: str | None = None
-
-
-def _triggers(ctx: _Context, state: _State, gone: tuple[str, ...] = ()) -> list[_Trigger]:
-    """The pending triggers, earliest first (ties by name): a contact near its joint
-    limits (or infeasible), or a holding finger near another finger (holding, idle,
-    or let go and still; ``gone``: fingers that are neither, e.g. one about to let go)."""
-    p = ctx.params
-    times = ctx.grid[ctx.grid >= state.now - TIME_TOL_S]
-    base = ctx.base_q.copy()
-    for n, rel in state.released.items():  # where a finger that let go stays
-        base[ctx.scene.hand.fingers[n].q_indices] = rel.q[-1]
-    prox = holding_proximity(
-        ctx.scene.hand,
-        state.holding,
-        times,
-        base,
-        trigger_m=p.contact.finger_trigger_m,
-        lost_m=p.regrasp.finger_clearance_m,
-        still=[n for n in ctx.scene.hand.finger_names if n not in state.holding and n not in gone],
-    )
-    out = []
-    for name, h in state.holding.items():
-        if name in state.held_to_end:
-            continue
-        t, why = h.track.trigger()
-        lost = held_until(h.track, p.contact)
-        loss = _loss_reason(h, lost)
-        near = prox.get(name)
-        lost_near = None
-        if near is not None:
-            if near.lost_s - p.dt_s < lost:
-                lost, loss, lost_near = near.lost_s - p.dt_s, near.reason, near.other
-            if t is None or near.trigger_s < t:
-                t, why = near.trigger_s, near.reason
-        # a hold that will be lost triggers at least one regrasp (and the lead) before:
-        # a margin that closes fast (a link nearing the object) leaves no time otherwise
-        due = lost - p.regrasp.duration_s - p.lead_s
-        if lost < ctx.scene.motion.t_end - p.dt_s - TIME_TOL_S and (t is None or due < t):
-            t = max(due, state.now, h.t_from)
-            why = f"its hold is lost after t={lost:.3f} s ({loss})"
-        if t is not None:
-            out.append(_Trigger(t, name, why, lost, lost_near))
-    return sorted(_chain_first(ctx, state, out), key=lambda e: (round(e.time_s, 9), e.finger))
-
-
-def _chain_first(ctx: _Context, state: _State, triggers: list[_Trigger]) -> list[_Trigger]:
-    """``triggers`` with the first finger of the regrasp chain (:func:`regrasp_chain`)
-    triggered by the chain's latest start, if that comes before its own trigger: holds
-    that end close together cannot wait for each other's triggers."""
-    p = ctx.params
-    end = ctx.scene.motion.t_end - p.dt_s - TIME_TOL_S
-    lost = {e.finger: e.lost_s for e in triggers if e.lost_s < end}
-    chain = regrasp_chain(lost, p.regrasp.duration_s)
-    if len(chain.order) < 2:
-        return triggers
-    first = next(e for e in triggers if e.finger == chain.order[0])
-    if chain.latest_start_s >= first.time_s - TIME_TOL_S:
-        return triggers
-    h = state.holding[first.finger]
-    early = replace(
-        first,
-        time_s=max(chain.latest_start_s, state.now, h.t_from),
-        reason=(
-            f"{chain.binding}'s hold is lost at t={lost[chain.binding or '']:.3f} s, "
-            f"so the regrasps of {', '.join(chain.order)} must start by "
-            f"t={chain.latest_start_s:.3f} s"
-        ),
-    )
-    return [early if e is first else e for e in triggers]
-
-
-def _loss_reason(h: Holding, lost_s: float) -> str:
-    """Why the hold ends right after ``lost_s`` [s] (the track's reason there)."""
-    k = int(np.searchsorted(h.track.times_s, lost_s + TIME_TOL_S))
-    reasons = h.track.reasons
-    return reasons[min(k, len(reasons) - 1)] or "it leaves the joint limits"
-
-
-def _contenders(triggers: list[_Trigger], ctx: _Context) -> list[_Trigger]:
+def _contenders(triggers: list[Trigger], ctx: PlanContext) -> list[Trigger]:
     """The fingers that may regrasp next, the first to go first: earliest deadline first.
 
     Among the fingers whose triggers fall within one regrasp (plus the lead) of the
@@ -480,7 +300,7 @@ def _contenders(triggers: list[_Trigger], ctx: _Context) -> list[_Trigger]:
 
 
 def _window(
-    ctx: _Context, state: _State, trig: _Trigger, triggers: list[_Trigger]
+    ctx: PlanContext, state: PlanState, trig: Trigger, triggers: list[Trigger]
 ) -> tuple[LiftOffWindow, str]:
     """The finger's lift-off window, with its preferred start and why."""
     p = ctx.params
@@ -508,15 +328,15 @@ def _window(
 
 
 def _advance(
-    ctx: _Context,
-    state: _State,
-    trig: _Trigger,
-    triggers: list[_Trigger],
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    triggers: list[Trigger],
     steps: list[_Step],
     *,
     end_by_s: float | None = None,
     exclude: list[np.ndarray] | None = None,
-) -> _State:
+) -> PlanState:
     """The state after ``trig``: its finger held to the end, or one verified regrasp."""
     p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
     D = p.regrasp.duration_s
@@ -543,7 +363,7 @@ def _advance(
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
     if not starts:
         busy = win.empty
-        released = None if busy else _let_go(ctx, state, trig, win, stay, why)
+        released = None if busy else let_go(ctx, state, trig, win, stay, why)
         if released is not None:
             return released
         raise PlanningError(
@@ -570,7 +390,7 @@ def _advance(
             starts,
             lambda t: holding_q(hand, motion, name, h, np.array([t]), p.contact.ik_tol_m)[0],
             others,
-            _q_hand(ctx, state, stay),
+            q_hand_of(ctx, state, stay),
             ctx.budget,
             end_by_s=end_by,
             exclude=exclude,
@@ -594,7 +414,7 @@ def _advance(
     try:
         found = search(*tries)
     except PlanningError:
-        released = _let_go(ctx, state, trig, win, stay, why)
+        released = let_go(ctx, state, trig, win, stay, why)
         if released is None:
             raise
         return released
@@ -608,7 +428,7 @@ def _advance(
 
 
 def _fingers_that_stay(
-    ctx: _Context, state: _State, trig: _Trigger, win: LiftOffWindow
+    ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow
 ) -> list[str]:
     """The fingers that hold while ``trig.finger`` is in the air; PlanningError if they
     are fewer than ``min_holding`` or not in force closure without it."""
@@ -640,11 +460,11 @@ def _fingers_that_stay(
 
 
 def _check_landing(
-    ctx: _Context,
+    ctx: PlanContext,
     name: str,
     res: RegraspResult,
     landed: dict[int, Holding],
-    triggers: list[_Trigger],
+    triggers: list[Trigger],
 ) -> Attempt | None:
     """Follow the contact a verified regrasp lands on (kept in ``landed``) and judge
     what it leaves: a ``short-hold`` attempt if it is lost sooner after landing than
@@ -654,7 +474,7 @@ def _check_landing(
     can no longer be regrasped in turn (:func:`regrasp_chain` must start before the
     landing) while without it they could."""
     p = ctx.params
-    hold = _landing_hold(ctx, name, res)
+    hold = landing_hold(ctx, name, res)
     landed[id(res)] = hold
     lost = held_until(hold.track, p.contact)
     end = ctx.scene.motion.t_end - p.dt_s
@@ -668,7 +488,7 @@ def _check_landing(
             measured=lost - res.t_end,
             required=need - res.t_end,
             what=f"{where}: held {lost - res.t_end:.2f} s after landing "
-            f"({_loss_reason(hold, lost)})",
+            f"({loss_reason(hold, lost)})",
         )
     losses = {
         e.finger: e.lost_s
@@ -695,24 +515,8 @@ def _check_landing(
     )
 
 
-def _landing_hold(ctx: _Context, name: str, res: RegraspResult | Join) -> Holding:
-    """The hold that follows a regrasp's landing."""
-    return start_holding(
-        ctx.scene.hand,
-        ctx.scene.obj,
-        ctx.scene.motion,
-        ctx.grid,
-        name,
-        res.Q_object,
-        res.n_Q_object,
-        res.q[-1],
-        res.t_end,
-        ctx.params.contact,
-    )
-
-
 def _refuse_dead_end(
-    ctx: _Context, state: _State, trig: _Trigger, triggers: list[_Trigger], win: LiftOffWindow
+    ctx: PlanContext, state: PlanState, trig: Trigger, triggers: list[Trigger], win: LiftOffWindow
 ) -> None:
     """Raise ``finger-busy`` if another finger's hold is lost before ``trig.finger``
     could land (and not because ``trig.finger`` comes near it): whatever this regrasp
@@ -742,301 +546,8 @@ def _refuse_dead_end(
         )
 
 
-def _try_release(
-    ctx: _Context,
-    state: _State,
-    trig: _Trigger,
-    win: LiftOffWindow,
-    stay: list[str],
-    why: str,
-) -> _State | None:
-    """The state after ``trig.finger`` lets go for the rest of the motion, or None.
-
-    Only when releases are allowed and the hold is lost before the end, and, if the
-    fingers that stay are too few to take turns (no more than ``min_holding``), when
-    every one of them holds to the end once this one has gone (a neighbour it was
-    closing in on no longer ends their hold). The release times tried are the latest in
-    the window first, then earlier ones.
-    """
-    p, motion = ctx.params, ctx.scene.motion
-    name = trig.finger
-    end = motion.t_end - p.dt_s - TIME_TOL_S
-    if not p.release or win.empty or trig.lost_s >= end:
-        return None
-    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
-    if len(stay) <= p.min_holding and any(
-        e.lost_s < end
-        for e in _triggers(ctx, without, gone=(name,))
-        if e.finger in stay and e.finger not in state.held_to_end
-    ):
-        return None
-    h = state.holding[name]
-    q_hand = _q_hand(ctx, state, stay)
-    tried: list[str] = []
-    for t_r in _release_times(ctx, win):
-        q_r = holding_q(ctx.scene.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
-        for park in (None, _park(ctx, name)):
-            rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
-            if rel is not None:
-                log.info("%s lets go at t=%.3f s", name, t_r)
-                others = (
-                    f"{len(stay)} others go on"
-                    if len(stay) > p.min_holding
-                    else "the others hold to the end"
-                )
-                note = f"{why}; no verified regrasp: let go ({others})"
-                return _apply_release(state, name, rel, note)
-    log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
-    return None
-
-
-def _release_times(ctx: _Context, win: LiftOffWindow) -> Iterator[float]:
-    """Release times to try [s]: the latest in the window first, then earlier ones by
-    ``start_step_s`` (at most ``max_starts``), while the budget lasts."""
-    p = ctx.params
-    for k in range(p.max_starts):
-        t_r = win.latest_s - k * p.start_step_s
-        if t_r < win.earliest_s - TIME_TOL_S or ctx.budget.exhausted:
-            return
-        yield max(t_r, win.earliest_s)
-
-
-def _park(ctx: _Context, name: str) -> np.ndarray:
-    """Where ``name`` goes after letting go: its posture clearest of the object over the
-    motion (:func:`~.holding.rest_configuration`), computed once."""
-    if name not in ctx.parks:
-        q = rest_configuration(ctx.scene.hand, ctx.scene.obj, ctx.scene.motion, [name])
-        ctx.parks[name] = q[ctx.scene.hand.fingers[name].q_indices]
-    return ctx.parks[name]
-
-
-def _release_at(
-    ctx: _Context,
-    state: _State,
-    name: str,
-    t_r: float,
-    q_r: np.ndarray,
-    q_hand: Callable[[np.ndarray], np.ndarray],
-    park: np.ndarray | None,
-    tried: list[str],
-) -> Release | None:
-    """A verified release of ``name`` at ``t_r`` (``park``: see plan_release), or None
-    (the failure noted in ``tried``)."""
-    p, h = ctx.params, state.holding[name]
-    ctx.budget.spend()
-    try:
-        return plan_release(
-            ctx.scene.hand,
-            ctx.scene.obj,
-            ctx.scene.motion,
-            name,
-            t_r,
-            (h.p, h.n),
-            q_r,
-            q_hand,
-            clearance_m=p.regrasp.clearance_m,
-            back_off_s=p.release_back_off_s,
-            dt_s=p.dt_s,
-            link_clearance_m=p.regrasp.link_clearance_m,
-            finger_clearance_m=p.regrasp.finger_clearance_m,
-            ik_tol_m=p.contact.ik_tol_m,
-            q_park=park,
-            park_s=p.regrasp.duration_s,
-        )
-    except PlanningError as exc:
-        tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {exc.kind.value}")
-        return None
-
-
-def _apply_release(state: _State, name: str, rel: Release, why: str) -> _State:
-    """The state after a verified release of ``name``."""
-    off = ReleasePhase(
-        finger=name,
-        t_start=rel.t_start,
-        t_end=rel.t_end,
-        P_object=rel.P_object,
-        min_clearance_m=rel.min_clearance_m,
-        reason=why,
-    )
-    return replace(
-        _hold_ends(state, name, rel.t_start, off),
-        holding={n: x for n, x in state.holding.items() if n != name},
-        now=max(state.now, rel.t_start),
-        released={**state.released, name: rel},
-    )
-
-
-def _let_go(
-    ctx: _Context,
-    state: _State,
-    trig: _Trigger,
-    win: LiftOffWindow,
-    stay: list[str],
-    why: str,
-) -> _State | None:
-    """The state after ``trig.finger``, which has no verified regrasp, lets go
-    (:func:`_try_release`), or lets go with an idle finger joining in its place
-    (:func:`_try_handover`); None if neither verifies."""
-    return _try_release(ctx, state, trig, win, stay, why) or _try_handover(
-        ctx, state, trig, win, stay, why
-    )
-
-
-_JOIN_CANDIDATES = 3  # new contacts tried per joining finger and release time
-_JOIN_APPROACH_S = 0.1  # the joining fingertip's final approach along Q's normal [s]
-
-
-def _try_handover(
-    ctx: _Context,
-    state: _State,
-    trig: _Trigger,
-    win: LiftOffWindow,
-    stay: list[str],
-    why: str,
-) -> _State | None:
-    """The state after ``trig.finger`` lets go and a finger that took no part so far
-    joins in its place (:mod:`.planning.join`), or None.
-
-    Only when releases are allowed and such a finger exists. The release times tried
-    are the latest in the window first; the joining fingers in the hand's order, each
-    with its best new contacts (:meth:`RegraspSearch.choose`, the paper's criterion);
-    the join starts when the release has backed off, the others holding.
-    """
-    p = ctx.params
-    name = trig.finger
-    idle = [n for n in ctx.scene.hand.finger_names if n not in state.phases]
-    if not p.release or not idle or win.empty:
-        return None
-    h = state.holding[name]
-    q_hand = _q_hand(ctx, state, stay)
-    for t_r in _release_times(ctx, win):
-        if t_r + p.release_back_off_s + p.regrasp.duration_s > ctx.scene.motion.t_end - p.dt_s:
-            continue  # no time for the other finger to join
-        q_r = holding_q(
-            ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), p.contact.ik_tol_m
-        )[0]
-        failed: list[str] = []
-        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, None, failed) or _release_at(
-            ctx, state, name, t_r, q_r, q_hand, _park(ctx, name), failed
-        )
-        if rel is None:
-            log.debug("%s cannot let go at %s", name, failed)
-            continue
-        for other in idle:
-            note = f"{why}; no verified regrasp: let go, {other} joins in its place"
-            after = _apply_release(state, name, rel, note)
-            joined = _join(ctx, after, other, t_r + p.release_back_off_s, stay, name)
-            if joined is not None:
-                log.info("%s lets go at t=%.3f s, %s joins", name, t_r, other)
-                return joined
-    return None
-
-
-def _join(
-    ctx: _Context, state: _State, name: str, t0: float, stay: list[str], instead_of: str
-) -> _State | None:
-    """The state after ``name`` (idle) joins from ``t0`` [s] with the ``stay`` fingers
-    holding; None if no new contact verifies or holds long enough."""
-    p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
-    f = hand.finger(name)
-    t_arrive = t0 + p.regrasp.duration_s
-    if t_arrive > motion.t_end - p.dt_s:
-        return None
-    if name not in ctx.manifolds:
-        m_times = ctx.manifolds[ctx.active[0]].times_s
-        ctx.manifolds[name] = build_manifold(
-            f, ctx.search.sample, motion, m_times, contact=p.contact
-        )
-    q_from = ctx.base_q[f.q_indices]
-    T = motion.pose(np.array([t_arrive]))[0]
-    tip_obj = T[:3, :3].T @ (f.fk(q_from) - T[:3, 3])  # the resting tip, object frame
-    k0 = int(np.argmin(np.linalg.norm(ctx.search.sample.points - tip_obj, axis=1)))
-    P = (ctx.search.sample.points[k0], ctx.search.sample.normals[k0])
-    others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
-    q_hand = _q_hand(ctx, state, stay)
-    excluded: list[np.ndarray] = []
-    for _ in range(_JOIN_CANDIDATES):
-        if ctx.budget.exhausted:
-            return None
-        ctx.budget.spend(2)  # the choice of Q and the join
-        try:
-            choice = ctx.search.choose(name, P, t_arrive, others, q_hand, excluded)
-            duration = join_duration(
-                q_from,
-                choice.q_arrive,
-                f.velocity_limit,
-                minimum_s=p.regrasp.duration_s,
-                approach_s=_JOIN_APPROACH_S,
-                dt_s=p.dt_s,
-            )
-            if t0 + duration > motion.t_end - p.dt_s:
-                return None  # no time left to hold Q
-            if t0 + duration > t_arrive + TIME_TOL_S:  # chosen for an earlier arrival
-                choice = ctx.search.choose(name, P, t0 + duration, others, q_hand, excluded)
-        except ContactError as exc:
-            log.debug("%s cannot join: %s", name, exc)
-            return None
-        excluded.append(choice.p_object)
-        try:
-            join = plan_join(
-                hand,
-                ctx.scene.obj,
-                motion,
-                name,
-                t0,
-                q_from,
-                (choice.p_object, choice.n_object),
-                choice.q_arrive,
-                q_hand,
-                duration_s=duration,
-                approach_s=_JOIN_APPROACH_S,
-                clearance_m=p.regrasp.clearance_m,
-                dt_s=p.dt_s,
-                link_clearance_m=p.regrasp.link_clearance_m,
-                finger_clearance_m=p.regrasp.finger_clearance_m,
-                ik_tol_m=p.contact.ik_tol_m,
-            )
-        except PlanningError as exc:
-            log.debug("%s cannot join: %s", name, exc)
-            continue
-        hold = _landing_hold(ctx, name, join)
-        lost = held_until(hold.track, p.contact)
-        if lost < min(join.t_end + p.regrasp.duration_s, motion.t_end - p.dt_s) - TIME_TOL_S:
-            log.debug("%s cannot join: Q held only to t=%.3f s", name, lost)
-            continue
-        phase = JoinPhase(
-            finger=name,
-            t_start=join.t_start,
-            t_end=join.t_end,
-            Q_object=join.Q_object,
-            min_clearance_m=join.min_clearance_m,
-            reason=f"joins in place of {instead_of}, which let go",
-        )
-        return replace(
-            state,
-            holding={**state.holding, name: hold},
-            history={**state.history, name: ()},
-            phases={**state.phases, name: (phase,)},
-            joined={**state.joined, name: join},
-            now=max(state.now, join.t_end),
-        )
-    return None
-
-
-def _hold_ends(state: _State, name: str, t_s: float, phase: RegraspPhase | ReleasePhase) -> _State:
-    """``state`` with ``name``'s current hold ended at ``t_s`` [s] and ``phase`` after it
-    (who holds what, and the time, are the caller's to change)."""
-    h = state.holding[name]
-    hold = ContactPhase(finger=name, t_start=h.t_from, t_end=t_s, p_object=h.p, n_object=h.n)
-    return replace(
-        state,
-        history={**state.history, name: (*state.history[name], replace(h, t_to=t_s))},
-        phases={**state.phases, name: (*state.phases[name], hold, phase)},
-    )
-
-
 def _next_deadline(
-    ctx: _Context, triggers: list[_Trigger], trig: _Trigger, win: LiftOffWindow
+    ctx: PlanContext, triggers: list[Trigger], trig: Trigger, win: LiftOffWindow
 ) -> tuple[float, str] | None:
     """The time this regrasp should have landed by so that the other holds lost before
     the end can each be regrasped in turn (:func:`regrasp_chain` over them; those lost
@@ -1060,39 +571,15 @@ def _next_deadline(
     return chain.latest_start_s, chain.binding or ""
 
 
-def _q_hand(ctx: _Context, state: _State, stay: list[str]) -> Callable[[np.ndarray], np.ndarray]:
-    """Hand configurations over time with the ``stay`` fingers holding (exact IK)."""
-    hand, motion, tol, base_q = (
-        ctx.scene.hand,
-        ctx.scene.motion,
-        ctx.params.contact.ik_tol_m,
-        ctx.base_q,
-    )
-
-    def q_hand(times: np.ndarray) -> np.ndarray:
-        q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
-        for n in stay:
-            q[:, hand.fingers[n].q_indices] = holding_q(
-                hand, motion, n, state.holding[n], times, tol
-            )
-        for n, rel in state.released.items():  # let go: still, after the back-off
-            idx = hand.fingers[n].q_indices
-            for j in range(idx.size):
-                q[:, idx[j]] = np.interp(times, rel.times_s, rel.q[:, j])
-        return q
-
-    return q_hand
-
-
 def _apply(
-    ctx: _Context,
-    state: _State,
+    ctx: PlanContext,
+    state: PlanState,
     name: str,
     t_trig: float,
     why: str,
     found: Found,
     new_hold: Holding | None = None,
-) -> _State:
+) -> PlanState:
     """The state after a verified regrasp of ``name`` (``new_hold``: the hold after its
     landing, if already followed)."""
     res, choice = found.result, found.choice
@@ -1125,17 +612,17 @@ def _apply(
         },
     )
     if new_hold is None:
-        new_hold = _landing_hold(ctx, name, res)
+        new_hold = landing_hold(ctx, name, res)
     log.info("%s regrasped at t=%.3f s (%s)", name, res.t_start, why)
     return replace(
-        _hold_ends(state, name, res.t_start, fly),
+        hold_ends(state, name, res.t_start, fly),
         holding={**state.holding, name: new_hold},
         regrasps=(*state.regrasps, res),
         now=res.t_end,
     )
 
 
-def _signature(state: _State) -> tuple:
+def _signature(state: PlanState) -> tuple:
     """What identifies a state for the backtracking: who holds what since when."""
     return (
         round(state.now, 9),
@@ -1149,12 +636,12 @@ def _signature(state: _State) -> tuple:
 
 
 def _another_first(
-    ctx: _Context,
-    state: _State,
-    contenders: list[_Trigger],
-    triggers: list[_Trigger],
+    ctx: PlanContext,
+    state: PlanState,
+    contenders: list[Trigger],
+    triggers: list[Trigger],
     steps: list[_Step],
-) -> _State | None:
+) -> PlanState | None:
     """When the first contender finds no regrasp, let another contender go first
     (e.g. the other finger of two that close in on each other); None if none can."""
     for alt in contenders[1:]:
@@ -1177,12 +664,12 @@ _BACKTRACK_DEPTH = 3  # how many earlier regrasps a failure may revisit
 
 
 def _backtrack(
-    ctx: _Context,
+    ctx: PlanContext,
     steps: list[_Step],
     failure: PlanningError,
-    state: _State,
-    trig: _Trigger,
-) -> _State | None:
+    state: PlanState,
+    trig: Trigger,
+) -> PlanState | None:
     """Change an earlier decision so that ``trig.finger`` can go; None if none helps.
 
     The last regrasps are revisited, the latest first (at most ``_BACKTRACK_DEPTH``).
@@ -1197,7 +684,7 @@ def _backtrack(
     for depth in range(1, min(_BACKTRACK_DEPTH, len(steps)) + 1):
         step = steps[-depth]
         kept = steps[: len(steps) - depth]
-        options: list[tuple[str, _Trigger, dict]] = []
+        options: list[tuple[str, Trigger, dict]] = []
         h_then = step.before.holding.get(trig.finger)
         if (
             timing
@@ -1243,7 +730,7 @@ def _backtrack(
     return None
 
 
-def _plan_until(ctx: _Context, state: _State, until: float, *, final: bool = False) -> Plan:
+def _plan_until(ctx: PlanContext, state: PlanState, until: float, *, final: bool = False) -> Plan:
     """The plan up to ``until``: every finger holding its current contact to then (the
     whole plan with ``final``, which keeps a hold that starts at the very end)."""
     phases = {n: list(state.phases[n]) for n in state.released}

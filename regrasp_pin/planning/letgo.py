@@ -1,0 +1,320 @@
+"""Letting a finger go when no regrasp of it verifies.
+
+A finger whose contact cannot be followed and that has no verified regrasp lets go
+for the rest of the motion (:func:`~.release.plan_release`, a ``release`` phase) if
+more than ``min_holding`` others remain to take turns, or if the others hold in force
+closure to the end; otherwise a finger that took no part so far may join in its place
+(:func:`~.join.plan_join`, a ``join`` phase) once it has let go: a hand-over.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+
+import numpy as np
+
+from ..exceptions import ContactError, PlanningError
+from ..grasp.holding import holding_q, rest_configuration
+from ..grasp.manifold import build_manifold
+from ..plan import JoinPhase, ReleasePhase
+from .join import join_duration, plan_join
+from .release import Release, plan_release
+from .schedule import TIME_TOL_S, LiftOffWindow, held_until
+from .state import (
+    PlanContext,
+    PlanState,
+    Trigger,
+    hold_ends,
+    landing_hold,
+    pending_triggers,
+    q_hand_of,
+)
+
+__all__ = ["let_go"]
+
+log = logging.getLogger(__name__)
+
+
+def let_go(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> PlanState | None:
+    """The state after ``trig.finger``, which has no verified regrasp, lets go
+    (:func:`_try_release`), or lets go with an idle finger joining in its place
+    (:func:`_try_handover`); None if neither verifies."""
+    return _try_release(ctx, state, trig, win, stay, why) or _try_handover(
+        ctx, state, trig, win, stay, why
+    )
+
+
+def _try_release(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> PlanState | None:
+    """The state after ``trig.finger`` lets go for the rest of the motion, or None.
+
+    Only when releases are allowed and the hold is lost before the end, and, if the
+    fingers that stay are too few to take turns (no more than ``min_holding``), when
+    every one of them holds to the end once this one has gone (a neighbour it was
+    closing in on no longer ends their hold). The release times tried are the latest in
+    the window first, then earlier ones.
+    """
+    p, motion = ctx.params, ctx.scene.motion
+    name = trig.finger
+    end = motion.t_end - p.dt_s - TIME_TOL_S
+    if not p.release or win.empty or trig.lost_s >= end:
+        return None
+    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
+    if len(stay) <= p.min_holding and any(
+        e.lost_s < end
+        for e in pending_triggers(ctx, without, gone=(name,))
+        if e.finger in stay and e.finger not in state.held_to_end
+    ):
+        return None
+    h = state.holding[name]
+    q_hand = q_hand_of(ctx, state, stay)
+    tried: list[str] = []
+    for t_r in _release_times(ctx, win):
+        q_r = holding_q(ctx.scene.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
+        for park in (None, _park(ctx, name)):
+            rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
+            if rel is not None:
+                log.info("%s lets go at t=%.3f s", name, t_r)
+                others = (
+                    f"{len(stay)} others go on"
+                    if len(stay) > p.min_holding
+                    else "the others hold to the end"
+                )
+                note = f"{why}; no verified regrasp: let go ({others})"
+                return _apply_release(state, name, rel, note)
+    log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
+    return None
+
+
+def _release_times(ctx: PlanContext, win: LiftOffWindow) -> Iterator[float]:
+    """Release times to try [s]: the latest in the window first, then earlier ones by
+    ``start_step_s`` (at most ``max_starts``), while the budget lasts."""
+    p = ctx.params
+    for k in range(p.max_starts):
+        t_r = win.latest_s - k * p.start_step_s
+        if t_r < win.earliest_s - TIME_TOL_S or ctx.budget.exhausted:
+            return
+        yield max(t_r, win.earliest_s)
+
+
+def _park(ctx: PlanContext, name: str) -> np.ndarray:
+    """Where ``name`` goes after letting go: its posture clearest of the object over the
+    motion (:func:`~.holding.rest_configuration`), computed once."""
+    if name not in ctx.parks:
+        q = rest_configuration(ctx.scene.hand, ctx.scene.obj, ctx.scene.motion, [name])
+        ctx.parks[name] = q[ctx.scene.hand.fingers[name].q_indices]
+    return ctx.parks[name]
+
+
+def _release_at(
+    ctx: PlanContext,
+    state: PlanState,
+    name: str,
+    t_r: float,
+    q_r: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    park: np.ndarray | None,
+    tried: list[str],
+) -> Release | None:
+    """A verified release of ``name`` at ``t_r`` (``park``: see plan_release), or None
+    (the failure noted in ``tried``)."""
+    p, h = ctx.params, state.holding[name]
+    ctx.budget.spend()
+    try:
+        return plan_release(
+            ctx.scene.hand,
+            ctx.scene.obj,
+            ctx.scene.motion,
+            name,
+            t_r,
+            (h.p, h.n),
+            q_r,
+            q_hand,
+            clearance_m=p.regrasp.clearance_m,
+            back_off_s=p.release_back_off_s,
+            dt_s=p.dt_s,
+            link_clearance_m=p.regrasp.link_clearance_m,
+            finger_clearance_m=p.regrasp.finger_clearance_m,
+            ik_tol_m=p.contact.ik_tol_m,
+            q_park=park,
+            park_s=p.regrasp.duration_s,
+        )
+    except PlanningError as exc:
+        tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {exc.kind.value}")
+        return None
+
+
+def _apply_release(state: PlanState, name: str, rel: Release, why: str) -> PlanState:
+    """The state after a verified release of ``name``."""
+    off = ReleasePhase(
+        finger=name,
+        t_start=rel.t_start,
+        t_end=rel.t_end,
+        P_object=rel.P_object,
+        min_clearance_m=rel.min_clearance_m,
+        reason=why,
+    )
+    return replace(
+        hold_ends(state, name, rel.t_start, off),
+        holding={n: x for n, x in state.holding.items() if n != name},
+        now=max(state.now, rel.t_start),
+        released={**state.released, name: rel},
+    )
+
+
+_JOIN_CANDIDATES = 3  # new contacts tried per joining finger and release time
+
+
+_JOIN_APPROACH_S = 0.1  # the joining fingertip's final approach along Q's normal [s]
+
+
+def _try_handover(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> PlanState | None:
+    """The state after ``trig.finger`` lets go and a finger that took no part so far
+    joins in its place (:mod:`.planning.join`), or None.
+
+    Only when releases are allowed and such a finger exists. The release times tried
+    are the latest in the window first; the joining fingers in the hand's order, each
+    with its best new contacts (:meth:`RegraspSearch.choose`, the paper's criterion);
+    the join starts when the release has backed off, the others holding.
+    """
+    p = ctx.params
+    name = trig.finger
+    idle = [n for n in ctx.scene.hand.finger_names if n not in state.phases]
+    if not p.release or not idle or win.empty:
+        return None
+    h = state.holding[name]
+    q_hand = q_hand_of(ctx, state, stay)
+    for t_r in _release_times(ctx, win):
+        if t_r + p.release_back_off_s + p.regrasp.duration_s > ctx.scene.motion.t_end - p.dt_s:
+            continue  # no time for the other finger to join
+        q_r = holding_q(
+            ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), p.contact.ik_tol_m
+        )[0]
+        failed: list[str] = []
+        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, None, failed) or _release_at(
+            ctx, state, name, t_r, q_r, q_hand, _park(ctx, name), failed
+        )
+        if rel is None:
+            log.debug("%s cannot let go at %s", name, failed)
+            continue
+        for other in idle:
+            note = f"{why}; no verified regrasp: let go, {other} joins in its place"
+            after = _apply_release(state, name, rel, note)
+            joined = _join(ctx, after, other, t_r + p.release_back_off_s, stay, name)
+            if joined is not None:
+                log.info("%s lets go at t=%.3f s, %s joins", name, t_r, other)
+                return joined
+    return None
+
+
+def _join(
+    ctx: PlanContext, state: PlanState, name: str, t0: float, stay: list[str], instead_of: str
+) -> PlanState | None:
+    """The state after ``name`` (idle) joins from ``t0`` [s] with the ``stay`` fingers
+    holding; None if no new contact verifies or holds long enough."""
+    p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
+    f = hand.finger(name)
+    t_arrive = t0 + p.regrasp.duration_s
+    if t_arrive > motion.t_end - p.dt_s:
+        return None
+    if name not in ctx.manifolds:
+        m_times = ctx.manifolds[ctx.active[0]].times_s
+        ctx.manifolds[name] = build_manifold(
+            f, ctx.search.sample, motion, m_times, contact=p.contact
+        )
+    q_from = ctx.base_q[f.q_indices]
+    T = motion.pose(np.array([t_arrive]))[0]
+    tip_obj = T[:3, :3].T @ (f.fk(q_from) - T[:3, 3])  # the resting tip, object frame
+    k0 = int(np.argmin(np.linalg.norm(ctx.search.sample.points - tip_obj, axis=1)))
+    P = (ctx.search.sample.points[k0], ctx.search.sample.normals[k0])
+    others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
+    q_hand = q_hand_of(ctx, state, stay)
+    excluded: list[np.ndarray] = []
+    for _ in range(_JOIN_CANDIDATES):
+        if ctx.budget.exhausted:
+            return None
+        ctx.budget.spend(2)  # the choice of Q and the join
+        try:
+            choice = ctx.search.choose(name, P, t_arrive, others, q_hand, excluded)
+            duration = join_duration(
+                q_from,
+                choice.q_arrive,
+                f.velocity_limit,
+                minimum_s=p.regrasp.duration_s,
+                approach_s=_JOIN_APPROACH_S,
+                dt_s=p.dt_s,
+            )
+            if t0 + duration > motion.t_end - p.dt_s:
+                return None  # no time left to hold Q
+            if t0 + duration > t_arrive + TIME_TOL_S:  # chosen for an earlier arrival
+                choice = ctx.search.choose(name, P, t0 + duration, others, q_hand, excluded)
+        except ContactError as exc:
+            log.debug("%s cannot join: %s", name, exc)
+            return None
+        excluded.append(choice.p_object)
+        try:
+            join = plan_join(
+                hand,
+                ctx.scene.obj,
+                motion,
+                name,
+                t0,
+                q_from,
+                (choice.p_object, choice.n_object),
+                choice.q_arrive,
+                q_hand,
+                duration_s=duration,
+                approach_s=_JOIN_APPROACH_S,
+                clearance_m=p.regrasp.clearance_m,
+                dt_s=p.dt_s,
+                link_clearance_m=p.regrasp.link_clearance_m,
+                finger_clearance_m=p.regrasp.finger_clearance_m,
+                ik_tol_m=p.contact.ik_tol_m,
+            )
+        except PlanningError as exc:
+            log.debug("%s cannot join: %s", name, exc)
+            continue
+        hold = landing_hold(ctx, name, join)
+        lost = held_until(hold.track, p.contact)
+        if lost < min(join.t_end + p.regrasp.duration_s, motion.t_end - p.dt_s) - TIME_TOL_S:
+            log.debug("%s cannot join: Q held only to t=%.3f s", name, lost)
+            continue
+        phase = JoinPhase(
+            finger=name,
+            t_start=join.t_start,
+            t_end=join.t_end,
+            Q_object=join.Q_object,
+            min_clearance_m=join.min_clearance_m,
+            reason=f"joins in place of {instead_of}, which let go",
+        )
+        return replace(
+            state,
+            holding={**state.holding, name: hold},
+            history={**state.history, name: ()},
+            phases={**state.phases, name: (phase,)},
+            joined={**state.joined, name: join},
+            now=max(state.now, join.t_end),
+        )
+    return None

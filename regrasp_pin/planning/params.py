@@ -1,0 +1,86 @@
+"""The parameters of the whole-hand planner (:func:`~.planner.plan_manipulation`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .._validate import positive, positive_int
+from ..grasp.contact import ContactModel
+from .regrasp import RegraspParams
+
+__all__ = ["PlannerParams"]
+
+
+@dataclass(frozen=True)
+class PlannerParams:
+    """Parameters of the whole-hand planner.
+
+    Attributes:
+        dt_s: Time step of the holding phases [s].
+        manifold_dt_s: Time step of the joint-space manifolds used to choose Q [s].
+        sample_spacing_m: Surface sampling spacing for the manifolds [m].
+        lead_s: A regrasp preferably starts this long before its trigger [s].
+        min_holding: Fewest fingers that must hold while one is in the air.
+        mu: Friction coefficient for force closure.
+        candidates: How many new contacts Q to try per lift-off time.
+        start_step_s: Spacing of the lift-off times tried in a finger's window [s].
+        max_starts: Most lift-off times tried per regrasp.
+        max_backtracks: Most times the planner re-plans an earlier regrasp.
+        max_steps: The search budget of the whole call, in steps (a new contact
+            chosen, a regrasp planned, a release or a join tried; see
+            :class:`~.search.SearchBudget`): once spent, no new attempt starts and the
+            planner stops with a ``budget`` failure and the partial plan. Counted, not
+            timed, so that a plan is the same on every machine; 400 steps take up to
+            about 50 s on a 2-core machine.
+        budget_s: An optional wall-clock limit of the whole call [s] (manifolds and
+            tracking included) on top of ``max_steps``, with the same effect; None (the
+            default): none, so that the outcome never depends on the machine's speed.
+        exit_tolerance_s: New contacts whose exit times differ by less than this are
+            ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
+        fingers: The fingers that take part (default: all). The others stay idle at
+            the configuration of :func:`rest_configuration`, as obstacles that every
+            regrasp is verified against.
+        contact: The contact model (trigger margin, pad cone, tolerances).
+        regrasp: Parameters of each regrasp (``duration_s`` is the shortest duration;
+            longer ones follow from the joint velocity limits).
+        release: Let a finger go for the rest of the motion when its hold is lost with
+            no verified regrasp, if more than ``min_holding`` others remain to take
+            turns, or if the others hold in force closure to the end
+            (:mod:`.planning.release`).
+        release_back_off_s: Duration of a release's back-off move [s].
+    """
+
+    dt_s: float = 0.01
+    manifold_dt_s: float = 0.05
+    sample_spacing_m: float = 0.002
+    lead_s: float = 0.02
+    min_holding: int = 3
+    mu: float = 0.8
+    candidates: int = 6
+    start_step_s: float = 0.1
+    max_starts: int = 5
+    max_backtracks: int = 8
+    max_steps: int = 400
+    budget_s: float | None = None
+    fingers: tuple[str, ...] | None = None
+    exit_tolerance_s: float = 0.25
+    contact: ContactModel = field(default_factory=ContactModel)
+    regrasp: RegraspParams = field(default_factory=RegraspParams)
+    release: bool = True
+    release_back_off_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("dt_s", "manifold_dt_s", "sample_spacing_m", "mu", "start_step_s"):
+            positive(getattr(self, name), f"PlannerParams.{name}")
+        for name in ("lead_s", "exit_tolerance_s", "release_back_off_s"):
+            positive(getattr(self, name), f"PlannerParams.{name}", allow_zero=True)
+        for name, least in (
+            ("min_holding", 1),
+            ("candidates", 1),
+            ("max_starts", 1),
+            ("max_backtracks", 0),
+            ("max_steps", 1),
+        ):
+            positive_int(getattr(self, name), f"PlannerParams.{name}", least)
+        if self.budget_s is not None:
+            positive(self.budget_s, "PlannerParams.budget_s", allow_zero=True)
