@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # imported lazily at run time
 __all__ = [
     "PLAN_FORMAT",
     "ContactPhase",
+    "IdlePhase",
     "JoinPhase",
     "Plan",
     "RegraspPhase",
@@ -216,7 +217,34 @@ class JoinPhase:
         }
 
 
-Phase = ContactPhase | RegraspPhase | ReleasePhase | JoinPhase
+@dataclass(frozen=True)
+class IdlePhase:
+    """A finger that takes no part rests, clear of the object and of the other fingers,
+    from ``t_start`` to ``t_end`` [s]: a finger outside ``PlannerParams.fingers`` for
+    the whole plan, or one that joins later (until its ``join`` phase).
+
+    Attributes:
+        finger: Finger name.
+        t_start: Start [s].
+        t_end: End [s].
+    """
+
+    finger: str
+    t_start: float
+    t_end: float
+    kind: str = field(default="idle", init=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The phase as plan-file data (JSON types)."""
+        return {
+            "finger": self.finger,
+            "kind": self.kind,
+            "t_start": self.t_start,
+            "t_end": self.t_end,
+        }
+
+
+Phase = ContactPhase | RegraspPhase | ReleasePhase | JoinPhase | IdlePhase
 
 
 def _phase_from_dict(d: dict[str, Any]) -> Phase:
@@ -262,6 +290,8 @@ def _phase_from_dict(d: dict[str, Any]) -> Phase:
             min_clearance_m=float(d["min_clearance_m"]),
             reason=str(d.get("reason", "")),
         )
+    if d.get("kind") == "idle":
+        return IdlePhase(finger=d["finger"], t_start=float(d["t_start"]), t_end=float(d["t_end"]))
     if d.get("kind") == "join":
         return JoinPhase(
             finger=d["finger"],
@@ -459,3 +489,8 @@ class Plan:
         """All join phases, in time order."""
         out = [p for ps in self.phases.values() for p in ps if isinstance(p, JoinPhase)]
         return sorted(out, key=lambda p: p.t_start)
+
+    def idles(self) -> list[IdlePhase]:
+        """All idle phases, in time order."""
+        out = [p for ps in self.phases.values() for p in ps if isinstance(p, IdlePhase)]
+        return sorted(out, key=lambda p: (p.t_start, p.finger))

@@ -9,7 +9,7 @@ import pytest
 from conftest import SHADOW_HAND_FILE, assert_close, shadow_urdf
 
 from regrasp_pin import Box, ContactPhase, Hand, InputError, ModelFileError, Plan, RegraspPhase
-from regrasp_pin.plan import PLAN_FORMAT, JoinPhase, ReleasePhase, hand_record
+from regrasp_pin.plan import PLAN_FORMAT, IdlePhase, JoinPhase, ReleasePhase, hand_record
 
 
 def _plan() -> Plan:
@@ -42,6 +42,7 @@ def _plan() -> Plan:
             ReleasePhase("ring", 0.2, 1.0, np.array([0.0, -0.02, 0.0]), 0.003, reason="gone"),
         ],
         "little": [
+            IdlePhase("little", 0.0, 0.3),
             JoinPhase("little", 0.3, 0.7, np.array([0.0, -0.02, 0.01]), 0.002, reason="joins"),
             ContactPhase("little", 0.7, 1.0, np.array([0.0, -0.02, 0.01]), np.array([0, -1.0, 0])),
         ],
@@ -92,6 +93,8 @@ def test_round_trip(tmp_path):
     assert (rel.finger, rel.reason, join.finger, join.reason) == ("ring", "gone", "little", "joins")
     assert_close(join.Q_object, [0.0, -0.02, 0.01], atol=0.0)
     assert (join.t_start, join.t_end, join.min_clearance_m) == (0.3, 0.7, 0.002)
+    (idle,) = back.idles()
+    assert (idle.finger, idle.kind, idle.t_start, idle.t_end) == ("little", "idle", 0.0, 0.3)
 
 
 def test_rebuilds_hand_object_and_poses():

@@ -111,6 +111,19 @@ def recheck(demo):
     return recheck_plan(plan, max_step_rad=1e-3, penetration_tol_m=1e-4, contact_tol_m=1e-4)
 
 
+def test_every_finger_has_phases_over_the_whole_plan(demo, recheck):
+    """The little finger takes no part: one idle phase over the whole plan, re-checked
+    clear of the object; the others' phases start at 0 and end at the end."""
+    _, plan, _, _ = demo
+    assert set(plan.phases) == set(plan.load_hand().finger_names)
+    (idle,) = plan.phases["little"]
+    assert (idle.kind, idle.t_start, idle.t_end) == ("idle", plan.t[0], plan.t[-1])
+    assert [c.finger for c in recheck.idles] == ["little"]
+    assert recheck.idles[0].min_object_distance_m > 0.0
+    for ps in plan.phases.values():
+        assert ps[0].t_start == plan.t[0] and ps[-1].t_end == pytest.approx(plan.t[-1])
+
+
 def test_three_fingers_hold_at_every_instant(recheck):
     assert recheck.min_holding >= 3, recheck.t_min_holding_s
 

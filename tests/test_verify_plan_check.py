@@ -17,7 +17,9 @@ from regrasp_pin import ContactPhase, Plan, RegraspPhase, make_scenario
 from regrasp_pin.exceptions import InputError, ModelFileError
 from regrasp_pin.grasp.contact import tip_targets
 from regrasp_pin.grasp.holding import holding_hand, rest_configuration
+from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.model.motion import ObjectMotion
+from regrasp_pin.plan import IdlePhase
 from regrasp_pin.verify.plan_check import recheck_plan
 
 T_END = 0.6
@@ -236,3 +238,40 @@ def test_the_object_against_the_palm(clean):
     assert not bad.ok and bad.min_palm_distance_m < -0.005
     assert any("enters the hand's fixed geometry" in p for p in bad.problems)
     assert bad.t_min_palm_s >= plan.t[-5] - 1e-12
+
+
+def _with_idle_little(plan: Plan, q: np.ndarray | None = None) -> Plan:
+    """The plan with the little finger (idle, no phase in the hand-made plan) in an idle
+    phase, optionally with the configurations ``q``."""
+    out = _with_q(plan, plan.q if q is None else q)
+    out.phases["little"] = [IdlePhase("little", float(plan.t[0]), float(plan.t[-1]))]
+    return out
+
+
+def test_an_idle_finger_is_checked_against_the_object(clean):
+    """An idle phase is re-checked like a moving one, finger against object with Coal:
+    at rest the little finger is as far from the object as the planner's own clearance
+    (model/clearance, the other pipeline) says; bent into the object, it is reported."""
+    plan, hand, _ = clean
+    f = hand.fingers["little"]
+    obj, T = plan.load_object(), plan.poses()
+    clearance = LinkClearance(hand, "little", obj, include_tip=True)
+    chk = recheck_plan(_with_idle_little(plan))
+    assert chk.ok, chk.problems
+    (idle,) = chk.idles
+    assert (idle.finger, idle.t_start, idle.t_end) == ("little", plan.t[0], plan.t[-1])
+    at_samples = clearance(plan.q, T)
+    assert 0.0 < idle.min_object_distance_m <= at_samples.min() + 1e-9
+    assert idle.min_object_distance_m == pytest.approx(at_samples.min(), abs=1e-4)
+
+    # the fingertip pulled 80 % of the way to the object's centre: into the object
+    tip = f.fk(plan.q[0, f.q_indices])
+    bent = f.ik((tip + 0.8 * (T[0][:3, 3] - tip))[None], plan.q[0, f.q_indices]).q[0]
+    q = plan.q.copy()
+    q[:, f.q_indices] = bent
+    inside = clearance(q, T)
+    assert inside.min() < -1e-3  # the premise: the other pipeline sees it inside
+    chk = recheck_plan(_with_idle_little(plan, q))
+    assert not chk.ok
+    assert chk.idles[0].min_object_distance_m == pytest.approx(inside.min(), abs=5e-4)
+    assert any("little (idle at 0.000 s) penetrates the object" in p for p in chk.problems)

@@ -49,7 +49,7 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from ..model.scene import Scene
-from ..plan import ContactPhase, Plan, RegraspPhase, hand_record
+from ..plan import ContactPhase, IdlePhase, Plan, RegraspPhase, hand_record
 from .join import Join
 from .letgo import let_go
 from .params import PlannerParams
@@ -810,6 +810,18 @@ def _assemble(
         t=times,
         q=q,
         T_palm_object=motion.as_xyzquat(times),
-        phases={n: list(ps) for n, ps in phases.items()},
+        phases=_with_idle(hand, phases, float(times[0]), float(times[-1])),
         summary={},
     )
+
+
+def _with_idle(hand: Hand, phases: dict[str, list], t0: float, t1: float) -> dict[str, list]:
+    """Every finger's phases from ``t0`` to ``t1`` [s]: an ``idle`` phase for a finger
+    that takes no part, and before the ``join`` of one that joins later."""
+    out = {n: list(ps) for n, ps in phases.items()}
+    for name in hand.finger_names:
+        ps = out.get(name, [])
+        start = min(ps[0].t_start, t1) if ps else t1
+        if start > t0 + TIME_TOL_S:
+            out[name] = [IdlePhase(name, t0, start), *ps]
+    return out

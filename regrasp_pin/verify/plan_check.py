@@ -48,7 +48,7 @@ from ..exceptions import InputError
 from ..plan import ContactPhase
 
 if TYPE_CHECKING:
-    from ..plan import JoinPhase, Plan, RegraspPhase, ReleasePhase
+    from ..plan import IdlePhase, JoinPhase, Plan, RegraspPhase, ReleasePhase
 
 __all__ = ["JointLimitViolation", "PlanCheck", "RegraspCheck", "recheck_plan"]
 
@@ -122,7 +122,9 @@ class PlanCheck:
     Attributes:
         ok: True when no problem was found.
         regrasps: One :class:`RegraspCheck` per regrasp phase (time order), then one per
-            release phase.
+            release phase, then one per join phase.
+        idles: One :class:`RegraspCheck` per idle phase: the resting finger against the
+            object and the other fingers.
         joint_limit_violations: The joints that leave their limits (worst sample each).
         min_holding: Fewest fingers holding a contact at any instant of the plan.
         t_min_holding_s: A time when that happens [s].
@@ -144,6 +146,7 @@ class PlanCheck:
 
     ok: bool
     regrasps: tuple[RegraspCheck, ...]
+    idles: tuple[RegraspCheck, ...]
     joint_limit_violations: tuple[JointLimitViolation, ...]
     min_holding: int
     t_min_holding_s: float
@@ -253,15 +256,17 @@ def recheck_plan(
             f"(tolerance {pen_tol * 1e3:.3f} mm)"
         )
 
-    checks = []
-    moves: list[RegraspPhase | ReleasePhase | JoinPhase] = [
+    checks: list[RegraspCheck] = []
+    idle_checks: list[RegraspCheck] = []
+    moves: list[RegraspPhase | ReleasePhase | JoinPhase | IdlePhase] = [
         *plan.regrasps(),
         *plan.releases(),
         *plan.joins(),
+        *plan.idles(),
     ]
     for phase in moves:
         rc = _check_regrasp(scene, phase, max_step)
-        checks.append(rc)
+        (idle_checks if phase.kind == "idle" else checks).append(rc)
         if rc.min_object_distance_m < -pen_tol:
             problems.append(
                 f"{rc.finger} ({phase.kind} at {rc.t_start:.3f} s) penetrates the object by "
@@ -278,6 +283,7 @@ def recheck_plan(
     return PlanCheck(
         ok=not problems,
         regrasps=tuple(checks),
+        idles=tuple(idle_checks),
         joint_limit_violations=tuple(violations),
         min_holding=n_hold,
         t_min_holding_s=t_hold,
@@ -531,7 +537,7 @@ def _densify(plan: Plan, sel: np.ndarray, max_step: float) -> tuple[np.ndarray, 
 
 
 def _check_regrasp(
-    scene: _Scene, phase: RegraspPhase | ReleasePhase | JoinPhase, max_step: float
+    scene: _Scene, phase: RegraspPhase | ReleasePhase | JoinPhase | IdlePhase, max_step: float
 ) -> RegraspCheck:
     """Densify one regrasp; the moving finger against the object, all fingers pairwise."""
     import coal
