@@ -240,7 +240,8 @@ def _figures(result: ManipulationPlan, out: Path) -> list[Path]:
     files = []
     from ..plotting.joints import plot_joint_angles
 
-    forefinger = "index" if "index" in result.plan.phases else next(iter(result.plan.phases))
+    taking_part = [f for f, ps in result.plan.phases.items() if ps[0].kind != "idle"]
+    forefinger = "index" if "index" in taking_part else taking_part[0]
     fig = plot_joint_angles(result.plan, forefinger)
     files.append(out / "fig9_joint_angles.png")
     fig.savefig(files[-1], dpi=110)
