@@ -6,7 +6,8 @@ other fingers hold the object in force closure to the end, the finger can simply
 go: from the release time ``t_r`` its fingertip backs off along the contact normal
 (fixed in the palm frame: ``clearance`` from where the pad touched) over a short
 minimum-jerk move; the finger then stays still or, given a parking configuration,
-moves there (minimum jerk, joint space) and stays. The motion is verified with Coal
+moves there (minimum jerk, joint space, as slowly as its velocity limits need) and
+stays. The joint speeds are checked against the limits and the motion is verified with Coal
 like every regrasp (:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip
 clear of the object, allowed to touch only at the release, the other links and the
 other fingers clear, joints within their limits).
@@ -27,7 +28,7 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..verify.finger_motion import verify_finger_motion
-from .timing import minimum_jerk
+from .timing import check_joint_speed, duration_for_move, minimum_jerk
 
 __all__ = ["Release", "plan_release", "verify_or_raise"]
 
@@ -94,15 +95,17 @@ def plan_release(
         finger_clearance_m: Clearance from the other fingers [m].
         ik_tol_m: IK tolerance of the backed-off configuration [m].
         q_park: ``(k,)`` where the finger goes after the back-off (None: it stays).
-        park_s: Duration of the move to ``q_park`` [s] (shorter if the motion ends).
+        park_s: Shortest duration of the move to ``q_park`` [s] (longer when the joint
+            velocity limits need it; cut short, unfinished, if the motion ends).
 
     Returns:
         The verified :class:`Release`.
 
     Raises:
         PlanningError: the release is at the end of the motion (``too-late``), the
-            backed-off position is out of reach (``ik-unreachable``) or the motion
-            fails the Coal check (its kind, measured and required value).
+            backed-off position is out of reach (``ik-unreachable``), a joint would
+            move faster than its limit (``velocity``) or the motion fails the Coal
+            check (its kind, measured and required value).
     """
     f = hand.finger(finger)
     t_r, t_end = float(t_release_s), float(motion.t_end)
@@ -140,9 +143,18 @@ def plan_release(
     s = minimum_jerk((times - t_r) / max(d, 1e-9))
     q = q_release[None] + s[:, None] * (q_off - q_release)[None]
     if q_park is not None and t_move[-1] < t_end - 1e-9:
-        d_park = min(park_s, t_end - t_move[-1])
+        # as long as the joint velocity limits need (a motion that ends first ends it)
+        d_park = duration_for_move(
+            q_off,
+            np.asarray(q_park, float),
+            f.velocity_limit,
+            minimum_s=park_s,
+            dt_s=dt_s,
+            path_factor=1.0,  # a straight joint-space move
+        )
         s_park = minimum_jerk((times - t_move[-1]) / d_park)
         q = q + s_park[:, None] * (np.asarray(q_park, float) - q_off)[None]
+    check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
     q_full = q_hand(times)
     q_full[:, f.q_indices] = q
     T = motion.pose(times)

@@ -56,6 +56,7 @@ def duration_for_move(
     *,
     minimum_s: float,
     dt_s: float,
+    path_factor: float = PATH_FACTOR,
 ) -> float:
     """Shortest regrasp duration [s] that keeps every joint under its velocity limit.
 
@@ -65,9 +66,12 @@ def duration_for_move(
         velocity_limit: ``(k,)`` joint velocity limits [rad/s].
         minimum_s: The duration is never shorter than this [s].
         dt_s: The duration is a multiple of this step [s].
+        path_factor: Joint-space path length over the straight distance: the default
+            allows for a regrasp's detour around the object; 1 for a straight
+            joint-space move (minimum jerk along the segment).
     """
     dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
-    needed = MJ_PEAK * PATH_FACTOR * float(np.max(dq / np.asarray(velocity_limit, float)))
+    needed = MJ_PEAK * path_factor * float(np.max(dq / np.asarray(velocity_limit, float)))
     return _round_up(max(needed, minimum_s), dt_s)
 
 
