@@ -81,22 +81,19 @@ def _try_release(
         if e.finger in stay and e.finger not in state.held_to_end
     ):
         return None
-    h = state.holding[name]
     q_hand = q_hand_of(ctx, state, stay)
     tried: list[str] = []
     for t_r in _release_times(ctx, win):
-        q_r = holding_q(ctx.scene.hand, motion, name, h, np.array([t_r]), p.contact.ik_tol_m)[0]
-        for park in (None, _park(ctx, name)):
-            rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
-            if rel is not None:
-                log.info("%s lets go at t=%.3f s", name, t_r)
-                others = (
-                    f"{len(stay)} others go on"
-                    if len(stay) > p.min_holding
-                    else "the others hold to the end"
-                )
-                note = f"{why}; no verified regrasp: let go ({others})"
-                return _apply_release(state, name, rel, note)
+        rel = _release_either(ctx, state, name, t_r, q_hand, tried)
+        if rel is not None:
+            log.info("%s lets go at t=%.3f s", name, t_r)
+            others = (
+                f"{len(stay)} others go on"
+                if len(stay) > p.min_holding
+                else "the others hold to the end"
+            )
+            note = f"{why}; no verified regrasp: let go ({others})"
+            return _apply_release(state, name, rel, note)
     log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
     return None
 
@@ -119,6 +116,28 @@ def _park(ctx: PlanContext, name: str) -> np.ndarray:
         q = rest_configuration(ctx.scene.hand, ctx.scene.obj, ctx.scene.motion, [name])
         ctx.parks[name] = q[ctx.scene.hand.fingers[name].q_indices]
     return ctx.parks[name]
+
+
+def _release_either(
+    ctx: PlanContext,
+    state: PlanState,
+    name: str,
+    t_r: float,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    tried: list[str],
+) -> Release | None:
+    """A verified release of ``name`` at ``t_r`` [s]: staying where it backed off, else
+    moving to its parking posture (:func:`_park`); None if neither verifies (the
+    failures noted in ``tried``)."""
+    h = state.holding[name]
+    q_r = holding_q(
+        ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), ctx.params.contact.ik_tol_m
+    )[0]
+    for park in (None, _park(ctx, name)):
+        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
+        if rel is not None:
+            return rel
+    return None
 
 
 def _release_at(
@@ -204,18 +223,12 @@ def _try_handover(
     idle = [n for n in ctx.scene.hand.finger_names if n not in state.phases]
     if not p.release or not idle or win.empty:
         return None
-    h = state.holding[name]
     q_hand = q_hand_of(ctx, state, stay)
     for t_r in _release_times(ctx, win):
         if t_r + p.release_back_off_s + p.regrasp.duration_s > ctx.scene.motion.t_end - p.dt_s:
             continue  # no time for the other finger to join
-        q_r = holding_q(
-            ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), p.contact.ik_tol_m
-        )[0]
         failed: list[str] = []
-        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, None, failed) or _release_at(
-            ctx, state, name, t_r, q_r, q_hand, _park(ctx, name), failed
-        )
+        rel = _release_either(ctx, state, name, t_r, q_hand, failed)
         if rel is None:
             log.debug("%s cannot let go at %s", name, failed)
             continue
