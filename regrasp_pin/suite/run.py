@@ -24,7 +24,7 @@ from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
 from .specs import ScenarioSpec
 
-__all__ = ["ScenarioResult", "load_results", "run_scenario"]
+__all__ = ["ScenarioResult", "load_results", "outcome_template", "run_scenario"]
 
 log = logging.getLogger(__name__)
 
@@ -40,11 +40,15 @@ class ScenarioResult:
         motion_kind: One of :data:`MOTION_KINDS`.
         ok: A full plan was found.
         failure_kind: The failure's :class:`~regrasp_pin.exceptions.FailureKind` value (e.g.
-            ``"velocity"``), ``"exception:<Type>"`` for an unexpected error, or None.
+            ``"velocity"``), ``"exception:<Type>"`` for an unexpected error, ``"timeout"``
+            or ``"crash"`` when the process running it was stopped or died
+            (:mod:`.isolate`), ``"worker-died"`` when a Dask worker was lost
+            (:mod:`.cluster`), or None.
         failure: The failure's message (for an unexpected error, with its traceback's
             last lines), or None.
         failed_stage: ``"grasp"`` (no initial grasp: the spec is skipped by the suite),
-            ``"build"`` (another error while building), ``"plan"``, or None.
+            ``"build"`` (another error while building), ``"plan"``, ``"run"`` (the
+            process or worker running it: timeout, crash, lost worker), or None.
         finger: The finger of the failure, if any.
         time_s: When in the motion the failure happened [s], if known.
         measured: The failure's measured value (units by kind), if any.
@@ -153,6 +157,19 @@ def _record_failure(result: ScenarioResult, exc: Exception, stage: str) -> None:
     result.attempts = _attempts_of(exc)
 
 
+def outcome_template(spec: ScenarioSpec) -> ScenarioResult:
+    """A result of ``spec`` that records nothing yet (``ok=False``, no failure)."""
+    return ScenarioResult(
+        name=spec.name,
+        hand=hand_label(spec.hand),
+        object_kind=spec.object.kind,
+        motion_kind=spec.motion.kind,
+        ok=False,
+        duration_s=spec.motion.duration_s,
+        spec=spec.to_dict(),
+    )
+
+
 def run_scenario(
     spec: ScenarioSpec,
     *,
@@ -183,15 +200,7 @@ def run_scenario(
     """
     steps = None if max_steps is None else positive_int(max_steps, "max_steps")
     budget = None if budget_s is None else positive(budget_s, "budget_s")
-    result = ScenarioResult(
-        name=spec.name,
-        hand=hand_label(spec.hand),
-        object_kind=spec.object.kind,
-        motion_kind=spec.motion.kind,
-        ok=False,
-        duration_s=spec.motion.duration_s,
-        spec=spec.to_dict(),
-    )
+    result = outcome_template(spec)
     t0 = time.perf_counter()
     try:
         scen = build_scenario(spec)
