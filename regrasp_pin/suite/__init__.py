@@ -36,10 +36,11 @@ the canonical pose. The grasp search of a
 generated spec samples the turn every ~2 deg (0.05-0.2 s) over its first 120 deg.
 """
 
-from .build import MAX_DRAWS_PER_SCENARIO, build_scenario, suite_scenarios
+from .build import build_scenario, suite_scenarios
 from .report import summarize
 from .run import ScenarioResult, load_results, run_scenario
 from .specs import (
+    MAX_DRAWS_PER_SCENARIO,
     MOTION_KINDS,
     OBJECT_KINDS,
     MotionSpec,
@@ -47,6 +48,7 @@ from .specs import (
     ScenarioSpec,
     generate_specs,
     neighbour_specs,
+    select_specs,
 )
 
 __all__ = [
@@ -62,6 +64,7 @@ __all__ = [
     "load_results",
     "neighbour_specs",
     "run_scenario",
+    "select_specs",
     "suite_scenarios",
     "summarize",
 ]

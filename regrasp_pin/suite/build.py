@@ -30,13 +30,11 @@ from ..scenarios import (
     setup_pose,
     turn_about_thumb_contact,
 )
-from .specs import ScenarioSpec, generate_specs
+from .specs import MAX_DRAWS_PER_SCENARIO, ScenarioSpec, generate_specs
 
 __all__ = ["MAX_DRAWS_PER_SCENARIO", "build_scenario", "suite_scenarios"]
 
 log = logging.getLogger(__name__)
-
-MAX_DRAWS_PER_SCENARIO = 4  # suite_scenarios draws at most this many specs per scenario
 
 
 @functools.cache

@@ -20,6 +20,7 @@ from ..model.objects import Box, ConvexMesh, ConvexObject, Prism
 from ..scenarios import HANDS, hand_label, is_hand_file, setup_objects
 
 __all__ = [
+    "MAX_DRAWS_PER_SCENARIO",
     "MOTION_KINDS",
     "OBJECT_KINDS",
     "MotionSpec",
@@ -27,9 +28,11 @@ __all__ = [
     "ScenarioSpec",
     "generate_specs",
     "neighbour_specs",
+    "select_specs",
 ]
 
 OBJECT_KINDS = ("prism", "box", "mesh")
+MAX_DRAWS_PER_SCENARIO = 4  # a suite draws at most this many specs per scenario
 MOTION_KINDS = ("object-axis", "contact-axis", "rotate-translate")
 
 SIZE_SPREAD = 0.10  # object sizes vary by +-10 % about the canonical ones
@@ -388,6 +391,41 @@ def generate_specs(n: int, seed: int = 0, hands: tuple[str, ...] = HANDS) -> lis
     seed = positive_int(seed, "seed", minimum=0)
     hands = _hands(hands)
     return [_draw_spec(i, seed, hands) for i in range(n)]
+
+
+def select_specs(
+    n: int,
+    seed: int = 0,
+    hands: tuple[str, ...] = HANDS,
+    *,
+    objects: tuple[str, ...] = OBJECT_KINDS,
+    motions: tuple[str, ...] = MOTION_KINDS,
+    draws_per_scenario: int = MAX_DRAWS_PER_SCENARIO,
+) -> list[ScenarioSpec]:
+    """The specs a suite of ``n`` scenarios draws from: those of :func:`generate_specs`
+    whose object kind is in ``objects`` and motion kind in ``motions``, enough of them
+    (``draws_per_scenario`` per scenario, as if every kind were kept) for ``n`` with an
+    initial grasp. The same kinds and seed give the same specs, in the same order.
+
+    Raises:
+        InputError: an unknown object or motion kind, or none; bad ``n`` or ``seed``.
+    """
+    for value, name, known in (
+        (objects, "objects", OBJECT_KINDS),
+        (motions, "motions", MOTION_KINDS),
+    ):
+        if not value:
+            raise InputError(name, "is empty", f"some of {known}")
+        for v in value:
+            choice(v, name, known)
+    n = positive_int(n, "n", minimum=0)
+    want = draws_per_scenario * n
+    # object kinds cycle with i % 3 and motion kinds with (i + i // 6) % 3: a kept
+    # fraction of len(objects) / 3 x len(motions) / 3 on average
+    scale = -(-len(OBJECT_KINDS) // len(objects)) * -(-len(MOTION_KINDS) // len(motions))
+    drawn = generate_specs(want * scale, seed, hands)
+    kept = [s for s in drawn if s.object.kind in objects and s.motion.kind in motions]
+    return kept[:want]
 
 
 def neighbour_specs(hands: tuple[str, ...] = HANDS) -> list[ScenarioSpec]:

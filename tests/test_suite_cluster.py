@@ -1,0 +1,165 @@
+"""The suite on Dask: the same results as one by one, faults kept to their scenario,
+streamed results that survive an interruption, and resuming without redoing work."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import suite_tasks
+from conftest import assert_close
+
+from regrasp_pin.exceptions import InputError
+from regrasp_pin.plan import Plan
+from regrasp_pin.suite import neighbour_specs, run_scenario
+from regrasp_pin.suite.cluster import WORKER_DIED, load_run, require_scale, run_suite
+from regrasp_pin.suite.isolate import CRASH, TIMEOUT
+
+pytest.importorskip("distributed", reason="the scale extra (dask, distributed) is not installed")
+
+SCHEMA = Path(__file__).resolve().parents[1] / "docs" / "suite_result.schema.json"
+
+
+def _named(*names: str):
+    base = neighbour_specs()[0]
+    return [replace(base, name=n) for n in names]
+
+
+def _valid_lines(path: Path) -> list[dict]:
+    jsonschema = pytest.importorskip("jsonschema")
+    validator = jsonschema.Draft202012Validator(json.loads(SCHEMA.read_text()))
+    lines = [json.loads(x) for x in path.read_text().splitlines()]
+    for d in lines:
+        errors = [e.message for e in validator.iter_errors(d)]
+        assert not errors, (d["name"], errors)
+    return lines
+
+
+def _regrasps(path: str) -> list[tuple[str, float, np.ndarray]]:
+    return [(p.finger, p.t_start, np.asarray(p.Q_object)) for p in Plan.load(path).regrasps()]
+
+
+def test_two_workers_give_the_results_of_one_by_one(tmp_path):
+    """Four small scenarios: the same outcomes, regrasps (finger, start, Q) as in-process."""
+    fast = {
+        "five_finger-hexagon-+60deg-40dps",
+        "five_finger-hexagon-+60deg-20dps",
+        "allegro-hexagon-+60deg-40dps",
+        "allegro-hexagon-+60deg-20dps",
+    }
+    specs = [s for s in neighbour_specs() if s.name in fast]
+    assert len(specs) == 4
+    done = run_suite(specs, out=tmp_path / "dask", workers=2, skip_no_grasp=False)
+    assert [r.name for r in done.results] == [s.name for s in specs]  # spec order
+    assert done.workers == 2 and len(done.task_s) == 4
+    for spec, r in zip(specs, done.results, strict=True):
+        alone = run_scenario(spec, out_dir=tmp_path / "alone")
+        assert (r.ok, r.failure_kind, r.n_regrasps) == (
+            alone.ok,
+            alone.failure_kind,
+            alone.n_regrasps,
+        )
+        if not r.ok:
+            continue
+        assert r.recheck_ok is True
+        a, b = _regrasps(r.plan_path), _regrasps(alone.plan_path)
+        assert [(f, round(t, 9)) for f, t, _ in a] == [(f, round(t, 9)) for f, t, _ in b]
+        for (_, _, qa), (_, _, qb) in zip(a, b, strict=True):
+            assert_close(qa, qb, atol=1e-9, what="Q [m]")
+    lines = _valid_lines(tmp_path / "dask" / "results.jsonl")
+    assert [d["name"] for d in lines] == [s.name for s in specs]
+
+
+def test_a_crash_a_hang_and_a_lost_worker_end_only_their_scenario(tmp_path):
+    if not Path("/proc/self/stat").is_file():
+        pytest.skip("finding the worker's pid needs /proc")
+    specs = _named("a", "b-crash", "c", "d-hang", "e-kill-worker", "f", "g")
+    done = run_suite(specs, out=tmp_path, workers=2, timeout_s=3.0, task=suite_tasks.faulty)
+    kinds = {r.name: r.failure_kind for r in done.results}
+    assert kinds == {
+        "a": None,
+        "b-crash": CRASH,
+        "c": None,
+        "d-hang": TIMEOUT,
+        "e-kill-worker": WORKER_DIED,
+        "f": None,
+        "g": None,
+    }
+    ok = [r for r in done.results if r.ok]
+    assert [r.n_regrasps for r in ok] == [len(r.name) % 7 for r in ok]  # the task's own results
+    assert len(_valid_lines(tmp_path / "results.jsonl")) == 7
+
+
+def test_specs_without_a_grasp_do_not_count(tmp_path):
+    specs = _named("a", "b-no-grasp", "c", "d", "e")
+    done = run_suite(specs, 3, out=tmp_path, workers=1, task=suite_tasks.faulty)
+    assert [r.name for r in done.results] == ["a", "c", "d"]  # the first 3 that count
+    assert [r.name for r in done.skipped] == ["b-no-grasp"]
+    assert not (tmp_path / "ran" / "e").exists()  # never started
+    results, skipped = load_run(tmp_path)
+    assert [r.name for r in results] == ["a", "c", "d"] and len(skipped) == 1
+
+
+def test_an_interrupted_run_resumes_without_redoing_work(tmp_path):
+    specs = _named(*"abcdef")
+    seen = []
+
+    def stop_after_two(r, counted, total):
+        seen.append(r.name)
+        if counted == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_suite(specs, out=tmp_path, workers=1, task=suite_tasks.quick, on_result=stop_after_two)
+    kept = _valid_lines(tmp_path / "results.jsonl")
+    assert [d["name"] for d in kept] == seen == ["a", "b"]
+    done = run_suite(specs, out=tmp_path, workers=2, task=suite_tasks.quick, resume=True)
+    assert done.resumed == 2
+    assert [r.name for r in done.results] == list("abcdef")
+    runs = {n: (tmp_path / "ran" / n).read_text().count("ran") for n in "abcdef"}
+    assert runs == dict.fromkeys("abcdef", 1)  # each ran once over both calls
+
+
+def test_a_line_cut_short_is_dropped_on_resume(tmp_path):
+    specs = _named(*"abc")
+    run_suite(specs, out=tmp_path, workers=1, task=suite_tasks.quick)
+    lines = (tmp_path / "results.jsonl").read_text().splitlines()
+    (tmp_path / "results.jsonl").write_text(lines[0] + "\n" + lines[1][:40])  # killed mid-line
+    assert [r.name for r in load_run(tmp_path)[0]] == ["a"]
+    done = run_suite(specs, out=tmp_path, workers=1, task=suite_tasks.quick, resume=True)
+    assert [r.name for r in done.results] == ["a", "b", "c"]
+    assert (tmp_path / "ran" / "b").read_text().count("ran") == 2  # b ran again
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "argument"),
+    [({"n": -1}, "n"), ({"workers": 0}, "workers"), ({"timeout_s": 0.0}, "timeout_s")],
+)
+def test_bad_arguments_are_named(tmp_path, kwargs, argument):
+    with pytest.raises(InputError, match=argument):
+        run_suite(_named("a"), out=tmp_path, task=suite_tasks.quick, **kwargs)
+
+
+def test_duplicate_spec_names_are_refused(tmp_path):
+    with pytest.raises(InputError, match="same name"):
+        run_suite(_named("a", "a"), out=tmp_path, task=suite_tasks.quick)
+
+
+def test_import_regrasp_pin_does_not_import_dask():
+    code = (
+        "import sys, regrasp_pin, regrasp_pin.suite, regrasp_pin.cli; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_without_the_scale_extra_the_error_names_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed fails
+    with pytest.raises(InputError, match=r"regrasp-pin\[scale\]"):
+        require_scale()
