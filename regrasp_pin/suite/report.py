@@ -11,7 +11,7 @@ from ..scenarios import HANDS
 from .run import ScenarioResult
 from .specs import MOTION_KINDS, OBJECT_KINDS
 
-__all__ = ["summarize"]
+__all__ = ["result_line", "summarize"]
 
 
 def _rate(results: Sequence[ScenarioResult]) -> str:
@@ -112,3 +112,30 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
         if r.recheck_ok is False:
             lines.append(f"  {r.name}: {'; '.join(r.recheck_problems[:3])}")
     return "\n".join(lines)
+
+
+def result_line(r: ScenarioResult, done: int, total: int) -> str:
+    """One line per scenario as it finishes (and a failure's reason on a second line)."""
+    plan = "     -  " if r.plan_s is None else f"{r.plan_s:6.1f} s"
+    times = f"build {r.build_s or 0:5.1f} s  plan {plan}"
+    head = f"[{done:3d}/{total}] {r.name:60}"
+    c0 = r.initial_finger_clearance_m
+    if c0 is not None and c0 <= 0.0:
+        times += f"  (starts with fingers {-c0 * 1e3:.1f} mm inside each other)"
+    if r.ok:
+        check = {True: "re-check ok", False: "RE-CHECK FAILED", None: "not re-checked"}
+        status = f"ok   {r.n_regrasps:2d} regrasps  {check[r.recheck_ok]:15}"
+        text = f"{head} {status} {times}"
+        if r.recheck_ok is False:
+            text += "\n      " + "; ".join(r.recheck_problems[:3])
+        return text
+    where = " ".join(
+        x
+        for x in (
+            r.finger or "",
+            f"t={r.time_s:.2f}/{r.duration_s:.1f} s" if r.time_s is not None else "",
+        )
+        if x
+    )
+    status = f"FAIL {r.failure_kind} ({r.failed_stage}) {where} after {r.n_regrasps} regrasps"
+    return f"{head} {status:45} {times}\n      {(r.failure or '')[:200]}"
