@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from .exceptions import RegraspError
 
 #: Sub-command modules, in the order ``--help`` lists them.
-COMMAND_MODULES: tuple[str, ...] = ("demo", "view", "approx", "info")
+COMMAND_MODULES: tuple[str, ...] = ("demo", "view", "approx", "info", "suite")
 
 
 def _commands() -> dict:

@@ -14,7 +14,7 @@ def test_help_lists_every_command(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    for name in ("demo", "view", "approx", "info"):
+    for name in ("demo", "view", "approx", "info", "suite"):
         assert name in out
 
 
@@ -68,3 +68,30 @@ def test_bad_arguments_are_reported(capsys):
     )
     assert main(["view", "/nonexistent/plan.json", "--html", "x.html"]) == 2
     assert "no such plan file" in capsys.readouterr().err
+
+
+def test_suite_runs_plans_and_reports(tmp_path, capsys):
+    """One real scenario on a one-worker local cluster: results, summary, report."""
+    pytest.importorskip("distributed", reason="the scale extra is not installed")
+    out = tmp_path / "suite"
+    argv = ["suite", "--n", "1", "--hand", "five_finger", "--object", "prism"]
+    argv += ["--motion", "object-axis", "--workers", "1", "--out", str(out), "--no-viewer"]
+    assert main(argv) == 0
+    lines = (out / "results.jsonl").read_text().splitlines()
+    assert len(lines) == 1
+    result = json.loads(lines[0])
+    assert result["spec"]["object"]["kind"] == "prism"
+    assert result["spec"]["motion"]["kind"] == "object-axis"
+    printed = capsys.readouterr().out
+    assert result["name"] in printed and "scenarios: 1, full plans" in printed
+    assert (out / "report.html").is_file() and (out / "summary.txt").is_file()
+    # the report alone, rebuilt from the results file
+    (out / "report.md").unlink()
+    assert main(["suite", "--report", str(out), "--no-viewer"]) == 0
+    assert result["name"] in (out / "report.md").read_text()
+
+
+def test_suite_without_out_is_a_one_line_error(capsys):
+    assert main(["suite", "--n", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--out" in err and len(err.splitlines()) == 1
