@@ -1,12 +1,11 @@
 """The scenario suite: full-plan rate, failure kinds and planning times over many problems.
 
 Runs the first ``--n`` scenarios of the deterministic suite ``--seed``
-(:func:`regrasp_pin.suite.generate_specs`; a spec without an initial grasp is skipped
-and the next one drawn, as :func:`regrasp_pin.suite.suite_scenarios` does, at most
-4 n draws) or, with ``--neighbours``, the canonical demo and its 29 neighbours
-(:func:`regrasp_pin.suite.neighbour_specs`). Each scenario is built, planned, and a
-full plan is saved, reloaded and re-checked with Pinocchio and Coal alone
-(:func:`regrasp_pin.verify.plan_check.recheck_plan`).
+(:func:`regrasp_pin.suite.select_specs`; a spec without an initial grasp is skipped
+and the next one drawn, at most 4 n draws) or, with ``--neighbours``, the canonical
+demo and its 29 neighbours (:func:`regrasp_pin.suite.neighbour_specs`). Each scenario
+is built, planned, and a full plan is saved, reloaded and re-checked with Pinocchio and
+Coal alone (:func:`regrasp_pin.verify.plan_check.recheck_plan`).
 
 Prints one line per scenario as it finishes (outcome, regrasps, times; the reason of a
 failure on a second line), then :func:`regrasp_pin.suite.summarize`, then, with
@@ -19,16 +18,19 @@ planning times, and every scenario whose outcome changed. Writes ``results.jsonl
 ``examples/hands/shadow_hand.json``; a hand file's canonical pose is searched once per
 process, :func:`regrasp_pin.scenarios.setup_pose`).
 
+The scenarios run on a local Dask cluster of ``--jobs`` workers, through the same code
+as ``regrasp-pin suite`` (:func:`regrasp_pin.suite.cluster.run_suite`). With more than
+one worker, the speed-up over one worker is first measured on the first ``--speedup``
+scenarios (both runs in this run, one after the other) and printed.
+
 Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
-[--out out/suite] [--jobs 1] [--max-steps 400] [--budget S] [--baseline old/results.jsonl]``.
+[--out out/suite] [--jobs 1] [--speedup K] [--max-steps 400] [--budget S]
+[--baseline old/results.jsonl]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 
 import numpy as np
@@ -36,100 +38,15 @@ import numpy as np
 from regrasp_pin.planning.planner import PlannerParams
 from regrasp_pin.scenarios import HANDS
 from regrasp_pin.suite import (
-    MAX_DRAWS_PER_SCENARIO,
     ScenarioResult,
     ScenarioSpec,
-    generate_specs,
     load_results,
     neighbour_specs,
-    run_scenario,
+    select_specs,
     summarize,
 )
-
-
-def line(r: ScenarioResult, done: int, total: int) -> str:
-    """One line per scenario (and the failure's reason on a second line)."""
-    plan = "     -  " if r.plan_s is None else f"{r.plan_s:6.1f} s"
-    times = f"build {r.build_s or 0:5.1f} s  plan {plan}"
-    head = f"[{done:3d}/{total}] {r.name:60}"
-    c0 = r.initial_finger_clearance_m
-    if c0 is not None and c0 <= 0.0:
-        times += f"  (starts with fingers {-c0 * 1e3:.1f} mm inside each other)"
-    if r.ok:
-        check = {True: "re-check ok", False: "RE-CHECK FAILED", None: "not re-checked"}
-        status = f"ok   {r.n_regrasps:2d} regrasps  {check[r.recheck_ok]:15}"
-        text = f"{head} {status} {times}"
-        if r.recheck_ok is False:
-            text += "\n      " + "; ".join(r.recheck_problems[:3])
-        return text
-    where = " ".join(
-        x
-        for x in (
-            r.finger or "",
-            f"t={r.time_s:.2f}/{r.duration_s:.1f} s" if r.time_s is not None else "",
-        )
-        if x
-    )
-    status = f"FAIL {r.failure_kind} ({r.failed_stage}) {where} after {r.n_regrasps} regrasps"
-    return f"{head} {status:45} {times}\n      {(r.failure or '')[:200]}"
-
-
-def run(
-    specs: list[ScenarioSpec],
-    n: int,
-    *,
-    skip_no_grasp: bool,
-    out: Path,
-    jobs: int,
-    max_steps: int | None,
-    budget_s: float | None,
-) -> tuple[list[ScenarioResult], list[ScenarioResult]]:
-    """Run specs in order until ``n`` count (skipped ones do not), on ``jobs`` processes.
-
-    A spec is started only while fewer than ``n`` are counted or running, so the
-    counted ones are the first ``n`` countable specs whatever the completion order.
-    Returns ``(counted, skipped)``, both in spec order.
-    """
-    counted: dict[int, ScenarioResult] = {}
-    skipped: dict[int, ScenarioResult] = {}
-    stream = (out / "results.jsonl").open("w")
-
-    def take(i: int, r: ScenarioResult) -> None:
-        if skip_no_grasp and r.failed_stage == "grasp":
-            skipped[i] = r
-            print(f"[skip]    {r.name:60} no initial grasp: {(r.failure or '')[:120]}", flush=True)
-            return
-        counted[i] = r
-        stream.write(json.dumps(r.to_dict()) + "\n")
-        stream.flush()
-        print(line(r, len(counted), n), flush=True)
-
-    nxt = 0
-    if jobs <= 1:
-        while len(counted) < n and nxt < len(specs):
-            take(nxt, run_scenario(specs[nxt], out_dir=out, max_steps=max_steps, budget_s=budget_s))
-            nxt += 1
-    else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            pending: dict[Future, int] = {}
-            while True:
-                while len(counted) + len(pending) < n and nxt < len(specs):
-                    fut = pool.submit(
-                        run_scenario,
-                        specs[nxt],
-                        out_dir=out,
-                        max_steps=max_steps,
-                        budget_s=budget_s,
-                    )
-                    pending[fut] = nxt
-                    nxt += 1
-                if not pending:
-                    break
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in sorted(done, key=pending.__getitem__):
-                    take(pending.pop(fut), fut.result())
-    stream.close()
-    return [counted[i] for i in sorted(counted)], [skipped[i] for i in sorted(skipped)]
+from regrasp_pin.suite.cluster import SuiteRun, run_suite
+from regrasp_pin.suite.report import result_line
 
 
 def compare(results: list[ScenarioResult], baseline: list[ScenarioResult]) -> str:
@@ -162,7 +79,28 @@ def compare(results: list[ScenarioResult], baseline: list[ScenarioResult]) -> st
     return "\n".join(out)
 
 
-def main() -> None:
+def speedup(specs: list[ScenarioSpec], k: int, jobs: int, out: Path, **kw) -> str:
+    """The speed-up of ``jobs`` workers over one on the first ``k`` countable specs,
+    both runs here and now (the same specs, the same machine, one after the other):
+    scenarios per minute of work, the clusters' start left out (it is paid once per run,
+    not per scenario) and shown apart."""
+    runs = {w: run_suite(specs, k, out=out / f"speedup-{w}", workers=w, **kw) for w in (1, jobs)}
+
+    def rate(r: SuiteRun) -> float:
+        return len(r.results) / max(r.wall_s - r.startup_s, 1e-9) * 60.0
+
+    one, many = runs[1], runs[jobs]
+    return (
+        f"speed-up of {jobs} workers over 1 on the first {len(one.results)} scenarios: "
+        f"{rate(one):.1f} -> {rate(many):.1f} scenarios/min, {rate(many) / rate(one):.2f}x the "
+        f"throughput (work {one.wall_s - one.startup_s:.0f} s -> "
+        f"{many.wall_s - many.startup_s:.0f} s; starting the cluster {one.startup_s:.1f} s / "
+        f"{many.startup_s:.1f} s)"
+    )
+
+
+def parse_args() -> argparse.Namespace:
+    """The options, checked (hands resolved into ``args.hands``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=100, help="scenarios with an initial grasp")
     parser.add_argument("--seed", type=int, default=0, help="suite seed")
@@ -178,7 +116,15 @@ def main() -> None:
         "five_finger and allegro), e.g. examples/hands/shadow_hand.json",
     )
     parser.add_argument("--out", type=Path, default=Path("out/suite"), help="output folder")
-    parser.add_argument("--jobs", type=int, default=1, help="processes (1: in this one)")
+    parser.add_argument("--jobs", type=int, default=1, help="workers of the local Dask cluster")
+    parser.add_argument(
+        "--speedup",
+        type=int,
+        default=None,
+        metavar="K",
+        help="first measure the speed-up of --jobs workers over one on the first K "
+        "scenarios (default: 8 with --jobs > 1; 0: do not)",
+    )
     parser.add_argument(
         "--max-steps",
         type=int,
@@ -199,6 +145,8 @@ def main() -> None:
             args.baseline = args.baseline / "results.jsonl"
         if not args.baseline.is_file():
             parser.error(f"--baseline: no such file {args.baseline} (a results.jsonl)")
+    if args.jobs < 1:
+        parser.error("--jobs: at least 1")
 
     hands = tuple(str(Path(h).resolve()) if h.endswith(".json") else h for h in args.hands or HANDS)
     for h in hands:
@@ -206,6 +154,13 @@ def main() -> None:
             parser.error(f"--hand: no such hand file {h}")
         if not h.endswith(".json") and h not in HANDS:
             parser.error(f"--hand: {h!r} is neither a bundled hand {HANDS} nor a .json file")
+    args.hands = hands
+    return args
+
+
+def main() -> None:
+    args = parse_args()
+    hands = args.hands
     args.out.mkdir(parents=True, exist_ok=True)
     if args.neighbours:
         specs = neighbour_specs(hands)
@@ -213,35 +168,39 @@ def main() -> None:
         what = f"the demo and its neighbours ({n} scenarios)"
     else:
         n, skip = args.n, True
-        specs = generate_specs(MAX_DRAWS_PER_SCENARIO * n, args.seed, hands)
+        specs = select_specs(n, args.seed, hands)
         what = f"suite seed {args.seed}: {n} scenarios with an initial grasp"
     steps = args.max_steps or PlannerParams.max_steps
     limit = "" if args.budget is None else f" and {args.budget:g} s"
-    print(f"{what}, {args.jobs} process(es), budget {steps} steps{limit}, output {args.out}")
-    t0 = time.perf_counter()
-    results, skipped = run(
-        specs,
-        n,
-        skip_no_grasp=skip,
-        out=args.out,
-        jobs=args.jobs,
-        max_steps=args.max_steps,
-        budget_s=args.budget,
-    )
-    wall = time.perf_counter() - t0
-    with (args.out / "results.jsonl").open("w") as f:  # in spec order
-        f.writelines(json.dumps(r.to_dict()) + "\n" for r in results)
-    with (args.out / "skipped.jsonl").open("w") as f:
-        f.writelines(json.dumps(r.to_dict()) + "\n" for r in skipped)
+    kw = {"skip_no_grasp": skip, "max_steps": args.max_steps, "budget_s": args.budget}
+    k = args.speedup if args.speedup is not None else (8 if args.jobs > 1 else 0)
+    measured = None
+    if k > 0:
+        print(f"measuring the speed-up: the first {min(k, n)} scenarios on 1, then on "
+              f"{args.jobs} worker(s)", flush=True)  # fmt: skip
+        measured = speedup(specs, min(k, n), args.jobs, args.out, **kw)
+        print(measured, flush=True)
+    print(f"{what}, {args.jobs} worker(s), budget {steps} steps{limit}, output {args.out}")
+
+    def show(r: ScenarioResult, counted: int, total: int) -> None:
+        if skip and r.failed_stage == "grasp":
+            print(f"[skip]    {r.name:60} no initial grasp: {(r.failure or '')[:120]}", flush=True)
+        else:
+            print(result_line(r, counted, total), flush=True)
+
+    done: SuiteRun = run_suite(specs, n, out=args.out, workers=args.jobs, on_result=show, **kw)
+    results = done.results
     text = summarize(results)
     if skip:
         text += (
-            f"\nspecs drawn: {len(results) + len(skipped)}, skipped without an initial "
-            f"grasp: {len(skipped)}"
+            f"\nspecs drawn: {len(results) + len(done.skipped)}, skipped without an initial "
+            f"grasp: {len(done.skipped)}"
         )
         if len(results) < n:
             text += f" -- only {len(results)} of {n} found in {len(specs)} draws"
-    text += f"\nwall time: {wall:.0f} s on {args.jobs} process(es)"
+    text += "\n" + done.describe().split("\n", 1)[1]
+    if measured:
+        text += "\n" + measured
     if args.baseline is not None:
         text += "\n" + compare(results, load_results(args.baseline))
     (args.out / "summary.txt").write_text(text + "\n")
