@@ -48,10 +48,12 @@ def faulty(spec: ScenarioSpec, *, out_dir: str | None = None, **kw: object) -> S
     if "crash" in spec.name:
         os.kill(os.getpid(), signal.SIGSEGV)
     if "hang" in spec.name:
-        time.sleep(600)
+        time.sleep(60)
     if "kill-worker" in spec.name:
+        if out_dir is not None:
+            (Path(out_dir) / "ran" / f"{spec.name}.pid").write_text(str(os.getpid()))
         os.kill(_worker_pid(), signal.SIGKILL)
-        time.sleep(600)
+        time.sleep(60)
     if "no-grasp" in spec.name:
         r = outcome_template(spec)
         r.failed_stage, r.failure_kind = "grasp", "no-candidate"

@@ -4,8 +4,10 @@ streamed results that survive an interruption, and resuming without redoing work
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -38,6 +40,14 @@ def _valid_lines(path: Path) -> list[dict]:
         errors = [e.message for e in validator.iter_errors(d)]
         assert not errors, (d["name"], errors)
     return lines
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 def _regrasps(path: str) -> list[tuple[str, float, np.ndarray]]:
@@ -90,6 +100,12 @@ def test_a_crash_a_hang_and_a_lost_worker_end_only_their_scenario(tmp_path):
         "f": None,
         "g": None,
     }
+    # the scenario whose worker died does not outlive it (it would sleep for a minute)
+    pid = int((tmp_path / "ran" / "e-kill-worker.pid").read_text())
+    deadline = time.monotonic() + 10.0
+    while _alive(pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _alive(pid)
     ok = [r for r in done.results if r.ok]
     assert [r.n_regrasps for r in ok] == [len(r.name) % 7 for r in ok]  # the task's own results
     assert len(_valid_lines(tmp_path / "results.jsonl")) == 7

@@ -95,7 +95,7 @@ class SuiteRun:
             f"skipped without an initial grasp: {len(self.skipped)}",
             f"wall time: {self.wall_s:.0f} s on {self.workers} worker(s) "
             f"({self.startup_s:.1f} s to start them)"
-            + (f"; {self.resumed} result(s) kept from an earlier run" if self.resumed else ""),
+            + (f"; {self.resumed} earlier result(s) kept, skips included" if self.resumed else ""),
         ]
         if self.task_s:
             over, task = np.array(self.overhead_s), np.array(self.task_s)

@@ -16,13 +16,12 @@ end into a :class:`~.run.ScenarioResult`:
 
 from __future__ import annotations
 
-import ctypes
 import multiprocessing
 import multiprocessing.connection
 import multiprocessing.forkserver
 import os
 import signal
-import sys
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -40,7 +39,6 @@ CRASH = "crash"  #: ScenarioResult.failure_kind of a scenario whose process died
 Task = Callable[..., ScenarioResult]
 
 _PRELOAD = ["regrasp_pin.suite.run"]
-_PR_SET_PDEATHSIG = 1  # prctl option (linux/prctl.h)
 _MALLOC_TRIM = "MALLOC_TRIM_THRESHOLD_"
 _context: Any = None
 
@@ -80,18 +78,27 @@ def _noop() -> None:
     pass
 
 
-def _die_with_parent() -> None:
-    """Linux: be killed when the parent (the forkserver, which exits with its worker)
-    dies, so that no scenario outlives the run that started it."""
-    if sys.platform.startswith("linux"):
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+def _watch(pid: int, period_s: float = 1.0) -> None:
+    """End this process once process ``pid`` (the one that asked for this scenario,
+    e.g. a Dask worker) is gone, so that no scenario outlives the run that started it."""
+
+    def watch() -> None:
+        while True:
+            time.sleep(period_s)
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:  # alive, under another user (a reused pid)
+                pass
+
+    threading.Thread(target=watch, name="watch-parent", daemon=True).start()
 
 
-def _child(conn: Any, task: Task, spec: ScenarioSpec, kwargs: dict[str, Any]) -> None:
+def _child(conn: Any, task: Task, spec: ScenarioSpec, kwargs: dict[str, Any], parent: int) -> None:
     # Ctrl-C stops the run (the driver), not this scenario with a bogus outcome
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _die_with_parent()
+    _watch(parent)
     try:
         result = task(spec, **kwargs)
     except BaseException as exc:  # a task should not raise; if it does, say what
@@ -139,7 +146,9 @@ def run_isolated(
     limit = None if timeout_s is None else positive(timeout_s, "timeout_s")
     ctx = _forkserver()
     recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(send, task, spec, kwargs), name=f"scenario {spec.name}")
+    proc = ctx.Process(
+        target=_child, args=(send, task, spec, kwargs, os.getpid()), name=f"scenario {spec.name}"
+    )
     t0 = time.perf_counter()
     proc.start()
     send.close()  # the child holds the only sending end: EOF when it dies
