@@ -111,6 +111,26 @@ def test_a_crash_a_hang_and_a_lost_worker_end_only_their_scenario(tmp_path):
     assert len(_valid_lines(tmp_path / "results.jsonl")) == 7
 
 
+def test_an_existing_cluster_by_its_scheduler_address(tmp_path):
+    """``scheduler=``: the same run on a cluster started elsewhere (here, in this test)."""
+    import dask
+    import distributed
+
+    with (
+        dask.config.set({"distributed.worker.daemon": False}),
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, dashboard_address=None
+        ) as cluster,
+    ):
+        done = run_suite(
+            _named(*"abcd"), out=tmp_path, scheduler=cluster.scheduler_address,
+            task=suite_tasks.quick,
+        )  # fmt: skip
+        assert done.workers == 2
+        assert len(cluster.scheduler.workers) == 2  # the run left the cluster up
+    assert [r.name for r in done.results] == list("abcd") and all(r.ok for r in done.results)
+
+
 def test_specs_without_a_grasp_do_not_count(tmp_path):
     specs = _named("a", "b-no-grasp", "c", "d", "e")
     done = run_suite(specs, 3, out=tmp_path, workers=1, task=suite_tasks.faulty)
