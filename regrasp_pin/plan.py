@@ -19,6 +19,7 @@ import numpy as np
 
 from ._validate import as_array
 from .exceptions import InputError, ModelFileError
+from .model.objects import OBJECT_KINDS
 
 if TYPE_CHECKING:  # imported lazily at run time
     from .model.hand import Hand
@@ -373,8 +374,16 @@ class Plan:
         Raises:
             InputError: wrong ``format`` or malformed fields.
         """
+        if not isinstance(d, dict):
+            raise InputError(
+                "plan", f"is a JSON {type(d).__name__}", "a JSON object (regrasp_pin.plan/1)"
+            )
         if d.get("format") != PLAN_FORMAT:
             raise InputError("format", f"is {d.get('format')!r}", repr(PLAN_FORMAT))
+        obj = d.get("object")
+        kind = obj.get("kind") if isinstance(obj, dict) else None
+        if kind not in OBJECT_KINDS:
+            raise InputError("object.kind", f"is {kind!r}", f"one of {OBJECT_KINDS}")
         try:
             phases = {f: [_phase_from_dict(p) for p in ps] for f, ps in d["phases"].items()}
             return cls(

@@ -184,7 +184,16 @@ def _turn_rate(angle_deg: float, rate_deg_s: float) -> tuple[float, float]:
     """The signed rate [rad/s] and duration [s] of a turn by ``angle_deg`` at
     ``rate_deg_s``; InputError for a rate that is not positive, an angle that is zero
     or not finite."""
-    rate = positive(rate_deg_s, "rate_deg_s")
+    try:
+        rate = float(rate_deg_s)
+    except (TypeError, ValueError):
+        rate = float("nan")
+    if not np.isfinite(rate) or rate <= 0:  # a speed: the sign of the angle turns
+        raise InputError(
+            "rate_deg_s",
+            f"{rate_deg_s!r} is not allowed",
+            "a speed > 0 [deg/s]; turn the other way with a negative angle_deg",
+        )
     angle = float(angle_deg)
     if not np.isfinite(angle) or angle == 0:
         raise InputError("angle_deg", f"{angle_deg!r} is not allowed", "a finite non-zero angle")

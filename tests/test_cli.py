@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+import logging
 
 import pytest
 
 from regrasp_pin.cli import build_parser, main
+from regrasp_pin.exceptions import FailureKind
 from regrasp_pin.plan import Plan
 
 
@@ -40,9 +42,13 @@ def test_info_takes_a_hand_file(tmp_path, capsys):
 
 
 def test_demo_json_writes_plan_and_figures(tmp_path, capsys):
-    code = main(["demo", "--out", str(tmp_path), "--json"])
+    pytest.importorskip("meshcat", reason="the viz extra is not installed")
+    html = tmp_path / "plan.html"
+    code = main(["demo", "--out", str(tmp_path), "--json", "--html", str(html)])
     assert code == 0
-    doc = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)  # stdout holds the JSON alone, even with --html
+    assert doc["ok"] is True and html.is_file() and str(html) in captured.err
     assert doc["all_verified"] is True
     assert (tmp_path / "plan.json").is_file()
     for f in doc["figures"]:
@@ -95,3 +101,90 @@ def test_suite_without_out_is_a_one_line_error(capsys):
     assert main(["suite", "--n", "1"]) == 2
     err = capsys.readouterr().err.strip()
     assert "--out" in err and len(err.splitlines()) == 1
+
+
+def test_version_text(capsys):
+    from regrasp_pin import __version__
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == f"regrasp-pin {__version__}"
+
+
+def test_no_plan_exits_1_with_json_on_stdout(tmp_path, capsys):
+    """A turn the five-finger hand cannot follow (180 deg at 40 deg/s): exit code 1,
+    the failure as JSON with its kind, and the partial plan written."""
+    argv = ["demo", "--angle", "180", "--rate", "40", "--no-plots", "--out", str(tmp_path)]
+    assert main([*argv, "--json"]) == 1
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
+    assert doc["ok"] is False and doc["failure_kind"] in {k.value for k in FailureKind}
+    assert Plan.load(doc["partial_plan"]).t[-1] <= doc["duration_s"]
+    # without --json: one line on stderr, the same exit code
+    assert main([*argv, "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("regrasp-pin demo: no plan: ") and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "option"),
+    [
+        (["demo", "--out", "{file}"], "--out"),
+        (["demo", "--html", "{missing}/plan.html"], "--html"),
+        (["approx", "{csv}", "-m", "3", "--plot", "{missing}/fig8.png"], "--plot"),
+    ],
+)
+def test_outputs_that_cannot_be_written_are_one_line(tmp_path, capsys, argv, option):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    csv = tmp_path / "c.csv"
+    csv.write_text("0,0\n1,0\n1,1\n0,1\n")
+    names = {"file": str(a_file), "missing": str(tmp_path / "missing"), "csv": str(csv)}
+    assert main([a.format(**names) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and option in err and "Traceback" not in err
+
+
+def test_log_levels(tmp_path, capsys):
+    before = logging.getLogger().level
+    csv = tmp_path / "c.csv"
+    csv.write_text("0,0\n1,0\n1,1\n0,1\n2,2\n")
+    assert main(["-v", "approx", str(csv), "-m", "3"]) == 0
+    assert logging.getLogger().level == logging.INFO
+    assert main(["--log-level", "debug", "approx", str(csv), "-m", "3"]) == 0
+    assert logging.getLogger().level == logging.DEBUG
+    assert main(["-q", "approx", str(csv), "-m", "3"]) == 0
+    assert logging.getLogger().level == logging.ERROR
+    assert "DEBUG regrasp_pin" in capsys.readouterr().err  # what -v/--log-level let through
+    logging.getLogger().setLevel(before)
+
+
+def test_plan_a_users_own_mesh_in_one_command(tmp_path, capsys):
+    """The README's own-object example: an OBJ in millimetres, a bundled hand."""
+    from pathlib import Path
+
+    obj = Path(__file__).resolve().parents[1] / "examples" / "objects" / "hexagonal_prism_mm.obj"
+    argv = ["plan", "--object", str(obj), "--scale", "0.001", "--angle", "60"]
+    assert main([*argv, "--out", str(tmp_path), "--json", "--no-plots"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["ok"] and doc["object"] == "convex_mesh" and doc["object_note"] is None
+    plan = Plan.load(doc["plan"])
+    assert plan.object["kind"] == "convex_mesh" and len(plan.regrasps()) == doc["regrasps"]
+    if doc["viewer"] is not None:  # with the viz extra
+        assert Path(doc["viewer"]).stat().st_size > 100_000
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--object", "sphere"], "--object: 'sphere' is not known"),
+        (["--object", "box:0.04,0.05"], "--object: 'box:0.04,0.05' has the wrong number"),
+        (["--object", "missing.obj"], "missing.obj: no such mesh file"),
+        (["--motion", "missing.csv"], "missing.csv: no such motion file"),
+    ],
+)
+def test_plan_bad_problems_are_one_line(tmp_path, capsys, argv, message):
+    assert main(["plan", *argv, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err

@@ -62,7 +62,9 @@ def test_text_output_3d_without_header_exact(tmp_path, capsys):
     np.savetxt(path, np.c_[np.cos(t), np.sin(t), 0.1 * t], delimiter=",")
     assert cli.main(["approx", str(path), "-m", "5", "--method", "exact", "--full-matrix"]) == 0
     out = capsys.readouterr().out
-    assert "50 points (open, 3-D) -> 5 vertices, method exact, deviation max" in out
+    assert "50 points (open, 3-D) -> 5 vertices, method exact, deviation ise" in out
+    assert "the exact optimum" in out  # what the chosen method did, nothing of the network
+    assert "network" not in out and "sweeps" not in out
     assert out.count("(") >= 5 + 1  # one line per vertex
 
 

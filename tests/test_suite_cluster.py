@@ -16,7 +16,7 @@ import pytest
 import suite_tasks
 from conftest import assert_close
 
-from regrasp_pin.exceptions import InputError
+from regrasp_pin.exceptions import InputError, MissingExtraError
 from regrasp_pin.plan import Plan
 from regrasp_pin.suite import neighbour_specs, run_scenario
 from regrasp_pin.suite.cluster import WORKER_DIED, load_run, require_scale, run_suite
@@ -197,5 +197,5 @@ def test_import_regrasp_pin_does_not_import_dask():
 
 def test_without_the_scale_extra_the_error_names_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed fails
-    with pytest.raises(InputError, match=r"regrasp-pin\[scale\]"):
+    with pytest.raises(MissingExtraError, match=r"regrasp-pin\[scale\]"):
         require_scale()

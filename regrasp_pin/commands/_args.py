@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 BUNDLED_HANDS = ("five_finger", "allegro")
 HAND_METAVAR = "{five_finger,allegro,FILE.json}"
@@ -15,3 +16,34 @@ def hand_argument(value: str) -> str:
     raise argparse.ArgumentTypeError(
         f"{value!r} is not a hand: expected five_finger, allegro or a .json hand file"
     )
+
+
+def output_folder(path: str | Path, option: str) -> Path:
+    """The folder ``path``, created if needed; an InputError naming ``option`` when it
+    cannot be (a regular file in the way, no permission)."""
+    from ..exceptions import InputError
+
+    folder = Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(
+            option, f"cannot create the folder {str(folder)!r} ({exc.strerror})", "a folder path"
+        ) from None
+    return folder
+
+
+def output_file(path: str | Path, option: str) -> Path:
+    """``path`` for a file to write: its folder must exist (checked before any work)."""
+    from ..exceptions import InputError
+
+    file = Path(path)
+    if not file.parent.is_dir():
+        raise InputError(
+            option,
+            f"the folder {str(file.parent)!r} does not exist",
+            "a file path in an existing folder",
+        )
+    if file.is_dir():
+        raise InputError(option, f"{str(file)!r} is a folder", "a file path")
+    return file

@@ -7,6 +7,8 @@ import json
 import time
 from pathlib import Path
 
+from ._args import output_file
+
 NAME = "approx"
 HELP = (
     "Approximate a curve (CSV rows x,y or x,y,z; optional header) by m of its points with "
@@ -21,20 +23,27 @@ _METHODS = ("hopfield", "exact")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``approx`` options to ``parser``."""
     parser.add_argument("curve", type=Path, help="CSV file with x,y or x,y,z rows")
-    parser.add_argument("-m", type=int, required=True, help="number of vertices (waypoints)")
+    parser.add_argument("-m", type=int, required=True, help="number of vertices (waypoints), >= 2")
     parser.add_argument("--closed", action="store_true", help="treat the curve as closed")
     parser.add_argument(
         "--deviation",
         choices=_DEVIATIONS,
-        default="max",
-        help="arc-to-chord deviation: max (Eq. 7, the paper's), sum, ise (default: max)",
+        default="ise",
+        help="arc-to-chord deviation: ise (integral square error), sum, or max (Eq. 7, "
+        "the paper's; its optima are degenerate, see docs/hopfield.md) (default: %(default)s)",
     )
     parser.add_argument(
         "--method", choices=_METHODS, default="hopfield", help="solver (default: hopfield)"
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the network's restarts")
     parser.add_argument(
-        "--restarts", type=int, default=6, help="network perturbation rounds (default: 6)"
+        "--seed", type=int, default=0,
+        help="seed of the network's restarts (default: %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--restarts",
+        type=int,
+        default=6,
+        help="network perturbation rounds (default: %(default)s)",
     )
     parser.add_argument(
         "--full-matrix",
@@ -91,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
 
     from ..polygon.approximate import approximate_polygon
 
+    if args.plot is not None:
+        output_file(args.plot, "--plot")  # before the work, not after
     points = np.asarray(load_curve(args.curve), dtype=float)
     t0 = time.perf_counter()
     res = approximate_polygon(
@@ -119,11 +130,13 @@ def run(args: argparse.Namespace) -> int:
         "indices": res.indices.tolist(),
         "vertices": res.vertices.tolist(),
         "energy": res.energy,
-        "plain_energy": res.plain_energy,
-        "sweeps": res.sweeps,
         "time_ms": round(time_ms, 3),
         "timings_ms": {k: round(v, 3) for k, v in res.timings_ms.items()},
     }
+    network = res.method == "hopfield"
+    if network:  # what only the network did
+        report["plain_energy"] = res.plain_energy
+        report["sweeps"] = res.sweeps
     if args.plot is not None:
         report["plot"] = str(args.plot)
     if args.json:
@@ -134,9 +147,11 @@ def run(args: argparse.Namespace) -> int:
         f"{args.curve}: {res.n} points ({kind}, {points.shape[1]}-D) -> {res.m} vertices, "
         f"method {res.method}, deviation {res.deviation}"
     )
-    print(f"energy {res.energy:.6g} (plain network {res.plain_energy:.6g}), {time_ms:.1f} ms")
-    if res.method == "hopfield":
+    if network:
+        print(f"energy {res.energy:.6g} (plain network {res.plain_energy:.6g}), {time_ms:.1f} ms")
         print(f"network sweeps {res.sweeps}")
+    else:
+        print(f"energy {res.energy:.6g} (the exact optimum), {time_ms:.1f} ms")
     print("vertices:")
     for i, v in zip(res.indices.tolist(), res.vertices, strict=True):
         coords = ", ".join(f"{c:.6g}" for c in v)

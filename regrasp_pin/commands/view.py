@@ -22,7 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write a self-contained HTML file (opens without a server) and exit",
     )  # fmt: skip
     parser.add_argument("--no-open", action="store_true", help="do not open a browser")
-    parser.add_argument("--fps", type=float, default=30.0, help="animation frame rate")
+    parser.add_argument(
+        "--fps", type=float, default=30.0, help="animation frame rate [1/s] (default: %(default)s)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -212,6 +212,10 @@ def build_manifold(
         InputError: NaN or non-increasing times, times outside the motion.
     """
     contact = contact or ContactModel()
+    if not isinstance(finger, Finger):
+        raise InputError(
+            "finger", f"is a {type(finger).__name__}", "a Finger, e.g. hand.finger('index')"
+        )
     times = as_array(times_s, "times_s", (None,))
     if times.size == 0 or np.any(np.diff(times) <= 0):
         raise InputError("times_s", "is empty or not strictly increasing", "increasing times [s]")

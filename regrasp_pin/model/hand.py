@@ -245,6 +245,14 @@ class Finger:
         return np.minimum(qb - self.lower, self.upper - qb).min(axis=1)
 
 
+class FingerMap(dict):
+    """``Hand.fingers``: a dict whose missing names raise an UnknownNameError that lists
+    the hand's fingers (a KeyError too, so ``except KeyError`` still works)."""
+
+    def __missing__(self, key: object) -> Finger:
+        raise UnknownNameError("fingers", key, list(self))
+
+
 class Hand:
     """A hand: Pinocchio model, collision and visual models, and its fingers.
 
@@ -275,7 +283,7 @@ class Hand:
         self.collision_model = collision_model
         self.visual_model = visual_model
         self.urdf_path = urdf_path
-        self.fingers = fingers
+        self.fingers: dict[str, Finger] = FingerMap(fingers)
         self.name = name
         #: How the URDF was loaded (``palm_frame``, ``locked``, ``couplings``), as JSON
         #: values: with the URDF, what rebuilds the same models.

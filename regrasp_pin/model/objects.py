@@ -38,6 +38,7 @@ from ._polyhedra import (
 from .faces import Face, FaceAdjacency, face_adjacency, make_face
 
 __all__ = [
+    "OBJECT_KINDS",
     "Box",
     "ConvexMesh",
     "ConvexObject",
@@ -49,7 +50,8 @@ __all__ = [
     "object_from_params",
 ]
 
-_KINDS = ("box", "prism", "extrusion", "convex_mesh")
+#: Every object kind (:attr:`ConvexObject.kind`; what a plan file may hold).
+OBJECT_KINDS = ("box", "prism", "extrusion", "convex_mesh")
 _CHUNK_ELEMENTS = 2_000_000  # bound on (points x candidates) arrays in distance queries
 
 
@@ -116,8 +118,8 @@ class ConvexObject:
             InputError: if the vertices are not a finite (V, 3) array.
             GeometryError: if the points are fewer than 4 or span no volume.
         """
-        if kind not in _KINDS:
-            raise InputError("kind", f"{kind!r} is not known", f"one of {_KINDS}")
+        if kind not in OBJECT_KINDS:
+            raise InputError("kind", f"{kind!r} is not known", f"one of {OBJECT_KINDS}")
         pts = as_array(vertices_object, "vertices", (None, 3))
         if pts.size:
             hand_scale(float(np.ptp(pts, axis=0).max()), "vertices")
@@ -477,13 +479,21 @@ class ConvexMesh(ConvexObject):
         self.input_centroid = frozen(c)
 
 
+_OBJECT_CLASSES: dict[str, type[ConvexObject]] = {
+    "box": Box,
+    "prism": Prism,
+    "extrusion": ExtrudedPolygon,
+    "convex_mesh": ConvexMesh,
+}
+
+
 def object_from_params(kind: str, params: dict[str, Any]) -> ConvexObject:
     """Rebuild an object from its :attr:`ConvexObject.kind` and :attr:`ConvexObject.params`.
 
     Raises:
         InputError: if ``kind`` is unknown or ``params`` do not fit it.
     """
-    classes = {"box": Box, "prism": Prism, "extrusion": ExtrudedPolygon, "convex_mesh": ConvexMesh}
+    classes = _OBJECT_CLASSES
     if kind not in classes:
         raise InputError("kind", f"{kind!r} is not known", f"one of {tuple(classes)}")
     try:

@@ -100,6 +100,20 @@ def validate_m(m: object, n: int, closed: bool) -> int:
     return int(m)
 
 
+def _refuse_degenerate(P: np.ndarray, m: int) -> None:
+    """InputError for a curve with fewer than ``m`` distinct points (all points equal
+    included): ``m`` vertices would repeat a point. Points closer than 1e-9 of the
+    curve's extent count as one."""
+    extent = float(np.ptp(P, axis=0).max())
+    if extent == 0.0:
+        raise InputError("points", f"all {P.shape[0]} points are equal", "a curve with extent")
+    distinct = np.unique(np.round((P - P.min(axis=0)) / (1e-9 * extent)), axis=0).shape[0]
+    if distinct < m:
+        raise InputError(
+            "points", f"has {distinct} distinct points for m={m}", f"at least m={m} distinct points"
+        )
+
+
 def approximate_polygon(
     points: object,
     m: int,
@@ -133,8 +147,12 @@ def approximate_polygon(
         The vertices, their indices and energy, and the network record.
 
     Raises:
-        InputError: bad ``points`` (shape, fewer than 2, NaN/inf), ``m``, ``seed`` or
-            ``restarts``.
+        InputError: bad ``points`` (shape, fewer than 2, NaN/inf, all equal, fewer
+            distinct points than ``m``), ``m``, ``seed`` or ``restarts``.
+
+    A straight curve (all points collinear) deviates from every chord by 0: any ``m``
+    vertices are optimal (energy 0) and the ones returned are the network's (or the
+    exact solver's) first.
         UnknownNameError: unknown ``deviation`` or ``method``.
     """
     P = validate_points(points)
@@ -142,6 +160,7 @@ def approximate_polygon(
     deviation = choice(deviation, "deviation", DEVIATIONS)
     method = choice(method, "method", METHODS)
     m = validate_m(m, n, closed)
+    _refuse_degenerate(P, m)
     seed = positive_int(seed, "seed", 0)
     restarts = positive_int(restarts, "restarts", 0)
 

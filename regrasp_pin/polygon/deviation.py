@@ -25,6 +25,8 @@ passes. With ``cap`` (and ``m``) chords that provably cannot appear in a polygon
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
@@ -45,6 +47,13 @@ def validate_points(points: object, argument: str = "points") -> np.ndarray:
     Raises:
         InputError: wrong shape, fewer than 2 points, or NaN/inf values.
     """
+    given: Any = points
+    try:
+        ndim = np.ndim(given)
+    except ValueError:  # ragged rows: as_array says so
+        ndim = 2
+    if ndim != 2:  # as_array would ask for "(N, N)"
+        raise InputError(argument, f"has shape {np.shape(given)}", "shape (n, 2) or (n, 3)")
     arr = as_array(points, argument, (None, None))
     if arr.shape[1] not in _SUPPORTED_DIMS:
         raise InputError(argument, f"has shape {arr.shape}", "shape (n, 2) or (n, 3)")

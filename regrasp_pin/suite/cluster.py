@@ -35,32 +35,27 @@ from typing import Any
 import numpy as np
 
 from .._validate import positive, positive_int
-from ..exceptions import InputError
+from ..exceptions import InputError, MissingExtraError
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
 from .specs import ScenarioSpec
 
-__all__ = ["SCALE_EXTRA", "WORKER_DIED", "SuiteRun", "load_run", "require_scale", "run_suite"]
+__all__ = ["WORKER_DIED", "SuiteRun", "load_run", "require_scale", "run_suite"]
 
 log = logging.getLogger(__name__)
 
 WORKER_DIED = "worker-died"  #: ScenarioResult.failure_kind when the Dask worker was lost
-SCALE_EXTRA = 'pip install "regrasp-pin[scale]"'
 RESULTS, SKIPPED = "results.jsonl", "skipped.jsonl"
 
 
 def require_scale() -> Any:
     """The ``distributed`` module once the scale extra (dask, distributed, tqdm) is
-    importable, or an InputError that says which extra to install."""
+    importable, or a MissingExtraError that says which extra to install."""
     try:
         import distributed
         import tqdm  # noqa: F401  (the progress bar of ``regrasp-pin suite``)
     except ImportError as exc:
-        raise InputError(
-            "dask",
-            f"not installed ({exc.name} is missing)",
-            f"the scale extra: {SCALE_EXTRA}",
-        ) from exc
+        raise MissingExtraError(exc.name or "dask", "scale") from None
     return distributed
 
 
