@@ -80,3 +80,15 @@ def test_a_scenario_follows_the_relative_motion_from_where_it_holds_the_object()
     N = np.array([g.normals_object[n] for n in names])
     assert ferrari_canny_epsilon(P, N, 0.8, torque_scale_m=obj.radius_m) > 0  # force closure
     assert "60" not in scen.description or "own motion" in scen.description
+
+
+def test_the_example_csv_is_a_motion_from_the_identity():
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "objects" / "turn_and_drift.csv"
+    rel = relative_motion_from_csv(path)
+    assert rel.duration_s == pytest.approx(2.0)
+    end = rel.pose(rel.t_end)
+    assert_close(end[:3, 3], [0.006, 0.0, 0.0], atol=1e-9, what="the drift [m]")
+    angle = np.degrees(Rotation.from_matrix(end[:3, :3]).magnitude())
+    assert angle == pytest.approx(10.0, abs=1e-4)
