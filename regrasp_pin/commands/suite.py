@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._args import HAND_METAVAR, hand_argument
+from ._args import HAND_METAVAR, hand_argument, output_folder
 
 NAME = "suite"
 HELP = (
@@ -109,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.out is None:
         raise InputError("--out", "is missing", "an output folder (or --report DIR)")
+    output_folder(args.out, "--out")
     from ..suite.cluster import require_scale
 
     require_scale()  # says which extra to install before anything is started
@@ -122,7 +123,13 @@ def run(args: argparse.Namespace) -> int:
     specs, n, skip, what = _specs(args)
     where = args.scheduler or f"a local cluster of {args.workers or 'all cores'} worker(s)"
     print(f"{what} on {where}, output {args.out}", flush=True)
-    bar = tqdm(total=n, unit="scenario", disable=True if args.quiet else None, file=sys.stderr)
+    from ..suite.cluster import load_run
+
+    kept = len(load_run(args.out)[0]) if args.resume else 0
+    bar = tqdm(
+        total=n, initial=min(kept, n), unit="scenario",
+        disable=True if args.quiet else None, file=sys.stderr,
+    )  # fmt: skip
 
     def progress(r: ScenarioResult, counted: int, total: int) -> None:
         if args.quiet:
