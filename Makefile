@@ -33,7 +33,7 @@ lint: $(STAMP)
 
 docs-images: $(STAMP)
 	$(VENV)/bin/regrasp-pin demo --out out --quiet
-	cp out/fig9_joint_angles.png out/fig2_manifold.png docs/
+	cp out/fig9_joint_angles.png out/fig2_manifold.png out/fig8_hopfield_path.png docs/
 	$(PY) docs/make_screenshots.py --plan out/plan.json
 
 clean:

@@ -355,7 +355,7 @@ def test_fig2_draws_the_box_the_instants_p_and_q(scene):
     fig = plot_manifold(m, times_idx=[0, 6, 12], track=track, q_new=f.q_mid, trigger_index=3)
     ax = fig.axes[0]
     assert "index" in ax.get_title() and "first 3" not in ax.get_title()
-    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]  # below the axes
     assert sum(lbl.startswith("manifold t =") for lbl in labels) == 3
     assert {"Q", "P's path (held)", f"trigger t = {times[3]:.2f} s"} <= set(labels)
     # P's path is drawn up to the trigger: 4 held times
@@ -369,6 +369,17 @@ def test_fig2_draws_the_box_the_instants_p_and_q(scene):
         assert a < np.degrees(f.lower[j]) and np.degrees(f.upper[j]) < b
     with pytest.raises(InputError, match="times_idx"):
         plot_manifold(m, times_idx=[13])
+    # from a plan: the joint path held up to the lift-off, and the joints by name
+    fig = plot_manifold(m, held=(times[:5], track.q[:5]), joint_names=f.joint_names)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == f"{f.joint_names[0]} [deg]"
+    assert ax.get_zlabel() == f"{f.joint_names[2]} [deg]"
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert f"lift-off t = {times[4]:.2f} s" in labels
+    (path,) = [ln for ln in ax.get_lines() if ln.get_label() == "P's path (held)"]
+    assert_close(np.radians(path.get_data_3d()[0]), track.q[:5, 0], atol=1e-12, what="held")
+    with pytest.raises(InputError, match="joint_names"):
+        plot_manifold(m, joint_names=["a", "b"])
     # a finger with more joints is drawn in its first three, and says so
     k4 = dataclasses.replace(
         m,

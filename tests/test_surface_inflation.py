@@ -209,6 +209,17 @@ def test_plot_unfolded_grid_draws_region_path_and_polygon(box):
     with pytest.raises(InputError) as err:
         plot_unfolded_grid(grid, path, polygon_indices=[0, len(path) + 3])
     assert err.value.argument == "polygon_indices"
+    # zoomed (Fig. 8): a square frame around P, Q and the paths, the whole region inset
+    fig = plot_unfolded_grid(grid, path, heights, waypoints, tip, zoom=True)
+    ax = fig.axes[0]
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    assert x1 - x0 == pytest.approx(y1 - y0)
+    uv = np.vstack([path.uv, tip.uv]) * 1e3
+    assert np.all((uv[:, 0] > x0) & (uv[:, 0] < x1) & (uv[:, 1] > y0) & (uv[:, 1] < y1))
+    whole = np.vstack([u.polygon_uv for u in grid.unfoldings]) * 1e3
+    assert np.ptp(whole[:, 0]) > x1 - x0  # the frame is a part of the region
+    (inset,) = ax.child_axes
+    assert inset.get_title() == "whole region"
     import matplotlib.pyplot as plt
 
     plt.close("all")

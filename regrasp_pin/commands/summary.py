@@ -12,6 +12,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "failure_summary",
+    "held_path",
     "plan_summary",
     "print_table",
     "release_rows",
@@ -170,7 +171,12 @@ def write_figures(result: ManipulationPlan, out: Path) -> list[Path]:
             from ..plotting.manifold import plot_manifold
 
             man = result.manifolds[r.finger]
-            fig = plot_manifold(man, q_new=r.q[-1], trigger_index=man.time_index(r.t_start))
+            fig = plot_manifold(
+                man,
+                q_new=r.q[-1],
+                held=held_path(result.plan, r.finger, r.t_start),
+                joint_names=result.plan.hand["fingers"][r.finger]["joints"],
+            )
             fig.gca().set_title(
                 f"{r.finger}: joint-space manifold (Fig. 2), regrasp at {r.t_start:.2f} s"
             )
@@ -191,8 +197,23 @@ def write_figures(result: ManipulationPlan, out: Path) -> list[Path]:
             heights=heights,
             polygon_indices=r.polygon.indices,
             tip_path=r.tip_path,
+            zoom=True,
+            title=f"Fig. 8: {r.finger}, P -> Q in {len(r.polygon.indices)} waypoints",
         )
         files.append(out / "fig8_hopfield_path.png")
         fig.savefig(files[-1], dpi=110)
         plt.close(fig)
     return files
+
+
+def held_path(plan: Any, finger: str, t_lift_s: float) -> tuple[Any, Any]:
+    """``(times_s, q)`` of ``finger`` [rad] over its contact phase that ends at the
+    lift-off ``t_lift_s`` [s] (the path of P in joint space, for Fig. 2)."""
+    import numpy as np
+
+    phase = next(
+        p for p in plan.phases[finger] if p.kind == "contact" and abs(p.t_end - t_lift_s) < 1e-6
+    )
+    hand = plan.load_hand()
+    rows = (plan.t >= phase.t_start - 1e-9) & (plan.t <= phase.t_end + 1e-9)
+    return plan.t[rows], plan.q[np.ix_(rows, hand.finger(finger).q_indices)]

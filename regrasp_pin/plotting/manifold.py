@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,8 @@ def plot_manifold(
     track: ContactTrack | None = None,
     q_new: Any = None,
     trigger_index: int | None = None,
+    held: tuple[Any, Any] | None = None,
+    joint_names: Sequence[str] | None = None,
     ax: Any = None,
 ) -> Any:
     """Draw a finger's 3-D joint space as in the paper's Fig. 2.
@@ -43,6 +46,10 @@ def plot_manifold(
             :class:`~regrasp_pin.grasp.choice.NewContact` (its ``q_arrive``).
         trigger_index: Index into ``track`` of the trigger; default
             ``track.trigger_index()``.
+        held: Instead of ``track``: ``(times_s (S,), q (S, k))``, the finger's joint path
+            [rad] while it held P, up to its lift-off, e.g. from a plan; its last point
+            is marked as the trigger.
+        joint_names: The axes' joint names (the first three); default "joint 1..3".
         ax: A matplotlib 3-D axes; default a new figure.
 
     Returns:
@@ -111,35 +118,15 @@ def plot_manifold(
             label=f"manifold t = {t[i]:.2f} s ({int(manifold.feasible[i].sum())} feasible)",
         )
 
-    if track is not None:
-        if trigger_index is None:
-            trigger_index = track.trigger_index()
-        if trigger_index is not None and not 0 <= trigger_index < track.q.shape[0]:
-            raise InputError(
-                "trigger_index", f"{trigger_index} is out of range", "an index into track"
-            )
-        # P is held up to the trigger; after it the finger lets go
-        end = track.q.shape[0] if trigger_index is None else trigger_index + 1
-        path = deg(track.q[:end, :3])
+    p_path, mark = _held_path(track, trigger_index, held, k)
+    if p_path is not None:
+        path = np.degrees(p_path[:, :3])
         drawn.append(path)
-        ax.plot(
-            path[:, 0],
-            path[:, 1],
-            path[:, 2],
-            color="tab:blue",
-            lw=2.5,
-            zorder=5,
-            label="P's path (held)",
-        )
+        ax.plot(*path.T, color="tab:blue", lw=2.5, zorder=5, label="P's path (held)")
         ax.scatter(*path[0], s=50, color="tab:blue", marker="o", depthshade=False)
-        if trigger_index is not None:
+        if mark is not None:
             ax.scatter(
-                *path[-1],
-                s=120,
-                color="tab:orange",
-                marker="X",
-                depthshade=False,
-                label=f"trigger t = {track.times_s[trigger_index]:.2f} s",
+                *path[-1], s=120, color="tab:orange", marker="X", depthshade=False, label=mark
             )
     if q_new is not None:
         q_arr = getattr(q_new, "q_arrive", q_new)
@@ -153,14 +140,43 @@ def plot_manifold(
     ax.set_xlim(a[0] - pad[0], b[0] + pad[0])
     ax.set_ylim(a[1] - pad[1], b[1] + pad[1])
     ax.set_zlim(a[2] - pad[2], b[2] + pad[2])
-    ax.set_xlabel("joint 1 [deg]")
-    ax.set_ylabel("joint 2 [deg]")
-    ax.set_zlabel("joint 3 [deg]")
+    names = list(joint_names or [f"joint {j + 1}" for j in range(3)])
+    if len(names) < 3:
+        raise InputError("joint_names", f"has {len(names)} names", "at least 3 (the axes')")
+    ax.set_xlabel(f"{names[0]} [deg]")
+    ax.set_ylabel(f"{names[1]} [deg]")
+    ax.set_zlabel(f"{names[2]} [deg]")
     title = f"{manifold.finger}: manifold in joint space (Fig. 2)"
     if k > 3:
         title += f"\nfirst 3 of its {k} joints"
     ax.set_title(title)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.02), ncol=2, fontsize="x-small")
+    # the legend below the axes, clear of the tick labels
+    fig.subplots_adjust(bottom=0.2)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize="x-small", frameon=False)
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(t[0], t[-1]))
     fig.colorbar(sm, ax=ax, shrink=0.55, pad=0.12, label="time [s]")
     return fig
+
+
+def _held_path(
+    track: ContactTrack | None,
+    trigger_index: int | None,
+    held: tuple[Any, Any] | None,
+    k: int,
+) -> tuple[np.ndarray | None, str | None]:
+    """P's joint path [rad] up to its trigger (from ``track``) or lift-off (``held``),
+    and the label of the point that ends it (None: not marked)."""
+    if held is not None:
+        times = as_array(held[0], "held[0]", (None,))
+        return as_array(held[1], "held[1]", (times.size, k)), f"lift-off t = {times[-1]:.2f} s"
+    if track is None:
+        return None, None
+    if trigger_index is None:
+        trigger_index = track.trigger_index()
+    if trigger_index is None:
+        return track.q, None
+    if not 0 <= trigger_index < track.q.shape[0]:
+        raise InputError("trigger_index", f"{trigger_index} is out of range", "an index into track")
+    # P is held up to the trigger; after it the finger lets go
+    return track.q[: trigger_index + 1], f"trigger t = {track.times_s[trigger_index]:.2f} s"

@@ -51,6 +51,7 @@ def plot_unfolded_grid(
     ax: Any = None,
     *,
     title: str | None = "Unfolded surface grid from P to Q (Fig. 4)",
+    zoom: bool = False,
 ) -> Any:
     """Draw the unfolded region, the grid, the grid path and a polygon through waypoints.
 
@@ -68,6 +69,9 @@ def plot_unfolded_grid(
         tip_path: The inflated tip path (its surface points are drawn in the plane).
         ax: A matplotlib axes; default a new figure.
         title: Axes title (None for none).
+        zoom: Frame P, Q, the paths and the polygon (with a margin of 30 % of their
+            extent, at least 5 mm) and show the whole unfolded region in an inset with
+            the framed part outlined, as the paper's Fig. 8 does.
 
     Returns:
         The matplotlib figure.
@@ -139,9 +143,42 @@ def plot_unfolded_grid(
             color=colour,
         )
     ax.set_aspect("equal")
+    if zoom:
+        drawn = [uv[[grid.p_index, grid.q_index]]]
+        drawn += [x.uv * mm for x in (path, tip_path) if x is not None]
+        _zoom(ax, grid, np.vstack(drawn), path)
     ax.set_xlabel("unfolded u [mm]")
     ax.set_ylabel("unfolded v [mm]")
     ax.legend(loc="best", fontsize=8)
     if title:
         ax.set_title(title)
     return fig
+
+
+def _zoom(ax: Any, grid: SurfaceGrid, drawn_mm: np.ndarray, path: GridPath | None) -> None:
+    """Frame ``drawn_mm`` (points [mm]) and put the whole region in an inset."""
+    from matplotlib.patches import Rectangle
+
+    lo, hi = drawn_mm.min(axis=0), drawn_mm.max(axis=0)
+    side = float((hi - lo).max()) + 2 * max(0.3 * float((hi - lo).max()), 5.0)
+    centre = (lo + hi) / 2
+    lo, hi = centre - side / 2, centre + side / 2  # a square frame
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    # the inset in the corner that hides the fewest drawn points (first of equals)
+    frac = (drawn_mm - lo) / side
+    corners = ((0.0, 0.0), (0.7, 0.0), (0.0, 0.7), (0.7, 0.7))
+    hidden = [int(np.all((frac >= c) & (frac <= np.add(c, 0.3)), axis=1).sum()) for c in corners]
+    x0, y0 = corners[int(np.argmin(hidden))]
+    inset = ax.inset_axes((x0, y0, 0.3, 0.3))
+    mm = 1e3
+    for unf in grid.unfoldings:
+        poly = np.vstack([unf.polygon_uv, unf.polygon_uv[:1]]) * mm
+        inset.plot(poly[:, 0], poly[:, 1], color="0.35", lw=0.6)
+    if path is not None:
+        inset.plot(path.uv[:, 0] * mm, path.uv[:, 1] * mm, color="tab:blue", lw=1)
+    inset.add_patch(Rectangle(tuple(lo), *(hi - lo), fill=False, ec="tab:red", lw=1))
+    inset.set_aspect("equal")
+    inset.set_xticks([])
+    inset.set_yticks([])
+    inset.set_title("whole region", fontsize=7)
