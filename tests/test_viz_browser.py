@@ -257,3 +257,11 @@ def test_manifold_scene_renders(chromium, tmp_path):
     yellow = (r > 150) & (g > 150) & (b < 110)
     for name, mask in (("purple", purple), ("teal", teal), ("yellow", yellow)):
         assert mask.sum() > 20, f"no {name} manifold points"
+
+
+def test_the_camera_frames_the_object(static_shot):
+    """On load the object fills a good part of the frame (not a few pixels in a corner):
+    its screen-space box covers at least a quarter of the frame."""
+    ys, xs = np.nonzero(_masks(static_shot)["blue"])
+    box = (np.ptp(xs) + 1) * (np.ptp(ys) + 1) / (W * H)
+    assert box >= 0.25, f"the object's box covers {box:.1%} of the frame"

@@ -201,19 +201,23 @@ class PlanViewer:
                 direction = direction + 0.6 * side / np.linalg.norm(side)
         self.look_from(direction)
 
-    def look_from(self, direction_palm: object, distance: float = 2.3) -> None:
-        """Point the camera at the hand and the object (at the plan's start) from
+    def look_from(self, direction_palm: object, distance: float = 1.5) -> None:
+        """Point the camera at the object and the fingertips of the fingers that take
+        part (at the plan's start; idle fingers and the palm may fall outside) from
         ``direction_palm (3,)`` (palm frame), at ``distance`` times the radius of the
         sphere around them."""
         d = as_array(direction_palm, "direction_palm", (3,))
         if np.linalg.norm(d) < 1e-12:
             raise InputError("direction_palm", "is zero", "a non-zero direction")
-        tips = np.concatenate(
-            [f.fk(self.plan.q[:1, f.q_indices]) for f in self.hand.fingers.values()]
-        )
+        working = [
+            f
+            for name, f in self.hand.fingers.items()
+            if any(p.kind != "idle" for p in self.plan.phases.get(name, []))
+        ] or list(self.hand.fingers.values())
+        tips = np.concatenate([f.fk(self.plan.q[:1, f.q_indices]) for f in working])
         verts = np.asarray(self.plan.object["vertices"], float)
         T0 = self.plan.poses()[0]
-        pts = np.concatenate([tips, verts @ T0[:3, :3].T + T0[:3, 3], np.zeros((1, 3))])
+        pts = np.concatenate([tips, verts @ T0[:3, :3].T + T0[:3, 3]])
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         radius = 0.5 * float(np.linalg.norm(hi - lo))
         self.camera_target = 0.5 * (lo + hi)
