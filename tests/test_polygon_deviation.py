@@ -205,7 +205,7 @@ def test_rest_lower_bound_never_exceeds_cheapest_cover():
     [
         (np.zeros((5, 4)), "points", "shape (n, 2) or (n, 3)"),
         (np.zeros((5, 1)), "points", "shape (n, 2) or (n, 3)"),
-        (np.zeros(6), "points", "shape (N, N)"),
+        (np.zeros(6), "points", "shape (n, 2) or (n, 3)"),
         (np.zeros((1, 2)), "points", "at least 2 points"),
         (np.array([[0.0, 0.0], [np.nan, 1.0]]), "points", "finite values"),
         (np.array([[0.0, 0.0], [np.inf, 1.0]]), "points", "finite values"),
