@@ -72,7 +72,10 @@ def camera(plan) -> tuple[np.ndarray, np.ndarray]:
 def static_shot(chromium, plan, tmp_path_factory) -> np.ndarray:
     """The static HTML (animation paused at T_SHOW) in Chromium's --screenshot mode."""
     out = tmp_path_factory.mktemp("static")
-    html = viz.export_html(plan, out / "plan.html", play=False, display_time_s=T_SHOW)
+    # without the on-page controls: the same picture as the live page
+    html = viz.export_html(
+        plan, out / "plan.html", play=False, display_time_s=T_SHOW, controls=False
+    )
     png = out / "shot.png"
     cmd = browser.chromium_command(html.as_uri(), png, out / "profile", width=W, height=H)
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
@@ -265,3 +268,43 @@ def test_the_camera_frames_the_object(static_shot):
     ys, xs = np.nonzero(_masks(static_shot)["blue"])
     box = (np.ptp(xs) + 1) * (np.ptp(ys) + 1) / (W * H)
     assert box >= 0.25, f"the object's box covers {box:.1%} of the frame"
+
+
+CONTROLS_JS = """
+(() => {
+  const a = viewer.animator;
+  const el = (id) => document.getElementById(id);
+  const shown = (e) => {
+    const r = e.getBoundingClientRect();
+    return r.width > 0 && r.height > 0 && r.left >= 0 && r.top >= 0 &&
+      r.right <= innerWidth && r.bottom <= innerHeight;
+  };
+  const out = {playing_on_load: a.playing, max: parseFloat(el("rp-time").max),
+               shown: ["rp-play", "rp-time", "rp-legend"].map((id) => shown(el(id)))};
+  el("rp-play").click();
+  out.playing_after_click = a.playing;
+  el("rp-time").value = "%(seek)s";
+  el("rp-time").dispatchEvent(new Event("input"));
+  out.time = a.time;
+  out.label = el("rp-label").textContent;
+  out.legend = el("rp-legend").textContent;
+  return out;
+})()
+"""
+
+
+def test_the_page_plays_on_load_with_controls_in_view(chromium, plan, tmp_path):
+    """Play/pause, a time slider and a legend, visible without a click; the button
+    pauses the playing animation, the slider seeks it."""
+    html = viz.export_html(plan, tmp_path / "controls.html", play=True)
+    state = browser.screenshot(
+        html.as_uri(), tmp_path / "controls.png", width=1280, height=800,
+        ready_js="viewer.animator.duration > 0 && !document.getElementById('rp-play').disabled",
+        before_js=CONTROLS_JS % {"seek": T_SHOW},
+    )  # fmt: skip
+    assert state["shown"] == [True, True, True]
+    assert state["playing_on_load"] is True and state["playing_after_click"] is False
+    assert state["max"] == pytest.approx(plan.t[-1] - plan.t[0], abs=0.01)
+    assert state["time"] == pytest.approx(T_SHOW) and state["label"].startswith(f"{T_SHOW:.2f}")
+    for item in ("object", "P: where a finger lifts off", "Q: where it lands", "index"):
+        assert item in state["legend"]

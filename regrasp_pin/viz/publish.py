@@ -13,6 +13,7 @@ import meshcat
 
 from ..plan import Plan
 from .animation import animate_plan
+from .controls import controls_html
 from .server import LiveServer
 
 __all__ = ["export_html", "save_html", "show_plan_live", "wait_until_interrupted"]
@@ -27,11 +28,16 @@ def _as_plan(plan: Plan | str | Path) -> Plan:
     return plan if isinstance(plan, Plan) else Plan.load(plan)
 
 
-def save_html(vis: meshcat.Visualizer, path: str | Path) -> Path:
-    """Write the scene of ``vis`` (recording or live) as a self-contained HTML file."""
+def save_html(vis: meshcat.Visualizer, path: str | Path, *, extra_html: str = "") -> Path:
+    """Write the scene of ``vis`` (recording or live) as a self-contained HTML file, with
+    ``extra_html`` (e.g. :func:`~.controls.controls_html`) at the end of its body."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(vis.static_html(), encoding="utf-8")
+    page = vis.static_html()
+    if extra_html:
+        at = page.rfind("</body>")
+        page = page[:at] + extra_html + page[at:] if at >= 0 else page + extra_html
+    path.write_text(page, encoding="utf-8")
     return path
 
 
@@ -42,13 +48,15 @@ def export_html(
     fps: float = 30.0,
     play: bool = True,
     display_time_s: float | None = None,
+    controls: bool = True,
 ) -> Path:
     """Write a plan as one self-contained HTML file that opens without a server.
 
     The page holds meshcat's viewer (inlined from the installed ``meshcat`` package;
     nothing is fetched from the network), the scene and its animation: open it in a
-    browser, turn the view with the mouse, and use "Open Controls > Animations" to
-    play, pause or scrub the timeline.
+    browser and turn the view with the mouse. With ``controls`` the page also shows a
+    play/pause button, a time slider and a legend (:mod:`.controls`); meshcat's own
+    "Open Controls > Animations" stays too.
 
     Args:
         plan: A :class:`~regrasp_pin.plan.Plan` or the path of a plan file.
@@ -56,12 +64,13 @@ def export_html(
         fps: Animation frame rate [1/s].
         play: Start playing when the page opens.
         display_time_s: Time [s] shown before playing (default the start).
+        controls: Add the on-page controls and legend.
 
     Returns:
         The path written.
     """
     viewer = animate_plan(_as_plan(plan), None, fps=fps, play=play, display_time_s=display_time_s)
-    out = save_html(viewer.vis, path)
+    out = save_html(viewer.vis, path, extra_html=controls_html(viewer) if controls else "")
     log.info("wrote %s (%.1f MB)", out, out.stat().st_size / 1e6)
     return out
 
