@@ -15,14 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ._validate import as_array, positive, positive_int
+from ._validate import as_array, positive
 from .exceptions import Attempt, ContactError, FailureKind, InputError, ModelFileError
 from .grasp.contact import ContactModel
-from .model.clearance import palm_clearance
 from .model.hand import Hand
 from .model.motion import ObjectMotion
 from .model.objects import ConvexObject
-from .scenarios import Scenario, grasp_for_motion, scenario_params
+from .scenarios import Scenario, grasp_for_motion, palm_hit, scenario_params, start_poses
 
 __all__ = ["relative_motion_from_csv", "relative_twist", "scenario_for_motion"]
 
@@ -144,8 +143,6 @@ def scenario_for_motion(
         UnknownNameError: an unknown finger.
         ContactError: no start pose with a grasp (``attempts`` lists each pose tried).
     """
-    from .placing import candidate_placements
-
     names = tuple(fingers) if fingers is not None else hand.finger_names
     for n in names:
         hand.finger(n)
@@ -155,11 +152,9 @@ def scenario_for_motion(
             "relative", "does not start at the identity", "poses relative to the start"
         )
     contact = contact or ContactModel()
-    if pose is not None:
-        poses = [as_array(pose, "pose", (4, 4))]
-    else:
-        found = candidate_placements(hand, obj, names, contact=contact, pivot=None, seed=seed)
-        poses = [p.T_palm_object for p in found[: positive_int(attempts, "attempts")]]
+    poses = start_poses(
+        hand, obj, names, contact, pose=pose, attempts=attempts, pivot=None, seed=seed
+    )
     failed: list[Attempt] = []
     for i, T0 in enumerate(poses):
         where = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
@@ -171,17 +166,9 @@ def scenario_for_motion(
         except ContactError as exc:
             failed.append(exc.as_attempt(where))
             continue
-        samples = motion.pose(np.linspace(motion.t_start, motion.t_end, 21))
-        gap = float(palm_clearance(hand, obj, samples).min())
-        if gap < 0.0:
-            failed.append(
-                Attempt(
-                    kind=FailureKind.OBJECT_CLEARANCE,
-                    measured=gap,
-                    required=0.0,
-                    what=f"{where}: the object hits the palm during the motion",
-                )
-            )
+        hit = palm_hit(hand, obj, motion, f"{where}: the object hits the palm during the motion")
+        if hit is not None:
+            failed.append(hit)
             continue
         idle = [n for n in hand.finger_names if n not in names]
         text = (

@@ -51,10 +51,12 @@ __all__ = [
     "hand_model",
     "is_hand_file",
     "make_scenario",
+    "palm_hit",
     "scenario_for_hand",
     "scenario_params",
     "setup_fingers",
     "setup_pose",
+    "start_poses",
     "turn_about_thumb_contact",
 ]
 
@@ -523,7 +525,7 @@ def scenario_for_hand(
         ContactError: no candidate pose has a grasp with the object clear of the palm;
             ``attempts`` lists each pose tried and why it failed.
     """
-    from .placing import END_FACE_COS, candidate_placements
+    from .placing import END_FACE_COS
 
     names = tuple(fingers) if fingers is not None else hand.finger_names
     for n in names:
@@ -534,11 +536,9 @@ def scenario_for_hand(
         raise InputError("pivot", f"{pivot!r} is not a grasping finger", f"one of {names} or None")
     rate_rad, duration = _turn_rate(angle_deg, rate_deg_s)
     contact = contact or ContactModel()
-    if pose is not None:
-        poses = [as_array(pose, "pose", (4, 4))]
-    else:
-        found = candidate_placements(hand, obj, names, contact=contact, pivot=pivot, seed=seed)
-        poses = [p.T_palm_object for p in found[: positive_int(attempts, "attempts")]]
+    poses = start_poses(
+        hand, obj, names, contact, pose=pose, attempts=attempts, pivot=pivot, seed=seed
+    )
     failed: list[Attempt] = []
     for i, T0 in enumerate(poses):
         what = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
@@ -587,17 +587,9 @@ def scenario_for_hand(
             except ContactError as exc:
                 failed.append(exc.as_attempt(f"{what}, about the {pivot}'s contact"))
                 continue
-        poses_t = motion.pose(np.linspace(motion.t_start, motion.t_end, 21))
-        gap = float(palm_clearance(hand, obj, poses_t).min())
-        if gap < 0.0:
-            failed.append(
-                Attempt(
-                    kind=FailureKind.OBJECT_CLEARANCE,
-                    measured=gap,
-                    required=0.0,
-                    what=f"{what}: the object hits the palm during the turn",
-                )
-            )
+        hit = palm_hit(hand, obj, motion, f"{what}: the object hits the palm during the turn")
+        if hit is not None:
+            failed.append(hit)
             continue
         axis_text = (
             "an axis through its centre"
@@ -620,6 +612,37 @@ def scenario_for_hand(
         kind=FailureKind.NO_CANDIDATE,
         attempts=failed,
     )
+
+
+def start_poses(
+    hand: Hand,
+    obj: ConvexObject,
+    fingers: tuple[str, ...],
+    contact: ContactModel,
+    *,
+    pose: np.ndarray | None,
+    attempts: int,
+    pivot: str | None,
+    seed: int,
+) -> list[np.ndarray]:
+    """The start poses a scenario search tries: ``[pose]`` if given, else the first
+    ``attempts`` of :func:`~regrasp_pin.placing.candidate_placements`, best first."""
+    from .placing import candidate_placements
+
+    if pose is not None:
+        return [as_array(pose, "pose", (4, 4))]
+    found = candidate_placements(hand, obj, fingers, contact=contact, pivot=pivot, seed=seed)
+    return [p.T_palm_object for p in found[: positive_int(attempts, "attempts")]]
+
+
+def palm_hit(hand: Hand, obj: ConvexObject, motion: ObjectMotion, what: str) -> Attempt | None:
+    """An ``object-clearance`` attempt (``what`` says where) if the object goes into the
+    palm at one of 21 times of ``motion``, else None."""
+    samples = motion.pose(np.linspace(motion.t_start, motion.t_end, 21))
+    gap = float(palm_clearance(hand, obj, samples).min())
+    if gap >= 0.0:
+        return None
+    return Attempt(kind=FailureKind.OBJECT_CLEARANCE, measured=gap, required=0.0, what=what)
 
 
 def scenario_params(fingers: tuple[str, ...], contact: ContactModel) -> PlannerParams:

@@ -188,3 +188,11 @@ def test_plan_bad_problems_are_one_line(tmp_path, capsys, argv, message):
     assert main(["plan", *argv, "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err
+
+
+def test_suite_choices_match_the_library():
+    """`regrasp-pin suite --help` lists literal copies (no heavy import): the library's."""
+    from regrasp_pin.commands import suite as command
+    from regrasp_pin.suite import MOTION_KINDS, OBJECT_KINDS
+
+    assert (command.OBJECT_KINDS, command.MOTION_KINDS) == (OBJECT_KINDS, MOTION_KINDS)
