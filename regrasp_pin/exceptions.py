@@ -115,6 +115,9 @@ class FailureKind(str, Enum):
     """Fewer fingers than required would hold."""
     BUDGET = "budget"
     """The search budget (attempts or seconds) ran out."""
+    INFEASIBLE = "infeasible"
+    """No plan exists: a finger cannot let go (no grasp without it is in force closure)
+    for longer than any of its contacts stays within its joint limits [s]."""
 
 
 # what to change, per kind, for the message of a failed plan
@@ -132,6 +135,8 @@ ADVICE = {
     FailureKind.FINGER_BUSY: "turn more slowly so that the fingers can take turns",
     FailureKind.TOO_FEW_FINGERS: "lower PlannerParams.min_holding or use more fingers",
     FailureKind.BUDGET: "raise the planner's budget (PlannerParams.max_steps, or budget_s if set)",
+    FailureKind.INFEASIBLE: "turn less or about another axis, or place the object where that "
+    "finger's contacts stay within its limits longer",
 }
 
 

@@ -34,6 +34,7 @@ from .exceptions import (
 from .grasp.choice import Grasp, initial_grasp
 from .grasp.contact import ContactModel
 from .grasp.manifold import build_manifold
+from .grasp.necessity import MustHold, must_hold
 from .model.clearance import palm_clearance
 from .model.hand import Hand
 from .model.motion import ObjectMotion
@@ -370,6 +371,8 @@ def grasp_for_motion(
     trials: int = 80,
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
     keep: Mapping[str, int] | None = None,
+    mu: float = 0.8,
+    must_hold_check: bool = False,
 ) -> Grasp:
     """The initial grasp chosen for ``motion`` (:func:`~.contact_choice.initial_grasp`).
 
@@ -393,13 +396,20 @@ def grasp_for_motion(
             <= 0 are rejected.
         keep: Fingers whose contact is given: finger -> index in the surface sample
             (``Grasp.indices`` of an earlier grasp); that point is their only candidate.
+        mu: Friction coefficient of the force-closure tests.
+        must_hold_check: Keep, for a finger that cannot let go from the start (no grasp
+            of the hand's other fingers, the idle ones too, is in force closure without
+            it: :func:`~regrasp_pin.grasp.necessity.must_hold`), only the contacts that
+            last that long (over the horizon). Only for a grasp meant for ``motion``
+            itself.
 
     Returns:
         The :class:`~.contact_choice.Grasp` at the motion's start.
 
     Raises:
         InputError: non-positive ``grasp_dt_s`` or ``horizon_s``.
-        ContactError: no force-closure grasp.
+        ContactError: no force-closure grasp (kind ``infeasible`` when a finger cannot
+            let go longer than any of its contacts lasts).
     """
     step = positive(grasp_dt_s, "grasp_dt_s")
     duration, t_last = motion.duration_s, motion.t_end
@@ -421,15 +431,24 @@ def grasp_for_motion(
         only[index] = True
         m = manifolds[name]
         manifolds[name] = replace(m, inside=m.inside & only[None, :])
+    runs: list[MustHold] = []
+    if must_hold_check:
+        every = dict(manifolds)
+        for n in hand.finger_names:
+            if n not in every:  # an idle finger may join later
+                every[n] = build_manifold(hand.fingers[n], sample, motion, times, contact=contact)
+        runs = must_hold(every, sample, obj, mu, list(fingers))
     return initial_grasp(
         hand,
         obj,
         manifolds,
         sample,
         contact=contact,
+        mu=mu,
         seed=seed,
         trials=trials,
         finger_clearance=finger_clearance,
+        must_hold=runs,
     )
 
 

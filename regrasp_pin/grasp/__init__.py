@@ -11,13 +11,16 @@ Takes the hand, the object and its motion. Gives:
   its hold ends, and the holding hand's configurations;
 - :mod:`.choice`: the initial grasp and the new contact Q (the paper's conditions
   (a) and (b): inside the limits, usable for the longest time);
-- :mod:`.quality`: force closure and the Ferrari-Canny epsilon.
+- :mod:`.quality`: force closure and the Ferrari-Canny epsilon;
+- :mod:`.necessity`: the runs of time in which a finger cannot let go (no grasp without
+  it exists), and whether any of its contacts lasts through them.
 """
 
 from .choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
 from .contact import ContactModel
 from .holding import Holding, holding_hand
 from .manifold import Manifold, build_manifold
+from .necessity import MustHold, first_infeasibility, must_hold
 from .quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
 from .tracking import ContactTrack, track_contact
 
@@ -27,14 +30,17 @@ __all__ = [
     "Grasp",
     "Holding",
     "Manifold",
+    "MustHold",
     "NewContact",
     "build_manifold",
     "choose_new_contact",
     "contact_wrenches",
     "exit_times",
     "ferrari_canny_epsilon",
+    "first_infeasibility",
     "holding_hand",
     "initial_grasp",
     "is_force_closure",
+    "must_hold",
     "track_contact",
 ]

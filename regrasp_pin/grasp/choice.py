@@ -20,7 +20,7 @@ the surface distance; it is only a tie-breaker).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -31,6 +31,7 @@ from ..model.hand import Finger, Hand
 from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
 from .manifold import Manifold
+from .necessity import MustHold
 from .quality import ferrari_canny_epsilon
 
 __all__ = [
@@ -432,10 +433,13 @@ def _start_candidates(
     t_index: int,
     contact: ContactModel,
     max_candidates: int,
+    hold: MustHold | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One finger's candidate contacts at ``t_index`` for :func:`initial_grasp`: their
     sample indices and lasting fractions, the longest-lasting first, spread over the
-    surface (two tip radii apart first, then one), links clear of the object."""
+    surface (two tip radii apart first, then one), links clear of the object; only
+    those that last through ``hold`` (a run from the start in which the finger cannot
+    let go) if it is given."""
     name = man.finger
     finger = hand.finger(name)
     usable = man.usable(contact.limit_margin_rad)
@@ -446,6 +450,14 @@ def _start_candidates(
             finger=name,
             time_s=float(man.times_s[t_index]),
         )
+    if hold is not None:
+        if not hold.lasting[idx].any():
+            raise _cannot_hold(man, hold, idx, t_index)
+        # what the planner needs: the trigger margin, up to the next grid time (the
+        # run may end anywhere before it); what is proven: margin >= 0 over the run
+        k_end = min(hold.k_to + 1, man.times_s.size - 1)
+        needed = np.asarray(usable[t_index : k_end + 1].all(axis=0))
+        idx = idx[needed[idx]] if needed[idx].any() else idx[hold.lasting[idx]]
     last = exit_times(usable[:, idx], man.times_s, t_index)
     frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
     order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
@@ -464,8 +476,28 @@ def _start_candidates(
         link_clear,
     )
     if not chosen:
-        raise ContactError("every usable contact makes a link touch the object", finger=name)
+        lasting = "" if hold is None else f" that lasts until t={hold.t_to_s:.3f} s"
+        raise ContactError(
+            f"every usable contact{lasting} makes a link touch the object", finger=name
+        )
     return idx[chosen], frac[chosen]
+
+
+def _cannot_hold(man: Manifold, hold: MustHold, idx: np.ndarray, t_index: int) -> ContactError:
+    """The INFEASIBLE error of a finger none of whose starting contacts ``idx`` lasts
+    through ``hold``, with how long the longest-lasting one does."""
+    last = exit_times(man.usable(0.0)[:, idx], man.times_s, t_index)
+    t0 = float(man.times_s[t_index])
+    return ContactError(
+        f"it cannot let go until t={hold.t_to_s:.3f} s (until then no grasp without it is in "
+        f"force closure), but none of its contacts stays within its joint limits that long "
+        f"(the longest until t={float(last.max()):.3f} s)",
+        finger=man.finger,
+        time_s=t0,
+        kind=FailureKind.INFEASIBLE,
+        measured=float(last.max()) - t0,
+        required=hold.t_to_s - t0,
+    )
 
 
 def _grasp_score(
@@ -522,6 +554,7 @@ def initial_grasp(
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
     min_finger_gap_m: float | None = None,
     gap_horizon_s: float = 1.0,
+    must_hold: Sequence[MustHold] = (),
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
 
@@ -541,10 +574,13 @@ def initial_grasp(
     fraction, the smallest of those leave-one-out epsilons, the mean lasting fraction
     and the epsilon.
     ``finger_clearance`` (optional) maps the fingers' configurations to a further
-    distance [m]; a grasp where it is <= 0 is refused.
+    distance [m]; a grasp where it is <= 0 is refused. ``must_hold`` (from
+    :func:`~regrasp_pin.grasp.necessity.must_hold`) keeps, for a finger that cannot let
+    go from ``t_index`` on, only the contacts that last through that run.
 
     Raises:
-        ContactError: a finger has no usable contact, or no combination is in force
+        ContactError: a finger has no usable contact (kind ``infeasible`` when none
+            lasts through its ``must_hold`` run), or no combination is in force
             closure.
     """
     contact = contact or ContactModel()
@@ -559,9 +595,10 @@ def initial_grasp(
     ks = soon[:: max(1, -(-soon.size // 5))]
     gap = _PairGaps(hand, {n: manifolds[n].q[ks] for n in names})
     pts, nrm = sample.points, sample.normals
+    hold = {r.finger: r for r in must_hold if r.k_from <= t_index <= r.k_to}
     per_finger = {
         name: _start_candidates(
-            hand, obj, manifolds[name], pts, t_index, contact, candidates_per_finger
+            hand, obj, manifolds[name], pts, t_index, contact, candidates_per_finger, hold.get(name)
         )
         for name in names
     }

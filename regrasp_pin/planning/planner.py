@@ -28,7 +28,9 @@ Where the plan stands and the triggers that follow from it are in
 :mod:`.planning.state`; the parameters in :mod:`.planning.params`.
 A motion that cannot be achieved raises :class:`~.exceptions.PlanningError` with the
 finger, the time, the kind of the failure, every attempt and the partial plan up to
-that time.
+that time; one that provably cannot be (a finger that cannot let go, no grasp without
+it existing, for longer than its contact lasts: :mod:`~regrasp_pin.grasp.necessity`)
+fails at once with kind ``infeasible``, before any search.
 """
 
 from __future__ import annotations
@@ -41,9 +43,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..exceptions import Attempt, FailureKind, PlanningError
-from ..grasp.choice import Grasp, initial_grasp
+from ..grasp.choice import Grasp, exit_times, initial_grasp
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
 from ..grasp.manifold import Manifold, build_manifold
+from ..grasp.necessity import MustHold, first_infeasibility, must_hold
 from ..grasp.quality import ferrari_canny_epsilon
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
@@ -163,8 +166,13 @@ def plan_manipulation(
     }
     stage["manifolds"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    every, runs = _must_hold(hand, obj, motion, sample, m_times, manifolds, params)
+    stage["must hold"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     if grasp is None:
-        grasp = initial_grasp(hand, obj, manifolds, sample, contact=params.contact, mu=params.mu)
+        grasp = initial_grasp(
+            hand, obj, manifolds, sample, contact=params.contact, mu=params.mu, must_hold=runs
+        )
     stage["initial grasp"] = time.perf_counter() - t0
 
     grid = _time_grid(motion, params.dt_s)
@@ -187,7 +195,7 @@ def plan_manipulation(
     stage["tracking"] = time.perf_counter() - t0
     search = RegraspSearch(
         scene,
-        manifolds,
+        every,
         sample,
         regrasp=params.regrasp,
         contact=params.contact,
@@ -204,7 +212,7 @@ def plan_manipulation(
         search,
         budget,
         base_q,
-        manifolds,
+        every,
     )
     state = PlanState(
         holding=holding,
@@ -214,6 +222,9 @@ def plan_manipulation(
         now=motion.t_start,
         held_to_end={},
     )
+    infeasible = first_infeasibility(runs, grasp.indices)
+    if infeasible is not None:
+        raise _no_plan_exists(ctx, state, infeasible, grasp.indices)
     t0 = time.perf_counter()
     steps: list[_Step] = []
     backtracks = 0
@@ -273,7 +284,8 @@ def plan_manipulation(
             "stage_s": stage,
         }
     )
-    return ManipulationPlan(plan, list(state.regrasps), grasp, manifolds, sample, stage)
+    taking_part = {n: m for n, m in every.items() if n in manifolds or n in state.joined}
+    return ManipulationPlan(plan, list(state.regrasps), grasp, taking_part, sample, stage)
 
 
 def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:
@@ -425,6 +437,65 @@ def _advance(
         )
     steps.append(_Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
     return _apply(ctx, state, name, t_trig, why, found, landed.get(id(found.result)))
+
+
+def _must_hold(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    sample: SurfaceSample,
+    m_times: np.ndarray,
+    manifolds: dict[str, Manifold],
+    params: PlannerParams,
+) -> tuple[dict[str, Manifold], list[MustHold]]:
+    """The manifolds of every finger that could hold and the runs in which a finger
+    cannot let go (:func:`~regrasp_pin.grasp.necessity.must_hold`).
+
+    An idle finger may join in place of one that lets go (:mod:`.planning.letgo`), so it
+    counts among those that could hold; its manifold is the one a join would build. The
+    runs are only claimed when every flight spans a grid time (regrasps last longer than
+    the grid step), as the proof needs; else there are none.
+    """
+    every = dict(manifolds)
+    step = float(m_times[1] - m_times[0]) if m_times.size > 1 else np.inf
+    if params.regrasp.duration_s <= step:
+        return every, []
+    if params.release:
+        for name in hand.finger_names:
+            if name not in every:
+                every[name] = build_manifold(
+                    hand.fingers[name], sample, motion, m_times, contact=params.contact
+                )
+    return every, must_hold(every, sample, obj, params.mu, list(manifolds))
+
+
+def _no_plan_exists(
+    ctx: PlanContext, state: PlanState, run: MustHold, start: dict[str, int]
+) -> PlanningError:
+    """The INFEASIBLE failure of a finger that cannot let go during ``run`` but cannot
+    hold that long either; the partial plan is the start."""
+    man = ctx.manifolds[run.finger]
+    at_start = run.finger in start and run.k_from == 0
+    k = run.k_from
+    usable = man.usable(0.0)
+    last = (
+        exit_times(usable[:, [start[run.finger]]], man.times_s, k)
+        if at_start
+        else exit_times(usable[:, usable[k]], man.times_s, k)
+    )
+    longest = float(last.max()) if last.size else float(man.times_s[k])
+    which = "its contact does not stay" if at_start else "none of its contacts stays"
+    return PlanningError(
+        f"no plan exists: from t={run.t_from_s:.3f} s to t={run.t_to_s:.3f} s no grasp "
+        f"without it is in force closure, so it cannot let go, but {which} within its "
+        f"joint limits that long (it leaves them at t={longest:.3f} s)",
+        finger=run.finger,
+        time_s=run.t_from_s,
+        partial=_plan_until(ctx, state, ctx.scene.motion.t_start),
+        kind=FailureKind.INFEASIBLE,
+        measured=longest - run.t_from_s,
+        required=run.duration_s,
+    )
 
 
 def _fingers_that_stay(

@@ -143,6 +143,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
         horizon_s=spec.grasp_horizon_s,
         seed=spec.seed,
         finger_clearance=clearance,
+        must_hold_check=m.kind != "contact-axis",  # the grasp's turn is the motion
     )
     motion = (
         turn_about_thumb_contact(T0, grasp, axis, rate_rad, duration, m.dt_s)

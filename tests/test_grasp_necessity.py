@@ -1,0 +1,172 @@
+"""The intervals in which a finger cannot let go (regrasp_pin.grasp.necessity)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from regrasp_pin.exceptions import ContactError, FailureKind, PlanningError
+from regrasp_pin.grasp.choice import Grasp
+from regrasp_pin.grasp.manifold import Manifold
+from regrasp_pin.grasp.necessity import (
+    MustHold,
+    closure_possible_without,
+    first_infeasibility,
+    must_hold,
+)
+from regrasp_pin.grasp.quality import ferrari_canny_epsilon
+from regrasp_pin.model.objects import Box
+from regrasp_pin.planning.planner import plan_manipulation
+
+MU = 0.8
+
+
+def _manifold(name: str, usable: np.ndarray, times: np.ndarray) -> Manifold:
+    """A manifold whose ``usable(0.0)`` is ``usable`` ``(T, N)`` (margin 0.1 rad there)."""
+    n_t, n = usable.shape
+    margin = np.where(usable, 0.1, -0.1)
+    return Manifold(
+        finger=name,
+        times_s=times,
+        q=np.zeros((n_t, n, 1)),
+        reachable=np.ones((n_t, n), bool),
+        inside=usable.copy(),
+        margin_rad=margin,
+        pad_ok=np.ones((n_t, n), bool),
+        lower=np.array([-1.0]),
+        upper=np.array([1.0]),
+        T_palm_object=np.tile(np.eye(4), (n_t, 1, 1)),
+    )
+
+
+@pytest.fixture(scope="module")
+def box():
+    obj = Box((0.04, 0.06, 0.05))
+    return obj, obj.sample_surface(0.005)
+
+
+def test_one_face_is_never_closure_and_opposite_faces_with_friction_are(box):
+    obj, sample = box
+    times = np.linspace(0.0, 1.0, 3)
+    top = sample.normals[:, 2] > 0.99
+    bottom = sample.normals[:, 2] < -0.99
+    only_top = np.tile(top, (3, 1))
+    both = np.tile(top | bottom, (3, 1))
+    both[0] = top  # at t=0 the others reach the top only
+    mans = {
+        "a": _manifold("a", np.ones((3, len(sample)), bool), times),
+        "b": _manifold("b", only_top, times),
+        "c": _manifold("c", both, times),
+        "d": _manifold("d", both, times),
+    }
+    # without "a": the others push on the top only at t=0, squeeze top and bottom later
+    assert closure_possible_without(mans, sample, obj, "a", MU).tolist() == [False, True, True]
+    # two fingers never hold (no torque about the line through their contacts)
+    del mans["d"]
+    assert not closure_possible_without(mans, sample, obj, "a", MU).any()
+    # a squeeze between two opposite faces with friction is in force closure (exact check)
+    i_top = np.flatnonzero(top)[:3]
+    i_bot = np.flatnonzero(bottom)[:3]
+    ii = np.r_[i_top, i_bot]
+    assert ferrari_canny_epsilon(sample.points[ii], sample.normals[ii], MU) > 0
+
+
+def test_bound_holds_for_every_grasp_of_the_other_fingers(box):
+    """Where some grasp of the others (one contact each, exact epsilon) is in force
+    closure, the bound must say so: it may only be looser, never tighter."""
+    obj, sample = box
+    rng = np.random.default_rng(3)
+    n_t = 12
+    times = np.linspace(0.0, 1.1, n_t)
+    mans = {}
+    for name in ("thumb", "index", "middle", "ring"):
+        faces = rng.choice(6, size=3, replace=False)
+        near = np.isin(sample.face_ids, faces)
+        mans[name] = _manifold(name, near[None, :] & (rng.random((n_t, len(sample))) < 0.3), times)
+    free = closure_possible_without(mans, sample, obj, "thumb", MU)
+    found_closure = 0
+    for k in range(n_t):
+        for _ in range(60):
+            ii = [
+                rng.choice(np.flatnonzero(mans[n].usable(0.0)[k]))
+                for n in ("index", "middle", "ring")
+            ]
+            if ferrari_canny_epsilon(sample.points[ii], sample.normals[ii], MU) > 0:
+                found_closure += 1
+                assert free[k], f"time {k}: a grasp without the thumb exists"
+    assert found_closure > 0  # the test exercised the bound
+
+
+def test_runs_lasting_contacts_and_first_infeasibility(box):
+    obj, sample = box
+    n_t = 10
+    times = np.linspace(0.0, 0.9, n_t)
+    n = len(sample)
+    top = sample.normals[:, 2] > 0.99
+    # one other finger (on the top face only): the thumb can never let go
+    other = _manifold("index", np.tile(top, (n_t, 1)), times)
+    thumb_usable = np.zeros((n_t, n), bool)
+    thumb_usable[0:5, 0] = True  # point 0: usable at times 0..4
+    thumb_usable[3:10, 1] = True  # point 1: at times 3..9
+    thumb = _manifold("thumb", thumb_usable, times)
+    runs = must_hold({"thumb": thumb, "index": other}, sample, obj, MU, ["thumb"])
+    assert [(r.finger, r.k_from, r.k_to) for r in runs] == [("thumb", 0, n_t - 1)]
+    run = runs[0]
+    assert run.t_from_s == 0.0 and run.t_to_s == pytest.approx(0.9)
+    assert not run.possible  # neither point lasts the whole run
+    assert first_infeasibility(runs) is run
+    # a shorter run that point 0 lasts through: feasible from point 0, not from point 1
+    short = MustHold("thumb", 0, 3, 0.0, 0.3, thumb_usable[0:4].all(axis=0))
+    assert short.possible
+    assert first_infeasibility([short], {"thumb": 0}) is None
+    assert first_infeasibility([short], {"thumb": 1}) is short
+    # a later run is judged on any contact, not on the starting one
+    later = MustHold("thumb", 4, 9, 0.4, 0.9, thumb_usable[4:10].all(axis=0))
+    assert first_infeasibility([later], {"thumb": 0}) is None
+
+
+@pytest.fixture(scope="module")
+def three_fingers():
+    """A neighbour scenario (five-finger hand, hexagon turned 100 deg about the thumb's
+    contact) planned with the thumb, index and middle only, nobody joining: without
+    any one of them two fingers remain, never in force closure."""
+    from regrasp_pin.suite import build_scenario, neighbour_specs
+
+    spec = next(s for s in neighbour_specs() if s.name == "five_finger-hexagon-+100deg-20dps")
+    scen = build_scenario(spec)
+    params = replace(scen.params, fingers=("thumb", "index", "middle"), release=False)
+    return scen, params
+
+
+def test_planner_refuses_a_grasp_that_cannot_last(three_fingers):
+    scen, params = three_fingers
+    keep = params.fingers
+    g = scen.grasp
+    grasp = Grasp(
+        points_object={n: g.points_object[n] for n in keep},
+        normals_object={n: g.normals_object[n] for n in keep},
+        q={n: g.q[n] for n in keep},
+        indices={n: g.indices[n] for n in keep},
+        epsilon=g.epsilon,
+    )
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=grasp, params=params)
+    e = err.value
+    assert e.kind == FailureKind.INFEASIBLE
+    assert e.finger in keep and e.time_s == scen.motion.t_start
+    # the run is the whole motion; the finger's contact leaves its limits before its end
+    assert e.required == pytest.approx(scen.motion.duration_s)
+    assert 0.0 <= e.measured < e.required
+    assert e.partial is not None and e.attempts == ()
+
+
+def test_planner_grasp_search_says_when_no_contact_lasts(three_fingers):
+    scen, params = three_fingers
+    with pytest.raises(ContactError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, params=params)
+    e = err.value
+    assert e.kind == FailureKind.INFEASIBLE
+    assert e.finger in params.fingers
+    assert e.measured < e.required == pytest.approx(scen.motion.duration_s)
