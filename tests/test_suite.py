@@ -244,6 +244,12 @@ def test_summary_counts():
     assert "planning time per regrasp: median 250 ms" in text
     assert "re-check of the full plans: 1/2 passed" in text
     assert "e: index penetrates" in text
+    assert "proven to have no plan" not in text
+    # a proven failure is counted apart: the others' rate leaves it out
+    results.append(_result("f", "allegro", "box", "object-axis", False, "infeasible", "plan"))
+    text = summarize(results)
+    assert "full plans: 2/6" in text
+    assert "proven to have no plan (kind infeasible): 1; full plans of the others: 2/5" in text
 
 
 def test_results_round_trip_through_json():

@@ -7,6 +7,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from ..exceptions import FailureKind
 from ..scenarios import HANDS
 from .run import ScenarioResult
 from .specs import MOTION_KINDS, OBJECT_KINDS
@@ -46,6 +47,13 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
     lines = [f"scenarios: {len(res)}, full plans: {_rate(res)}"]
     if not res:
         return "\n".join(lines)
+    proven = [r for r in res if r.failure_kind == FailureKind.INFEASIBLE.value]
+    if proven:
+        rest = [r for r in res if r.failure_kind != FailureKind.INFEASIBLE.value]
+        lines.append(
+            f"proven to have no plan (kind infeasible): {len(proven)}; "
+            f"full plans of the others: {_rate(rest)}"
+        )
     hands = [h for h in HANDS if any(r.hand == h for r in res)]
     hands += sorted({r.hand for r in res} - set(hands))
     kinds = [k for k in OBJECT_KINDS if any(r.object_kind == k for r in res)]
