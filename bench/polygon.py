@@ -12,10 +12,15 @@ n = 100, 200, 500 points, and reduces them to m = 7, 10, 20 vertices. Prints:
    of the paper, by deviation, open/closed, 2-D/3-D, over all curves, n and m (cases whose
    optimum is 0, e.g. a lattice path cut at its corners, are counted apart);
 4. the baseline: a naive numpy O(n^3) H (one chord start at a time, every end and arc
-   point broadcast) against the full exact H and the network's band, n = 500.
+   point broadcast) against the full exact H and the network's band, n = 500;
+5. closed digital curves as the polygonal-approximation literature uses them (8-connected
+   outlines of 53-112 points with sharp corners, one-pixel-wide parts, repeated pixels, a
+   spiral; :mod:`digital_curves`), m = 8 to 30, for every deviation: energy / exact
+   optimum of the network and of the plain network of the paper, and the network's time.
 
 Times are the best of ``--repeat`` runs [ms]. Usage:
-``python bench/polygon.py [--repeat K] [--quick]`` (``--quick``: n <= 200 in part 3).
+``python bench/polygon.py [--repeat K] [--quick] [--digital]`` (``--quick``: n <= 200 in
+part 3; ``--digital``: part 5 only).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from collections import defaultdict
 from collections.abc import Callable
 
 import numpy as np
+from digital_curves import benchmark_curves
 
 from regrasp_pin.polygon.approximate import approximate_polygon, network_band
 from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
@@ -239,15 +245,67 @@ def baseline(repeat: int) -> None:
     print(f"ise H, O(n^2) prefix sums  {t_ise:8.1f}")
 
 
+DIGITAL_M = (8, 12, 16, 20, 25, 30)
+
+
+def digital() -> None:
+    curves = benchmark_curves()
+    sizes = sorted(len(P) for _, P in curves)
+    print(
+        f"\n5) closed digital curves: {len(curves)} outlines, n = {sizes[0]}-{sizes[-1]}, "
+        f"m in {DIGITAL_M}: energy / exact optimum"
+    )
+    print(
+        f"{'deviation':9} {'cases':>5} {'E*=0':>5} {'mean':>7} {'worst':>7} {'plain mean':>10} "
+        f"{'plain worst':>11} {'>plain':>6} {'missed0':>7} {'net ms':>7}"
+    )
+    worst_case: dict[str, tuple[float, str, int]] = {}
+    for deviation in DEVIATIONS:
+        rows, times = [], []
+        for label, P in curves:
+            for m in DIGITAL_M:
+                hop = approximate_polygon(P, m, closed=True, deviation=deviation)
+                ex = approximate_polygon(P, m, closed=True, deviation=deviation, method="exact")
+                z = zero_level(P, deviation)
+                e_x = clean(ex.energy, z)
+                e_h, e_p = clean(hop.energy, z), clean(hop.plain_energy, z)
+                rows.append((ratio(e_h, e_x), ratio(e_p, e_x), float(e_x == 0.0), e_h > e_p))
+                times.append(hop.timings_ms["H"] + hop.timings_ms["network"])
+                if rows[-1][0] > worst_case.get(deviation, (0.0, "", 0))[0]:
+                    worst_case[deviation] = (rows[-1][0], label, m)
+        a = np.array(rows)
+        nz = a[a[:, 2] == 0.0]
+        print(
+            f"{deviation:9} {len(a):5d} {int(a[:, 2].sum()):5d} {nz[:, 0].mean():7.4f} "
+            f"{nz[:, 0].max():7.4f} {nz[:, 1].mean():10.4f} {nz[:, 1].max():11.4f} "
+            f"{int(a[:, 3].sum()):6d} {int((a[a[:, 2] == 1.0, 0] != 1.0).sum()):7d} "
+            f"{np.median(times):7.1f}"
+        )
+    print(
+        "worst cases: "
+        + ", ".join(f"{d} {r:.3f} ({lab}, m={m})" for d, (r, lab, m) in worst_case.items())
+    )
+    print(
+        ">plain: cases where the network ends above the plain network; missed0: cases with "
+        "optimum 0 (left out of the ratios) where the network is above 0; net ms: median "
+        "H + network."
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3, help="timing repetitions (best of)")
     parser.add_argument("--quick", action="store_true", help="n <= 200 in the quality table")
+    parser.add_argument("--digital", action="store_true", help="only the digital curves (part 5)")
     args = parser.parse_args()
+    if args.digital:
+        digital()
+        return
     headline(args.repeat)
     grid_of_sizes(args.repeat)
     quality(args.quick)
     baseline(args.repeat)
+    digital()
 
 
 if __name__ == "__main__":

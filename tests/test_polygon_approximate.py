@@ -94,6 +94,39 @@ def test_straight_path_and_pixels():
         assert np.isfinite(res.energy)
 
 
+def square_with_stem() -> np.ndarray:
+    """Closed 8-connected outline of a 5 x 5 pixel square with a one-pixel-wide stem: the
+    outline walks the stem out and back, so (4, 2), (5, 2), (6, 2) appear twice."""
+    bottom = [(x, 0) for x in range(5)]
+    right_low = [(4, 1), (4, 2)]
+    stem = [(5, 2), (6, 2), (7, 2), (6, 2), (5, 2), (4, 2)]
+    rest = [(4, 3), (4, 4), *[(x, 4) for x in range(3, -1, -1)], (0, 3), (0, 2), (0, 1)]
+    return np.array(bottom + right_low + stem + rest, dtype=float)
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+def test_repeated_pixels_give_no_nan_and_no_zero_length_chord(deviation):
+    P = square_with_stem()
+    for closed in (False, True):
+        H = deviation_matrix(P, deviation, closed=closed)
+        assert not np.isnan(H).any()
+        for m in (4, 6, 9):
+            for method in METHODS:
+                res = approximate_polygon(P, m, closed=closed, deviation=deviation, method=method)
+                ends = np.roll(res.vertices, -1, axis=0) if closed else res.vertices[1:]
+                starts = res.vertices if closed else res.vertices[:-1]
+                gaps = np.linalg.norm(ends - starts, axis=1)
+                assert np.all(gaps > 0), f"zero-length chord ({method}, m={m}, {closed=})"
+                assert np.isfinite(res.energy) and np.isfinite(res.plain_energy)
+            ex = approximate_polygon(P, m, closed=closed, deviation=deviation, method="exact")
+            H_best = exact_polygon(H, m, closed=closed).energy
+            assert_close(ex.energy, H_best, atol=1e-12, rtol=1e-12)
+    loop = np.vstack([P, P[:1]])  # an open path back to its start: m = 2 is a point
+    with pytest.raises(InputError, match="m: 2 joins the first and last points"):
+        approximate_polygon(loop, 2, deviation=deviation)
+    assert np.isfinite(approximate_polygon(loop, 3, deviation=deviation).energy)
+
+
 def test_all_points_and_two_points():
     P = noisy_circle(6)
     res = approximate_polygon(P, 6, closed=True)

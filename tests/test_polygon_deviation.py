@@ -30,12 +30,12 @@ def loop_matrix(P: np.ndarray, deviation: str, closed: bool) -> np.ndarray:
             y = (x + L) % n
             w = P[y] - P[x]
             ww = float(w @ w)
+            if ww == 0.0:  # coincident chord ends: a zero-length chord is unavailable
+                continue
             dists = []
             for k in range(1, L):
                 v = P[(x + k) % n] - P[x]
-                if ww == 0.0:  # coincident chord ends: distance to that point
-                    dists.append(math.sqrt(float(v @ v)))
-                elif d == 2:
+                if d == 2:
                     dists.append(abs(w[0] * v[1] - w[1] * v[0]) / math.sqrt(ww))
                 else:
                     dists.append(float(np.linalg.norm(np.cross(w, v))) / math.sqrt(ww))
@@ -113,17 +113,27 @@ def test_structure_of_h():
             assert np.all(np.isfinite(H[off]))
 
 
-def test_straight_line_has_zero_deviation_and_coincident_ends_use_point_distance():
+def test_straight_line_has_zero_deviation_and_coincident_ends_are_unavailable():
     P = np.c_[np.arange(8.0), 2 * np.arange(8.0) + 1]
     for dev in DEVIATIONS:
         H = deviation_matrix(P, dev)
         assert np.all(H[np.triu_indices(8, 1)] == 0.0)
-    # the curve leaves (0, 0) and comes back: chord 0 -> 4 has coincident ends
-    Q = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0], [0.0, 1.0], [0.0, 0.0], [3.0, 3.0]])
-    H = deviation_matrix(Q, "max")
-    assert_close(H[0, 4], 5**0.5, atol=1e-12, what="farthest point from (0, 0)")
-    assert_close(deviation_matrix(Q, "sum")[0, 4], 1 + 5**0.5 + 1, atol=1e-12)
-    assert_close(deviation_matrix(Q, "ise")[0, 4], 1 + 5 + 1, atol=1e-12)
+    # the curve leaves (0, 0) and comes back (chord 0 -> 4), then repeats (3, 3) (chord
+    # 5 -> 6, neighbours): both chords have zero length, so they are inf like h_xx
+    Q = np.array([[0.0, 0], [1, 0], [1, 2], [0, 1], [0, 0], [3, 3], [3, 3], [4, 2]])
+    for dev in DEVIATIONS:
+        for closed in (False, True):
+            H = deviation_matrix(Q, dev, closed=closed)
+            assert np.isinf(H[0, 4]) and np.isinf(H[5, 6]), (dev, closed)
+            assert not np.isnan(H).any()
+            assert np.isfinite(H[0, 3]) and np.isfinite(H[4, 7]) and H[4, 5] == 0.0
+            assert np.isinf(chord_deviations(Q, [0, 5], [4, 6], dev, closed=closed)).all()
+    # a point nudged by far less than the tolerance still coincides; one a bit farther does not
+    R = Q.copy()
+    R[4] += 1e-12
+    assert np.isinf(deviation_matrix(R, "max")[0, 4])
+    R[4] = [1e-6, 0.0]
+    assert_close(deviation_matrix(R, "max")[0, 4], 2.0, atol=1e-5, what="line along x")
 
 
 def test_chord_deviations_match_matrix():

@@ -27,7 +27,13 @@ import numpy as np
 
 from .._validate import choice, positive_int
 from ..exceptions import InputError
-from .deviation import DEVIATIONS, deviation_matrix, validate_points
+from .deviation import (
+    COINCIDENT_RTOL,
+    DEVIATIONS,
+    coincident_sq,
+    deviation_matrix,
+    validate_points,
+)
 from .exact import exact_polygon
 from .hopfield import initial_state, run_network
 from .hopfield_search import competitive_hopfield
@@ -100,17 +106,25 @@ def validate_m(m: object, n: int, closed: bool) -> int:
     return int(m)
 
 
-def _refuse_degenerate(P: np.ndarray, m: int) -> None:
+def _refuse_degenerate(P: np.ndarray, m: int, closed: bool) -> None:
     """InputError for a curve with fewer than ``m`` distinct points (all points equal
-    included): ``m`` vertices would repeat a point. Points closer than 1e-9 of the
-    curve's extent count as one."""
+    included): ``m`` vertices would repeat a point, i.e. a chord of zero length, which H
+    does not offer (:data:`~regrasp_pin.polygon.deviation.COINCIDENT_RTOL`). Points closer
+    than that fraction of the curve's extent count as one. The same for an open path whose
+    two ends coincide and ``m = 2`` (its only chord would have zero length)."""
     extent = float(np.ptp(P, axis=0).max())
     if extent == 0.0:
         raise InputError("points", f"all {P.shape[0]} points are equal", "a curve with extent")
-    distinct = np.unique(np.round((P - P.min(axis=0)) / (1e-9 * extent)), axis=0).shape[0]
-    if distinct < m:
+    distinct = np.unique(np.round((P - P.min(axis=0)) / (COINCIDENT_RTOL * extent)), axis=0)
+    if distinct.shape[0] < m:
         raise InputError(
-            "points", f"has {distinct} distinct points for m={m}", f"at least m={m} distinct points"
+            "points",
+            f"has {distinct.shape[0]} distinct points for m={m}",
+            f"at least m={m} distinct points",
+        )
+    if not closed and m == 2 and np.sum((P[-1] - P[0]) ** 2) <= coincident_sq(P):
+        raise InputError(
+            "m", "2 joins the first and last points, which coincide", "m >= 3 for this path"
         )
 
 
@@ -148,7 +162,8 @@ def approximate_polygon(
 
     Raises:
         InputError: bad ``points`` (shape, fewer than 2, NaN/inf, all equal, fewer
-            distinct points than ``m``), ``m``, ``seed`` or ``restarts``.
+            distinct points than ``m``), ``m`` (also ``m = 2`` on an open path whose ends
+            coincide), ``seed`` or ``restarts``.
 
     A straight curve (all points collinear) deviates from every chord by 0: any ``m``
     vertices are optimal (energy 0) and the ones returned are the network's (or the
@@ -160,7 +175,7 @@ def approximate_polygon(
     deviation = choice(deviation, "deviation", DEVIATIONS)
     method = choice(method, "method", METHODS)
     m = validate_m(m, n, closed)
-    _refuse_degenerate(P, m)
+    _refuse_degenerate(P, m, closed)
     seed = positive_int(seed, "seed", 0)
     restarts = positive_int(restarts, "restarts", 0)
 

@@ -3,8 +3,7 @@
 For an ordered point sequence ``P = (p_0, ..., p_{n-1})`` the entry ``H[x, y]`` measures how
 badly the chord ``p_x p_y`` represents the arc of the curve between its ends (Eq. 2,
 Fig. 5). Every measure is built on the distance ``d(p, p_x p_y)`` of an arc point to the
-straight line through the chord ends or, when the two ends coincide (digital curves repeat
-pixels), to that point:
+straight line through the chord ends:
 
 * ``"max"``: the largest distance of the arc's points to the chord (Eq. 7);
 * ``"sum"``: the sum of those distances (the Araujo-Tanaka deviation of Fig. 5);
@@ -12,9 +11,15 @@ pixels), to that point:
 
 Only points strictly inside the arc count (the chord ends lie on the chord), so
 neighbouring points give ``H[x, x + 1] = 0``. The diagonal is ``H[x, x] = inf`` (Eq. 7) for
-every measure. Open curves (a path from P to Q) only have forward arcs, ``H[x, y] = inf``
-for ``y <= x``. Closed curves use cyclic indices (Eq. 5): the arc from ``x`` to ``y`` runs
-through ``x + 1, x + 2, ...`` modulo ``n``, so ``H`` is not symmetric.
+every measure, and so is every chord whose two ends coincide (closer than
+:data:`COINCIDENT_RTOL` times the curve's extent): digital curves repeat pixels (a
+one-pixel-wide part is walked along both sides), and a zero-length chord has no line to
+measure against and would give the polygon two vertices at one place, which Eq. 7 rules
+out for one point. No entry is NaN.
+
+Open curves (a path from P to Q) only have forward arcs, ``H[x, y] = inf`` for ``y <= x``.
+Closed curves use cyclic indices (Eq. 5): the arc from ``x`` to ``y`` runs through
+``x + 1, x + 2, ...`` modulo ``n``, so ``H`` is not symmetric.
 
 Cost: ``"ise"`` is O(n^2) from prefix sums of the coordinates and their products.
 ``"max"`` and ``"sum"`` need every (chord, arc point) pair, O(n^3); they are evaluated one
@@ -39,6 +44,9 @@ DEVIATIONS: tuple[str, ...] = ("max", "sum", "ise")
 _SUPPORTED_DIMS = (2, 3)
 # Relative slack when comparing a lower bound with the cap (float rounding).
 _CAP_RTOL = 1e-9
+#: Points closer than this fraction of the curve's extent (largest coordinate range)
+#: coincide: a chord between them is unavailable (``inf``), like the diagonal of Eq. 7.
+COINCIDENT_RTOL = 1e-9
 
 
 def validate_points(points: object, argument: str = "points") -> np.ndarray:
@@ -146,8 +154,9 @@ def chord_deviations(
         closed: Closed curve.
 
     Returns:
-        Deviations, shape ``(k,)``; ``inf`` where ``start == end`` (Eq. 7) and, for open
-        curves, where ``end < start``.
+        Deviations, shape ``(k,)``; ``inf`` where ``start == end`` (Eq. 7), where the two
+        ends coincide (see :data:`COINCIDENT_RTOL`) and, for open curves, where
+        ``end < start``.
     """
     P = validate_points(points)
     deviation = choice(deviation, "deviation", DEVIATIONS)
@@ -156,8 +165,9 @@ def chord_deviations(
     b: np.ndarray = np.asarray(ends, dtype=np.int64).ravel() % n
     lengths = (b - a) % n if closed else b - a
     out = np.zeros(a.shape[0])
-    out[lengths <= 0] = np.inf
-    inner = np.where(lengths > 1, lengths - 1, 0)
+    gone = (lengths <= 0) | (_sq_norm(P[b] - P[a]) <= coincident_sq(P))
+    out[gone] = np.inf
+    inner = np.where((lengths > 1) & ~gone, lengths - 1, 0)
     if inner.sum() == 0:
         return out
     chord = np.repeat(np.arange(a.shape[0]), inner)
@@ -172,6 +182,16 @@ def chord_deviations(
     else:
         out[seg] = np.add.reduceat(d2, first[seg])
     return out
+
+
+def coincident_sq(points: np.ndarray) -> float:
+    """Squared distance [length^2] at or below which two points of ``points`` coincide."""
+    extent = float(np.ptp(points, axis=0).max())
+    return (COINCIDENT_RTOL * extent) ** 2
+
+
+def _sq_norm(v: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", v, v)
 
 
 def point_line_sq(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -260,6 +280,7 @@ class _Builder:
         self.closed = closed
         self.P = P - P.mean(axis=0)  # deviations are translation invariant
         self.scale = float(np.abs(self.P).max())
+        self.tiny2 = coincident_sq(P)
         self.P3 = np.concatenate([self.P, self.P, self.P])  # index i + n for i in [-n, 2n)
         self.planes = [(i, j) for i in range(self.d) for j in range(i + 1, self.d)]
         self._kind = "max"
@@ -302,29 +323,18 @@ class _Builder:
         ww = w[0] * w[0]
         for wc in w[1:]:
             ww += wc * wc
-        # coincident ends: no cheap bound, 0 keeps the chord
+        # coincident ends (inf in H anyway): 0 keeps the chord here
         lb = np.sqrt(np.divide(cross2, ww, out=np.zeros((n, ncols)), where=ww > 0))
         lb[:, :2] = 0.0
         return lb
 
-    def _coincident(self, keep: np.ndarray | None, ncols: int) -> tuple[np.ndarray, np.ndarray]:
-        """Chords ``(x, L)``, ``2 <= L < ncols``, whose two ends are the same point."""
-        n = self.n
-        _, inverse, counts = np.unique(self.P, axis=0, return_inverse=True, return_counts=True)
-        inverse = inverse.ravel()
-        dup = np.flatnonzero(counts[inverse] > 1)
-        empty = np.zeros(0, dtype=np.int64)
-        if dup.size < 2:
-            return empty, empty
-        a, b = np.nonzero(inverse[dup][:, None] == inverse[dup][None, :])
-        xs, ys = dup[a], dup[b]
-        Ls = (ys - xs) % n
-        ok = (Ls >= 2) & (Ls < ncols) & (self.closed | (ys > xs))
-        xs, Ls = xs[ok], Ls[ok]
-        if keep is not None:
-            ok = keep[xs, Ls]
-            xs, Ls = xs[ok], Ls[ok]
-        return xs, Ls
+    def _coincident(self, ncols: int) -> np.ndarray:
+        """Chords whose two ends coincide, offset form ``(n, ncols)``."""
+        ww = np.zeros((self.n, ncols))
+        for c in range(self.d):
+            wc = self._window(c, 0, ncols, self.n) - self.P[:, c, None]
+            ww += wc * wc
+        return ww <= self.tiny2
 
     def _keep(self, lower: np.ndarray, valid: np.ndarray, cap: float, m: int | None) -> np.ndarray:
         """Chords that may appear in a polygon of energy <= cap, offset form."""
@@ -367,8 +377,8 @@ class _Builder:
                 assert cap is not None
                 keep = self._keep(self._middle_lower_bound(ncols), valid, cap, m)
             self._max_or_sum(F, kind, keep)
-            self._fix_coincident(F, kind, keep, ncols)
         F[~(valid if keep is None else keep)] = np.inf
+        F[self._coincident(ncols)] = np.inf  # zero-length chords, like h_xx (Eq. 7)
         F[:, :min_span] = np.inf
         return self._assemble(F)
 
@@ -428,9 +438,6 @@ class _Builder:
         np.maximum(total, 0.0, out=total)
         F = np.divide(total, ww, out=np.zeros((n, ncols)), where=ww > 0)
         F[:, :2] = 0.0
-        xs, Ls = self._coincident(None, ncols)
-        if xs.size:
-            F[xs, Ls] = chord_deviations(self.P, xs, (xs + Ls) % n, "ise", closed=self.closed)
         F[~valid] = np.inf
         return F
 
@@ -469,7 +476,8 @@ class _Builder:
 
     def _cross_tables(self, Lmax: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
         """Per coordinate plane ``(KfT, KzT)`` (see :meth:`_max_or_sum`) up to span
-        ``Lmax``, and ``(n, Lmax + 1)`` 1 / chord length (0 for coincident ends)."""
+        ``Lmax``, and ``(n, Lmax + 1)`` 1 / chord length (0 for coincident ends, which
+        are set to inf afterwards)."""
         n = self.n
         tables = []
         for i, j in self.planes:
@@ -542,11 +550,3 @@ class _Builder:
             return np.sqrt(acc.max(axis=0))
         np.sqrt(acc, out=acc)
         return acc.sum(axis=0)
-
-    def _fix_coincident(
-        self, F: np.ndarray, kind: str, keep: np.ndarray | None, ncols: int
-    ) -> None:
-        """Chords whose two ends coincide: distance to that point, computed directly."""
-        xs, Ls = self._coincident(keep, ncols)
-        if xs.size:
-            F[xs, Ls] = chord_deviations(self.P, xs, (xs + Ls) % self.n, kind, closed=self.closed)

@@ -5,7 +5,9 @@ local minimum. :func:`competitive_hopfield` keeps the plain run from the paper's
 state and then tries more initial states (on closed curves the equidistant state shifted
 by half a spacing, a greedy bottom-up merge, a greedy top-down split) and perturbations
 (one or two columns' vertices relocated to other chords; several columns removed and
-greedily re-inserted), each followed by re-convergence of the same network. A result is
+greedily re-inserted; blocks of consecutive columns competing jointly and annealed runs of
+the winner-take-all, :mod:`regrasp_pin.polygon.hopfield_moves`), each followed by
+re-convergence of the same network. A result is
 accepted only if its energy is lower, so the answer is never worse than the plain network.
 
 The network itself (states, input, energy, sweeps) is :mod:`regrasp_pin.polygon.hopfield`.
@@ -34,8 +36,19 @@ from .hopfield import (
     window_costs,
     winners,
 )
+from .hopfield_moves import annealed_sweeps, block_pass
 
 logger = logging.getLogger(__name__)
+
+# Annealed restarts: start temperature as a fraction of the mean chord energy, final
+# temperature as a fraction of the start, and sweeps per anneal.
+_ANNEAL_T0 = 1.0
+_ANNEAL_T1 = 1e-3
+_ANNEAL_SWEEPS = 40
+# Largest block of consecutive columns that compete jointly, and the longest curve on
+# which block moves are made by default.
+_BLOCK_MAX = 8
+_BLOCK_MAX_POINTS = 200
 
 
 @dataclass(frozen=True)
@@ -235,12 +248,15 @@ def _local_search(
     closed: bool,
     trials: int = 2,
     budget: int = 10_000,
+    block: int = 0,
 ) -> tuple[np.ndarray, float, int]:
     """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
 
     After the network has converged, the ``trials`` most promising relocations of one
     vertex to another chord are tried: one that lowers the energy at once is taken; one
-    that does not is kept only if the network, re-converged from it, ends lower.
+    that does not is kept only if the network, re-converged from it, ends lower. When no
+    relocation helps, blocks of ``block`` consecutive columns compete jointly
+    (:func:`~.hopfield_moves.block_pass`; 0 or 1: no block moves).
     """
     groups = column_groups(s.shape[0], closed)
     s, sweeps = _converge(H, HT, s.copy(), groups, closed)
@@ -262,6 +278,13 @@ def _local_search(
             energy = polygon_energy(H, s, closed=closed)
             improved = True
             break
+        if not improved and block > 1:
+            moved = s.copy()
+            if block_pass(H, moved, block, closed):
+                s, sw = _converge(H, HT, np.sort(moved) if closed else moved, groups, closed)
+                sweeps += sw + 1
+                energy = polygon_energy(H, s, closed=closed)
+                improved = True
         if not improved:
             break
     return s, energy, sweeps
@@ -319,6 +342,36 @@ def _greedy_split(H: np.ndarray, HT: np.ndarray, m: int, closed: bool) -> np.nda
     return None
 
 
+def _perturbed(
+    H: np.ndarray,
+    HT: np.ndarray,
+    s: np.ndarray,
+    closed: bool,
+    rng: np.random.Generator,
+    free: np.ndarray,
+) -> np.ndarray | None:
+    """A perturbation of state ``s``: a few columns (a random set, or a run of consecutive
+    ones up to most of them) removed and re-inserted greedily."""
+    if rng.random() < 0.5:  # a run of consecutive columns, up to most of them
+        k = int(rng.integers(1, max(1, (2 * free.size) // 3) + 1))
+        start = int(rng.integers(0, free.size))
+        drop = free[(start + np.arange(k)) % free.size]
+    else:
+        k = int(rng.integers(1, max(1, free.size // 3) + 1))
+        drop = rng.choice(free, size=k, replace=False)
+    return _insert_greedy(H, HT, np.delete(s, drop), closed, k)
+
+
+def default_block(n: int, m: int) -> int:
+    """Block size of the block winner-take-all for ``n`` points and ``m`` vertices.
+
+    ``min(8, m // 2)`` (at least half of the columns stay outside any one block) on curves
+    of up to 200 points; 0 (no block moves) on longer ones, where the block moves would cost
+    several times the rest of the search.
+    """
+    return min(_BLOCK_MAX, m // 2) if n <= _BLOCK_MAX_POINTS else 0
+
+
 def competitive_hopfield(
     H: np.ndarray,
     m: int,
@@ -330,6 +383,8 @@ def competitive_hopfield(
     seed: int = 0,
     plain: NetworkRun | None = None,
     trials: int = 2,
+    block: int | None = None,
+    anneals: int = 0,
 ) -> HopfieldResult:
     """Polygonal approximation with the competitive Hopfield network, plus restarts.
 
@@ -343,7 +398,11 @@ def competitive_hopfield(
 
     Every state is polished by a local search: the network converges, then the ``trials``
     most promising relocations of one vertex to another chord are tried, each followed by
-    re-convergence; the first that lowers the energy is kept and the search repeats.
+    re-convergence; the first that lowers the energy is kept and the search repeats. When
+    none helps, blocks of ``block`` consecutive columns compete jointly
+    (:mod:`~regrasp_pin.polygon.hopfield_moves`; the energy never rises) and the search
+    repeats if one moved. ``anneals`` annealed runs of the winner-take-all from the best
+    state give further initial states.
 
     Args:
         H: Deviation matrix, shape ``(n, n)``; ``inf`` marks chords that may not be used.
@@ -357,12 +416,17 @@ def competitive_hopfield(
         plain: The plain run from ``initial`` if already computed on this ``H`` (it is then
             not repeated).
         trials: Relocations tried (with re-convergence) when no single move helps.
+        block: Columns per block of the block winner-take-all (0 or 1: none); default
+            :func:`default_block`.
+        anneals: Annealed runs from the best state (40 sweeps each, the temperature
+            falling from the mean chord energy to 1/1000 of it).
 
     Returns:
         The best state, the plain network's result and the sweep/energy record.
 
     Raises:
-        InputError: invalid ``H``, ``m``, ``initial``, ``restarts`` or ``trials``.
+        InputError: invalid ``H``, ``m``, ``initial``, ``restarts``, ``trials``,
+            ``block`` or ``anneals``.
     """
     H = check_deviation_matrix(H)
     n = H.shape[0]
@@ -371,6 +435,8 @@ def competitive_hopfield(
         raise InputError("m", f"{m} exceeds the number of points n={n}", f"m <= {n}")
     restarts = positive_int(restarts, "restarts", 0)
     trials = positive_int(trials, "trials", 0)
+    block = positive_int(default_block(n, m) if block is None else block, "block", 0)
+    anneals = positive_int(anneals, "anneals", 0)
     if points is None:
         points = np.arange(n, dtype=float)[:, None] * np.array([[1.0, 0.0]])
     if initial is None:
@@ -385,7 +451,7 @@ def competitive_hopfield(
     def consider(s: np.ndarray | None) -> None:
         nonlocal best_s, best_e, sweeps
         if s is not None and s.shape[0] == m:
-            s2, e2, sw = _local_search(H, HT, s, closed, trials)
+            s2, e2, sw = _local_search(H, HT, s, closed, trials, block=block)
             sweeps += sw
             if e2 < best_e:
                 best_s, best_e = s2, e2
@@ -401,15 +467,11 @@ def competitive_hopfield(
     for _ in range(restarts):
         if free.size == 0 or not np.isfinite(best_e):
             break
-        if rng.random() < 0.5:  # a run of consecutive columns, up to most of them
-            k = int(rng.integers(1, max(1, (2 * free.size) // 3) + 1))
-            start = int(rng.integers(0, free.size))
-            drop = free[(start + np.arange(k)) % free.size]
-        else:
-            k = int(rng.integers(1, max(1, free.size // 3) + 1))
-            drop = rng.choice(free, size=k, replace=False)
-        s = _insert_greedy(H, HT, np.delete(best_s, drop), closed, k)
-        consider(s)
+        consider(_perturbed(H, HT, best_s, closed, rng, free))
+    for _ in range(anneals if np.isfinite(best_e) else 0):
+        t0 = _ANNEAL_T0 * best_e / m  # a typical chord's share of the energy
+        temps = np.geomspace(max(t0, 1e-300), max(t0 * _ANNEAL_T1, 1e-300), _ANNEAL_SWEEPS)
+        consider(annealed_sweeps(H, HT, best_s, closed, rng, temps))
     logger.debug("hopfield: plain %.6g -> best %.6g (%d sweeps)", plain.energy, best_e, sweeps)
     return HopfieldResult(
         indices=np.asarray(best_s),

@@ -1,0 +1,174 @@
+"""Two further moves of the competitive network: block winner-take-all and annealed sweeps.
+
+Both act on the same state (one vertex index per column) and the same inputs (Eq. 10) as
+:mod:`regrasp_pin.polygon.hopfield`:
+
+* **Block winner-take-all** (:func:`update_block`): ``k`` consecutive columns compete
+  jointly, the way one column competes in Eq. 6. Given the two columns around the block,
+  the block's share of the energy is ``h[p, x_1] + h[x_1, x_2] + ... + h[x_k, q]``, and the
+  block takes the joint state that minimizes it (a small dynamic programme over the points
+  between ``p`` and ``q``), only if it is strictly better. As for one column, the energy
+  never rises. With ``k = 1`` this is Eq. 6 itself; larger blocks see moves that single
+  columns cannot make one at a time (several vertices shifting together).
+* **Annealed winner-take-all** (:func:`annealed_sweeps`): the winner of each column is drawn
+  from the Boltzmann distribution of its inputs at a temperature ``T`` (``argmax`` of
+  ``U / T`` plus Gumbel noise, seeded), ``T`` falling geometrically to almost 0. The energy
+  may rise during these sweeps; they only produce a new initial state, from which the
+  deterministic network converges again, and the result is kept only if its energy is
+  lower than the best so far. At ``T -> 0`` the rule is Eq. 6.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .hopfield import column_groups, tie_tolerance, window_costs, winners
+
+#: Default reach of a column in a block move [curve steps]: bounds a block's work to
+#: ``k (2 BLOCK_RADIUS + 1)^2`` on long curves; short curves compete over all points.
+BLOCK_RADIUS = 24
+
+
+def block_costs(
+    H: np.ndarray, p: int, q: int, current: np.ndarray, radius: int | None = None
+) -> tuple[float, np.ndarray | None]:
+    """Best joint state of the ``k`` consecutive columns between vertices ``p`` and ``q``.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``.
+        p: Vertex of the column before the block.
+        q: Vertex of the column after the block (cyclic: the interval runs forward from
+            ``p`` to ``q`` modulo ``n``).
+        current: The block's current vertices, shape ``(k,)``, in order inside the interval.
+        radius: If given, column ``j`` only competes over the points within ``radius``
+            curve steps of its current vertex (bounds the work to ``k (2 radius + 1)^2``).
+
+    Returns:
+        (the block's share of the energy, its ``k`` vertices in order), or ``(inf, None)``
+        when no joint state has a finite energy. Ties go to the earliest points (relative
+        tolerance, see :func:`~.hopfield.winners`).
+    """
+    n = H.shape[0]
+    k = current.shape[0]
+    w = (q - p) % n - 1
+    if w < k:
+        return np.inf, None
+    off = (current - p - 1) % n  # positions in the interval, 0 .. w-1
+    if radius is None or 2 * radius + 1 >= w:
+        cand = [np.arange(w)] * k
+    else:
+        cand = [np.arange(max(o - radius, 0), min(o + radius + 1, w)) for o in off.tolist()]
+    X = [(p + 1 + c) % n for c in cand]
+    cost = H[p, X[0]]
+    back = []
+    for j in range(1, k):
+        step = H[X[j - 1][:, None], X[j][None, :]]
+        step = np.where(cand[j - 1][:, None] < cand[j][None, :], step, np.inf)
+        total = cost[:, None] + step  # previous vertex (rows), this one (columns)
+        arg = winners(total.T)
+        cost = total[arg, np.arange(arg.shape[0])]
+        back.append(arg)
+    total = cost + H[X[-1], q]
+    y = int(winners(total[None, :])[0])
+    if not np.isfinite(total[y]):
+        return np.inf, None
+    pos = [y]
+    for arg in reversed(back):
+        pos.append(int(arg[pos[-1]]))
+    pos = pos[::-1]
+    return float(total[y]), np.array([X[j][pos[j]] for j in range(k)])
+
+
+def update_block(
+    H: np.ndarray, s: np.ndarray, first: int, k: int, radius: int | None = None
+) -> bool:
+    """Block winner-take-all of columns ``first .. first + k - 1`` (cyclic) in place.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``.
+        s: State, shape ``(m,)``; ``k <= m - 2`` so that the block has two outside
+            neighbours (on an open curve the block must not include column 0 or m-1).
+        first: First column of the block.
+        k: Block size.
+        radius: See :func:`block_costs`.
+
+    Returns:
+        Whether the block moved (only to a strictly better joint state: the energy never
+        rises).
+    """
+    m = s.shape[0]
+    cols = (first + np.arange(k)) % m
+    p, q = int(s[(first - 1) % m]), int(s[(first + k) % m])
+    chain = np.concatenate([[p], s[cols], [q]])
+    current = float(H[chain[:-1], chain[1:]].sum())
+    best, pos = block_costs(H, p, q, s[cols], radius)
+    if pos is None:
+        return False
+    tol = tie_tolerance(np.array([[best]]))[0, 0]
+    if not best < current - tol:
+        return False
+    s[cols] = pos
+    return True
+
+
+def block_pass(
+    H: np.ndarray, s: np.ndarray, k: int, closed: bool, radius: int | None = BLOCK_RADIUS
+) -> bool:
+    """One pass of block updates over every block of ``k`` consecutive free columns
+    (each column within ``radius`` curve steps of its vertex, see :func:`block_costs`).
+
+    Returns:
+        Whether any block moved. ``s`` is updated in place; on a closed curve it stays a
+        cyclic rotation of an increasing sequence (sort it afterwards).
+    """
+    m = s.shape[0]
+    k = min(k, m - 2)
+    if k < 2:
+        return False
+    firsts = range(m) if closed else range(1, m - k)
+    moved = False
+    for i in firsts:
+        moved |= update_block(H, s, i, k, radius)
+    return moved
+
+
+def annealed_sweeps(
+    H: np.ndarray,
+    HT: np.ndarray,
+    s: np.ndarray,
+    closed: bool,
+    rng: np.random.Generator,
+    temperatures: np.ndarray,
+) -> np.ndarray:
+    """Sweeps of the annealed winner-take-all from state ``s``; returns the new state.
+
+    In each sweep every free column (non-adjacent columns together) takes the row that
+    maximizes ``U[x, i] / T + g`` with Gumbel noise ``g``: a draw from the Boltzmann
+    distribution ``exp(U / T)`` over the rows between its neighbours.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``.
+        HT: ``H.T`` made contiguous.
+        s: State, shape ``(m,)``.
+        closed: Closed curve.
+        rng: Seeded generator (the draws).
+        temperatures: One temperature per sweep [energy unit of H], e.g. falling.
+
+    Returns:
+        The state after the sweeps, shape ``(m,)``, increasing.
+    """
+    s = s.copy()
+    m = s.shape[0]
+    groups = column_groups(m, closed)
+    for T in temperatures.tolist():
+        for cols in groups:
+            p, q = s[(cols - 1) % m], s[(cols + 1) % m]
+            x, cost, _span = window_costs(H, HT, p, q)
+            noisy = cost - T * rng.gumbel(size=cost.shape)
+            win = np.argmin(noisy, axis=1)
+            ok = np.isfinite(cost[np.arange(cols.size), win])
+            s[cols[ok]] = x[np.arange(cols.size), win][ok]
+    return np.sort(s) if closed else s
+
+
+__all__ = ["BLOCK_RADIUS", "annealed_sweeps", "block_costs", "block_pass", "update_block"]
