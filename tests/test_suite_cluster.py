@@ -199,3 +199,17 @@ def test_without_the_scale_extra_the_error_names_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed fails
     with pytest.raises(MissingExtraError, match=r"regrasp-pin\[scale\]"):
         require_scale()
+
+
+def test_describe_counts_the_skipped_specs_by_kind():
+    from regrasp_pin.suite.cluster import SuiteRun
+    from regrasp_pin.suite.run import outcome_template
+
+    specs = _named("a", "b", "c")
+    skipped = [
+        replace(outcome_template(s), ok=False, failure_kind=k, failed_stage="grasp")
+        for s, k in zip(specs, ["infeasible", "force-closure", "infeasible"], strict=True)
+    ]
+    text = SuiteRun(results=[], skipped=skipped, wall_s=1.0, workers=1).describe()
+    assert "skipped without an initial grasp: 3 (infeasible 2, force-closure 1)" in text
+    assert "skipped without an initial grasp: 0\n" in SuiteRun([], [], 1.0, 1).describe() + "\n"

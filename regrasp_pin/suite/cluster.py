@@ -26,6 +26,7 @@ import json
 import logging
 import os
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -86,8 +87,10 @@ class SuiteRun:
 
     def describe(self) -> str:
         """Skipped specs, wall time, workers and the scheduling overhead, in a few lines."""
+        kinds = Counter(str(r.failure_kind) for r in self.skipped).most_common()
         lines = [
-            f"skipped without an initial grasp: {len(self.skipped)}",
+            f"skipped without an initial grasp: {len(self.skipped)}"
+            + (f" ({', '.join(f'{k} {n}' for k, n in kinds)})" if kinds else ""),
             f"wall time: {self.wall_s:.0f} s on {self.workers} worker(s) "
             f"({self.startup_s:.1f} s to start them)"
             + (f"; {self.resumed} earlier result(s) kept, skips included" if self.resumed else ""),
