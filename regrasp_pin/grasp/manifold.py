@@ -115,12 +115,11 @@ class WorkspaceVoxels:
     def contains(self, p_palm: np.ndarray) -> np.ndarray:
         """``(...,)`` True where the points may be reachable (False = provably not)."""
         idx = np.floor((p_palm - self.origin) / self.voxel_m).astype(np.int64)
-        shape = np.array(self.occupied.shape)
-        ok = np.all((idx >= 0) & (idx < shape), axis=-1)
-        out = np.zeros(p_palm.shape[:-1], bool)
-        i = idx[ok]
-        out[ok] = self.occupied[i[:, 0], i[:, 1], i[:, 2]]
-        return out
+        nx, ny, nz = self.occupied.shape
+        ix, iy, iz = idx[..., 0], idx[..., 1], idx[..., 2]
+        ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny) & (iz >= 0) & (iz < nz)
+        flat = np.where(ok, (ix * ny + iy) * nz + iz, 0)  # C order of `occupied`
+        return ok & self.occupied.ravel()[flat]
 
 
 @functools.lru_cache(maxsize=64)
