@@ -16,7 +16,7 @@ best result is kept. An unreachable target is not an error: it comes back with
 The work is done on component-major arrays ``(k, N)`` and only on the points that
 have not converged yet. The iterations run in numpy, or, when numba is installed
 (``pip install regrasp-pin[fast]``), in the same loop compiled per point
-(:mod:`.ik_numba`, about 10 x faster); :func:`set_ik_backend` chooses, and the
+(:mod:`.ik_numba`, 1.5 to 2 x faster); :func:`set_ik_backend` chooses, and the
 environment variable ``REGRASP_PIN_IK_BACKEND=numpy`` sets the default.
 """
 

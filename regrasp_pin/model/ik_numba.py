@@ -45,12 +45,13 @@ def _fk_jacobian(chain, q, n, fast_trig, work):
     """
     C, t, column, scaling, offset, tip_t = chain
     W, o, axes, origins, J = work
-    for i in range(3):
-        o[i] = 0.0
-        for j in range(3):
-            W[i, j] = 1.0 if i == j else 0.0
     for jt in range(C.shape[0]):
         for i in range(3):
+            if jt == 0:  # W' = I before the first joint: o = t, W' = C exactly
+                o[i] = t[0, i]
+                for j in range(3):
+                    W[i, j] = C[0, i, j]
+                continue
             o[i] = o[i] + (W[i, 0] * t[jt, 0] + W[i, 1] * t[jt, 1] + W[i, 2] * t[jt, 2])
             w0, w1, w2 = W[i, 0], W[i, 1], W[i, 2]
             for j in range(3):
@@ -70,7 +71,16 @@ def _fk_jacobian(chain, q, n, fast_trig, work):
             origins[jt, i] = o[i]
     for i in range(3):
         o[i] = o[i] + (W[i, 0] * tip_t[0] + W[i, 1] * tip_t[1] + W[i, 2] * tip_t[2])
-    J[:, :] = 0.0
+    _jacobian(chain, work)
+
+
+def _jacobian(chain, work):
+    """``J[:, col_j] += s_j z_j x (p - o_j)`` from the axes and origins of :func:`_fk_jacobian`."""
+    C, t, column, scaling, offset, tip_t = chain
+    W, o, axes, origins, J = work
+    for i in range(3):
+        for c in range(J.shape[1]):
+            J[i, c] = 0.0
     for jt in range(C.shape[0]):
         r0 = o[0] - origins[jt, 0]
         r1 = o[1] - origins[jt, 1]
@@ -158,7 +168,8 @@ def iterate_python(chain_arrays, lower, upper, targets, q, tol_m, max_iter, fast
             if steps == max_iter:
                 break
             steps += 1
-            free[:] = True
+            for c in range(k):
+                free[c] = True
             _dls_step(J, free, e0, e1, e2, err_sq, lam0_sq, lam_err, dq)
             any_blocked = False
             for c in range(k):
@@ -186,10 +197,11 @@ def _compile() -> Callable[..., Any] | None:
         except ImportError:
             _failed = True
             return None
-        jit = numba.njit(cache=True)
-        # the same functions, each calling the compiled versions of the others
+        # the same functions, each calling the compiled versions of the others (inlined)
         glb = dict(iterate_python.__globals__)
-        for f in (_cos_sin, _fk_jacobian, _dls_step, iterate_python):
+        for f in (_cos_sin, _jacobian, _fk_jacobian, _dls_step, iterate_python):
+            inline = "never" if f is iterate_python else "always"
+            jit = numba.njit(cache=True, inline=inline)
             glb[f.__name__] = jit(types.FunctionType(f.__code__, glb, f.__name__))
         _compiled = glb["iterate_python"]
     return _compiled
