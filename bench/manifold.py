@@ -5,14 +5,17 @@ box 40 x 60 x 40 mm at (65, 0, 60) mm turning about the palm y axis through its 
 at 30 deg/s for 3 s, its surface sampled every 2 mm, 100 object poses. Prints:
 
 - the one-off workspace covers (cached per finger, built on the first manifold);
-- the five manifolds (:func:`regrasp_pin.grasp.manifold.build_manifold`), best of 3;
+- the five manifolds (:func:`regrasp_pin.grasp.manifold.build_manifold`), best of 3, on
+  each IK backend available (numpy; numba when installed), and how many of their
+  flags differ between the backends;
 - the baseline: a per-point loop calling ``Finger.ik`` on one target at a time,
   warm-started from the same point's previous time, on a random subset of the points
   (all 100 times), extrapolated to every point of every finger; and the ratio. Once
   with ``Finger.ik``'s restarts (its default: what the manifold must agree with) and
   once without (cheaper, but a warm start can stay in a local minimum);
 - the choice of Q (:func:`regrasp_pin.grasp.choice.choose_new_contact`) for the
-  first finger of the initial grasp to trigger, best of 5;
+  first finger of the initial grasp to trigger, best of 5 (skipped, with the reason,
+  when the scene has no initial grasp);
 - how many of the manifold's feasible flags differ from the loops' on the subset.
 
 Saves Fig. 1 (object, contacts P and Q) and Fig. 2 (that finger's joint space) into
@@ -27,11 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
+from regrasp_pin.exceptions import ContactError
 from regrasp_pin.grasp.choice import choose_new_contact, initial_grasp
 from regrasp_pin.grasp.contact import ContactModel, pad_cosines, tip_targets
 from regrasp_pin.grasp.manifold import build_manifold, workspace_voxels
 from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.ik import IK_BACKENDS, ik_backend, set_ik_backend
+from regrasp_pin.model.ik_numba import available
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
 
@@ -96,7 +102,23 @@ def main() -> None:
     def build_all():
         return {n: build_manifold(hand.finger(n), sample, motion, times) for n in names}
 
-    t_man, manifolds = best_time(build_all, 3)
+    default = ik_backend()
+    t_backend, built = {}, {}
+    for backend in [b for b in IK_BACKENDS if b == "numpy" or available()]:
+        set_ik_backend(backend)
+        build_manifold(hand.finger(names[0]), sample, motion, times[:2])  # numba: load kernel
+        t_backend[backend], built[backend] = best_time(build_all, 3)
+    set_ik_backend(default)
+    manifolds = built[default]
+    t_man = t_backend[default]
+    flag_diff = {
+        b: sum(
+            int((getattr(m, f) != getattr(built["numpy"][n], f)).sum())
+            for n, m in ms.items()
+            for f in ("reachable", "inside", "pad_ok")
+        )
+        for b, ms in built.items()
+    }
 
     # baseline on a random subset of the points, every time, every finger
     rng = np.random.default_rng(0)
@@ -117,8 +139,49 @@ def main() -> None:
             differ[restarts] += int((feas != manifolds[n].feasible[:, subset]).sum())
     full = {r: t * len(sample) / args.subset for r, t in t_loop.items()}
 
-    # Q for the first finger to trigger, arriving REGRASP_S after the trigger
-    grasp = initial_grasp(hand, box, manifolds, sample)
+    n_pts = len(sample)
+    total_entries = n_pts * args.poses * len(names)
+    print(
+        f"five-finger hand, box 40 x 60 x 40 mm every {args.spacing * 1e3:g} mm: {n_pts} "
+        f"points x {args.poses} poses x {len(names)} fingers = {total_entries:,} entries"
+    )
+    if not available():
+        print("numba not installed: IK on numpy only (pip install regrasp-pin[fast])")
+    print(f"{'step':44} {'time':>10} {'target':>10}")
+    rows = [
+        ("workspace covers (once per finger, cached)", f"{t_cover:8.2f} s", ""),
+        *[
+            (f"manifolds, 5 fingers, IK {b} (best of 3)", f"{t:8.2f} s", "<= 1 s")
+            for b, t in t_backend.items()
+        ],
+        ("per-point Finger.ik loop, restarts (extrap.)", f"{full[True]:8.1f} s", "(~90 s)"),
+        (f"  speed-up manifolds ({default}) / loop", f"{full[True] / t_man:8.1f} x", ""),
+        ("per-point loop, no restarts (extrap.)", f"{full[False]:8.1f} s", ""),
+        (f"  speed-up manifolds ({default}) / loop", f"{full[False] / t_man:8.1f} x", ""),
+    ]
+    for name, value, target in rows:
+        print(f"{name:44} {value:>10} {target:>10}")
+    for b, d in flag_diff.items():
+        if b != "numpy":
+            print(
+                f"IK {b} vs numpy: {d} of {3 * total_entries:,} flags differ (reach, inside, pad)"
+            )
+    print(
+        f"loops on {args.subset} random points per finger, all poses ({total} entries); "
+        f"feasible flags that differ from the {default} manifolds': {differ[True]} with "
+        f"restarts, {differ[False]} without"
+    )
+    choose_q(args, hand, box, motion, times, sample, contact, manifolds)
+
+
+def choose_q(args, hand, box, motion, times, sample, contact, manifolds) -> None:
+    """Q for the first finger of the initial grasp to trigger, arriving REGRASP_S later."""
+    names = hand.finger_names
+    try:
+        grasp = initial_grasp(hand, box, manifolds, sample)
+    except ContactError as exc:
+        print(f"choice of Q not timed: no initial grasp on this scene ({exc})")
+        return
     tracks = {
         n: track_contact(
             hand,
@@ -152,34 +215,8 @@ def main() -> None:
         )
 
     t_q, q_new = best_time(choose, 5)
-
-    n_pts = len(sample)
-    print(
-        f"five-finger hand, box 40 x 60 x 40 mm every {args.spacing * 1e3:g} mm: {n_pts} "
-        f"points x {args.poses} poses x {len(names)} fingers "
-        f"= {n_pts * args.poses * len(names):,} entries"
-    )
-    print(f"{'step':44} {'time':>10} {'target':>10}")
-    rows = [
-        ("workspace covers (once per finger, cached)", f"{t_cover:8.2f} s", ""),
-        ("manifolds, 5 fingers (best of 3)", f"{t_man:8.2f} s", "<= 1 s"),
-        ("per-point Finger.ik loop, restarts (extrap.)", f"{full[True]:8.1f} s", "(~90 s)"),
-        ("  speed-up manifolds / loop", f"{full[True] / t_man:8.1f} x", ""),
-        ("per-point loop, no restarts (extrap.)", f"{full[False]:8.1f} s", ""),
-        ("  speed-up manifolds / loop", f"{full[False] / t_man:8.1f} x", ""),
-        (
-            f"choose Q ({finger}, {q_new.n_candidates} candidates, best of 5)",
-            f"{t_q * 1e3:7.1f} ms",
-            "<= 20 ms",
-        ),
-    ]
-    for name, value, target in rows:
-        print(f"{name:44} {value:>10} {target:>10}")
-    print(
-        f"loops on {args.subset} random points per finger, all poses ({total} entries); "
-        f"feasible flags that differ from the manifolds': {differ[True]} with restarts, "
-        f"{differ[False]} without"
-    )
+    name = f"choose Q ({finger}, {q_new.n_candidates} candidates, best of 5)"
+    print(f"{name:44} {f'{t_q * 1e3:7.1f} ms':>10} {'<= 20 ms':>10}")
     print(
         f"{finger} triggers at {trig[finger]:.2f} s ({tracks[finger].trigger()[1]}); "
         f"Q at {np.round(q_new.p_object * 1e3, 1)} mm, stays until {q_new.exit_time_s:.2f} s, "

@@ -115,12 +115,11 @@ class WorkspaceVoxels:
     def contains(self, p_palm: np.ndarray) -> np.ndarray:
         """``(...,)`` True where the points may be reachable (False = provably not)."""
         idx = np.floor((p_palm - self.origin) / self.voxel_m).astype(np.int64)
-        shape = np.array(self.occupied.shape)
-        ok = np.all((idx >= 0) & (idx < shape), axis=-1)
-        out = np.zeros(p_palm.shape[:-1], bool)
-        i = idx[ok]
-        out[ok] = self.occupied[i[:, 0], i[:, 1], i[:, 2]]
-        return out
+        nx, ny, nz = self.occupied.shape
+        ix, iy, iz = idx[..., 0], idx[..., 1], idx[..., 2]
+        ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny) & (iz >= 0) & (iz < nz)
+        flat = np.where(ok, (ix * ny + iy) * nz + iz, 0)  # C order of `occupied`
+        return ok & self.occupied.ravel()[flat]
 
 
 @functools.lru_cache(maxsize=64)
@@ -244,8 +243,10 @@ def build_manifold(
     n_palm_faces = np.einsum("tij,fj->tfi", T_all[:, :3, :3], np.array(list(face_normal.values())))
     inward = -n_palm_faces.reshape(-1, 3)
     pads_T = np.ascontiguousarray(pads.T)
-    best_cos = np.concatenate(  # in blocks of 32 normals, small enough for the cache
-        [(b @ pads_T).max(axis=1) for b in np.array_split(inward, -(-len(inward) // 32))]
+    # in blocks of 4 normals: each product (4, M) stays in cache, and small enough that
+    # BLAS runs it on one thread (starting threads on a loaded machine cost 100 x)
+    best_cos = np.concatenate(
+        [(b @ pads_T).max(axis=1) for b in np.array_split(inward, -(-len(inward) // 4))]
     ).reshape(n_palm_faces.shape[:2])
     can_face = best_cos + slack >= contact.cos_cone
     face_index = np.searchsorted(np.array(list(face_normal)), sample.face_ids)
@@ -322,9 +323,12 @@ def build_manifold(
         if ok.any():
             cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
             pad[ti[ok], pi[ok]] = cos >= contact.cos_cone
-    with np.errstate(invalid="ignore"):
-        margin = np.minimum(q_out - finger.lower, finger.upper - q_out).min(axis=2)
-    margin = np.where(reach, margin, -np.inf)
+    # margins of the reached entries, the minimum over the joints column by column (a
+    # reduction over a short last axis is slow in numpy; min is exact either way)
+    q_reached = q_out[reach]
+    d = np.minimum(q_reached - finger.lower, finger.upper - q_reached)
+    margin = np.full((nt, n), -np.inf)
+    margin[reach] = functools.reduce(np.minimum, d.T)
     inside = reach & (margin >= 0.0)
     log.debug(
         "manifold %s: %d times x %d points, %.1f%% reachable",

@@ -14,18 +14,26 @@ best result is kept. An unreachable target is not an error: it comes back with
 ``success=False`` and its residual.
 
 The work is done on component-major arrays ``(k, N)`` and only on the points that
-have not converged yet.
+have not converged yet. The iterations run in numpy, or, when numba is installed
+(``pip install regrasp-pin[fast]``), in the same loop compiled per point
+(:mod:`.ik_numba`, 1.5 to 2 x faster); :func:`set_ik_backend` chooses, and the
+environment variable ``REGRASP_PIN_IK_BACKEND=numpy`` sets the default.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..exceptions import InputError
+from . import ik_numba
 from .kinematics import FingerChain
 
-__all__ = ["IKResult", "solve_position_ik"]
+__all__ = ["IK_BACKENDS", "IKResult", "ik_backend", "set_ik_backend", "solve_position_ik"]
+
+IK_BACKENDS = ("numpy", "numba")
 
 _LAMBDA0_SQ = 1e-8  # [m^2]
 _LAMBDA_ERR = 1e-2  # [-], weight of |e|^2 in lambda^2
@@ -33,6 +41,35 @@ _MAX_STEP = 0.4  # [rad] largest joint change per iteration
 _BLOCK = 8192  # points per block
 _STALL_SQ = 0.995**2  # an iteration must shrink the error by 0.5 % ...
 _STALL_TOL_FACTOR = 10.0  # ... unless it is already within 10 x tol
+_CONSTS = (_LAMBDA0_SQ, _LAMBDA_ERR, _MAX_STEP, _STALL_SQ, _STALL_TOL_FACTOR)
+_backend: list[str] = []  # the chosen backend, once chosen
+
+
+def ik_backend() -> str:
+    """The backend the IK iterations run on: ``"numba"`` or ``"numpy"``.
+
+    The default is numba when it is installed, unless the environment variable
+    ``REGRASP_PIN_IK_BACKEND`` is ``numpy``.
+    """
+    if not _backend:
+        want = os.environ.get("REGRASP_PIN_IK_BACKEND", "numba")
+        _backend.append("numba" if want != "numpy" and ik_numba.available() else "numpy")
+    return _backend[0]
+
+
+def set_ik_backend(name: str) -> str:
+    """Run the IK iterations on ``name`` (one of :data:`IK_BACKENDS`); return the previous.
+
+    Raises:
+        InputError: an unknown name, or ``"numba"`` without numba installed.
+    """
+    if name not in IK_BACKENDS:
+        raise InputError("name", f"is {name!r}", f"one of {IK_BACKENDS}")
+    if name == "numba" and not ik_numba.available():
+        raise InputError("name", "is 'numba' but numba is not installed", "numpy")
+    previous = ik_backend()
+    _backend[0] = name
+    return previous
 
 
 @dataclass(frozen=True)
@@ -108,6 +145,12 @@ def _iterate(
 
     Only the points that have not converged are carried from one iteration to the next.
     """
+    if ik_backend() == "numba":
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        err, iters = ik_numba.iterate(
+            chain.packed(), lower, upper, targets, q, tol_m, max_iter, fast_trig, _CONSTS
+        )
+        return q, err, int(iters)
     n = q.shape[1]
     err = np.empty(n)
     active = np.arange(n)

@@ -122,6 +122,28 @@ class FingerChain:
         self._joints = tuple(joints)
         self._tip_t = A_prev.T @ frame.placement.translation
         self._tip_R = A_prev.T @ frame.placement.rotation
+        self._packed = (
+            np.array([jt.C for jt in joints]).reshape(-1, 3, 3),
+            np.array([jt.t for jt in joints]).reshape(-1, 3),
+            np.array([jt.column for jt in joints], dtype=np.int64),
+            np.array([jt.scaling for jt in joints]),
+            np.array([jt.offset for jt in joints]),
+            self._tip_t.copy(),
+        )
+        for a in self._packed:
+            a.flags.writeable = False
+
+    def packed(self) -> tuple[np.ndarray, ...]:
+        """The kernel's constants as arrays (read-only), for compiled kernels.
+
+        Returns:
+            ``(C, t, column, scaling, offset, tip_t)``: per joint on the path root ->
+            tip, ``C`` ``(m, 3, 3)`` and ``t`` ``(m, 3)`` [m] as in the module docstring,
+            the index of its driving joint in the finger's q ``(m,)``, its mimic scaling
+            and offset [rad] ``(m,)``; and the tip frame's origin in the last ``W'``
+            frame ``(3,)`` [m].
+        """
+        return self._packed
 
     @staticmethod
     def _revolute_axis(
@@ -177,14 +199,15 @@ class FingerChain:
             ``J`` ``(3, k, N)`` [m/rad] or None.
         """
         n = qT.shape[1]
-        W = np.zeros((3, 3, n))
-        W[0, 0] = W[1, 1] = W[2, 2] = 1.0
-        o = np.zeros((3, n))
         axes = []
         origins = []
-        for jt in self._joints:
-            o = o + np.matmul(jt.t, W)  # o += W @ t, per point
-            W = np.matmul(jt.C.T, W)  # W <- W @ C  (W[i] is row i, shape (3, N))
+        for i, jt in enumerate(self._joints):
+            if i == 0:  # W = I: o = t, W = C (exactly what the products give)
+                o = np.repeat(jt.t[:, None], n, axis=1)
+                W = np.repeat(jt.C[:, :, None], n, axis=2)
+            else:
+                o = o + np.matmul(jt.t, W)  # o += W @ t, per point
+                W = np.matmul(jt.C.T, W)  # W <- W @ C  (W[i] is row i, shape (3, N))
             theta = qT[jt.column] * jt.scaling if jt.scaling != 1.0 else qT[jt.column]
             if jt.offset:
                 theta = theta + jt.offset
@@ -210,9 +233,14 @@ class FingerChain:
             r = p - oj
             col = J[:, jt.column]
             f = jt.scaling
-            col[0] += f * (z[1] * r[2] - z[2] * r[1])
-            col[1] += f * (z[2] * r[0] - z[0] * r[2])
-            col[2] += f * (z[0] * r[1] - z[1] * r[0])
+            if f == 1.0:  # (1.0 * x is x)
+                col[0] += z[1] * r[2] - z[2] * r[1]
+                col[1] += z[2] * r[0] - z[0] * r[2]
+                col[2] += z[0] * r[1] - z[1] * r[0]
+            else:
+                col[0] += f * (z[1] * r[2] - z[2] * r[1])
+                col[1] += f * (z[2] * r[0] - z[0] * r[2])
+                col[2] += f * (z[0] * r[1] - z[1] * r[0])
         return p, W, J
 
     def _forward(self, q: np.ndarray, want_jacobian: bool):
