@@ -14,10 +14,14 @@ best result is kept. An unreachable target is not an error: it comes back with
 ``success=False`` and its residual.
 
 The work is done on component-major arrays ``(k, N)`` and only on the points that
-have not converged yet. The iterations run in numpy, or, when numba is installed
-(``pip install regrasp-pin[fast]``), in the same loop compiled per point
-(:mod:`.ik_numba`, 1.5 to 2 x faster); :func:`set_ik_backend` chooses, and the
-environment variable ``REGRASP_PIN_IK_BACKEND=numpy`` sets the default.
+have not converged yet. The iterations run in numpy (the default and the reference),
+or, on request, in the same loop compiled per point by numba (:mod:`.ik_numba`,
+``pip install regrasp-pin[fast]``, 1.5 to 2 x faster): :func:`set_ik_backend` or the
+environment variable ``REGRASP_PIN_IK_BACKEND=numba``. It is not chosen by merely
+being installed, because its single-precision cos/sin round differently from numpy's:
+the iterates differ by about 1e-7 rad, which can move a regrasp trigger by a grid step
+and so change a plan (1 of the 30 neighbour scenarios). A plan should not depend on
+which packages happen to be installed.
 """
 
 from __future__ import annotations
@@ -48,12 +52,12 @@ _backend: list[str] = []  # the chosen backend, once chosen
 def ik_backend() -> str:
     """The backend the IK iterations run on: ``"numba"`` or ``"numpy"``.
 
-    The default is numba when it is installed, unless the environment variable
-    ``REGRASP_PIN_IK_BACKEND`` is ``numpy``.
+    The default is numpy; the environment variable ``REGRASP_PIN_IK_BACKEND=numba``
+    asks for numba (numpy if numba is not installed).
     """
     if not _backend:
-        want = os.environ.get("REGRASP_PIN_IK_BACKEND", "numba")
-        _backend.append("numba" if want != "numpy" and ik_numba.available() else "numpy")
+        want = os.environ.get("REGRASP_PIN_IK_BACKEND", "numpy")
+        _backend.append("numba" if want == "numba" and ik_numba.available() else "numpy")
     return _backend[0]
 
 
