@@ -192,10 +192,8 @@ def main() -> None:
     results = done.results
     text = summarize(results)
     if skip:
-        text += (
-            f"\nspecs drawn: {len(results) + len(done.skipped)}, skipped without an initial "
-            f"grasp: {len(done.skipped)}"
-        )
+        skipped_line = done.describe().split("\n", 1)[0]  # with the kinds
+        text += f"\nspecs drawn: {len(results) + len(done.skipped)}, {skipped_line}"
         if len(results) < n:
             text += f" -- only {len(results)} of {n} found in {len(specs)} draws"
     text += "\n" + done.describe().split("\n", 1)[1]

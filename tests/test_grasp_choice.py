@@ -33,13 +33,15 @@ from regrasp_pin.exceptions import ContactError, FailureKind, InputError
 from regrasp_pin.grasp.choice import (
     SCREEN_EDGES,
     _CombinationSearch,
+    _Ranking,
+    _Screen,
     _spread_out,
     choose_new_contact,
     exit_times,
     initial_grasp,
 )
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
-from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.grasp.manifold import Manifold, build_manifold
 from regrasp_pin.grasp.quality import ferrari_canny_epsilon, is_force_closure
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
@@ -347,8 +349,23 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
             torque_scale_m=box.radius_m,
         )
 
+    def removable(p, n):  # other contacts that could let go with (p, n) landed
+        k = len(other_p)
+        if k < 3:
+            return 0
+        return sum(
+            ferrari_canny_epsilon(
+                np.vstack([np.delete(other_p, w, 0), p]),
+                np.vstack([np.delete(other_n, w, 0), n]),
+                MU,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=box.radius_m,
+            )
+            > 0
+            for w in range(k)
+        )
+
     eps_P = eps(P, n_P)
-    first_fc = None
     passing = []
     for rank, (neg_exit, _, _, i) in enumerate(rows):
         e = eps(sample.points[i], sample.normals[i])
@@ -360,11 +377,20 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
         if _link_distance(hand, name, box, q_i, T_i, tip=True) < -contact.tip_penetration_m:
             continue
         passing.append((rank, i, -neg_exit, e))
-        if first_fc is None:
-            first_fc = (rank, i, -neg_exit, e)
-        if e >= eps_P:
-            return (rank, i, -neg_exit, e), rows, passing, eps_P
-    return first_fc, rows, passing, eps_P
+    counts = [removable(sample.points[c[1]], sample.normals[c[1]]) for c in passing]
+    most = len(other_p) if len(other_p) >= 3 else 0
+    return _window_choice(passing, counts, eps_P, most), rows, passing, eps_P
+
+
+def _window_choice(passing, counts, eps_P, most):
+    """Among the first 4 candidates that pass (fewer if one lets every other finger go
+    and keeps the quality): most fingers that could let go, then quality kept, then rank."""
+    window = []
+    for c, r in zip(passing, counts, strict=True):
+        window.append((r, c[3] >= eps_P, -c[0], c))
+        if (r == most and c[3] >= eps_P) or len(window) == 4:
+            break
+    return max(window, key=lambda w: w[:3])[3] if window else None
 
 
 def _choose_from_grasp(five, finger, t_arrive, **kwargs):
@@ -416,12 +442,8 @@ def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
     exit_time = m.times_s[min(exit_index, m.times_s.size - 1)]
     assert q.exit_time_s == pytest.approx(exit_time)
     assert q.t_arrive_s == pytest.approx(m.times_s[ka])
-    # the paper's condition (b): no candidate that keeps the grasp outlasts Q
-    keeps = [p for p in passing if p[3] >= eps_P]
-    if q.quality_kept:
-        assert exit_index == max(p[2] for p in keeps)
-    else:  # none keeps the quality: the longest-lasting one in force closure
-        assert not keeps and exit_index == max(p[2] for p in passing)
+    # Q is one of the first four candidates that pass, in the order of condition (b)
+    assert q.rank in [p[0] for p in passing[:4]]
     # the reported numbers
     assert_close(q.p_object, sample.points[i], atol=0.0, what="Q")
     assert_close(q.q_arrive, m.q[ka, i], atol=0.0, what="q at arrival")
@@ -433,6 +455,78 @@ def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
     # Q is far enough from every other contact
     for p_other, _ in others.values():
         assert np.linalg.norm(q.p_object - p_other) >= SEP_M
+
+
+def test_q_lets_more_fingers_go_among_the_first_that_pass():
+    """Among the first candidates that pass, the one after which most of the other
+    fingers could let go is taken, whatever its rank (leave-one-out epsilons)."""
+    hand = Hand.five_finger()
+    finger = hand.finger("little")
+    box = Box((0.04, 0.06, 0.04))
+    sample = box.sample_surface(0.01)
+    pts, nrm = sample.points, sample.normals
+    top = int(np.flatnonzero(nrm[:, 2] > 0.99)[0])
+    bottom = int(np.flatnonzero(nrm[:, 2] < -0.99)[0])
+    side = int(np.flatnonzero(nrm[:, 0] > 0.99)[0])
+    others = {
+        n: (pts[i], nrm[i]) for n, i in zip(("a", "b", "c"), (top, bottom, side), strict=True)
+    }
+    op, on = (
+        np.array([pts[top], pts[bottom], pts[side]]),
+        np.array([nrm[top], nrm[bottom], nrm[side]]),
+    )
+
+    def eps(p, n):
+        return ferrari_canny_epsilon(
+            np.vstack([op, p]),
+            np.vstack([on, n]),
+            MU,
+            n_edges=SCREEN_EDGES,
+            torque_scale_m=box.radius_m,
+        )
+
+    def removable(i):
+        return sum(
+            ferrari_canny_epsilon(
+                np.vstack([np.delete(op, w, 0), pts[i]]),
+                np.vstack([np.delete(on, w, 0), nrm[i]]),
+                MU,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=box.radius_m,
+            )
+            > 0
+            for w in range(3)
+        )
+
+    closing = [
+        i for i in range(len(sample)) if i not in (top, bottom, side) and eps(pts[i], nrm[i]) > 0
+    ]
+    counts = {i: removable(i) for i in closing}
+    low = min(closing, key=lambda i: (counts[i], i))
+    high = max(closing, key=lambda i: (counts[i], -i))
+    assert counts[low] < counts[high]  # the scene offers a choice
+    n_t, n = 2, len(sample)
+    manifold = Manifold(
+        finger="little",
+        times_s=np.array([0.0, 1.0]),
+        q=np.zeros((n_t, n, finger.k)),
+        reachable=np.ones((n_t, n), bool),
+        inside=np.ones((n_t, n), bool),
+        margin_rad=np.full((n_t, n), 0.2),
+        pad_ok=np.ones((n_t, n), bool),
+        lower=finger.lower,
+        upper=finger.upper,
+        T_palm_object=np.tile(np.eye(4), (n_t, 1, 1)),
+    )
+    screen = _Screen(hand, finger, box, manifold, sample, 0, others, MU, None, None, 0.0)
+    idx = np.array([low, high])
+    ranked = _Ranking(np.ones(2), np.full(2, 0.2), np.zeros(2), idx, 0.0)
+    P = np.array([0.0, 0.0, 0.02])  # the contact let go, on the top face
+    chosen = screen.first(np.array([0, 1]), ranked, P, np.array([0.0, 0.0, 1.0]))
+    assert chosen.index == high and chosen.rank == 1  # taken from second place
+    # outside the window of passing candidates the rank decides
+    screen.window = 1
+    assert screen.first(np.array([0, 1]), ranked, P, np.array([0.0, 0.0, 1.0])).index == low
 
 
 def test_q_skips_candidates_whose_links_touch(five):

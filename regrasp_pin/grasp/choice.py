@@ -9,10 +9,11 @@ larger joint margin at arrival, then by the shorter distance from P.
 Beyond the paper, the grasp must keep holding: Q must be at least ``min_separation_m``
 from the other fingers' contacts, the other contacts plus Q must be in force closure,
 and Q should keep or improve the grasp quality (Ferrari-Canny epsilon) that P gave
-with the others. Candidates are taken in the order of (b); the first that passes every
-test (and a Coal check that no other link of the finger touches the object at
-arrival) is chosen. If none keeps the quality, the best force-closure candidate is
-taken and the result says so.
+with the others. Candidates are taken in the order of (b) and tested (and a Coal check
+that no other link of the finger touches the object at arrival); among the first four
+that pass, Q is the one after which most other fingers could let go with the rest in
+force closure (so that a finger that must regrasp later can), then one that keeps the
+quality, then the first; the result says whether the quality was kept.
 
 "Distance from P" is the straight-line distance in the object frame (a lower bound of
 the surface distance; it is only a tie-breaker).
@@ -43,6 +44,7 @@ __all__ = [
 ]
 
 SCREEN_EDGES = 6  # friction-cone edges used when screening candidates
+_REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
 
 
 @dataclass(frozen=True)
@@ -320,6 +322,7 @@ class _Screen:
         )
         self.finger_clearance_m = finger_clearance_m
         self.rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}
+        self.window = _REMOVABLE_WINDOW
 
     def eps(self, p: np.ndarray, n: np.ndarray) -> float:
         """Ferrari-Canny epsilon of the other contacts and ``(p, n)``."""
@@ -347,14 +350,36 @@ class _Screen:
                 return "finger clearance"
         return None
 
+    def removable(self, p: np.ndarray, n: np.ndarray) -> int:
+        """How many of the other contacts could let go, with ``(p, n)`` landed, the rest
+        staying in force closure."""
+        k = self.other_p.shape[0]
+        if k < 3:
+            return 0
+        count = 0
+        for w in range(k):
+            keep = np.arange(k) != w
+            e = ferrari_canny_epsilon(
+                np.vstack([self.other_p[keep], p[None]]),
+                np.vstack([self.other_n[keep], n[None]]),
+                self.mu,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=self.scale,
+            )
+            count += e > 0.0
+        return count
+
     def first(
         self, order: np.ndarray, ranked: _Ranking, P_object: np.ndarray, n_P_object: np.ndarray
     ) -> NewContact:
-        """The first candidate in ``order`` that keeps the grasp quality of P, else the
-        first that passes; ContactError (the most frequent rejection) if none does."""
+        """Among the first ``self.window`` candidates in ``order`` that pass, the one
+        after which most other fingers could let go, then the first that keeps the grasp
+        quality of P, then the first; ContactError (the most frequent rejection) if none
+        passes."""
         pts, normals, idx = self.sample.points, self.sample.normals, ranked.idx
         eps_P = self.eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
-        fallback = None
+        passing: list[tuple[int, bool, int, NewContact]] = []
+        best_removable = self.other_p.shape[0] if self.other_p.shape[0] >= 3 else 0
         for position, j in enumerate(order):
             i = int(idx[j])
             e = self.eps(pts[i], normals[i])
@@ -378,12 +403,12 @@ class _Screen:
                 n_candidates=int(idx.size),
                 rank=position,
             )
-            if result.quality_kept:
-                return result
-            if fallback is None:
-                fallback = result
-        if fallback is not None:
-            return fallback
+            r = self.removable(pts[i], normals[i]) if self.window > 1 else 0
+            passing.append((r, result.quality_kept, -position, result))
+            if (r == best_removable and result.quality_kept) or len(passing) >= self.window:
+                break
+        if passing:
+            return max(passing, key=lambda c: c[:3])[3]
         raise self.failure(order.size, idx.size)
 
     def failure(self, checked: int, n_candidates: int) -> ContactError:
