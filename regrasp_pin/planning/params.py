@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .._validate import positive, positive_int
+from ..exceptions import InputError
 from ..grasp.contact import ContactModel
 from .regrasp import RegraspParams
 
@@ -48,6 +49,10 @@ class PlannerParams:
             turns, or if the others hold in force closure to the end
             (:mod:`.planning.release`).
         release_back_off_s: Duration of a release's back-off move [s].
+        prove_infeasible: Fail at once, with kind ``infeasible``, when a finger
+            provably cannot hold as long as it must (:mod:`~regrasp_pin.grasp.necessity`),
+            and choose the initial grasp with that proof; False: search anyway (the
+            partial plan of a failure then reaches as far as the search got).
     """
 
     dt_s: float = 0.01
@@ -68,6 +73,7 @@ class PlannerParams:
     regrasp: RegraspParams = field(default_factory=RegraspParams)
     release: bool = True
     release_back_off_s: float = 0.1
+    prove_infeasible: bool = True
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "manifold_dt_s", "sample_spacing_m", "mu", "start_step_s"):
@@ -84,3 +90,8 @@ class PlannerParams:
             positive_int(getattr(self, name), f"PlannerParams.{name}", least)
         if self.budget_s is not None:
             positive(self.budget_s, "PlannerParams.budget_s", allow_zero=True)
+        for name in ("release", "prove_infeasible"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(
+                    f"PlannerParams.{name}", f"is {getattr(self, name)!r}", "True or False"
+                )

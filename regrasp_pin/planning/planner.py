@@ -454,11 +454,12 @@ def _must_hold(
     An idle finger may join in place of one that lets go (:mod:`.planning.letgo`), so it
     counts among those that could hold; its manifold is the one a join would build. The
     runs are only claimed when every flight spans a grid time (regrasps last longer than
-    the grid step), as the proof needs; else there are none.
+    the grid step), as the proof needs, and ``params.prove_infeasible``; else there are
+    none.
     """
     every = dict(manifolds)
     step = float(m_times[1] - m_times[0]) if m_times.size > 1 else np.inf
-    if params.regrasp.duration_s <= step:
+    if not params.prove_infeasible or params.regrasp.duration_s <= step:
         return every, []
     if params.release:
         for name in hand.finger_names:
