@@ -88,6 +88,9 @@ def _configure_logging(args: argparse.Namespace) -> None:
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
     handler._regrasp_pin_cli = True  # type: ignore[attr-defined]
+    # the handler filters too: a library that sets its own loggers' levels after this
+    # (dask's distributed does, when a suite starts its cluster) cannot get past -q
+    handler.setLevel(getattr(logging, level))
     root.addHandler(handler)
     root.setLevel(getattr(logging, level))
     for noisy in ("matplotlib", "PIL", "distributed", "asyncio"):

@@ -157,6 +157,16 @@ def test_log_levels(tmp_path, capsys):
     assert main(["-q", "approx", str(csv), "-m", "3"]) == 0
     assert logging.getLogger().level == logging.ERROR
     assert "DEBUG regrasp_pin" in capsys.readouterr().err  # what -v/--log-level let through
+    # a library that raises its own logger's level later (distributed does when a
+    # suite starts its cluster) is still held back by -q
+    lib = logging.getLogger("distributed.scheduler")
+    lib_level = lib.level
+    lib.setLevel(logging.INFO)
+    lib.info("State start")
+    lib.error("a real error")
+    err = capsys.readouterr().err
+    assert "State start" not in err and "ERROR distributed.scheduler: a real error" in err
+    lib.setLevel(lib_level)
     logging.getLogger().setLevel(before)
 
 
