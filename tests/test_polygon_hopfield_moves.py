@@ -11,13 +11,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from regrasp_pin.exceptions import InputError
+from regrasp_pin.polygon.approximate import approximate_polygon
 from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
 from regrasp_pin.polygon.exact import exact_polygon
-from regrasp_pin.polygon.hopfield import initial_state, polygon_energy, run_network
+from regrasp_pin.polygon.hopfield import TIE_RTOL, initial_state, polygon_energy, run_network
 from regrasp_pin.polygon.hopfield_moves import (
     annealed_sweeps,
     block_costs,
     block_pass,
+    spread_ties,
     update_block,
 )
 from regrasp_pin.polygon.hopfield_search import competitive_hopfield
@@ -126,3 +128,42 @@ def test_bad_block_and_anneals():
         competitive_hopfield(H, 12, closed=True, anneals=-1)
     annealed = competitive_hopfield(H, 12, closed=True, points=P, anneals=2)
     assert annealed.energy <= annealed.plain_energy and np.isfinite(annealed.energy)
+
+
+def _u_path() -> np.ndarray:
+    """Three straight runs of 20 steps (a U): every "max" optimum has its vertices at
+    the two corners and the ends, and the others anywhere on the runs (energy 0)."""
+    a = np.c_[np.zeros(21), np.arange(21)]
+    b = np.c_[np.arange(1, 21), np.full(20, 20)]
+    c = np.c_[np.full(20, 20), np.arange(19, -1, -1)]
+    return np.vstack([a, b, c]).astype(float)
+
+
+@pytest.mark.parametrize("method", ["hopfield", "exact"])
+def test_max_ties_are_broken_toward_spread_out_vertices(method):
+    P = _u_path()
+    raw = exact_polygon(deviation_matrix(P, "max", closed=False), 8, closed=False).indices
+    assert np.diff(raw).min() == 1  # the degenerate optimum: free vertices bunched up
+    res = approximate_polygon(P, 8, deviation="max", method=method)
+    assert res.energy == pytest.approx(0.0, abs=1e-12)  # still optimal
+    assert {0, 20, 40, 60} <= set(res.indices.tolist())  # ends and corners
+    assert np.diff(res.indices).min() >= 6  # 4 free vertices over 3 runs of 20 steps
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), closed=st.booleans())
+def test_spreading_ties_keeps_the_energy_and_the_order(seed, closed):
+    rng = np.random.default_rng(seed)
+    n, m = 50, 7
+    P = np.cumsum(rng.integers(-1, 2, size=(n, 2)), axis=0).astype(float)
+    P += 1e-3 * np.arange(n)[:, None]  # no two points coincide
+    H = deviation_matrix(P, "max", closed=closed)
+    s = run_network(H, initial_state(P, m, closed=closed), closed=closed).indices
+    before = polygon_energy(H, s, closed=closed)
+    after_s = spread_ties(H, s, P, closed=closed)
+    after = polygon_energy(H, after_s, closed=closed)
+    # at most 5 sweeps x m moves, each within the tie tolerance of the energy
+    assert after <= before + 5 * m * TIE_RTOL * max(before, 1e-12) + 1e-15
+    assert np.all(np.diff(after_s) > 0) and after_s.size == m
+    if not closed:
+        assert after_s[0] == s[0] and after_s[-1] == s[-1]  # the pinned ends stay

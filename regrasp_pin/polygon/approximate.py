@@ -35,7 +35,8 @@ from .deviation import (
     validate_points,
 )
 from .exact import exact_polygon
-from .hopfield import initial_state, run_network
+from .hopfield import initial_state, polygon_energy, run_network
+from .hopfield_moves import spread_ties
 from .hopfield_search import competitive_hopfield
 
 logger = logging.getLogger(__name__)
@@ -207,6 +208,7 @@ def approximate_polygon(
     )
     t_net += clock() - t0
     timings = {"H": t_h * 1e3, "network": t_net * 1e3}
+    Hx = H
     if method == "hopfield":
         idx, energy = hop.indices, hop.energy
         sweeps, history = hop.sweeps, hop.energy_history
@@ -224,6 +226,9 @@ def approximate_polygon(
         idx, energy = ex.indices, ex.energy
         sweeps, history = 0, np.zeros(0)
     idx = np.asarray(idx, dtype=np.int64)
+    if deviation == "max":  # degenerate optima: spread the vertices among the ties
+        idx = spread_ties(Hx, idx, P, closed=closed)
+        energy = polygon_energy(Hx, idx, closed=closed)
     return PolygonResult(
         indices=idx,
         vertices=P[idx].copy(),

@@ -22,7 +22,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .hopfield import column_groups, tie_tolerance, window_costs, winners
+from .hopfield import (
+    TIE_RTOL,
+    column_groups,
+    polygon_energy,
+    tie_tolerance,
+    window_costs,
+    winners,
+)
 
 #: Default reach of a column in a block move [curve steps]: bounds a block's work to
 #: ``k (2 BLOCK_RADIUS + 1)^2`` on long curves; short curves compete over all points.
@@ -172,3 +179,62 @@ def annealed_sweeps(
 
 
 __all__ = ["BLOCK_RADIUS", "annealed_sweeps", "block_costs", "block_pass", "update_block"]
+
+
+def spread_ties(
+    H: np.ndarray, s: np.ndarray, points: np.ndarray, *, closed: bool, sweeps: int = 5
+) -> np.ndarray:
+    """Move each vertex, among the positions that cost its two chords no more (ties
+    within :data:`~.hopfield.TIE_RTOL` of the polygon's energy), to the one nearest the
+    arc-length midpoint of its neighbours: the tie-break toward spread-out vertices.
+
+    The ``"max"`` measure (Eq. 7) makes a chord between adjacent points free, so its
+    optima are degenerate (vertices may bunch up); this keeps the energy (up to the tie
+    tolerance per move) and spreads the vertices out. Columns are visited in order,
+    ``sweeps`` times at most (until nothing moves); an open path's end columns stay.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``.
+        s: State, shape ``(m,)``, ordered.
+        points: The curve, shape ``(n, d)`` (for the arc lengths).
+        closed: Closed curve.
+        sweeps: Most passes over the columns.
+
+    Returns:
+        The new state, shape ``(m,)``.
+    """
+    s = np.array(s, dtype=np.int64)
+    n, m = H.shape[0], s.shape[0]
+    seg = np.linalg.norm(np.diff(points, axis=0, append=points[:1]), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])  # arc[n]: the whole closed length
+    energy = polygon_energy(H, s, closed=closed)
+    tol = TIE_RTOL * float(np.maximum(abs(energy), 1e-12))
+    eps = 1e-12 * float(np.maximum(arc[n], 1e-12))  # a move must get nearer by this
+
+    def along(x: np.ndarray, p: int) -> np.ndarray:  # arc length from p, forward
+        d = arc[x] - arc[p]
+        return d % arc[n] if closed else d
+
+    cols = range(m) if closed else range(1, m - 1)
+    for _ in range(sweeps):
+        moved = False
+        for i in cols:
+            p, q = int(s[i - 1]), int(s[(i + 1) % m])
+            width = (q - p) % n - 1 if closed else q - p - 1
+            if width < 2:
+                continue
+            xs = (p + 1 + np.arange(width)) % n
+            half = float(along(np.array([q]), p)[0]) / 2.0
+            current = float(H[p, s[i]] + H[s[i], q])
+            miss = np.where(
+                H[p, xs] + H[xs, q] <= current + tol, np.abs(along(xs, p) - half), np.inf
+            )
+            j = int(np.argmin(miss))  # ties: the first
+            if miss[j] < abs(float(along(np.array([s[i]]), p)[0]) - half) - eps:
+                s[i] = xs[j]
+                moved = True
+        if not moved:
+            break
+    if closed:
+        s = np.sort(s)
+    return s
