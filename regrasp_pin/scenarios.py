@@ -401,7 +401,7 @@ def grasp_for_motion(
             of the hand's other fingers, the idle ones too, is in force closure without
             it: :func:`~regrasp_pin.grasp.necessity.must_hold`), only the contacts that
             last that long (over the horizon). Only for a grasp meant for ``motion``
-            itself.
+            itself, with regrasps longer than ``grasp_dt_s`` (the proof's assumption).
 
     Returns:
         The :class:`~.contact_choice.Grasp` at the motion's start.
@@ -420,6 +420,16 @@ def grasp_for_motion(
     manifolds = {
         n: build_manifold(hand.fingers[n], sample, motion, times, contact=contact) for n in fingers
     }
+    runs: list[MustHold] = []
+    if must_hold_check:  # on the unrestricted manifolds: what every finger could use
+        every = dict(manifolds)
+        for n in hand.finger_names:
+            if n not in every:  # an idle finger may join later
+                every[n] = build_manifold(hand.fingers[n], sample, motion, times, contact=contact)
+        # the last step of the motion claims nothing (the planner counts a hold lost
+        # there as held to the end)
+        until = motion.t_end - step if t_last >= motion.t_end - 1e-9 else None
+        runs = must_hold(every, sample, obj, mu, list(fingers), until_s=until)
     for name, index in (keep or {}).items():
         if name not in manifolds:
             raise UnknownNameError("keep", name, list(manifolds))
@@ -431,13 +441,6 @@ def grasp_for_motion(
         only[index] = True
         m = manifolds[name]
         manifolds[name] = replace(m, inside=m.inside & only[None, :])
-    runs: list[MustHold] = []
-    if must_hold_check:
-        every = dict(manifolds)
-        for n in hand.finger_names:
-            if n not in every:  # an idle finger may join later
-                every[n] = build_manifold(hand.fingers[n], sample, motion, times, contact=contact)
-        runs = must_hold(every, sample, obj, mu, list(fingers))
     return initial_grasp(
         hand,
         obj,

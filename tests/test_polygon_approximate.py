@@ -13,7 +13,7 @@ from regrasp_pin.exceptions import InputError, UnknownNameError
 from regrasp_pin.polygon.approximate import METHODS, PolygonResult, approximate_polygon
 from regrasp_pin.polygon.deviation import DEVIATIONS, chord_deviations, deviation_matrix
 from regrasp_pin.polygon.exact import exact_polygon
-from regrasp_pin.polygon.hopfield import initial_state, run_network
+from regrasp_pin.polygon.hopfield import TIE_RTOL, initial_state, run_network
 
 
 def noisy_circle(n: int, seed: int = 0, noise: float = 0.01) -> np.ndarray:
@@ -62,8 +62,9 @@ def test_exact_method_is_the_optimum_and_network_is_not_better(deviation):
         best = exact_polygon(H, 8, closed=closed).energy
         ex = approximate_polygon(P, 8, closed=closed, deviation=deviation, method="exact")
         hop = approximate_polygon(P, 8, closed=closed, deviation=deviation)
-        assert_close(ex.energy, best, atol=1e-12, rtol=1e-12)
-        assert ex.energy <= hop.energy * (1 + 1e-12)
+        # "max": the vertices spread among ties, within TIE_RTOL of the energy
+        assert_close(ex.energy, best, atol=1e-12, rtol=2 * TIE_RTOL)
+        assert ex.energy <= hop.energy * (1 + 2 * TIE_RTOL)
 
 
 def test_banded_pipeline_matches_the_full_matrix(caplog):
@@ -77,11 +78,13 @@ def test_banded_pipeline_matches_the_full_matrix(caplog):
     plain = run_network(H, initial_state(P, 20, closed=True), closed=True)
     assert res.plain_energy == plain.energy
     ex = approximate_polygon(P, 20, closed=True, deviation="max", method="exact")
-    assert_close(ex.energy, exact_polygon(H, 20, closed=True).energy, atol=1e-12, rtol=1e-12)
-    assert ex.energy <= res.energy
+    best = exact_polygon(H, 20, closed=True).energy
+    assert_close(ex.energy, best, atol=1e-12, rtol=TIE_RTOL)  # "max": spread among ties
+    assert ex.energy <= res.energy * (1 + TIE_RTOL)
     full = approximate_polygon(P, 20, closed=True, deviation="max", restarts=2, full_matrix=True)
     assert full.plain_energy == res.plain_energy, "same plain network with and without band"
-    assert ex.energy <= full.energy <= full.plain_energy
+    assert ex.energy <= full.energy * (1 + TIE_RTOL)
+    assert full.energy <= full.plain_energy * (1 + TIE_RTOL)
 
 
 def test_straight_path_and_pixels():
@@ -120,7 +123,7 @@ def test_repeated_pixels_give_no_nan_and_no_zero_length_chord(deviation):
                 assert np.isfinite(res.energy) and np.isfinite(res.plain_energy)
             ex = approximate_polygon(P, m, closed=closed, deviation=deviation, method="exact")
             H_best = exact_polygon(H, m, closed=closed).energy
-            assert_close(ex.energy, H_best, atol=1e-12, rtol=1e-12)
+            assert_close(ex.energy, H_best, atol=1e-12, rtol=TIE_RTOL)
     loop = np.vstack([P, P[:1]])  # an open path back to its start: m = 2 is a point
     with pytest.raises(InputError, match="m: 2 joins the first and last points"):
         approximate_polygon(loop, 2, deviation=deviation)

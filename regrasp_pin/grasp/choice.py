@@ -477,7 +477,7 @@ def _start_candidates(
         )
     if hold is not None:
         if not hold.lasting[idx].any():
-            raise _cannot_hold(man, hold, idx, t_index)
+            raise _cannot_hold(man, hold, idx, t_index, contact)
         # what the planner needs: the trigger margin, up to the next grid time (the
         # run may end anywhere before it); what is proven: margin >= 0 over the run
         k_end = min(hold.k_to + 1, man.times_s.size - 1)
@@ -508,19 +508,37 @@ def _start_candidates(
     return idx[chosen], frac[chosen]
 
 
-def _cannot_hold(man: Manifold, hold: MustHold, idx: np.ndarray, t_index: int) -> ContactError:
-    """The INFEASIBLE error of a finger none of whose starting contacts ``idx`` lasts
-    through ``hold``, with how long the longest-lasting one does."""
-    last = exit_times(man.usable(0.0)[:, idx], man.times_s, t_index)
+def _cannot_hold(
+    man: Manifold, hold: MustHold, idx: np.ndarray, t_index: int, contact: ContactModel
+) -> ContactError:
+    """The error of a finger none of whose starting candidates ``idx`` lasts through
+    ``hold``: INFEASIBLE if no contact at all does (with how long the longest-lasting
+    one holds), NO_CANDIDATE if some do but lack the choice margin at the start."""
     t0 = float(man.times_s[t_index])
-    return ContactError(
+    head = (
         f"it cannot let go until t={hold.t_to_s:.3f} s (until then no grasp without it is in "
-        f"force closure), but none of its contacts stays within its joint limits that long "
-        f"(the longest until t={float(last.max()):.3f} s)",
+        f"force closure), but "
+    )
+    if hold.possible:
+        return ContactError(
+            head + f"its contacts that last that long are within "
+            f"{contact.choice_margin_rad:.2f} rad of a joint limit at the start",
+            finger=man.finger,
+            time_s=t0,
+            kind=FailureKind.NO_CANDIDATE,
+            measured=float(hold.lasting.sum()),
+            required=1.0,
+        )
+    usable = man.usable(0.0)
+    last = exit_times(usable[:, usable[t_index]], man.times_s, t_index)
+    t_last = float(last.max()) if last.size else t0
+    return ContactError(
+        head + "none of its contacts stays within its joint limits that long "
+        f"(the longest until t={t_last:.3f} s)",
         finger=man.finger,
         time_s=t0,
         kind=FailureKind.INFEASIBLE,
-        measured=float(last.max()) - t0,
+        measured=t_last - t0,
         required=hold.t_to_s - t0,
     )
 

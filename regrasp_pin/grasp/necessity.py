@@ -31,6 +31,8 @@ Why it is a proof, and of what (docs/manifold.md):
 
 It assumes what the planner does: contacts are the surface sample's points, a hold
 stays on one object point, and every flight lasts longer than the manifolds' time step.
+Which contacts are usable is what the manifolds' IK (with its restarts) finds; the
+planner checks a grasp it is given against its own tracking of the contacts instead.
 """
 
 from __future__ import annotations
@@ -163,7 +165,7 @@ def closure_possible_without(
             continue
         p = corners[k, faces].reshape(-1, 3)
         n = np.repeat(normals[faces], 4, axis=0)
-        key = p.tobytes()
+        key = faces.tobytes() + p.tobytes()
         if key not in memo:
             w = contact_wrenches(p, n, mu_out, n_edges=CONE_EDGES, torque_scale_m=obj.radius_m)
             memo[key] = _positively_spanning(w)
@@ -178,6 +180,7 @@ def must_hold(
     mu: float,
     fingers: tuple[str, ...] | list[str] | None = None,
     min_fingers: int = 3,
+    until_s: float | None = None,
 ) -> list[MustHold]:
     """Every run of times at which a finger cannot let go, by finger then time.
 
@@ -188,11 +191,15 @@ def must_hold(
         mu: Friction coefficient.
         fingers: The fingers to examine (default: all of ``manifolds``).
         min_fingers: Fewest fingers that can hold (:func:`closure_possible_without`).
+        until_s: Times after this claim nothing [s] (the planner counts a hold lost in
+            the motion's last step as held to the end); None: every time.
     """
     out = []
     for name in fingers if fingers is not None else list(manifolds):
         man = manifolds[name]
         free = closure_possible_without(manifolds, sample, obj, name, mu, min_fingers)
+        if until_s is not None:
+            free |= man.times_s > until_s + 1e-9
         usable = man.usable(0.0)
         edges = np.flatnonzero(np.diff(np.r_[1, free.astype(np.int8), 1]))
         for a, b in zip(edges[::2], edges[1::2] - 1, strict=True):

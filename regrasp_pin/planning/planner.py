@@ -46,7 +46,7 @@ from ..exceptions import Attempt, FailureKind, PlanningError
 from ..grasp.choice import Grasp, exit_times, initial_grasp
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
 from ..grasp.manifold import Manifold, build_manifold
-from ..grasp.necessity import MustHold, first_infeasibility, must_hold
+from ..grasp.necessity import MustHold, must_hold
 from ..grasp.quality import ferrari_canny_epsilon
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
@@ -222,9 +222,9 @@ def plan_manipulation(
         now=motion.t_start,
         held_to_end={},
     )
-    infeasible = first_infeasibility(runs, grasp.indices)
+    infeasible = _first_infeasibility(ctx, state, runs)
     if infeasible is not None:
-        raise _no_plan_exists(ctx, state, infeasible, grasp.indices)
+        raise _no_plan_exists(ctx, infeasible, state)
     t0 = time.perf_counter()
     steps: list[_Step] = []
     backtracks = 0
@@ -458,8 +458,8 @@ def _must_hold(
     none.
     """
     every = dict(manifolds)
-    step = float(m_times[1] - m_times[0]) if m_times.size > 1 else np.inf
-    if not params.prove_infeasible or params.regrasp.duration_s <= step:
+    step = float(np.diff(m_times).max()) if m_times.size > 1 else np.inf
+    if not params.prove_infeasible or params.regrasp.duration_s <= step + TIME_TOL_S:
         return every, []
     if params.release:
         for name in hand.finger_names:
@@ -467,34 +467,61 @@ def _must_hold(
                 every[name] = build_manifold(
                     hand.fingers[name], sample, motion, m_times, contact=params.contact
                 )
-    return every, must_hold(every, sample, obj, params.mu, list(manifolds))
+    # a hold lost in the motion's last step counts as held to the end (planning.state)
+    until = motion.t_end - params.dt_s
+    return every, must_hold(every, sample, obj, params.mu, list(manifolds), until_s=until)
+
+
+def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
+    """The first time in ``[h.t_from, t_to]`` at which the tracked hold ``h`` is lost
+    (not reached, outside the limits or the pad turned away; the motion's last step
+    excepted, as the planner counts it held to the end), or None if it is held."""
+    tr, c = h.track, ctx.params.contact
+    sel = (tr.times_s <= min(t_to, ctx.scene.motion.t_end - ctx.params.dt_s) + TIME_TOL_S) & (
+        tr.times_s >= h.t_from - TIME_TOL_S
+    )
+    lost = sel & ((tr.error_m > c.ik_tol_m) | (tr.margin_rad < 0.0) | (tr.pad_cos < c.cos_cone))
+    return float(tr.times_s[np.argmax(lost)]) if lost.any() else None
+
+
+def _first_infeasibility(
+    ctx: PlanContext, state: PlanState, runs: list[MustHold]
+) -> tuple[MustHold, float] | None:
+    """The first run that no plan can get through, with the time the finger's contact
+    leaves its limits: a run from the start that the finger's tracked starting hold
+    does not last through, or a later run no contact of the finger lasts through (as
+    the manifolds find); None if there is none."""
+    bad = []
+    for run in runs:
+        held = state.holding.get(run.finger)
+        if held is not None and run.k_from == 0:
+            lost = _held_until(ctx, held, run.t_to_s)
+            if lost is not None:
+                bad.append((run, lost))
+        elif run.k_from > 0 and not run.possible:
+            man = ctx.manifolds[run.finger]
+            usable = man.usable(0.0)
+            last = exit_times(usable[:, usable[run.k_from]], man.times_s, run.k_from)
+            bad.append((run, float(last.max()) if last.size else run.t_from_s))
+    return min(bad, key=lambda b: (b[0].k_from, b[0].finger), default=None)
 
 
 def _no_plan_exists(
-    ctx: PlanContext, state: PlanState, run: MustHold, start: dict[str, int]
+    ctx: PlanContext, found: tuple[MustHold, float], state: PlanState
 ) -> PlanningError:
-    """The INFEASIBLE failure of a finger that cannot let go during ``run`` but cannot
+    """The INFEASIBLE failure of a finger that cannot let go during a run but cannot
     hold that long either; the partial plan is the start."""
-    man = ctx.manifolds[run.finger]
-    at_start = run.finger in start and run.k_from == 0
-    k = run.k_from
-    usable = man.usable(0.0)
-    last = (
-        exit_times(usable[:, [start[run.finger]]], man.times_s, k)
-        if at_start
-        else exit_times(usable[:, usable[k]], man.times_s, k)
-    )
-    longest = float(last.max()) if last.size else float(man.times_s[k])
-    which = "its contact does not stay" if at_start else "none of its contacts stays"
+    run, lost = found
+    which = "its contact does not stay" if run.k_from == 0 else "none of its contacts stays"
     return PlanningError(
         f"no plan exists: from t={run.t_from_s:.3f} s to t={run.t_to_s:.3f} s no grasp "
         f"without it is in force closure, so it cannot let go, but {which} within its "
-        f"joint limits that long (it leaves them at t={longest:.3f} s)",
+        f"joint limits that long (it leaves them at t={lost:.3f} s)",
         finger=run.finger,
         time_s=run.t_from_s,
         partial=_plan_until(ctx, state, ctx.scene.motion.t_start),
         kind=FailureKind.INFEASIBLE,
-        measured=longest - run.t_from_s,
+        measured=lost - run.t_from_s,
         required=run.duration_s,
     )
 

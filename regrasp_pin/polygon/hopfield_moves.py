@@ -189,9 +189,11 @@ def spread_ties(
     arc-length midpoint of its neighbours: the tie-break toward spread-out vertices.
 
     The ``"max"`` measure (Eq. 7) makes a chord between adjacent points free, so its
-    optima are degenerate (vertices may bunch up); this keeps the energy (up to the tie
-    tolerance per move) and spreads the vertices out. Columns are visited in order,
-    ``sweeps`` times at most (until nothing moves); an open path's end columns stay.
+    optima are degenerate (vertices may bunch up); this keeps the energy (all moves
+    together raise it by at most ``TIE_RTOL`` times itself: one budget, so that ties do
+    not follow last-bit noise and the energy cannot creep) and spreads the vertices out.
+    Columns are visited in order, ``sweeps`` times at most (until nothing moves); an open
+    path's end columns stay.
 
     Args:
         H: Deviation matrix, shape ``(n, n)``.
@@ -226,11 +228,11 @@ def spread_ties(
             xs = (p + 1 + np.arange(width)) % n
             half = float(along(np.array([q]), p)[0]) / 2.0
             current = float(H[p, s[i]] + H[s[i], q])
-            miss = np.where(
-                H[p, xs] + H[xs, q] <= current + tol, np.abs(along(xs, p) - half), np.inf
-            )
+            cost = H[p, xs] + H[xs, q]
+            miss = np.where(cost <= current + tol, np.abs(along(xs, p) - half), np.inf)
             j = int(np.argmin(miss))  # ties: the first
             if miss[j] < abs(float(along(np.array([s[i]]), p)[0]) - half) - eps:
+                tol -= max(float(cost[j]) - current, 0.0)  # one budget for all moves
                 s[i] = xs[j]
                 moved = True
         if not moved:
