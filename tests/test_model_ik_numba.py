@@ -140,6 +140,19 @@ def test_backend_switch_and_its_errors(backend, monkeypatch):
         ik.set_ik_backend("numba")
     ik.set_ik_backend("numpy")
     assert ik.ik_backend() == "numpy"
+    # the environment variable is read once, at the first call, and checked
+    saved = list(ik._backend)
+    try:
+        for value, what in (("cuda", "one of"), ("numba", "numba is not installed")):
+            ik._backend.clear()
+            monkeypatch.setenv("REGRASP_PIN_IK_BACKEND", value)
+            with pytest.raises(InputError, match=f"REGRASP_PIN_IK_BACKEND.*{what}"):
+                ik.ik_backend()
+        ik._backend.clear()
+        monkeypatch.setenv("REGRASP_PIN_IK_BACKEND", "numpy")
+        assert ik.ik_backend() == "numpy"
+    finally:
+        ik._backend[:] = saved
 
 
 def test_packed_chain_is_the_kernel_of_forward_kinematics(five):

@@ -53,11 +53,22 @@ def ik_backend() -> str:
     """The backend the IK iterations run on: ``"numba"`` or ``"numpy"``.
 
     The default is numpy; the environment variable ``REGRASP_PIN_IK_BACKEND=numba``
-    asks for numba (numpy if numba is not installed).
+    asks for numba.
+
+    Raises:
+        InputError: the variable names no backend, or numba without numba installed.
     """
     if not _backend:
         want = os.environ.get("REGRASP_PIN_IK_BACKEND", "numpy")
-        _backend.append("numba" if want == "numba" and ik_numba.available() else "numpy")
+        if want not in IK_BACKENDS:
+            raise InputError("REGRASP_PIN_IK_BACKEND", f"is {want!r}", f"one of {IK_BACKENDS}")
+        if want == "numba" and not ik_numba.available():
+            raise InputError(
+                "REGRASP_PIN_IK_BACKEND",
+                "is 'numba' but numba is not installed",
+                "numpy, or pip install 'regrasp-pin[fast]'",
+            )
+        _backend.append(want)
     return _backend[0]
 
 

@@ -87,7 +87,7 @@ class SuiteRun:
 
     def describe(self) -> str:
         """Skipped specs, wall time, workers and the scheduling overhead, in a few lines."""
-        kinds = Counter(str(r.failure_kind) for r in self.skipped).most_common()
+        kinds = Counter(r.failure_kind or "no kind" for r in self.skipped).most_common()
         lines = [
             f"skipped without an initial grasp: {len(self.skipped)}"
             + (f" ({', '.join(f'{k} {n}' for k, n in kinds)})" if kinds else ""),
