@@ -34,7 +34,7 @@ from .exceptions import (
 from .grasp.choice import Grasp, initial_grasp
 from .grasp.contact import ContactModel
 from .grasp.manifold import build_manifold
-from .grasp.necessity import MustHold, must_hold
+from .grasp.necessity import MustHold, must_hold, with_idle_fingers
 from .model.clearance import palm_clearance
 from .model.hand import Hand
 from .model.motion import ObjectMotion
@@ -422,10 +422,7 @@ def grasp_for_motion(
     }
     runs: list[MustHold] = []
     if must_hold_check:  # on the unrestricted manifolds: what every finger could use
-        every = dict(manifolds)
-        for n in hand.finger_names:
-            if n not in every:  # an idle finger may join later
-                every[n] = build_manifold(hand.fingers[n], sample, motion, times, contact=contact)
+        every = with_idle_fingers(hand, manifolds, sample, motion, contact)
         # the last step of the motion claims nothing (the planner counts a hold lost
         # there as held to the end)
         until = motion.t_end - step if t_last >= motion.t_end - 1e-9 else None

@@ -318,6 +318,25 @@ def _exit_index_direct(hand, name, manifold, sample, ka, i, contact):
     return nt
 
 
+def _removable(other_p, other_n, p, n, scale_m):
+    """How many of the other contacts could let go with ``(p, n)`` landed, the rest in
+    force closure (written out: one screening epsilon per contact left out)."""
+    k = len(other_p)
+    if k < 3:
+        return 0
+    return sum(
+        ferrari_canny_epsilon(
+            np.vstack([np.delete(other_p, w, 0), p]),
+            np.vstack([np.delete(other_n, w, 0), n]),
+            MU,
+            n_edges=SCREEN_EDGES,
+            torque_scale_m=scale_m,
+        )
+        > 0
+        for w in range(k)
+    )
+
+
 def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONTACT, kb=None):
     """The paper's rules plus the grasp tests, written out candidate by candidate; the
     landing lies between manifold times ``kb`` and ``ka`` (default: at ``ka``)."""
@@ -350,20 +369,7 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
         )
 
     def removable(p, n):  # other contacts that could let go with (p, n) landed
-        k = len(other_p)
-        if k < 3:
-            return 0
-        return sum(
-            ferrari_canny_epsilon(
-                np.vstack([np.delete(other_p, w, 0), p]),
-                np.vstack([np.delete(other_n, w, 0), n]),
-                MU,
-                n_edges=SCREEN_EDGES,
-                torque_scale_m=box.radius_m,
-            )
-            > 0
-            for w in range(k)
-        )
+        return _removable(other_p, other_n, p, n, box.radius_m)
 
     eps_P = eps(P, n_P)
     passing = []
@@ -486,17 +492,7 @@ def test_q_lets_more_fingers_go_among_the_first_that_pass():
         )
 
     def removable(i):
-        return sum(
-            ferrari_canny_epsilon(
-                np.vstack([np.delete(op, w, 0), pts[i]]),
-                np.vstack([np.delete(on, w, 0), nrm[i]]),
-                MU,
-                n_edges=SCREEN_EDGES,
-                torque_scale_m=box.radius_m,
-            )
-            > 0
-            for w in range(3)
-        )
+        return _removable(op, on, pts[i], nrm[i], box.radius_m)
 
     closing = [
         i for i in range(len(sample)) if i not in (top, bottom, side) and eps(pts[i], nrm[i]) > 0

@@ -21,7 +21,7 @@ the surface distance; it is only a tie-breaker).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -356,18 +356,14 @@ class _Screen:
         k = self.other_p.shape[0]
         if k < 3:
             return 0
-        count = 0
-        for w in range(k):
-            keep = np.arange(k) != w
-            e = ferrari_canny_epsilon(
-                np.vstack([self.other_p[keep], p[None]]),
-                np.vstack([self.other_n[keep], n[None]]),
-                self.mu,
-                n_edges=SCREEN_EDGES,
-                torque_scale_m=self.scale,
-            )
-            count += e > 0.0
-        return count
+        loo = _leave_one_out(
+            np.vstack([self.other_p, p[None]]),
+            np.vstack([self.other_n, n[None]]),
+            self.mu,
+            self.scale,
+            range(k),
+        )
+        return sum(e > 0.0 for e in loo)
 
     def first(
         self, order: np.ndarray, ranked: _Ranking, P_object: np.ndarray, n_P_object: np.ndarray
@@ -543,6 +539,19 @@ def _cannot_hold(
     )
 
 
+def _leave_one_out(
+    p: np.ndarray, n: np.ndarray, mu: float, scale_m: float, rows: Iterable[int]
+) -> list[float]:
+    """The screening epsilon of contacts ``p``, ``n`` ``(F, 3)`` with each of ``rows``
+    left out in turn (> 0: the others hold without it)."""
+    return [
+        ferrari_canny_epsilon(
+            np.delete(p, j, 0), np.delete(n, j, 0), mu, n_edges=SCREEN_EDGES, torque_scale_m=scale_m
+        )
+        for j in rows
+    ]
+
+
 def _grasp_score(
     p: np.ndarray, n: np.ndarray, fracs: list[float], mu: float, scale_m: float
 ) -> tuple[float, float] | None:
@@ -556,20 +565,7 @@ def _grasp_score(
     if e <= 0:
         return None
     F = p.shape[0]
-    loo = (
-        [
-            ferrari_canny_epsilon(
-                np.delete(p, j, 0),
-                np.delete(n, j, 0),
-                mu,
-                n_edges=SCREEN_EDGES,
-                torque_scale_m=scale_m,
-            )
-            for j in range(F)
-        ]
-        if F > 3
-        else []
-    )
+    loo = _leave_one_out(p, n, mu, scale_m, range(F)) if F > 3 else []
     removable = [x for x in loo if x > 0]
     score = (
         len(removable)

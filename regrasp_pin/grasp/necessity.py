@@ -43,11 +43,20 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import nnls
 
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
-from .manifold import Manifold
+from .contact import ContactModel
+from .manifold import Manifold, build_manifold
 from .quality import contact_wrenches
 
-__all__ = ["MustHold", "closure_possible_without", "first_infeasibility", "must_hold"]
+__all__ = [
+    "MustHold",
+    "closure_possible_without",
+    "first_infeasibility",
+    "must_hold",
+    "with_idle_fingers",
+]
 
 CONE_EDGES = 8  # edges of the circumscribed friction cones
 SPAN_TOL = 1e-8  # relative residual below which wrenches count as positively spanning
@@ -81,6 +90,24 @@ class MustHold:
     def possible(self) -> bool:
         """Whether any contact of the finger lasts through the run."""
         return bool(self.lasting.any())
+
+
+def with_idle_fingers(
+    hand: Hand,
+    manifolds: Mapping[str, Manifold],
+    sample: SurfaceSample,
+    motion: ObjectMotion,
+    contact: ContactModel,
+) -> dict[str, Manifold]:
+    """``manifolds`` and, on the same times, those of the hand's other fingers: an idle
+    finger may join in place of one that lets go, so it counts among those that could
+    hold (its manifold is the one a join would build)."""
+    every = dict(manifolds)
+    times = next(iter(manifolds.values())).times_s
+    for name in hand.finger_names:
+        if name not in every:
+            every[name] = build_manifold(hand.fingers[name], sample, motion, times, contact=contact)
+    return every
 
 
 def _face_corners(

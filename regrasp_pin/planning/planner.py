@@ -46,7 +46,7 @@ from ..exceptions import Attempt, FailureKind, PlanningError
 from ..grasp.choice import Grasp, exit_times, initial_grasp
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
 from ..grasp.manifold import Manifold, build_manifold
-from ..grasp.necessity import MustHold, must_hold
+from ..grasp.necessity import MustHold, must_hold, with_idle_fingers
 from ..grasp.quality import ferrari_canny_epsilon
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
@@ -457,16 +457,14 @@ def _must_hold(
     the grid step), as the proof needs, and ``params.prove_infeasible``; else there are
     none.
     """
-    every = dict(manifolds)
     step = float(np.diff(m_times).max()) if m_times.size > 1 else np.inf
     if not params.prove_infeasible or params.regrasp.duration_s <= step + TIME_TOL_S:
-        return every, []
-    if params.release:
-        for name in hand.finger_names:
-            if name not in every:
-                every[name] = build_manifold(
-                    hand.fingers[name], sample, motion, m_times, contact=params.contact
-                )
+        return dict(manifolds), []
+    every = (
+        with_idle_fingers(hand, manifolds, sample, motion, params.contact)
+        if params.release
+        else dict(manifolds)
+    )
     # a hold lost in the motion's last step counts as held to the end (planning.state)
     until = motion.t_end - params.dt_s
     return every, must_hold(every, sample, obj, params.mu, list(manifolds), until_s=until)
