@@ -26,7 +26,11 @@ that comes near another finger keeps a wider gap from it on the grid (and a grid
 no route keeps a narrower one); a finger near its joint limits is rerouted more
 strongly. A failure that only another duration can fix (velocity) ends the variants at
 once, for the caller
-(:mod:`.planning.search`). It never returns a path that has not passed the check;
+(:mod:`.planning.search`). When no variant passes, the joint-space fallback
+(:mod:`.transfer`: lift along P's normal, a joint-space move through a raised via,
+approach along Q's normal; not in the paper) is tried, verified by the same check;
+its velocity failure is the one reported then (a longer duration may let it pass).
+It never returns a path that has not passed the check;
 when nothing passes it raises :class:`~.exceptions.PlanningError` (or
 :class:`~.exceptions.VerificationError`) with the finger, the time, the kind of the
 failure, its numbers and every attempt.

@@ -125,9 +125,10 @@ def plan_transfer(
 
     Raises:
         PlanningError: the lift or the approach is out of reach (``ik-unreachable``),
-            a joint would move faster than its limit (``velocity``: the fastest of the
-            vias), or no via passes the Coal check (the kind, measured and required
-            values of the last failure).
+            a joint would move faster than its limit for some via (``velocity``, the
+            via that is least too fast: a longer duration may let it pass), or else no
+            via passes the Coal check (the kind, measured and required values of the
+            last failure).
     """
     f = hand.finger(finger)
     n_t = max(int(np.ceil(duration_s / sample_dt_s)), 8) + 1
@@ -149,6 +150,7 @@ def plan_transfer(
     required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
     lc = LinkClearance(hand, finger, obj, include_tip=True)
     last: PlanningError | None = None
+    slowest: PlanningError | None = None  # the velocity failure a stretch fixes soonest
     for height in VIA_HEIGHTS:
         via = _via(f, T[(i_a + i_b) // 2], P, Q, q_a, q_b, height * (clearance_m + f.tip_radius))
         path = (
@@ -161,6 +163,8 @@ def plan_transfer(
             check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
         except PlanningError as exc:
             last = exc
+            if slowest is None or _over_speed(exc) < _over_speed(slowest):
+                slowest = exc
             continue
         q_full = np.array(q_hand(times), dtype=float)
         q_full[:, f.q_indices] = q
@@ -203,7 +207,11 @@ def plan_transfer(
             via_height=float(height),
         )
     assert last is not None  # VIA_HEIGHTS is not empty
-    raise last
+    raise slowest if slowest is not None else last
+
+
+def _over_speed(exc: PlanningError) -> float:
+    return float(exc.measured or np.inf) / float(exc.required or 1.0)
 
 
 def _along_normal(
