@@ -26,7 +26,7 @@ from test_planning_regrasp import (
 import regrasp_pin.planning.regrasp as regrasp_module
 from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.model.hand import Hand
-from regrasp_pin.planning.regrasp import RegraspParams, plan_regrasp
+from regrasp_pin.planning.regrasp import RegraspParams
 from regrasp_pin.planning.transfer import LIFT_FRACTION, Transfer, plan_transfer
 
 PARAMS = RegraspParams()
