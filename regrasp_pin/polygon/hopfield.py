@@ -60,6 +60,13 @@ def tie_tolerance(cost: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(best), TIE_RTOL * np.maximum(np.abs(best), 1e-12), 0.0)
 
 
+def improves(new: float, old: float) -> bool:
+    """Whether energy ``new`` is lower than ``old`` by more than the tie tolerance
+    (``TIE_RTOL`` times ``old``): the one test by which a search keeps a state, so that no
+    state is taken on last-bit noise (and a search cannot cycle among equal energies)."""
+    return bool(new < old - TIE_RTOL * max(abs(old), 1e-12))
+
+
 def winners(cost: np.ndarray) -> np.ndarray:
     """Per row, the first column whose cost is within :func:`tie_tolerance` of the
     row's minimum (the winner-take-all of Eq. 6, with deterministic ties)."""
@@ -362,6 +369,7 @@ __all__ = [
     "check_deviation_matrix",
     "check_state",
     "column_groups",
+    "improves",
     "initial_state",
     "make_increasing",
     "network_input",

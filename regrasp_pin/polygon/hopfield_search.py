@@ -28,6 +28,7 @@ from .hopfield import (
     check_deviation_matrix,
     check_state,
     column_groups,
+    improves,
     initial_state,
     make_increasing,
     polygon_energy,
@@ -253,9 +254,9 @@ def _local_search(
     """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
 
     After the network has converged, the ``trials`` most promising relocations of one
-    vertex to another chord are tried: one that lowers the energy at once is taken; one
-    that does not is kept only if the network, re-converged from it, ends lower. When no
-    relocation helps, blocks of ``block`` consecutive columns compete jointly
+    vertex to another chord are tried, each followed by re-convergence; the first that ends
+    lower (by more than the tie tolerance, :func:`~.hopfield.improves`: no walk along
+    plateaus of equal energy) is kept. When no relocation helps, blocks of ``block`` consecutive columns compete jointly
     (:func:`~.hopfield_moves.block_pass`; 0 or 1: no block moves).
     """
     groups = column_groups(s.shape[0], closed)
@@ -264,27 +265,22 @@ def _local_search(
     n = H.shape[0]
     for _ in range(budget):
         improved = False
-        for gain, moved in _relocations(H, HT, s, closed, trials):
+        for _gain, moved in _relocations(H, HT, s, closed, trials):
             dirty = _changed_columns(s, moved, n)
-            if gain < 0:
-                s, sw = _converge(H, HT, moved, groups, closed, dirty)
-            else:
-                moved, sw = _converge(H, HT, moved, groups, closed, dirty)
-                if not polygon_energy(H, moved, closed=closed) < energy:
-                    sweeps += sw
-                    continue
-                s = moved
+            moved, sw = _converge(H, HT, moved, groups, closed, dirty)
             sweeps += sw
-            energy = polygon_energy(H, s, closed=closed)
-            improved = True
-            break
+            e2 = polygon_energy(H, moved, closed=closed)
+            if improves(e2, energy):  # ties (a move along a plateau) are not taken
+                s, energy, improved = moved, e2, True
+                break
         if not improved and block > 1:
             moved = s.copy()
             if block_pass(H, moved, block, closed):
-                s, sw = _converge(H, HT, np.sort(moved) if closed else moved, groups, closed)
+                moved, sw = _converge(H, HT, np.sort(moved) if closed else moved, groups, closed)
                 sweeps += sw + 1
-                energy = polygon_energy(H, s, closed=closed)
-                improved = True
+                e2 = polygon_energy(H, moved, closed=closed)
+                if improves(e2, energy):
+                    s, energy, improved = moved, e2, True
         if not improved:
             break
     return s, energy, sweeps
@@ -455,7 +451,7 @@ def competitive_hopfield(
         if s is not None and s.shape[0] == m:
             s2, e2, sw = _local_search(H, HT, s, closed, trials, block=block)
             sweeps += sw
-            if e2 < best_e:
+            if improves(e2, best_e):
                 best_s, best_e = s2, e2
         history.append(best_e)
 
