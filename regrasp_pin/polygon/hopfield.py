@@ -67,6 +67,8 @@ def improves(new: float, old: float) -> bool:
     """Whether energy ``new`` is lower than ``old`` by more than the tie tolerance
     (``TIE_RTOL`` times ``old``): the one test by which a search keeps a state, so that no
     state is taken on last-bit noise (and a search cannot cycle among equal energies)."""
+    if not np.isfinite(old):  # any finite energy beats an unavailable chord
+        return bool(new < old)
     return bool(new < old - TIE_RTOL * max(abs(old), 1e-12))
 
 
