@@ -56,15 +56,33 @@ TIE_RTOL = 1e-9
 
 def tie_tolerance(cost: np.ndarray) -> np.ndarray:
     """Per-row tolerance ``(R, 1)`` within which costs are ties (inf rows: 0)."""
-    best = cost.min(axis=1, keepdims=True)
+    return _tolerance_of(cost.min(axis=1, keepdims=True))
+
+
+def _tolerance_of(best: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(best), TIE_RTOL * np.maximum(np.abs(best), 1e-12), 0.0)
+
+
+def improves(new: float, old: float) -> bool:
+    """Whether energy ``new`` is lower than ``old`` by more than the tie tolerance
+    (``TIE_RTOL`` times ``old``): the one test by which a search keeps a state, so that no
+    state is taken on last-bit noise (and a search cannot cycle among equal energies)."""
+    if not np.isfinite(old):  # any finite energy beats an unavailable chord
+        return bool(new < old)
+    return bool(new < old - TIE_RTOL * max(abs(old), 1e-12))
 
 
 def winners(cost: np.ndarray) -> np.ndarray:
     """Per row, the first column whose cost is within :func:`tie_tolerance` of the
     row's minimum (the winner-take-all of Eq. 6, with deterministic ties)."""
-    best = cost.min(axis=1, keepdims=True)
-    return np.argmax(cost <= best + tie_tolerance(cost), axis=1)
+    return _winners_and_tolerance(cost)[0]
+
+
+def _winners_and_tolerance(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`winners` and the rows' :func:`tie_tolerance` ``(R,)``, from one minimum."""
+    best = cost.min(axis=1)
+    tol = _tolerance_of(best)
+    return np.argmax(cost <= (best + tol)[:, None], axis=1), tol
 
 
 @dataclass(frozen=True)
@@ -292,11 +310,11 @@ def update_columns(H: np.ndarray, HT: np.ndarray, s: np.ndarray, cols: np.ndarra
     m, n = s.shape[0], H.shape[0]
     p, q = s[(cols - 1) % m], s[(cols + 1) % m]
     x, cost, span = window_costs(H, HT, p, q)  # -U (Eq. 10) over the interval
-    win = winners(cost)  # winner-take-all (Eq. 6), ties to the first row
+    win, tol = _winners_and_tolerance(cost)  # winner-take-all (Eq. 6), ties to the first row
     r = np.arange(cols.shape[0])
     cur = (s[cols] - p - 1) % n  # current row's position in the window
     # better by more than the tie tolerance only: E never rises, and noise never moves
-    better = cost[r, win] < cost[r, cur] - tie_tolerance(cost)[:, 0]
+    better = cost[r, win] < cost[r, cur] - tol
     moved = cols[better]
     s[moved] = x[r, win][better]
     return moved, span
@@ -362,6 +380,7 @@ __all__ = [
     "check_deviation_matrix",
     "check_state",
     "column_groups",
+    "improves",
     "initial_state",
     "make_increasing",
     "network_input",

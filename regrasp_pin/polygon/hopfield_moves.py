@@ -178,7 +178,14 @@ def annealed_sweeps(
     return np.sort(s) if closed else s
 
 
-__all__ = ["BLOCK_RADIUS", "annealed_sweeps", "block_costs", "block_pass", "update_block"]
+__all__ = [
+    "BLOCK_RADIUS",
+    "annealed_sweeps",
+    "block_costs",
+    "block_pass",
+    "spread_ties",
+    "update_block",
+]
 
 
 def spread_ties(

@@ -16,6 +16,7 @@ The network itself (states, input, energy, sweeps) is :mod:`regrasp_pin.polygon.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,7 @@ from .hopfield import (
     check_deviation_matrix,
     check_state,
     column_groups,
+    improves,
     initial_state,
     make_increasing,
     polygon_energy,
@@ -123,7 +125,8 @@ def _relocations(
     gain_rem = np.where(np.isfinite(gain_rem), gain_rem, np.inf)
     if not closed:
         gain_rem[0] = gain_rem[-1] = np.inf
-    total = gain_rem[:, None] + gain_ins[None, :]
+    with np.errstate(invalid="ignore"):  # inf + -inf: NaN, never among the best
+        total = gain_rem[:, None] + gain_ins[None, :]
     # inserting into a chord adjacent to the removed vertex is a plain network move
     nc = total.shape[1]
     total[i, i % nc] = np.inf
@@ -249,44 +252,55 @@ def _local_search(
     trials: int = 2,
     budget: int = 10_000,
     block: int = 0,
+    memo: dict | None = None,
 ) -> tuple[np.ndarray, float, int]:
     """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
 
     After the network has converged, the ``trials`` most promising relocations of one
-    vertex to another chord are tried: one that lowers the energy at once is taken; one
-    that does not is kept only if the network, re-converged from it, ends lower. When no
-    relocation helps, blocks of ``block`` consecutive columns compete jointly
-    (:func:`~.hopfield_moves.block_pass`; 0 or 1: no block moves).
+    vertex to another chord are tried, each followed by re-convergence; the first that ends
+    lower (by more than the tie tolerance, :func:`~.hopfield.improves`: no walk along
+    plateaus of equal energy) is kept. When no relocation helps, blocks of ``block``
+    consecutive columns compete jointly (:func:`~.hopfield_moves.block_pass`; 0 or 1: no
+    block moves).
+
+    The search is a deterministic function of the converged state it stands on, so
+    ``memo`` (one dict per ``H``) maps every such state already searched to where the
+    search ended: reaching one again ends the search there at once, with the same result.
     """
     groups = column_groups(s.shape[0], closed)
     s, sweeps = _converge(H, HT, s.copy(), groups, closed)
     energy = polygon_energy(H, s, closed=closed)
     n = H.shape[0]
+    memo = {} if memo is None else memo
+    visited: list[tuple] = []
     for _ in range(budget):
-        improved = False
-        for gain, moved in _relocations(H, HT, s, closed, trials):
-            dirty = _changed_columns(s, moved, n)
-            if gain < 0:
-                s, sw = _converge(H, HT, moved, groups, closed, dirty)
-            else:
-                moved, sw = _converge(H, HT, moved, groups, closed, dirty)
-                if not polygon_energy(H, moved, closed=closed) < energy:
-                    sweeps += sw
-                    continue
-                s = moved
-            sweeps += sw
-            energy = polygon_energy(H, s, closed=closed)
-            improved = True
+        key = (block, trials, s.tobytes())
+        if key in memo:
+            s, energy = memo[key]
+            s = s.copy()
             break
+        visited.append(key)
+        improved = False
+        for _gain, moved in _relocations(H, HT, s, closed, trials):
+            dirty = _changed_columns(s, moved, n)
+            moved, sw = _converge(H, HT, moved, groups, closed, dirty)
+            sweeps += sw
+            e2 = polygon_energy(H, moved, closed=closed)
+            if improves(e2, energy):  # ties (a move along a plateau) are not taken
+                s, energy, improved = moved, e2, True
+                break
         if not improved and block > 1:
             moved = s.copy()
             if block_pass(H, moved, block, closed):
-                s, sw = _converge(H, HT, np.sort(moved) if closed else moved, groups, closed)
+                moved, sw = _converge(H, HT, np.sort(moved) if closed else moved, groups, closed)
                 sweeps += sw + 1
-                energy = polygon_energy(H, s, closed=closed)
-                improved = True
+                e2 = polygon_energy(H, moved, closed=closed)
+                if improves(e2, energy):
+                    s, energy, improved = moved, e2, True
         if not improved:
             break
+    for key in visited:
+        memo[key] = (s, energy)
     return s, energy, sweeps
 
 
@@ -340,6 +354,59 @@ def _greedy_split(H: np.ndarray, HT: np.ndarray, m: int, closed: bool) -> np.nda
         if np.isfinite(polygon_energy(H, s, closed=closed)):
             return _insert_greedy(H, HT, s, closed, m - k)
     return None
+
+
+def _grown(
+    H: np.ndarray,
+    HT: np.ndarray,
+    points: np.ndarray,
+    m: int,
+    closed: bool,
+    trials: int,
+    memo: dict,
+) -> np.ndarray | None:
+    """Growing start: the network from the paper's equidistant state with the fewest
+    vertices (3 closed, 2 open), polished by the local search (no block moves), then one
+    vertex inserted at the best split, and so on up to ``m`` vertices (polished like every
+    start by :func:`competitive_hopfield`).
+
+    With few vertices the network places the long chords; each added vertex goes where it
+    helps most and the network re-converges around it. This finds the ``"max"`` optima
+    made of one or two long chords across the curve and many vertices on straight runs
+    (zero-cost chords), which a network started with all ``m`` vertices spread out misses.
+    """
+    s: np.ndarray | None = initial_state(points, 3 if closed else 2, closed=closed)
+    while s is not None:
+        k = s.shape[0]
+        if k == m:
+            break
+        s, _energy, _sweeps = _local_search(H, HT, s, closed, trials, memo=memo)
+        s = _insert_greedy(H, HT, s, closed, 1)
+    return s
+
+
+def _starts(
+    H: np.ndarray,
+    HT: np.ndarray,
+    plain: np.ndarray,
+    points: np.ndarray,
+    closed: bool,
+    trials: int,
+    block: int,
+    memo: dict,
+) -> Iterator[np.ndarray | None]:
+    """The deterministic initial states, in order (each made when it is needed): the plain
+    network's result, the equidistant state shifted by half a spacing (closed curves), the
+    greedy merge and split, and, where block moves are made (``block > 1``: the search
+    can afford it), the growing start (:func:`_grown`)."""
+    m = plain.shape[0]
+    yield plain
+    if closed:
+        yield initial_state(points, m, closed=True, phase=0.5)
+    yield _greedy_merge(H, m, closed)
+    yield _greedy_split(H, HT, m, closed)
+    if block > 1:
+        yield _grown(H, HT, points, m, closed, trials, memo)
 
 
 def _perturbed(
@@ -450,20 +517,19 @@ def competitive_hopfield(
     history = list(plain.energy_history)
     sweeps = plain.sweeps
 
+    memo: dict = {}  # converged states already searched -> where the search ended
+
     def consider(s: np.ndarray | None) -> None:
         nonlocal best_s, best_e, sweeps
         if s is not None and s.shape[0] == m:
-            s2, e2, sw = _local_search(H, HT, s, closed, trials, block=block)
+            s2, e2, sw = _local_search(H, HT, s, closed, trials, block=block, memo=memo)
             sweeps += sw
-            if e2 < best_e:
+            if improves(e2, best_e):
                 best_s, best_e = s2, e2
         history.append(best_e)
 
-    consider(plain.indices)
-    if closed:  # the equidistant state shifted by half a spacing
-        consider(initial_state(points, m, closed=True, phase=0.5))
-    consider(_greedy_merge(H, m, closed))
-    consider(_greedy_split(H, HT, m, closed))
+    for start in _starts(H, HT, plain.indices, points, closed, trials, block, memo):
+        consider(start)
     rng = np.random.default_rng(seed)
     free = np.arange(m) if closed else np.arange(1, m - 1)
     for _ in range(restarts):

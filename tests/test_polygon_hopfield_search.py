@@ -1,0 +1,123 @@
+"""The network's search: ties never accepted, memoized local search, the growing start."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from regrasp_pin.polygon import hopfield_search
+from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
+from regrasp_pin.polygon.exact import exact_polygon
+from regrasp_pin.polygon.hopfield import TIE_RTOL, improves, initial_state, polygon_energy
+from regrasp_pin.polygon.hopfield_search import competitive_hopfield
+
+
+def pixel_curve(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = 1 + 0.3 * np.sin(3 * t) + 0.1 * rng.standard_normal(n)
+    return np.round(np.c_[r * np.cos(t), r * np.sin(t)] * n / 8)  # repeated pixels
+
+
+def digital_curve(name: str, n: int) -> np.ndarray:
+    """A benchmark outline of bench/digital_curves.py (the literature's test shapes)."""
+    path = Path(__file__).resolve().parents[1] / "bench" / "digital_curves.py"
+    spec = importlib.util.spec_from_file_location("digital_curves", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.digital_curve(name, n)
+
+
+def test_improves_needs_more_than_the_tie_tolerance():
+    assert improves(1.0 - 2 * TIE_RTOL, 1.0)
+    assert not improves(1.0 - 0.5 * TIE_RTOL, 1.0)  # last-bit noise is a tie
+    assert not improves(1.0, 1.0)
+    assert improves(5.0, np.inf) and not improves(np.inf, np.inf)
+    assert not improves(0.0, 0.0)
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+@pytest.mark.parametrize("closed", [True, False])
+def test_memo_changes_no_result(monkeypatch, deviation, closed):
+    """The memoized local search ends where the search without the memo ends."""
+    plain_search = hopfield_search._local_search
+
+    def without_memo(*args, **kwargs):
+        kwargs["memo"] = None
+        return plain_search(*args, **kwargs)
+
+    for seed in range(3):
+        P = pixel_curve(60 + 10 * seed, seed)
+        H = deviation_matrix(P, deviation, closed=closed)
+        with_memo = competitive_hopfield(H, 10, closed=closed, points=P, seed=seed)
+        monkeypatch.setattr(hopfield_search, "_local_search", without_memo)
+        fresh = competitive_hopfield(H, 10, closed=closed, points=P, seed=seed)
+        monkeypatch.setattr(hopfield_search, "_local_search", plain_search)
+        assert np.array_equal(with_memo.indices, fresh.indices)
+        assert with_memo.energy == fresh.energy
+        assert with_memo.sweeps <= fresh.sweeps
+
+
+def test_local_search_takes_only_real_improvements(monkeypatch):
+    """Every state the local search keeps is lower than the one before by more than the
+    tie tolerance (no walk along a plateau of equal "max" energies), so it ends long
+    before its step budget."""
+    P = digital_curve("spiral", 112)  # plateaus: many zero-cost chords
+    H = deviation_matrix(P, "max", closed=True)
+    HT = np.ascontiguousarray(H.T)
+    kept: list[tuple[float, float]] = []
+    real = hopfield_search.improves
+
+    def spy(new: float, old: float) -> bool:
+        ok = real(new, old)
+        if ok:
+            kept.append((new, old))
+        return ok
+
+    rounds = []
+    relocations = hopfield_search._relocations
+
+    def count(*args):
+        rounds.append(1)
+        return relocations(*args)
+
+    monkeypatch.setattr(hopfield_search, "improves", spy)
+    monkeypatch.setattr(hopfield_search, "_relocations", count)
+    s0 = initial_state(P, 20, closed=True)
+    s, energy, _sweeps = hopfield_search._local_search(H, HT, s0, True, block=10)
+    assert len(rounds) < 200  # was the whole budget of 10 000 with plateau moves
+    assert all(new < old - TIE_RTOL * abs(old) for new, old in kept)
+    assert energy == polygon_energy(H, s, closed=True)
+
+
+def test_growing_start_finds_the_long_chord_optimum(monkeypatch):
+    """The figure eight of 56 pixels, m = 12: the "max" optimum is one chord across the
+    bridge and eleven zero-cost chords; without the growing start the search ends 13.9 %
+    above it, with it at the optimum (never above the plain network)."""
+    P = digital_curve("eight", 56)
+    H = deviation_matrix(P, "max", closed=True)
+    best = exact_polygon(H, 12, closed=True).energy
+    grown = competitive_hopfield(H, 12, closed=True, points=P)
+    starts = hopfield_search._starts
+
+    def no_growing(H, HT, plain, points, closed, trials, block, memo):
+        yield from starts(H, HT, plain, points, closed, trials, 0, memo)
+
+    monkeypatch.setattr(hopfield_search, "_starts", no_growing)
+    without = competitive_hopfield(H, 12, closed=True, points=P)
+    assert without.energy > 1.05 * best, "the case no longer needs the growing start"
+    assert grown.energy <= best * (1 + 1e-9)
+    assert grown.energy <= grown.plain_energy
+
+
+def test_growing_start_is_a_valid_state():
+    P = pixel_curve(50, 4)
+    H = deviation_matrix(P, "sum", closed=True)
+    HT = np.ascontiguousarray(H.T)
+    s = hopfield_search._grown(H, HT, P, 9, True, 2, {})
+    assert s is not None and s.shape == (9,) and np.all(np.diff(s) > 0)
+    assert np.isfinite(polygon_energy(H, s, closed=True))
