@@ -125,10 +125,10 @@ def plan_transfer(
 
     Raises:
         PlanningError: the lift or the approach is out of reach (``ik-unreachable``),
-            a joint would move faster than its limit for some via (``velocity``, the
-            via that is least too fast: a longer duration may let it pass), or else no
-            via passes the Coal check (the kind, measured and required values of the
-            last failure).
+            no via passes the Coal check within the velocity limits: ``velocity`` if
+            one that is too fast passes its geometry (the least too fast: a longer
+            duration may let it pass), else the kind, measured and required values
+            of the last Coal failure.
     """
     f = hand.finger(finger)
     n_t = max(int(np.ceil(duration_s / sample_dt_s)), 8) + 1
@@ -148,9 +148,7 @@ def plan_transfer(
     s = minimum_jerk((mid - mid[0]) / (mid[-1] - mid[0]))
     required = np.where(lift | land, 0.0, clearance_m)
     required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
-    lc = LinkClearance(hand, finger, obj, include_tip=True)
-    last: PlanningError | None = None
-    slowest: PlanningError | None = None  # the velocity failure a stretch fixes soonest
+    paths = []
     for height in VIA_HEIGHTS:
         via = _via(f, T[(i_a + i_b) // 2], P, Q, q_a, q_b, height * (clearance_m + f.tip_radius))
         path = (
@@ -158,14 +156,9 @@ def plan_transfer(
             if via is None
             else PchipInterpolator([0.0, 0.5, 1.0], np.stack([q_a, via, q_b]), axis=0)
         )
-        q = np.vstack([q_lift[:-1], path(s), q_app[1:]])
-        try:
-            check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
-        except PlanningError as exc:
-            last = exc
-            if slowest is None or _over_speed(exc) < _over_speed(slowest):
-                slowest = exc
-            continue
+        paths.append((height, np.vstack([q_lift[:-1], path(s), q_app[1:]])))
+
+    def coal_failure(q: np.ndarray) -> tuple[PlanningError | None, VerificationReport, np.ndarray]:
         q_full = np.array(q_hand(times), dtype=float)
         q_full[:, f.q_indices] = q
         report = verify_finger_motion(
@@ -179,35 +172,83 @@ def plan_transfer(
             link_clearance_m=np.maximum(required, link_clearance_m),
             finger_clearance_m=finger_clearance_m,
         )
-        if not report.ok:
-            worst = report.worst_failure
-            last = PlanningError(
-                "the joint-space transfer fails the Coal check"
-                + ("" if worst is None else f" ({worst.describe()})"),
-                finger=finger,
-                time_s=report.time_s,
-                kind=FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind,
-                measured=None if worst is None else worst.value,
-                required=None if worst is None else worst.required,
-            )
+        return (None if report.ok else _coal_error(finger, report)), report, q_full
+
+    # within the velocity limits first; the others only if none of those passes, and
+    # then only their geometry decides whether a velocity failure is reported
+    too_fast: list[tuple[float, np.ndarray, PlanningError]] = []
+    last: PlanningError | None = None
+    for height, q in paths:
+        try:
+            check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
+        except PlanningError as exc:
+            too_fast.append((height, q, exc))
             continue
-        tip_palm = f.fk(q)
-        tip_obj = np.einsum("nji,nj->ni", T[:, :3, :3], tip_palm - T[:, :3, 3])
-        keys = [0, i_a, i_b, n_t - 1] if via is None else [0, i_a, (i_a + i_b) // 2, i_b, n_t - 1]
-        transfer = ~(lift | land)
-        flight = transfer if transfer.any() else np.ones(n_t, bool)
-        return Transfer(
-            times_s=times,
-            q=q,
-            tip_object=tip_obj,
-            keyframes_object=tip_obj[keys],
-            keyframe_times_s=times[keys],
-            report=report,
-            min_clearance_m=float(lc(q_full[flight], T[flight]).min()),
-            via_height=float(height),
-        )
+        failure, report, q_full = coal_failure(q)
+        if failure is None:
+            return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
+        last = failure
+    slowest: PlanningError | None = None  # the velocity failure a stretch fixes soonest
+    for _, q, exc in sorted(too_fast, key=lambda c: (_over_speed(c[2]), c[0])):
+        failure, _, _ = coal_failure(q)
+        if failure is None:
+            slowest = exc
+            break
+        last = failure
+    if slowest is not None:
+        raise slowest
     assert last is not None  # VIA_HEIGHTS is not empty
-    raise slowest if slowest is not None else last
+    raise last
+
+
+def _coal_error(finger: str, report: VerificationReport) -> PlanningError:
+    """The typed failure of a transfer that fails the Coal check (its worst failure)."""
+    worst = report.worst_failure
+    return PlanningError(
+        "the joint-space transfer fails the Coal check"
+        + ("" if worst is None else f" ({worst.describe()})"),
+        finger=finger,
+        time_s=report.time_s,
+        kind=FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind,
+        measured=None if worst is None else worst.value,
+        required=None if worst is None else worst.required,
+    )
+
+
+def _transfer(
+    hand: Hand,
+    obj: ConvexObject,
+    finger: str,
+    times: np.ndarray,
+    T: np.ndarray,
+    q: np.ndarray,
+    q_full: np.ndarray,
+    report: VerificationReport,
+    height: float,
+    ends: tuple[int, int],
+) -> Transfer:
+    """The :class:`Transfer` of a verified trajectory (``ends``: the samples where the
+    lift ends and the approach begins)."""
+    f = hand.finger(finger)
+    i_a, i_b = ends
+    n_t = len(times)
+    tip_obj = np.einsum("nji,nj->ni", T[:, :3, :3], f.fk(q) - T[:, :3, 3])
+    keys = [0, i_a, i_b, n_t - 1] if height <= 0.0 else [0, i_a, (i_a + i_b) // 2, i_b, n_t - 1]
+    flight = np.zeros(n_t, bool)
+    flight[i_a + 1 : i_b] = True
+    if not flight.any():
+        flight[:] = True
+    lc = LinkClearance(hand, finger, obj, include_tip=True)
+    return Transfer(
+        times_s=times,
+        q=q,
+        tip_object=tip_obj,
+        keyframes_object=tip_obj[keys],
+        keyframe_times_s=times[keys],
+        report=report,
+        min_clearance_m=float(lc(q_full[flight], T[flight]).min()),
+        via_height=float(height),
+    )
 
 
 def _over_speed(exc: PlanningError) -> float:
