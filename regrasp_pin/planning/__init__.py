@@ -7,7 +7,8 @@ carries every failed attempt and the partial plan:
 - :mod:`.regrasp`: one finger's regrasp from P to Q: surface path
   (:mod:`regrasp_pin.surface`), Hopfield waypoints (:mod:`regrasp_pin.polygon`), a
   timing synchronized with the object (:mod:`.timing`), IK, and the Coal check
-  (:mod:`regrasp_pin.verify`);
+  (:mod:`regrasp_pin.verify`); when no surface path passes, :mod:`.transfer`, a
+  joint-space fallback verified the same way;
 - :mod:`.planner`: the whole hand over the whole motion (:func:`plan_manipulation`):
   which finger lets go when, and backtracking; its parameters in :mod:`.params`;
 - :mod:`.state`: where a plan stands and the triggers that follow from it;

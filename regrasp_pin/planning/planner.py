@@ -439,6 +439,13 @@ def _advance(
     return _apply(ctx, state, name, t_trig, why, found, landed.get(id(found.result)))
 
 
+def _tip_path_record(res: RegraspResult) -> list:
+    """The tip path of a regrasp's record, at most about 200 points: the curve over the
+    inflated surface, or the executed tip of a joint-space transfer (object frame)."""
+    pts = res.tip_object if res.tip_path is None else res.tip_path.points_object
+    return pts[:: max(1, len(pts) // 200)].tolist()
+
+
 def _must_hold(
     hand: Hand,
     obj: ConvexObject,
@@ -695,10 +702,11 @@ def _apply(
             "n_Q_object": res.n_Q_object.tolist(),
             "trigger_time_s": t_trig,
             "waypoint_times_s": res.waypoint_times_s.tolist(),
-            "grid_path_object": res.grid_path.points_object.tolist(),
-            "tip_path_object": res.tip_path.points_object[
-                :: max(1, len(res.tip_path) // 200)
-            ].tolist(),
+            "route": res.route,
+            "grid_path_object": []
+            if res.grid_path is None
+            else res.grid_path.points_object.tolist(),
+            "tip_path_object": _tip_path_record(res),
             "path_length_m": res.path_length_m,
             "m": int(res.waypoints_object.shape[0]),
             "q_exit_time_s": choice.exit_time_s,

@@ -26,7 +26,11 @@ that comes near another finger keeps a wider gap from it on the grid (and a grid
 no route keeps a narrower one); a finger near its joint limits is rerouted more
 strongly. A failure that only another duration can fix (velocity) ends the variants at
 once, for the caller
-(:mod:`.planning.search`). It never returns a path that has not passed the check;
+(:mod:`.planning.search`). When no variant passes, the joint-space fallback
+(:mod:`.transfer`: lift along P's normal, a joint-space move through a raised via,
+approach along Q's normal; not in the paper) is tried, verified by the same check;
+its velocity failure is the one reported then (a longer duration may let it pass).
+It never returns a path that has not passed the check;
 when nothing passes it raises :class:`~.exceptions.PlanningError` (or
 :class:`~.exceptions.VerificationError`) with the finger, the time, the kind of the
 failure, its numbers and every attempt.
@@ -56,6 +60,7 @@ from ..surface.inflation import TipPath, grid_inflation, inflate_path
 from ..surface.path import GridPath, shortest_grid_path
 from ..verify.finger_motion import VerificationReport, verify_finger_motion
 from .timing import check_joint_speed, inverse_minimum_jerk, minimum_jerk
+from .transfer import Transfer, plan_transfer
 
 __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
 
@@ -163,11 +168,14 @@ class RegraspResult:
         n_P_object: Its outward normal.
         Q_object: New contact, object frame ``(3,)`` [m].
         n_Q_object: Its outward normal.
-        grid: The unfolded surface grid.
-        grid_path: The grid path from P to Q.
-        tip_path: The fingertip-centre curve over the inflated surface.
-        polygon: The Hopfield (or exact) polygonal approximation of ``tip_path``.
-        waypoints_object: ``(m, 3)`` waypoints (tip centres), object frame [m].
+        grid: The unfolded surface grid (None for a joint-space transfer).
+        grid_path: The grid path from P to Q (None for a joint-space transfer).
+        tip_path: The fingertip-centre curve over the inflated surface (None for a
+            joint-space transfer).
+        polygon: The Hopfield (or exact) polygonal approximation of ``tip_path`` (None
+            for a joint-space transfer).
+        waypoints_object: ``(m, 3)`` waypoints (tip centres), object frame [m]; for a
+            joint-space transfer its keyframes (:mod:`.transfer`).
         waypoint_times_s: ``(m,)`` when each waypoint is passed [s].
         times_s: ``(S,)`` trajectory times [s].
         q: ``(S, k)`` finger joint trajectory [rad].
@@ -179,6 +187,8 @@ class RegraspResult:
         params: The parameters that succeeded.
         stage_ms: Time spent in each stage [ms].
         attempts: The variants that failed before success, as data.
+        route: ``"surface"`` (the paper's path over the inflated surface) or
+            ``"joint-space"`` (the fallback of :mod:`.transfer`).
     """
 
     finger: str
@@ -188,10 +198,10 @@ class RegraspResult:
     n_P_object: np.ndarray
     Q_object: np.ndarray
     n_Q_object: np.ndarray
-    grid: SurfaceGrid
-    grid_path: GridPath
-    tip_path: TipPath
-    polygon: PolygonResult
+    grid: SurfaceGrid | None
+    grid_path: GridPath | None
+    tip_path: TipPath | None
+    polygon: PolygonResult | None
     waypoints_object: np.ndarray
     waypoint_times_s: np.ndarray
     times_s: np.ndarray
@@ -202,6 +212,7 @@ class RegraspResult:
     params: RegraspParams
     stage_ms: dict[str, float] = field(default_factory=dict)
     attempts: tuple[Attempt, ...] = ()
+    route: str = "surface"
 
     @property
     def planning_ms(self) -> float:
@@ -240,6 +251,7 @@ def plan_regrasp(
     *,
     others_tips_object: np.ndarray | None = None,
     params: RegraspParams | None = None,
+    q_land: np.ndarray | None = None,
 ) -> RegraspResult:
     """Plan and verify one finger's regrasp from P to Q while the object moves.
 
@@ -262,9 +274,13 @@ def plan_regrasp(
             frame (they are fixed there while holding) [m]; grid nodes under them are
             forbidden.
         params: :class:`RegraspParams`.
+        q_land: ``(k,)`` a configuration near the one holding Q at landing [rad], the
+            IK seed of the joint-space fallback (default ``q_start``).
 
     Returns:
-        A :class:`RegraspResult` whose trajectory passed the Coal verification.
+        A :class:`RegraspResult` whose trajectory passed the Coal verification: the
+        paper's surface path if a variant of it passes, else the joint-space fallback
+        (:mod:`.transfer`) if it passes.
 
     Raises:
         InputError: bad parameters, P or Q not on the object, P == Q.
@@ -345,6 +361,40 @@ def plan_regrasp(
             attempts=tuple(attempts),
         )
     assert last is not None  # max_variants >= 1
+    try:
+        moved = plan_transfer(
+            hand,
+            obj,
+            motion,
+            f.name,
+            float(t_start),
+            params.duration_s,
+            (P, nP),
+            (Q, nQ),
+            q0,
+            q0 if q_land is None else as_array(q_land, "q_land", (f.k,)),
+            q_hand,
+            clearance_m=params.clearance_m,
+            link_clearance_m=params.link_clearance_m,
+            finger_clearance_m=params.finger_clearance_m,
+            ik_tol_m=params.ik_tol_m,
+            sample_dt_s=params.sample_dt_s,
+        )
+    except PlanningError as exc:
+        attempts.append(exc.as_attempt("joint-space transfer"))
+        log.debug("regrasp %s joint-space transfer failed: %s", f.name, exc)
+        if exc.kind == FailureKind.VELOCITY:
+            last = exc  # a longer duration may let it pass
+    else:
+        stages.lap("transfer")
+        log.info(
+            "regrasp %s at t=%.3f s verified in joint space (via %.0f, min clearance %.2f mm)",
+            f.name,
+            t_start,
+            moved.via_height,
+            1e3 * moved.min_clearance_m,
+        )
+        return _transferred(f.name, P, nP, Q, nQ, float(t_start), moved, params, stages, attempts)
     cls = VerificationError if isinstance(last, VerificationError) else PlanningError
     raise cls(
         f"no path variant passed ({len(attempts)} tried); the last: {last.reason}",
@@ -354,6 +404,45 @@ def plan_regrasp(
         measured=last.measured,
         required=last.required,
         attempts=attempts,
+    )
+
+
+def _transferred(
+    finger: str,
+    P: np.ndarray,
+    nP: np.ndarray,
+    Q: np.ndarray,
+    nQ: np.ndarray,
+    t_start: float,
+    moved: Transfer,
+    params: RegraspParams,
+    stages: _Stages,
+    attempts: list[Attempt],
+) -> RegraspResult:
+    """The :class:`RegraspResult` of a verified joint-space transfer."""
+    return RegraspResult(
+        finger=finger,
+        t_start=t_start,
+        t_end=float(moved.times_s[-1]),
+        P_object=P,
+        n_P_object=nP,
+        Q_object=Q,
+        n_Q_object=nQ,
+        grid=None,
+        grid_path=None,
+        tip_path=None,
+        polygon=None,
+        waypoints_object=moved.keyframes_object,
+        waypoint_times_s=moved.keyframe_times_s,
+        times_s=moved.times_s,
+        q=moved.q,
+        tip_object=moved.tip_object,
+        report=moved.report,
+        min_clearance_m=moved.min_clearance_m,
+        params=params,
+        stage_ms=dict(stages.ms),
+        attempts=tuple(attempts),
+        route="joint-space",
     )
 
 

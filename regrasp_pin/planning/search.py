@@ -42,7 +42,7 @@ from .outcomes import dominant_kind, failure_summary
 from .proximity import clear_of_fingers
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import TIME_TOL_S
-from .timing import duration_for_move, stretched_duration
+from .timing import duration_for_move, next_duration
 
 __all__ = ["Found", "RegraspSearch", "SearchBudget"]
 
@@ -308,6 +308,7 @@ class RegraspSearch:
         duration = duration_for_move(
             q0, choice.q_arrive, f.velocity_limit, minimum_s=d_min, dt_s=self.dt_s
         )
+        speeds: list[tuple[float, float]] = []  # (duration, peak speed / limit) of this Q
         for _ in range(self.stretches + 1):
             what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
             if start + duration > end_by + TIME_TOL_S:
@@ -327,10 +328,13 @@ class RegraspSearch:
                 chosen_for = duration
                 try:
                     budget.spend()
-                    choice = self.choose(finger, P, start + duration, others, q_hand, excluded)
+                    again = self.choose(finger, P, start + duration, others, q_hand, excluded)
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))
                     break
+                if not np.array_equal(again.p_object, choice.p_object):
+                    speeds.clear()  # another Q: another path
+                choice = again
                 what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
             budget.spend()
             try:
@@ -348,15 +352,17 @@ class RegraspSearch:
                     q_hand,
                     others_tips_object=others_tips,
                     params=replace(self.regrasp, duration_s=duration),
+                    q_land=choice.q_arrive,
                 )
             except PlanningError as exc:
                 attempts.append(exc.as_attempt(what))
                 log.debug("regrasp %s: %s", finger, exc)
                 if exc.kind == FailureKind.VELOCITY and exc.measured is not None and exc.required:
-                    duration = stretched_duration(
-                        duration, exc.measured / exc.required, dt_s=self.dt_s
-                    )
-                    continue
+                    speeds.append((duration, exc.measured / exc.required))
+                    longer = next_duration(speeds, dt_s=self.dt_s)
+                    if longer is not None:
+                        duration = longer
+                        continue
                 break
             rejected = None if landing_check is None else landing_check(result)
             if rejected is not None:

@@ -24,6 +24,7 @@ __all__ = [
     "duration_for_move",
     "inverse_minimum_jerk",
     "minimum_jerk",
+    "next_duration",
     "stretched_duration",
 ]
 
@@ -79,6 +80,35 @@ def stretched_duration(duration_s: float, speed_ratio: float, *, dt_s: float) ->
     """The duration [s] after which a trajectory that reached ``speed_ratio`` times a
     joint's velocity limit stays under it (time scaling: speeds fall as 1 / duration)."""
     return _round_up(duration_s * max(speed_ratio, 1.0) * STRETCH_MARGIN, dt_s)
+
+
+def next_duration(tried: Sequence[tuple[float, float]], *, dt_s: float) -> float | None:
+    """The next duration [s] to try after velocity failures, or None if none can pass.
+
+    ``tried`` holds ``(duration [s], peak speed / limit)`` of the failed tries, in order.
+    After one, time scaling (:func:`stretched_duration`). A regrasp's path changes with
+    its duration (the object turns further during a longer flight, so the joints must
+    move further): after two or more, the last two tries are fitted with
+    ``ratio = a / D + b`` (time-scaled part ``a``, part ``b`` that does not fall with
+    the duration) and the duration that brings the fit to ``1 / STRETCH_MARGIN`` is
+    taken when longer than time scaling's; None when the fit says no duration can
+    (``b`` at or above it: the speeds would not fall under the limit).
+    """
+    D1, r1 = tried[-1]
+    scaled = stretched_duration(D1, r1, dt_s=dt_s)
+    if len(tried) < 2:
+        return scaled
+    D0, r0 = tried[-2]
+    if abs(1.0 / D0 - 1.0 / D1) < 1e-9:
+        return scaled
+    a = (r0 - r1) / (1.0 / D0 - 1.0 / D1)
+    b = r1 - a / D1
+    goal = 1.0 / STRETCH_MARGIN
+    if a <= 0.0:
+        return scaled  # not slower when shorter: no trend to follow
+    if b >= goal:
+        return None
+    return max(scaled, _round_up(a / (goal - b), dt_s))
 
 
 def check_joint_speed(

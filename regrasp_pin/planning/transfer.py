@@ -1,0 +1,314 @@
+"""The joint-space fallback of a regrasp: lift along P's normal, move, land along Q's normal.
+
+The paper's regrasp follows a path over the virtually inflated surface
+(:mod:`.planning.regrasp`). Where no variant of that path passes -- the finger's
+other links sweep an edge on the way down to Q, a joint flips to follow the curve, the
+path crowds another finger -- the finger can still get there another way, the one a
+release and a join take (:mod:`.release`, :mod:`.join`):
+
+1. *lift*: over the first ``LIFT_FRACTION`` of the duration the fingertip backs off
+   along P's outward normal, which turns with the object, to ``clearance_m`` above P
+   (minimum jerk);
+2. *transfer*: a move in the finger's joint space to the configuration above Q, through
+   a via configuration whose fingertip is raised away from the object (none: a straight
+   move), shape-preserving (PCHIP) through the three configurations, minimum-jerk in
+   time;
+3. *approach*: over the last ``LIFT_FRACTION`` the fingertip comes down along Q's
+   normal and touches Q at the landing time.
+
+The vias tried are the straight move and the midpoint of the two backed-off fingertips
+raised along the mean of the two normals by ``VIA_HEIGHTS`` times the clearance plus
+the tip radius. Each candidate is checked against the joint velocity limits and
+verified with Coal exactly as a surface path is
+(:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip and the
+other links clear of the object by ``clearance_m`` during the transfer, allowed to touch
+only at lift-off and landing, the other fingers clear, joints within their limits).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from ..exceptions import FailureKind, PlanningError
+from ..model.clearance import LinkClearance
+from ..model.hand import Finger, Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject
+from ..verify.finger_motion import VerificationReport, verify_finger_motion
+from .timing import check_joint_speed, minimum_jerk
+
+__all__ = ["LIFT_FRACTION", "VIA_HEIGHTS", "Transfer", "plan_transfer"]
+
+#: Share of the duration taken by the lift, and by the approach [-].
+LIFT_FRACTION = 0.25
+#: Heights of the via above the two backed-off tips' midpoint, in units of
+#: (clearance + tip radius); 0 is the straight joint-space move.
+VIA_HEIGHTS = (0.0, 1.0, 2.0)
+
+
+@dataclass(frozen=True)
+class Transfer:
+    """A verified joint-space regrasp (module docstring).
+
+    Attributes:
+        times_s: ``(S,)`` sample times [s].
+        q: ``(S, k)`` the finger's joint trajectory [rad].
+        tip_object: ``(S, 3)`` the fingertip centre as executed, object frame [m].
+        keyframes_object: ``(K, 3)`` the fingertip at lift-off, after the lift, at the
+            via (when there is one), before the approach and at landing, object frame
+            [m].
+        keyframe_times_s: ``(K,)`` when each keyframe is passed [s].
+        report: The Coal verification report (``report.ok`` is True).
+        min_clearance_m: Smallest Coal distance between the finger and the object
+            during the transfer [m].
+        via_height: The ``VIA_HEIGHTS`` entry that passed.
+    """
+
+    times_s: np.ndarray
+    q: np.ndarray
+    tip_object: np.ndarray
+    keyframes_object: np.ndarray
+    keyframe_times_s: np.ndarray
+    report: VerificationReport
+    min_clearance_m: float
+    via_height: float
+
+
+def plan_transfer(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    finger: str,
+    t_start: float,
+    duration_s: float,
+    P: tuple[np.ndarray, np.ndarray],
+    Q: tuple[np.ndarray, np.ndarray],
+    q_start: np.ndarray,
+    q_land: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    *,
+    clearance_m: float,
+    link_clearance_m: float,
+    finger_clearance_m: float,
+    ik_tol_m: float,
+    sample_dt_s: float,
+) -> Transfer:
+    """Plan and verify ``finger``'s joint-space regrasp from P to Q (module docstring).
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        motion: Its motion; ``[t_start, t_start + duration_s]`` lies within it.
+        finger: The regrasping finger.
+        t_start: Lift-off time [s].
+        duration_s: From lift-off to landing [s].
+        P: The contact let go ``(point, outward normal)``, object frame [m].
+        Q: The new contact ``(point, outward normal)``, object frame [m].
+        q_start: ``(k,)`` the finger holding P at ``t_start`` [rad].
+        q_land: ``(k,)`` a configuration near the one holding Q at landing (IK seed)
+            [rad].
+        q_hand: Maps times ``(S,)`` to hand configurations ``(S, nq)`` with the other
+            fingers holding.
+        clearance_m: How far the fingertip backs off, and the clearance it keeps from
+            the object during the transfer [m].
+        link_clearance_m: Clearance of the finger's other links from the object [m].
+        finger_clearance_m: Clearance from the other fingers [m].
+        ik_tol_m: IK tolerance along the lift and the approach [m].
+        sample_dt_s: Time step of the trajectory [s].
+
+    Returns:
+        The verified :class:`Transfer`.
+
+    Raises:
+        PlanningError: the lift or the approach is out of reach (``ik-unreachable``),
+            no via passes the Coal check within the velocity limits: ``velocity`` if
+            one that is too fast passes its geometry (the least too fast: a longer
+            duration may let it pass), else the kind, measured and required values
+            of the last Coal failure.
+    """
+    f = hand.finger(finger)
+    n_t = max(int(np.ceil(duration_s / sample_dt_s)), 8) + 1
+    times = t_start + np.linspace(0.0, duration_s, n_t)
+    tau = np.linspace(0.0, 1.0, n_t)
+    lift = tau <= LIFT_FRACTION + 1e-12
+    land = tau >= 1.0 - LIFT_FRACTION - 1e-12
+    i_a, i_b = int(np.flatnonzero(lift)[-1]), int(np.flatnonzero(land)[0])
+    T = motion.pose(times)
+    off_lift = clearance_m * minimum_jerk(tau[lift] / LIFT_FRACTION)
+    off_land = clearance_m * minimum_jerk((1.0 - tau[land]) / LIFT_FRACTION)
+    q_lift = _along_normal(f, T[lift], P, off_lift, np.asarray(q_start, float), ik_tol_m)
+    q_app = _along_normal(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m)
+    q_app = q_app[::-1]
+    q_a, q_b = q_lift[-1], q_app[0]
+    mid = times[i_a : i_b + 1]
+    s = minimum_jerk((mid - mid[0]) / (mid[-1] - mid[0]))
+    required = np.where(lift | land, 0.0, clearance_m)
+    required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
+    paths = []
+    for height in VIA_HEIGHTS:
+        via = _via(f, T[(i_a + i_b) // 2], P, Q, q_a, q_b, height * (clearance_m + f.tip_radius))
+        path = (
+            PchipInterpolator([0.0, 1.0], np.stack([q_a, q_b]), axis=0)
+            if via is None
+            else PchipInterpolator([0.0, 0.5, 1.0], np.stack([q_a, via, q_b]), axis=0)
+        )
+        paths.append((height, np.vstack([q_lift[:-1], path(s), q_app[1:]])))
+
+    def coal_failure(q: np.ndarray) -> tuple[PlanningError | None, VerificationReport, np.ndarray]:
+        q_full = np.array(q_hand(times), dtype=float)
+        q_full[:, f.q_indices] = q
+        report = verify_finger_motion(
+            hand,
+            obj,
+            finger,
+            times,
+            q_full,
+            T,
+            tip_clearance_m=required,
+            link_clearance_m=np.maximum(required, link_clearance_m),
+            finger_clearance_m=finger_clearance_m,
+        )
+        return (None if report.ok else _coal_error(finger, report)), report, q_full
+
+    # within the velocity limits first; the others only if none of those passes, and
+    # then only their geometry decides whether a velocity failure is reported
+    too_fast: list[tuple[float, np.ndarray, PlanningError]] = []
+    last: PlanningError | None = None
+    for height, q in paths:
+        try:
+            check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
+        except PlanningError as exc:
+            too_fast.append((height, q, exc))
+            continue
+        failure, report, q_full = coal_failure(q)
+        if failure is None:
+            return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
+        last = failure
+    slowest: PlanningError | None = None  # the velocity failure a stretch fixes soonest
+    for _, q, exc in sorted(too_fast, key=lambda c: (_over_speed(c[2]), c[0])):
+        failure, _, _ = coal_failure(q)
+        if failure is None:
+            slowest = exc
+            break
+        last = failure
+    if slowest is not None:
+        raise slowest
+    assert last is not None  # VIA_HEIGHTS is not empty
+    raise last
+
+
+def _coal_error(finger: str, report: VerificationReport) -> PlanningError:
+    """The typed failure of a transfer that fails the Coal check (its worst failure)."""
+    worst = report.worst_failure
+    return PlanningError(
+        "the joint-space transfer fails the Coal check"
+        + ("" if worst is None else f" ({worst.describe()})"),
+        finger=finger,
+        time_s=report.time_s,
+        kind=FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind,
+        measured=None if worst is None else worst.value,
+        required=None if worst is None else worst.required,
+    )
+
+
+def _transfer(
+    hand: Hand,
+    obj: ConvexObject,
+    finger: str,
+    times: np.ndarray,
+    T: np.ndarray,
+    q: np.ndarray,
+    q_full: np.ndarray,
+    report: VerificationReport,
+    height: float,
+    ends: tuple[int, int],
+) -> Transfer:
+    """The :class:`Transfer` of a verified trajectory (``ends``: the samples where the
+    lift ends and the approach begins)."""
+    f = hand.finger(finger)
+    i_a, i_b = ends
+    n_t = len(times)
+    tip_obj = np.einsum("nji,nj->ni", T[:, :3, :3], f.fk(q) - T[:, :3, 3])
+    keys = [0, i_a, i_b, n_t - 1] if height <= 0.0 else [0, i_a, (i_a + i_b) // 2, i_b, n_t - 1]
+    flight = np.zeros(n_t, bool)
+    flight[i_a + 1 : i_b] = True
+    if not flight.any():
+        flight[:] = True
+    lc = LinkClearance(hand, finger, obj, include_tip=True)
+    return Transfer(
+        times_s=times,
+        q=q,
+        tip_object=tip_obj,
+        keyframes_object=tip_obj[keys],
+        keyframe_times_s=times[keys],
+        report=report,
+        min_clearance_m=float(lc(q_full[flight], T[flight]).min()),
+        via_height=float(height),
+    )
+
+
+def _over_speed(exc: PlanningError) -> float:
+    return float(exc.measured or np.inf) / float(exc.required or 1.0)
+
+
+def _along_normal(
+    f: Finger,
+    T: np.ndarray,
+    contact: tuple[np.ndarray, np.ndarray],
+    offsets: np.ndarray,
+    q_seed: np.ndarray,
+    ik_tol_m: float,
+) -> np.ndarray:
+    """Configurations ``(S, k)`` whose fingertip sits ``offsets`` ``(S,)`` [m] above the
+    contact along its normal at object poses ``T`` ``(S, 4, 4)``, each warm-started from
+    the one before (the first from ``q_seed``)."""
+    p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
+    local = p[None] + (f.tip_radius + offsets)[:, None] * n[None]
+    targets = np.einsum("sij,sj->si", T[:, :3, :3], local) + T[:, :3, 3]
+    q = np.empty((len(T), f.k))
+    seed = q_seed
+    for i, target in enumerate(targets):
+        res = f.ik(target[None], seed, tol_m=ik_tol_m, restarts=False)
+        if res.error_m[0] > ik_tol_m:
+            raise PlanningError(
+                f"cannot move along the contact normal (residual {res.error_m[0] * 1e3:.2f} mm "
+                f"at {offsets[i] * 1e3:.1f} mm above it)",
+                finger=f.name,
+                time_s=None,
+                kind=FailureKind.IK_UNREACHABLE,
+                measured=float(res.error_m[0]),
+                required=ik_tol_m,
+            )
+        q[i] = seed = res.q[0]
+    return q
+
+
+def _via(
+    f: Finger,
+    T: np.ndarray,
+    P: tuple[np.ndarray, np.ndarray],
+    Q: tuple[np.ndarray, np.ndarray],
+    q_a: np.ndarray,
+    q_b: np.ndarray,
+    height_m: float,
+) -> np.ndarray | None:
+    """The via configuration ``(k,)``: the fingertip near the midpoint of the two
+    backed-off tips (object pose ``T``) raised by ``height_m`` along the mean of the
+    normals of P and Q (IK from the mean configuration, as near as it gets); None for
+    a zero height (a straight move)."""
+    if height_m <= 0.0:
+        return None
+    R, o = T[:3, :3], T[:3, 3]
+    mid_palm = 0.5 * (f.fk(q_a) + f.fk(q_b))
+    up_obj = np.asarray(P[1], float) + np.asarray(Q[1], float)
+    norm = float(np.linalg.norm(up_obj))
+    if norm < 1e-6:  # opposite normals: raise away from the object's centre instead
+        up_obj = R.T @ (mid_palm - o)
+        norm = float(np.linalg.norm(up_obj))
+    target = mid_palm + height_m * (R @ (up_obj / norm))
+    # a via need not be reached exactly: the Coal check judges the motion through it
+    return f.ik(target[None], 0.5 * (q_a + q_b), tol_m=1e-4, restarts=False).q[0]

@@ -1,0 +1,222 @@
+"""Tests of the joint-space fallback of a regrasp (regrasp_pin.planning.transfer).
+
+The scenes are those of tests/test_planning_regrasp.py (five-finger hand, a 40 x 60 x
+40 mm box, the index finger): "edge" puts P and Q on the two faces around a vertical
+edge that points away from the palm, so that the straight joint-space move from P to Q
+cuts into the box (asserted there). Every returned trajectory is re-checked here with
+the independent Pinocchio + Coal distances of that module, densified to 1 mrad joint
+steps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_planning_regrasp import (
+    CASES,
+    FINGER,
+    PENETRATION_TOL_M,
+    CoalCheck,
+    Scene,
+    dense,
+)
+
+import regrasp_pin.planning.regrasp as regrasp_module
+from regrasp_pin.exceptions import FailureKind, PlanningError
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.planning.regrasp import RegraspParams
+from regrasp_pin.planning.transfer import LIFT_FRACTION, Transfer, plan_transfer
+
+PARAMS = RegraspParams()
+IK_TOL_M = PARAMS.ik_tol_m
+
+
+@pytest.fixture(scope="module")
+def hand() -> Hand:
+    return Hand.five_finger()
+
+
+@pytest.fixture(scope="module")
+def checker(hand) -> CoalCheck:
+    return CoalCheck(hand, FINGER)
+
+
+@pytest.fixture(scope="module")
+def scenes(hand) -> dict[str, Scene]:
+    from test_planning_regrasp import EDGE, UPRIGHT
+
+    return {
+        "upright-moving": Scene(hand, UPRIGHT, 10.0),
+        "edge-static": Scene(hand, EDGE, 0.0, 0.1, 0.001),
+        "edge-moving": Scene(hand, EDGE, 10.0, 0.1, 0.001),
+    }
+
+
+def transfer(scene: Scene, p_object, q_object, duration_s: float = 0.8) -> Transfer:
+    i_p, i_q = scene.contact(p_object), scene.contact(q_object)
+    S, M = scene.sample, scene.manifold
+    return plan_transfer(
+        scene.hand,
+        scene.obj,
+        scene.motion,
+        FINGER,
+        0.0,
+        duration_s,
+        (S.points[i_p], S.normals[i_p]),
+        (S.points[i_q], S.normals[i_q]),
+        M.q[0, i_p],
+        M.q[1, i_q],
+        scene.q_neutral,
+        clearance_m=PARAMS.clearance_m,
+        link_clearance_m=PARAMS.link_clearance_m,
+        finger_clearance_m=PARAMS.finger_clearance_m,
+        ik_tol_m=IK_TOL_M,
+        sample_dt_s=PARAMS.sample_dt_s,
+    )
+
+
+def recheck_transfer(checker: CoalCheck, scene: Scene, times, q, t0: float, D: float) -> dict:
+    """Dense independent re-check: no geometry of the finger in the box; between the
+    lift and the approach every geometry keeps the clearance; joints and speeds within
+    limits."""
+    f = checker.finger
+    q_full = scene.q_neutral(times)
+    q_full[:, f.q_indices] = q
+    t_d, q_d, T_d = dense(times, q_full, scene.motion)
+    d_obj, d_ff, _ = checker.run(q_d, T_d)
+    tau = (t_d - t0) / D
+    flight = (tau > LIFT_FRACTION + 1e-9) & (tau < 1.0 - LIFT_FRACTION - 1e-9)
+    assert d_obj.min() >= -PENETRATION_TOL_M, f"penetrates by {-1e3 * d_obj.min():.3f} mm"
+    assert d_obj[flight].min() >= PARAMS.clearance_m - PENETRATION_TOL_M
+    assert d_ff.min() > 0.0
+    q_f = q_d[:, f.q_indices]
+    assert np.all(q_f >= f.lower - 1e-9) and np.all(q_f <= f.upper + 1e-9)
+    speed = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
+    assert np.all(speed <= f.velocity_limit)
+    return {"min_flight_m": float(d_obj[flight].min()), "n_flight": int(flight.sum())}
+
+
+@pytest.mark.parametrize(("scene_name", "p_object", "q_object"), [CASES[3], *CASES[4:]])
+def test_a_transfer_lands_on_q_and_passes_an_independent_recheck(
+    scenes, checker, scene_name, p_object, q_object
+):
+    scene = scenes[scene_name]
+    moved = transfer(scene, p_object, q_object)
+    assert moved.report.ok
+    stats = recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, 0.8)
+    assert stats["n_flight"] > 0
+    # FK round trip: the tip centre touches P at lift-off and Q at landing, and backs
+    # off along the normals by the clearance at the ends of the lift and the approach
+    S, f = scene.sample, checker.finger
+    i_p, i_q = scene.contact(p_object), scene.contact(q_object)
+    T = scene.motion.pose(moved.times_s)
+    tip_obj = np.einsum("nji,nj->ni", T[:, :3, :3], f.fk(moved.q) - T[:, :3, 3])
+    r = f.tip_radius
+    assert np.linalg.norm(tip_obj[0] - (S.points[i_p] + r * S.normals[i_p])) <= IK_TOL_M
+    assert np.linalg.norm(tip_obj[-1] - (S.points[i_q] + r * S.normals[i_q])) <= IK_TOL_M
+    lifted = moved.keyframes_object[1]
+    above_p = S.points[i_p] + (r + PARAMS.clearance_m) * S.normals[i_p]
+    assert np.linalg.norm(lifted - above_p) <= IK_TOL_M
+    np.testing.assert_allclose(moved.tip_object, tip_obj, atol=1e-9)
+    # the smallest clearance it reports is what the re-check finds in the transfer
+    assert moved.min_clearance_m >= PARAMS.clearance_m - PENETRATION_TOL_M
+
+
+@pytest.mark.parametrize(("scene_name", "p_object", "q_object"), CASES[4:])
+def test_around_an_edge_the_transfer_goes_through_a_raised_via(
+    scenes, checker, scene_name, p_object, q_object
+):
+    # the straight move between the backed-off configurations cuts the edge region,
+    # so the first via height that passes is above zero
+    moved = transfer(scenes[scene_name], p_object, q_object)
+    assert moved.via_height > 0.0
+    assert len(moved.keyframes_object) == 5
+
+
+def test_too_short_a_transfer_is_a_velocity_failure_with_its_numbers(scenes):
+    with pytest.raises(PlanningError) as info:
+        transfer(scenes["edge-static"], *CASES[4][1:], duration_s=0.04)
+    exc = info.value
+    assert exc.kind == FailureKind.VELOCITY and exc.finger == FINGER
+    assert exc.measured > exc.required > 0.0
+
+
+def test_of_the_vias_too_fast_the_least_too_fast_whose_geometry_passes_is_reported(
+    scenes, monkeypatch
+):
+    # at 0.5 s no via passes: alone, each raises either its velocity failure (its
+    # geometry passes the Coal check) or its Coal failure; together, the velocity
+    # failure reported is the smallest over-speed among those whose geometry passes,
+    # the one a stretch of the duration fixes soonest
+    import regrasp_pin.planning.transfer as transfer_module
+
+    scene, case = scenes["edge-static"], CASES[4][1:]
+    alone = {}
+    for height in transfer_module.VIA_HEIGHTS:
+        monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (height,))
+        with pytest.raises(PlanningError) as info:
+            transfer(scene, *case, duration_s=0.5)
+        alone[height] = info.value
+    monkeypatch.undo()
+    fixable = [e.measured / e.required for e in alone.values() if e.kind == FailureKind.VELOCITY]
+    assert any(e.kind != FailureKind.VELOCITY for e in alone.values())  # the straight move
+    with pytest.raises(PlanningError) as info:
+        transfer(scene, *case, duration_s=0.5)
+    if fixable:
+        assert info.value.kind == FailureKind.VELOCITY
+        assert info.value.measured / info.value.required == pytest.approx(min(fixable))
+    else:
+        assert info.value.kind != FailureKind.VELOCITY
+
+
+def test_plan_regrasp_falls_back_to_the_transfer_when_no_surface_variant_passes(
+    scenes, checker, monkeypatch
+):
+    scene = scenes["edge-moving"]
+    p_object, q_object = CASES[5][1:]
+
+    def no_surface_path(task, p):
+        raise PlanningError(
+            "no surface path (test)",
+            finger=FINGER,
+            time_s=0.1,
+            kind=FailureKind.OBJECT_CLEARANCE,
+            measured=-1e-3,
+            required=0.0,
+        )
+
+    monkeypatch.setattr(regrasp_module, "_surface_path", no_surface_path)
+    i_p, i_q = scene.contact(p_object), scene.contact(q_object)
+    result = scene.plan(i_p, i_q, q_land=scene.manifold.q[1, i_q])
+    assert result.route == "joint-space" and result.grid_path is None
+    assert result.report.ok
+    kinds = [a.kind for a in result.attempts]
+    assert kinds and all(k == FailureKind.OBJECT_CLEARANCE for k in kinds)
+    recheck_transfer(checker, scene, result.times_s, result.q, 0.0, result.params.duration_s)
+    np.testing.assert_array_equal(result.Q_object, scene.sample.points[i_q])
+    # the surface path is taken whenever it passes: the same call without the patch
+    monkeypatch.undo()
+    plain = scene.plan(i_p, i_q, q_land=scene.manifold.q[1, i_q])
+    assert plain.route == "surface" and plain.grid_path is not None
+
+
+def test_when_the_transfer_fails_too_the_error_keeps_every_attempt(scenes, monkeypatch):
+    scene = scenes["edge-static"]
+    p_object, q_object = CASES[4][1:]
+
+    def no_surface_path(task, p):
+        raise PlanningError(
+            "no surface path (test)", finger=FINGER, kind=FailureKind.FINGER_COLLISION
+        )
+
+    monkeypatch.setattr(regrasp_module, "_surface_path", no_surface_path)
+    i_p, i_q = scene.contact(p_object), scene.contact(q_object)
+    short = dataclasses.replace(PARAMS, duration_s=0.04)
+    with pytest.raises(PlanningError) as info:
+        scene.plan(i_p, i_q, params=short, q_land=scene.manifold.q[1, i_q])
+    exc = info.value
+    # the transfer was too fast: its velocity failure is what a longer duration fixes
+    assert exc.kind == FailureKind.VELOCITY
+    assert [a.what for a in exc.attempts][-1] == "joint-space transfer"
