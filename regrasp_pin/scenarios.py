@@ -31,9 +31,9 @@ from .exceptions import (
     ModelFileError,
     UnknownNameError,
 )
-from .grasp.choice import Grasp, initial_grasp
+from .grasp.choice import GAP_HORIZON_S, Grasp, initial_grasp
 from .grasp.contact import ContactModel
-from .grasp.manifold import build_manifold
+from .grasp.manifold import StartTracking, build_manifold
 from .grasp.necessity import MustHold, must_hold, with_idle_fingers
 from .model.clearance import palm_clearance
 from .model.hand import Hand
@@ -373,6 +373,7 @@ def grasp_for_motion(
     keep: Mapping[str, int] | None = None,
     mu: float = 0.8,
     must_hold_check: bool = False,
+    track_start: bool = True,
 ) -> Grasp:
     """The initial grasp chosen for ``motion`` (:func:`~.contact_choice.initial_grasp`).
 
@@ -402,6 +403,11 @@ def grasp_for_motion(
             it: :func:`~regrasp_pin.grasp.necessity.must_hold`), only the contacts that
             last that long (over the horizon). Only for a grasp meant for ``motion``
             itself, with regrasps longer than ``grasp_dt_s`` (the proof's assumption).
+        track_start: Map into joint space only what the choice reads
+            (:class:`~regrasp_pin.grasp.manifold.StartTracking`: every point at the
+            start, then the points feasible there through the finger-gap horizon and
+            while they last); the same grasp as mapping every entry (False, the
+            reference), which ``must_hold_check`` needs and then does.
 
     Returns:
         The :class:`~.contact_choice.Grasp` at the motion's start.
@@ -417,8 +423,15 @@ def grasp_for_motion(
         duration, t_last = float(horizon_s), motion.t_start + float(horizon_s)
     sample = obj.sample_surface(0.002)
     times = np.linspace(motion.t_start, t_last, max(int(duration / step), 1) + 1)
+    # what initial_grasp reads: usable(limit margin) from the start, q over the gap horizon
+    track = (
+        StartTracking(contact.limit_margin_rad, float(times[0]) + GAP_HORIZON_S)
+        if track_start and not must_hold_check
+        else None
+    )
     manifolds = {
-        n: build_manifold(hand.fingers[n], sample, motion, times, contact=contact) for n in fingers
+        n: build_manifold(hand.fingers[n], sample, motion, times, contact=contact, track=track)
+        for n in fingers
     }
     runs: list[MustHold] = []
     if must_hold_check:  # on the unrestricted manifolds: what every finger could use
@@ -448,6 +461,7 @@ def grasp_for_motion(
         seed=seed,
         trials=trials,
         finger_clearance=finger_clearance,
+        gap_horizon_s=GAP_HORIZON_S,
         must_hold=runs,
     )
 

@@ -22,9 +22,16 @@ from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin.exceptions import InputError
+from regrasp_pin.grasp.choice import exit_times
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
-from regrasp_pin.grasp.manifold import build_manifold, pad_directions, workspace_voxels
+from regrasp_pin.grasp.manifold import (
+    StartTracking,
+    build_manifold,
+    pad_directions,
+    workspace_voxels,
+)
 from regrasp_pin.model.hand import Finger, Hand
+from regrasp_pin.model.ik import solve_position_ik
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
 
@@ -170,6 +177,58 @@ def test_batched_ik_is_per_point_ik(scene):
         one = f.ik(targets[i])
         assert one.success[0] == batch.success[i]
         assert_close(one.q[0], batch.q[i], atol=1e-12, what=f"point {i}")
+
+
+def test_batched_ik_is_bitwise_per_point(scene):
+    # what lets a manifold solve a subset of its points: each point's IK result is
+    # the same bit for bit in any batch (solved alone, or with other points)
+    hand, _, _, sample, _, manifolds = scene
+    f = hand.finger("thumb")
+    targets = _targets(f, sample, manifolds["thumb"])[6]
+    q0 = np.broadcast_to(f.q_mid, targets.shape[:1] + (f.k,))
+    batch = solve_position_ik(f.chain, f.lower, f.upper, targets, q0, tol_m=CONTACT.ik_tol_m)
+    rng = np.random.default_rng(3)
+    some = np.sort(rng.choice(len(sample), 40, replace=False))
+    for idx in (some, some[:1], some[7:9]):
+        part = solve_position_ik(
+            f.chain, f.lower, f.upper, targets[idx], q0[idx], tol_m=CONTACT.ik_tol_m
+        )
+        assert np.array_equal(part.q, batch.q[idx])
+        assert np.array_equal(part.error_m, batch.error_m[idx])
+
+
+@pytest.mark.parametrize("name", ["thumb", "index", "middle"])
+@pytest.mark.parametrize("chunk", [5, 3])
+def test_start_tracking_maps_what_the_grasp_reads_as_the_full_manifold(scene, name, chunk):
+    # the entries a tracked manifold maps are the full manifold's, bit for bit; it maps
+    # every point at the start, the points feasible there through the horizon, then
+    # each while it stays usable: the same exit times from the start
+    hand, _, motion, sample, _, _ = scene
+    times = np.linspace(0.0, 3.0, 31)  # 0.1 s apart: chunks straddle the horizon
+    f = hand.finger(name)
+    margin = CONTACT.limit_margin_rad
+    full = build_manifold(f, sample, motion, times, chunk=chunk)
+    track = StartTracking(margin_rad=margin, all_until_s=0.75)
+    part = build_manifold(f, sample, motion, times, chunk=chunk, track=track)
+    # asked for: every point at the start; those feasible there through the horizon
+    # (t <= 0.75 s: 8 times); after it, a point while usable at every earlier time
+    start = full.feasible[0]
+    assert start.any()
+    usable = full.usable(margin)
+    before = np.logical_and.accumulate(usable, axis=0)
+    asked = np.ones_like(full.reachable)
+    asked[1:] = start
+    asked[8:] &= before[7:-1]
+    assert asked[8:].any() and not asked[8:].all()
+    assert np.array_equal(part.q[asked], full.q[asked], equal_nan=True)
+    for field in ("reachable", "inside", "pad_ok", "margin_rad"):
+        assert np.array_equal(getattr(part, field)[asked], getattr(full, field)[asked])
+    assert np.isnan(part.q[~asked]).all() and not part.reachable[~asked].any()
+    idx = np.flatnonzero(full.usable(CONTACT.choice_margin_rad)[0])
+    assert np.array_equal(
+        exit_times(part.usable(margin)[:, idx], times, 0),
+        exit_times(usable[:, idx], times, 0),
+    )
 
 
 def _grid(finger: Finger, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -67,3 +67,33 @@ def test_a_hand_files_scenario_entry_picks_fingers_and_scales_objects(tmp_path):
         setup_fingers(hand_file("typo", {"fingers": ["pinky"]}))
     with pytest.raises(InputError):
         setup_fingers(hand_file("extra", {"speed": 2}))
+
+
+@pytest.mark.parametrize(("hand", "angle"), [("five_finger", 60.0), ("allegro", -100.0)])
+def test_the_grasp_search_maps_only_what_it_reads_and_picks_the_same_grasp(hand, angle):
+    # StartTracking maps the entries initial_grasp reads exactly as the full manifolds
+    # do: the grasp is the same, bit for bit, as with every entry mapped
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.model.motion import ObjectMotion
+    from regrasp_pin.scenarios import grasp_for_motion, hand_model, setup_pose
+
+    h = hand_model(hand)
+    obj = setup_objects(hand)["hexagon"]()
+    T0 = setup_pose(hand)
+    turn = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=T0[:3, 2],
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.sign(angle) * np.radians(40.0),
+        duration_s=abs(angle) / 40.0,
+        dt_s=0.01,
+    )
+    kw = dict(contact=ContactModel(), grasp_dt_s=0.1, seed=0)
+    fingers = setup_fingers(hand)
+    fast = grasp_for_motion(h, obj, turn, fingers, **kw)
+    full = grasp_for_motion(h, obj, turn, fingers, track_start=False, **kw)
+    assert fast.indices == full.indices
+    assert fast.epsilon == full.epsilon
+    for n in fingers:
+        assert np.array_equal(fast.q[n], full.q[n])
+        assert np.array_equal(fast.points_object[n], full.points_object[n])

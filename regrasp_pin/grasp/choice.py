@@ -44,6 +44,8 @@ __all__ = [
 ]
 
 SCREEN_EDGES = 6  # friction-cone edges used when screening candidates
+#: initial_grasp measures finger gaps over the first this many seconds [s]
+GAP_HORIZON_S = 1.0
 _REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
 
 
@@ -592,7 +594,7 @@ def initial_grasp(
     seed: int = 0,
     finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
     min_finger_gap_m: float | None = None,
-    gap_horizon_s: float = 1.0,
+    gap_horizon_s: float = GAP_HORIZON_S,
     must_hold: Sequence[MustHold] = (),
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.

@@ -28,6 +28,14 @@ whose normal no pad direction of the finger can oppose within the cone (checked 
 face and time against pad directions sampled over the joint box, with a slack that
 bounds the sampling error). They are reported unreachable, with NaN coordinates.
 
+A manifold built for the initial grasp only (``track``, :class:`StartTracking`) maps
+only what that choice reads: every point at the first time, then only the points
+feasible there, each through the first ``all_until_s`` and after that only while it
+stays usable (:func:`~regrasp_pin.grasp.choice.exit_times` reads no further). The
+other entries are reported not reachable. Each point's entries depend on that point
+alone (the IK runs point by point in a batch, warm starts and repairs are per point),
+so the entries it maps equal the full manifold's.
+
 The link-vs-object Coal test of the contact model is not part of the manifold (it
 would cost a Coal query per point and time); it is applied where contacts are chosen
 (:mod:`.contact_choice`) and followed (:mod:`.tracking`).
@@ -49,7 +57,7 @@ from ..model.motion import ObjectMotion
 from ..model.objects import SurfaceSample
 from .contact import ContactModel, pad_cosines, tip_targets
 
-__all__ = ["Manifold", "WorkspaceVoxels", "build_manifold", "workspace_voxels"]
+__all__ = ["Manifold", "StartTracking", "WorkspaceVoxels", "build_manifold", "workspace_voxels"]
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +104,29 @@ class Manifold:
     def time_index(self, t_s: float) -> int:
         """Index of the first grid time >= ``t_s`` (clamped to the last)."""
         return min(int(np.searchsorted(self.times_s, t_s - 1e-12)), self.times_s.size - 1)
+
+
+@dataclass(frozen=True)
+class StartTracking:
+    """Which entries of a manifold the choice of a grasp at its first time reads.
+
+    With it, :func:`build_manifold` maps every point at the first time and after that
+    only the points feasible there (inside the limits, pad facing): each at every time
+    up to ``all_until_s`` (where the grasp search reads its joint coordinates), and
+    after that at a time only if it was usable with ``margin_rad`` at every earlier
+    time (so that :func:`~regrasp_pin.grasp.choice.exit_times` from the first time,
+    over ``usable(margin_rad)``, is the full manifold's). Every other entry is reported
+    not reachable (NaN coordinates).
+
+    Attributes:
+        margin_rad: The margin of the usability that the lasting times are read with
+            [rad] (``ContactModel.limit_margin_rad`` for the initial grasp).
+        all_until_s: Every point feasible at the first time is mapped at all times up
+            to this one [s] (within 1e-9 s).
+    """
+
+    margin_rad: float
+    all_until_s: float
 
 
 @dataclass(frozen=True)
@@ -187,6 +218,7 @@ def build_manifold(
     max_iter: int = 30,
     max_iter_warm: int = 5,
     chunk: int = 5,
+    track: StartTracking | None = None,
 ) -> Manifold:
     """Map the sampled surface into the finger's joint space at every time.
 
@@ -203,9 +235,12 @@ def build_manifold(
             time, so slow points cost no long tails.
         chunk: Number of consecutive times solved in one IK batch (warm-started from
             the last time of the previous chunk).
+        track: Map only the entries that the choice of a grasp at the first time reads
+            (:class:`StartTracking`); None: every entry.
 
     Returns:
-        The :class:`Manifold`.
+        The :class:`Manifold` (with ``track``, the entries not mapped are not
+        reachable; the others equal the full manifold's).
 
     Raises:
         InputError: NaN or non-increasing times, times outside the motion.
@@ -256,9 +291,20 @@ def build_manifold(
     # the last solved time (small motions between grid times), in one IK batch each
     starts = [0, *range(1, nt, chunk)]
     stops = [1, *[min(s0 + chunk, nt) for s0 in range(1, nt, chunk)]]
+    # with `track`: the points feasible at time 0, and those usable at every time so far
+    tracked = np.zeros(n, bool)
+    lasting = np.zeros(n, bool)
+    k_all = (
+        nt - 1
+        if track is None
+        else max(int(np.searchsorted(times, track.all_until_s + 1e-9, side="right")) - 1, 0)
+    )
     for s0, s1 in zip(starts, stops, strict=True):
+        if track is not None and s0 > 0:
+            solve[s0:s1] &= (tracked if s0 <= k_all else lasting)[None, :]
         ti, pi = np.nonzero(solve[s0:s1])
         if ti.size == 0:
+            lasting[:] = False  # nothing reached in this chunk
             continue
         ti = ti + s0
         res = solve_position_ik(
@@ -323,12 +369,18 @@ def build_manifold(
         if ok.any():
             cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
             pad[ti[ok], pi[ok]] = cos >= contact.cos_cone
-    # margins of the reached entries, the minimum over the joints column by column (a
-    # reduction over a short last axis is slow in numpy; min is exact either way)
-    q_reached = q_out[reach]
-    d = np.minimum(q_reached - finger.lower, finger.upper - q_reached)
-    margin = np.full((nt, n), -np.inf)
-    margin[reach] = functools.reduce(np.minimum, d.T)
+        if track is not None:
+            good = reach[s0:s1] & pad[s0:s1]
+            m_chunk = _margins(q_out[s0:s1], finger.lower, finger.upper)
+            usable = np.asarray((good & (m_chunk >= track.margin_rad)).all(axis=0))
+            if s0 == 0:
+                tracked = np.asarray(good[0] & (m_chunk[0] >= 0.0))
+                lasting = usable
+            else:
+                lasting &= usable
+    if track is not None:
+        _forget_untracked(q_out, reach, pad, finger, track, k_all)
+    margin = np.where(reach, _margins(q_out, finger.lower, finger.upper), -np.inf)
     inside = reach & (margin >= 0.0)
     log.debug(
         "manifold %s: %d times x %d points, %.1f%% reachable",
@@ -349,6 +401,38 @@ def build_manifold(
         upper=finger.upper.copy(),
         T_palm_object=T_all,
     )
+
+
+def _margins(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """``(...,)`` signed distance [rad] of ``q`` ``(..., k)`` to the nearest boundary
+    plane (NaN where ``q`` is NaN): the minimum over the joints column by column (a
+    reduction over a short last axis is slow in numpy; min is exact either way)."""
+    d = np.minimum(q - lower, upper - q)
+    return functools.reduce(np.minimum, np.moveaxis(d, -1, 0))
+
+
+def _forget_untracked(
+    q: np.ndarray,
+    reach: np.ndarray,
+    pad: np.ndarray,
+    finger: Finger,
+    track: StartTracking,
+    k_all: int,
+) -> None:
+    """Report not reachable (in place) the entries that ``track`` does not ask for:
+    after time 0, those of points not feasible at time 0, and after time ``k_all``
+    those of points not usable with ``track.margin_rad`` at every earlier time (the
+    chunks solve some of them past a point's exit; forgetting them makes the entries
+    mapped follow from ``track`` alone)."""
+    margin = np.where(reach, _margins(q, finger.lower, finger.upper), -np.inf)
+    usable = reach & pad & (margin >= track.margin_rad)
+    before = np.logical_and.accumulate(usable, axis=0)  # usable at every time <= k
+    keep = np.ones_like(reach)
+    keep[1:] = (reach[0] & pad[0] & (margin[0] >= 0.0))[None, :]
+    keep[k_all + 1 :] &= before[k_all:-1]
+    q[~keep] = np.nan
+    reach &= keep
+    pad &= keep
 
 
 def _retry_failed(

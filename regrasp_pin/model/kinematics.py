@@ -16,8 +16,15 @@ Kernel. With ``P_j = (R_j, t_j)`` the placement of joint j in its parent joint f
 
 Carrying ``W'_j = W_j A_j`` instead of ``W_j`` folds every constant into one 3 x 3
 matrix per joint, ``W'_j = W'_{j-1} C_j Rz(theta_j)`` with ``C_j = A_{j-1}^T R_j A_j``,
-so a joint costs one (3N x 3) @ (3 x 3) product and four column updates; the joint's
+so a joint costs one product with a 3 x 3 matrix and four column updates; the joint's
 world axis is the third column of ``W'_j``.
+
+Every product with a constant is written out as elementwise sums in a fixed order
+(:func:`_combine`) rather than handed to BLAS: a BLAS kernel rounds a point's result
+differently depending on where the point falls in the batch (vector lanes, fused
+multiply-adds, the tail) and on the machine, whereas here each point's result depends
+on that point alone, bit for bit. That is what lets a caller solve any subset of
+points and get exactly the entries of the whole batch.
 """
 
 from __future__ import annotations
@@ -40,6 +47,27 @@ def _rotation_z_to(axis: np.ndarray) -> np.ndarray:
     if np.linalg.norm(v) < 1e-12:
         return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
     return pin.exp3(v / np.linalg.norm(v) * np.arctan2(np.linalg.norm(v), c))
+
+
+def _combine(coef: np.ndarray, cols: list[np.ndarray], out: np.ndarray) -> np.ndarray:
+    """``out = sum_b coef[b] * cols[b]`` in the order of ``b``, elementwise (each point's
+    result from its own entries only); exact terms skipped (a zero coefficient adds
+    nothing, a unit one multiplies by nothing). Returns ``out``."""
+    first = True
+    for c, col in zip(coef.tolist(), cols, strict=True):
+        if c == 0.0:
+            continue
+        if first:
+            if c == 1.0:
+                out[...] = col
+            else:
+                np.multiply(col, c, out=out)
+            first = False
+        else:
+            np.add(out, col if c == 1.0 else col * c, out=out)
+    if first:
+        out[...] = 0.0
+    return out
 
 
 @dataclass(frozen=True)
@@ -206,8 +234,13 @@ class FingerChain:
                 o = np.repeat(jt.t[:, None], n, axis=1)
                 W = np.repeat(jt.C[:, :, None], n, axis=2)
             else:
-                o = o + np.matmul(jt.t, W)  # o += W @ t, per point
-                W = np.matmul(jt.C.T, W)  # W <- W @ C  (W[i] is row i, shape (3, N))
+                cols = [W[:, 0], W[:, 1], W[:, 2]]
+                o = o + _combine(jt.t, cols, np.empty((3, n)))  # o += W @ t, per point
+                # W <- W @ C  (W[:, b] is column b, shape (3, N))
+                W_new = np.empty_like(W)
+                for a in range(3):
+                    _combine(jt.C[:, a], cols, W_new[:, a])
+                W = W_new
             theta = qT[jt.column] * jt.scaling if jt.scaling != 1.0 else qT[jt.column]
             if jt.offset:
                 theta = theta + jt.offset
@@ -225,7 +258,7 @@ class FingerChain:
             if want_jacobian:
                 axes.append(W[:, 2])
                 origins.append(o)
-        p = o + np.matmul(self._tip_t, W)
+        p = o + _combine(self._tip_t, [W[:, 0], W[:, 1], W[:, 2]], np.empty((3, n)))
         if not want_jacobian:
             return p, W, None
         J = np.zeros((3, self.k, n))
@@ -274,6 +307,9 @@ class FingerChain:
 
     def poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Tip frame rotations ``(N, 3, 3)`` and positions ``(N, 3)`` in the palm frame."""
-        p, W, _ = self._forward(q, False)
-        R = (W.reshape(-1, 3) @ self._tip_R).reshape(-1, 3, 3)
-        return R, p
+        p, W, _ = self.forward_soa(np.ascontiguousarray(q.T), False)
+        cols = [W[:, 0], W[:, 1], W[:, 2]]  # R = W @ tip_R, per point
+        R = np.empty_like(W)
+        for a in range(3):
+            _combine(self._tip_R[:, a], cols, R[:, a])
+        return np.moveaxis(R, 2, 0), p.T
