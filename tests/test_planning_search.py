@@ -7,6 +7,8 @@ searches a regrasp. The landing check is the caller's judgement of a verified re
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from conftest import held_grasp
@@ -92,3 +94,41 @@ def test_every_landing_rejected_ends_typed_with_every_attempt(problem):
     # each verified landing was judged once, and each took another Q
     assert len(rejected) >= 2
     assert exc.required == pytest.approx(0.4)
+
+
+def test_a_surface_path_too_fast_at_every_duration_falls_back_to_joint_space(problem, monkeypatch):
+    import regrasp_pin.planning.regrasp as regrasp_module
+
+    def too_fast(task, p):
+        raise PlanningError(
+            "too fast (test)", finger=FINGER, kind=FailureKind.VELOCITY, measured=2.0, required=1.0
+        )
+
+    monkeypatch.setattr(regrasp_module, "_surface_path", too_fast)
+    try:
+        found = problem()
+    except PlanningError as exc:
+        attempts, result = exc.attempts, None
+    else:
+        attempts, result = list(found.attempts), found.result
+    # for the first candidate: the surface path at longer and longer durations (the
+    # Q re-chosen for each arrival time), then the fallback once, at the last of them
+    # with the last Q
+    tried = [re.search(r"Q=\[(.*?)\], ([0-9.]+) s( \(joint-space\))?$", a.what) for a in attempts]
+    group = []
+    for a, m in zip(attempts, tried, strict=True):
+        group.append((a, m))
+        if m is None or m.group(3):
+            break
+    last_a, last_m = group[-1]
+    fell_back = last_m is not None and last_m.group(3) is not None
+    surface = group[:-1] if fell_back else group
+    assert len(surface) >= 2 and all(a.kind == FailureKind.VELOCITY for a, _ in surface)
+    durations = [float(m.group(2)) for _, m in surface]
+    assert durations == sorted(durations) and durations[-1] > durations[0]
+    if fell_back:  # the fallback failed: it was tried
+        assert float(last_m.group(2)) == durations[-1]
+        assert last_m.group(1) == surface[-1][1].group(1)
+    else:  # the first candidate's fallback passed
+        assert result is not None and result.route == "joint-space" and result.report.ok
+        assert result.t_end - result.t_start == pytest.approx(durations[-1], abs=1e-9)

@@ -24,7 +24,7 @@ from test_planning_regrasp import (
 )
 
 import regrasp_pin.planning.regrasp as regrasp_module
-from regrasp_pin.exceptions import FailureKind, PlanningError
+from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.planning.regrasp import RegraspParams
 from regrasp_pin.planning.transfer import LIFT_FRACTION, Transfer, plan_transfer
@@ -220,3 +220,43 @@ def test_when_the_transfer_fails_too_the_error_keeps_every_attempt(scenes, monke
     # the transfer was too fast: its velocity failure is what a longer duration fixes
     assert exc.kind == FailureKind.VELOCITY
     assert [a.what for a in exc.attempts][-1] == "joint-space transfer"
+
+
+def _fails_with(kind: FailureKind):
+    def no_surface_path(task, p):
+        raise PlanningError(
+            "no surface path (test)", finger=FINGER, kind=kind, measured=2.0, required=1.0
+        )
+
+    return no_surface_path
+
+
+def test_route_selects_the_surface_path_the_fallback_or_both(scenes, monkeypatch):
+    scene = scenes["edge-moving"]
+    i_p, i_q = (scene.contact(c) for c in CASES[5][1:])
+    q_land = scene.manifold.q[1, i_q]
+    # the fallback alone, even where the surface path passes
+    only = scene.plan(i_p, i_q, q_land=q_land, route="joint-space")
+    assert only.route == "joint-space" and not only.attempts
+    monkeypatch.setattr(regrasp_module, "_surface_path", _fails_with(FailureKind.OBJECT_CLEARANCE))
+    # the surface path alone: its failure, and no transfer tried
+    with pytest.raises(PlanningError) as info:
+        scene.plan(i_p, i_q, q_land=q_land, route="surface")
+    assert info.value.kind == FailureKind.OBJECT_CLEARANCE
+    assert all(a.what != "joint-space transfer" for a in info.value.attempts)
+    # a surface path too fast for its duration: the caller tries a longer one first
+    monkeypatch.setattr(regrasp_module, "_surface_path", _fails_with(FailureKind.VELOCITY))
+    with pytest.raises(PlanningError) as info:
+        scene.plan(i_p, i_q, q_land=q_land)
+    assert info.value.kind == FailureKind.VELOCITY
+    assert [a.what for a in info.value.attempts] != [] and all(
+        a.what != "joint-space transfer" for a in info.value.attempts
+    )
+
+
+def test_an_unknown_route_is_an_input_error_naming_it(scenes):
+    scene = scenes["edge-moving"]
+    i_p, i_q = (scene.contact(c) for c in CASES[5][1:])
+    with pytest.raises(InputError) as info:
+        scene.plan(i_p, i_q, route="air")
+    assert info.value.argument == "route" and "joint-space" in str(info.value)

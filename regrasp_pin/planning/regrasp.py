@@ -26,10 +26,11 @@ that comes near another finger keeps a wider gap from it on the grid (and a grid
 no route keeps a narrower one); a finger near its joint limits is rerouted more
 strongly. A failure that only another duration can fix (velocity) ends the variants at
 once, for the caller
-(:mod:`.planning.search`). When no variant passes, the joint-space fallback
-(:mod:`.transfer`: lift along P's normal, a joint-space move through a raised via,
-approach along Q's normal; not in the paper) is tried, verified by the same check;
-its velocity failure is the one reported then (a longer duration may let it pass).
+(:mod:`.planning.search`). When no variant passes for another reason, the joint-space
+fallback (:mod:`.transfer`: lift along P's normal, a joint-space move through a raised
+via, approach along Q's normal; not in the paper) is tried, verified by the same
+check; its velocity failure is the one reported then (a longer duration may let it
+pass). ``route`` restricts a call to one of the two.
 It never returns a path that has not passed the check;
 when nothing passes it raises :class:`~.exceptions.PlanningError` (or
 :class:`~.exceptions.VerificationError`) with the finger, the time, the kind of the
@@ -77,6 +78,8 @@ _MAX_INFLATION_FACTOR = 2.25  # the inflation grows up to this x its start
 _MAX_FINGER_GAP_M = 0.008  # the hard gap kept from the other fingers grows up to this
 #: failures that no path variant fixes: the caller changes Q or the duration
 CALLER_KINDS = frozenset({FailureKind.VELOCITY})
+#: the routes :func:`plan_regrasp` may take
+ROUTES = ("auto", "surface", "joint-space")
 
 
 @dataclass(frozen=True)
@@ -252,6 +255,7 @@ def plan_regrasp(
     others_tips_object: np.ndarray | None = None,
     params: RegraspParams | None = None,
     q_land: np.ndarray | None = None,
+    route: str = "auto",
 ) -> RegraspResult:
     """Plan and verify one finger's regrasp from P to Q while the object moves.
 
@@ -276,11 +280,13 @@ def plan_regrasp(
         params: :class:`RegraspParams`.
         q_land: ``(k,)`` a configuration near the one holding Q at landing [rad], the
             IK seed of the joint-space fallback (default ``q_start``).
+        route: ``"auto"``: the paper's surface path, and if no variant of it passes,
+            the joint-space fallback (:mod:`.transfer`), except after a velocity
+            failure (the caller tries a longer duration first); ``"surface"``: the
+            surface path only; ``"joint-space"``: the fallback only.
 
     Returns:
-        A :class:`RegraspResult` whose trajectory passed the Coal verification: the
-        paper's surface path if a variant of it passes, else the joint-space fallback
-        (:mod:`.transfer`) if it passes.
+        A :class:`RegraspResult` whose trajectory passed the Coal verification.
 
     Raises:
         InputError: bad parameters, P or Q not on the object, P == Q.
@@ -289,6 +295,8 @@ def plan_regrasp(
     """
     scene = Scene(hand, obj, motion)  # types and scale, before any work
     params = (params or RegraspParams()).validate()
+    if route not in ROUTES:
+        raise InputError("route", f"{route!r} is not a route", f"one of {ROUTES}")
     f = hand.finger(finger)
     P = as_array(P_object, "P_object", (3,))
     Q = as_array(Q_object, "Q_object", (3,))
@@ -320,6 +328,79 @@ def plan_regrasp(
 
     attempts: list[Attempt] = []
     last: PlanningError | None = None
+    if route != "joint-space":
+        found = _surface_variants(task, params, stages, attempts)
+        if isinstance(found, RegraspResult):
+            return replace(
+                found,
+                P_object=P,
+                n_P_object=nP,
+                Q_object=Q,
+                n_Q_object=nQ,
+                stage_ms=dict(stages.ms),
+                attempts=tuple(attempts),
+            )
+        last = found
+    if route == "joint-space" or (
+        route == "auto" and last is not None and last.kind not in CALLER_KINDS
+    ):
+        q_seed = q0 if q_land is None else as_array(q_land, "q_land", (f.k,))
+        try:
+            moved = plan_transfer(
+                hand,
+                obj,
+                motion,
+                f.name,
+                float(t_start),
+                params.duration_s,
+                (P, nP),
+                (Q, nQ),
+                q0,
+                q_seed,
+                q_hand,
+                clearance_m=params.clearance_m,
+                link_clearance_m=params.link_clearance_m,
+                finger_clearance_m=params.finger_clearance_m,
+                ik_tol_m=params.ik_tol_m,
+                sample_dt_s=params.sample_dt_s,
+            )
+        except PlanningError as exc:
+            attempts.append(exc.as_attempt("joint-space transfer"))
+            log.debug("regrasp %s joint-space transfer failed: %s", f.name, exc)
+            if last is None or exc.kind == FailureKind.VELOCITY:
+                last = exc  # the only failure, or one a longer duration may fix
+        else:
+            stages.lap("transfer")
+            log.info(
+                "regrasp %s at t=%.3f s verified in joint space (via %.0f, clearance %.2f mm)",
+                f.name,
+                t_start,
+                moved.via_height,
+                1e3 * moved.min_clearance_m,
+            )
+            return _transferred(
+                f.name, P, nP, Q, nQ, float(t_start), moved, params, stages, attempts
+            )
+    assert last is not None  # a surface variant or the transfer was tried
+    cls = VerificationError if isinstance(last, VerificationError) else PlanningError
+    raise cls(
+        f"no path variant passed ({len(attempts)} tried); the last: {last.reason}",
+        finger=f.name,
+        time_s=last.time_s if last.time_s is not None else float(t_start),
+        kind=last.kind,
+        measured=last.measured,
+        required=last.required,
+        attempts=attempts,
+    )
+
+
+def _surface_variants(
+    task: _Task, params: RegraspParams, stages: _Stages, attempts: list[Attempt]
+) -> RegraspResult | PlanningError:
+    """The first surface-path variant that verifies, or the last failure (each failure
+    appended to ``attempts``): variants follow the failures' kinds (:func:`_next_variant`)
+    until none is left, or at once after one that only the caller can fix."""
+    last: PlanningError | None = None
     tried: set[tuple] = set()
     paths: dict[tuple, tuple[GridPath, TipPath]] = {}
     p_try = params
@@ -335,7 +416,7 @@ def plan_regrasp(
         except PlanningError as exc:
             attempts.append(exc.as_attempt(_describe(p_try)))
             last = exc
-            log.debug("regrasp %s variant failed: %s", f.name, exc)
+            log.debug("regrasp %s variant failed: %s", task.finger.name, exc)
             if exc.kind in CALLER_KINDS:
                 break
             nxt = _next_variant(p_try, exc.kind, params)
@@ -345,66 +426,15 @@ def plan_regrasp(
             continue
         log.info(
             "regrasp %s at t=%.3f s verified (m=%d, min clearance %.2f mm, %.0f ms)",
-            f.name,
-            t_start,
+            task.finger.name,
+            task.t_start,
             p_try.m,
             1e3 * result.min_clearance_m,
             sum(stages.ms.values()),
         )
-        return replace(
-            result,
-            P_object=P,
-            n_P_object=nP,
-            Q_object=Q,
-            n_Q_object=nQ,
-            stage_ms=dict(stages.ms),
-            attempts=tuple(attempts),
-        )
+        return result
     assert last is not None  # max_variants >= 1
-    try:
-        moved = plan_transfer(
-            hand,
-            obj,
-            motion,
-            f.name,
-            float(t_start),
-            params.duration_s,
-            (P, nP),
-            (Q, nQ),
-            q0,
-            q0 if q_land is None else as_array(q_land, "q_land", (f.k,)),
-            q_hand,
-            clearance_m=params.clearance_m,
-            link_clearance_m=params.link_clearance_m,
-            finger_clearance_m=params.finger_clearance_m,
-            ik_tol_m=params.ik_tol_m,
-            sample_dt_s=params.sample_dt_s,
-        )
-    except PlanningError as exc:
-        attempts.append(exc.as_attempt("joint-space transfer"))
-        log.debug("regrasp %s joint-space transfer failed: %s", f.name, exc)
-        if exc.kind == FailureKind.VELOCITY:
-            last = exc  # a longer duration may let it pass
-    else:
-        stages.lap("transfer")
-        log.info(
-            "regrasp %s at t=%.3f s verified in joint space (via %.0f, min clearance %.2f mm)",
-            f.name,
-            t_start,
-            moved.via_height,
-            1e3 * moved.min_clearance_m,
-        )
-        return _transferred(f.name, P, nP, Q, nQ, float(t_start), moved, params, stages, attempts)
-    cls = VerificationError if isinstance(last, VerificationError) else PlanningError
-    raise cls(
-        f"no path variant passed ({len(attempts)} tried); the last: {last.reason}",
-        finger=f.name,
-        time_s=last.time_s if last.time_s is not None else float(t_start),
-        kind=last.kind,
-        measured=last.measured,
-        required=last.required,
-        attempts=attempts,
-    )
+    return last
 
 
 def _transferred(

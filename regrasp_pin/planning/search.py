@@ -7,9 +7,13 @@ shorter move; :func:`~regrasp_pin.grasp.choice.choose_new_contact`). For each Q:
 1. the duration is computed from the joint velocity limits for the move from the
    lift-off configuration to Q's (:func:`~regrasp_pin.planning.timing.duration_for_move`);
 2. :func:`~regrasp_pin.planning.regrasp.plan_regrasp` plans and verifies the path, changing
-   its own variants by the kind of each failure;
+   its own variants by the kind of each failure, and tries the joint-space fallback
+   (:mod:`.transfer`) when no surface path passes for a reason other than speed;
 3. a velocity failure stretches the duration by the measured over-speed (time
-   scaling) and plans the same Q again (or the Q the new arrival time prefers);
+   scaling, then fitted to the last two tries: :func:`~.timing.next_duration`) and
+   plans the same Q again (or the Q the new arrival time prefers); when no longer
+   duration is left (stretches used, or it would land after the deadline) the
+   joint-space fallback is tried once at the last duration;
 4. a verified regrasp is judged by what follows its landing (the caller's
    ``landing_check``: the planner follows the new contact and rejects one that would be
    lost sooner than a regrasp takes);
@@ -309,8 +313,11 @@ class RegraspSearch:
             q0, choice.q_arrive, f.velocity_limit, minimum_s=d_min, dt_s=self.dt_s
         )
         speeds: list[tuple[float, float]] = []  # (duration, peak speed / limit) of this Q
-        for _ in range(self.stretches + 1):
+        stretches, route = 0, "auto"
+        while True:
             what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
+            if route != "auto":
+                what += f" ({route})"
             if start + duration > end_by + TIME_TOL_S:
                 attempts.append(
                     Attempt(
@@ -353,17 +360,16 @@ class RegraspSearch:
                     others_tips_object=others_tips,
                     params=replace(self.regrasp, duration_s=duration),
                     q_land=choice.q_arrive,
+                    route=route,
                 )
             except PlanningError as exc:
                 attempts.append(exc.as_attempt(what))
                 log.debug("regrasp %s: %s", finger, exc)
-                if exc.kind == FailureKind.VELOCITY and exc.measured is not None and exc.required:
-                    speeds.append((duration, exc.measured / exc.required))
-                    longer = next_duration(speeds, dt_s=self.dt_s)
-                    if longer is not None:
-                        duration = longer
-                        continue
-                break
+                retry = self._after_velocity(exc, speeds, duration, start, end_by, stretches, route)
+                if retry is None:
+                    break
+                duration, stretches, route = retry
+                continue
             rejected = None if landing_check is None else landing_check(result)
             if rejected is not None:
                 attempts.append(rejected)
@@ -371,6 +377,39 @@ class RegraspSearch:
             return Found(result, choice, tuple(attempts))
         excluded.append(choice.p_object)
         return False
+
+    def _after_velocity(
+        self,
+        exc: PlanningError,
+        speeds: list[tuple[float, float]],
+        duration: float,
+        start: float,
+        end_by: float,
+        stretches: int,
+        route: str,
+    ) -> tuple[float, int, str] | None:
+        """What to try after a regrasp of one Q at ``duration`` failed with ``exc``:
+        ``(duration, stretches so far, route)``, or None (the next Q).
+
+        After a velocity failure (its speed appended to ``speeds``): a longer duration
+        (:func:`~.timing.next_duration`) if stretches are left and it lands by
+        ``end_by``; else, once, the joint-space fallback at the same duration (a
+        velocity failure of the surface path skips it, for a longer duration first).
+        """
+        if exc.kind != FailureKind.VELOCITY or exc.measured is None or not exc.required:
+            return None
+        speeds.append((duration, exc.measured / exc.required))
+        longer = next_duration(speeds, dt_s=self.dt_s)
+        if (
+            longer is not None
+            and stretches < self.stretches
+            and start + longer <= end_by + TIME_TOL_S
+        ):
+            return longer, stretches + 1, route
+        if route == "auto":
+            speeds.clear()  # another route: another path
+            return duration, stretches, "joint-space"
+        return None
 
     def _fail(
         self, finger: str, starts: list[float], attempts: list[Attempt], *, budget: bool
