@@ -49,6 +49,7 @@ from .placing import Placement, candidate_placements
 from .plan import ContactPhase, Plan, RegraspPhase
 from .planning.planner import ManipulationPlan, PlannerParams, plan_manipulation
 from .planning.regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .planning.transfer import Transfer, plan_transfer
 from .polygon.approximate import PolygonResult, approximate_polygon
 from .polygon.deviation import deviation_matrix
 from .scenarios import Scenario, make_scenario, scenario_for_hand
@@ -100,6 +101,7 @@ __all__ = [
     "SurfaceGrid",
     "SurfaceSample",
     "TipPath",
+    "Transfer",
     "UnknownNameError",
     "VerificationError",
     "VerificationReport",
@@ -127,6 +129,7 @@ __all__ = [
     "object_from_params",
     "plan_manipulation",
     "plan_regrasp",
+    "plan_transfer",
     "shortest_grid_path",
     "track_contact",
     "verify_finger_motion",

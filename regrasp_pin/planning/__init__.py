@@ -28,6 +28,7 @@ from .planner import ManipulationPlan, PlannerParams, plan_manipulation
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import LiftOffWindow, lift_off_window, start_times
 from .search import RegraspSearch, SearchBudget
+from .transfer import Transfer, plan_transfer
 
 __all__ = [
     "LiftOffWindow",
@@ -37,10 +38,12 @@ __all__ = [
     "RegraspResult",
     "RegraspSearch",
     "SearchBudget",
+    "Transfer",
     "dominant_kind",
     "failure_summary",
     "lift_off_window",
     "plan_manipulation",
     "plan_regrasp",
+    "plan_transfer",
     "start_times",
 ]
