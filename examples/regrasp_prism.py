@@ -47,7 +47,7 @@ def main(out: Path = Path("out/examples")) -> Path:
     print(f"{len(result.regrasps)} regrasps by {sorted({r.finger for r in result.regrasps})}")
 
     # 4. one regrasp opened up (sections 2.1-2.3)
-    r = result.regrasps[0]
+    r = next(g for g in result.regrasps if g.route == "surface")  # the paper's path
     print(
         f"{r.finger}: P {np.round(1e3 * r.P_object, 1)} -> Q {np.round(1e3 * r.Q_object, 1)} mm, "
         f"grid path {1e3 * r.grid_path.length_m:.1f} mm over faces {r.grid.face_chain}, "

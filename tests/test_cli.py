@@ -206,3 +206,42 @@ def test_suite_choices_match_the_library():
     from regrasp_pin.suite import MOTION_KINDS, OBJECT_KINDS
 
     assert (command.OBJECT_KINDS, command.MOTION_KINDS) == (OBJECT_KINDS, MOTION_KINDS)
+
+
+def test_the_demo_table_marks_a_joint_space_regrasp_and_says_what_it_is(capsys):
+    from regrasp_pin.commands.summary import print_table
+
+    def row(finger, route, waypoints):
+        return {
+            "finger": finger,
+            "trigger_s": 1.0,
+            "t_start_s": 0.98,
+            "t_end_s": 1.3,
+            "P_object_mm": [1.0, 2.0, 3.0],
+            "Q_object_mm": [4.0, 5.0, 6.0],
+            "path_length_mm": 20.0,
+            "waypoints": waypoints,
+            "route": route,
+            "min_clearance_mm": 3.0,
+            "planning_ms": 50.0,
+        }
+
+    summary = {
+        "fingers_regrasped": ["index", "ring"],
+        "all_verified": True,
+        "releases": [],
+        "joins": [],
+        "stage_s": {},
+        "total_s": 1.0,
+        "plan": "plan.json",
+        "figures": [],
+    }
+    print_table([row("index", "surface", 7)], summary)
+    plain = capsys.readouterr().out
+    assert "*" not in plain and "joint-space" not in plain
+    print_table([row("index", "surface", 7), row("ring", "joint-space", 4)], summary)
+    lines = capsys.readouterr().out.splitlines()
+    ring = next(line for line in lines if line.startswith("ring"))
+    index = next(line for line in lines if line.startswith("index"))
+    assert " 4* " in ring and " 7 " in index and "*" not in index
+    assert any(line.startswith("* the joint-space fallback") for line in lines)

@@ -40,6 +40,7 @@ def summary_rows(result: ManipulationPlan) -> list[dict]:
                 "Q_object_mm": (1e3 * r.Q_object).round(1).tolist(),
                 "path_length_mm": 1e3 * r.path_length_m,
                 "waypoints": int(r.waypoints_object.shape[0]),
+                "route": r.route,
                 "min_clearance_mm": 1e3 * r.min_clearance_m,
                 "planning_ms": r.planning_ms,
                 "verified": bool(r.report.ok),
@@ -118,12 +119,18 @@ def print_table(rows: list[dict], summary: dict) -> None:
     for r in rows:
         P = ",".join(f"{v:.0f}" for v in r["P_object_mm"])
         Q = ",".join(f"{v:.0f}" for v in r["Q_object_mm"])
+        wp = f"{r['waypoints']}" + ("*" if r["route"] == "joint-space" else "")
         print(
             f"{r['finger']:7} {r['trigger_s']:8.2f} {r['t_start_s']:8.2f} {P:>20} {Q:>20} "
-            f"{r['path_length_mm']:7.1f} {r['waypoints']:3d} {r['min_clearance_mm']:6.2f} "
+            f"{r['path_length_mm']:7.1f} {wp:>3} {r['min_clearance_mm']:6.2f} "
             f"{r['planning_ms']:7.0f}"
         )
     print("-" * len(head))
+    if any(r["route"] == "joint-space" for r in rows):
+        print(
+            "* the joint-space fallback (no surface path passed): lift along P's normal, "
+            "move in joint space, land along Q's normal; wp counts its keyframes"
+        )
     n = len(rows)
     if n:
         print(
@@ -152,7 +159,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
 
 
 def write_figures(result: ManipulationPlan, out: Path) -> list[Path]:
-    """Fig. 9 (forefinger joint angles), Fig. 2 (one regrasp's manifold), Fig. 8."""
+    """Fig. 9 (forefinger joint angles), Fig. 2 (one regrasp's manifold), Fig. 8 (the
+    first surface-path regrasp; none if every regrasp flew the joint-space fallback)."""
     from ..plotting import require_pyplot
 
     plt = require_pyplot()
@@ -167,6 +175,11 @@ def write_figures(result: ManipulationPlan, out: Path) -> list[Path]:
     plt.close(fig)
     if result.regrasps:
         r = next((g for g in result.regrasps if g.finger == forefinger), result.regrasps[0])
+        # Fig. 8 shows a surface path: the forefinger's first, else any finger's first
+        on_surface = [g for g in result.regrasps if g.route == "surface"]
+        r8 = next((g for g in on_surface if g.finger == forefinger), None) or next(
+            iter(on_surface), None
+        )
         try:
             from ..plotting.manifold import plot_manifold
 
@@ -185,25 +198,33 @@ def write_figures(result: ManipulationPlan, out: Path) -> list[Path]:
             plt.close(fig)
         except ImportError:  # the Fig. 2 module is optional
             pass
-        from ..plotting.surface import plot_unfolded_grid
-        from ..surface.inflation import grid_inflation
-
-        p = r.params
-        height = p.inflation_factor * p.clearance_m
-        heights = grid_inflation(r.grid, height, r.tip_path.taper_m)
-        fig = plot_unfolded_grid(
-            r.grid,
-            path=r.grid_path,
-            heights=heights,
-            polygon_indices=r.polygon.indices,
-            tip_path=r.tip_path,
-            zoom=True,
-            title=f"Fig. 8: {r.finger}, P -> Q in {len(r.polygon.indices)} waypoints",
-        )
-        files.append(out / "fig8_hopfield_path.png")
-        fig.savefig(files[-1], dpi=110)
-        plt.close(fig)
+        if r8 is not None:
+            files.append(_fig8(r8, out / "fig8_hopfield_path.png"))
     return files
+
+
+def _fig8(r: Any, path: Path) -> Path:
+    """Fig. 8 of a surface-path regrasp ``r``, written to ``path``."""
+    from ..plotting import require_pyplot
+    from ..plotting.surface import plot_unfolded_grid
+    from ..surface.inflation import grid_inflation
+
+    plt = require_pyplot()
+    p = r.params
+    height = p.inflation_factor * p.clearance_m
+    heights = grid_inflation(r.grid, height, r.tip_path.taper_m)
+    fig = plot_unfolded_grid(
+        r.grid,
+        path=r.grid_path,
+        heights=heights,
+        polygon_indices=r.polygon.indices,
+        tip_path=r.tip_path,
+        zoom=True,
+        title=f"Fig. 8: {r.finger}, P -> Q in {len(r.polygon.indices)} waypoints",
+    )
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def held_path(plan: Any, finger: str, t_lift_s: float) -> tuple[Any, Any]:
