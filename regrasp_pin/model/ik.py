@@ -146,6 +146,28 @@ def _dls_step(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
     return J[0] * x0 + J[1] * x1 + J[2] * x2  # (k, n)
 
 
+def _first_evaluation(
+    chain: FingerChain, q: np.ndarray, fast_trig: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Tip positions ``(3, n)`` and Jacobians ``(3, k, n)`` at ``q`` ``(k, n)``, each run of
+    consecutive equal starts (bit for bit) evaluated once: warm starts shared by a
+    point's times, a common cold start. Each point's kernel result depends on that
+    point alone, so the copies are the same bits as evaluating every column."""
+    n = q.shape[1]
+    if n < 2:
+        return chain.tip_soa(q, True, fast_trig)  # type: ignore[return-value]
+    bits = q.view(np.int64)
+    new = np.empty(n, bool)
+    new[0] = True
+    np.any(bits[:, 1:] != bits[:, :-1], axis=0, out=new[1:])
+    first = np.flatnonzero(new)
+    if first.size > 0.8 * n:  # few repeats: not worth the copies
+        return chain.tip_soa(q, True, fast_trig)  # type: ignore[return-value]
+    p, J = chain.tip_soa(q[:, first], True, fast_trig)
+    counts = np.diff(np.append(first, n))
+    return np.repeat(p, counts, axis=1), np.repeat(J, counts, axis=2)  # type: ignore[arg-type]
+
+
 def _iterate(
     chain: FingerChain,
     lower: np.ndarray,
@@ -176,7 +198,10 @@ def _iterate(
     iters = 0
     prev_sq = np.full(n, np.inf)
     while True:
-        p, _, J = chain.forward_soa(qa, True, fast_trig)
+        if iters == 0:
+            p, J = _first_evaluation(chain, qa, fast_trig)
+        else:
+            p, J = chain.tip_soa(qa, True, fast_trig)
         e = ta - p
         err_sq = _rowdot(e, e)
         err[active] = np.sqrt(err_sq)
@@ -222,7 +247,7 @@ def _finish(
     Points far above the tolerance after the first pass have stalled (unreachable) or
     run out of iterations; more iterations would not help them (restarts might).
     """
-    p, _, _ = chain.forward_soa(q, False)
+    p, _ = chain.tip_soa(q, False)
     d = targets - p
     err = np.sqrt(_rowdot(d, d))
     bad = np.flatnonzero((err > tol_m) & (err <= _STALL_TOL_FACTOR * tol_m))
