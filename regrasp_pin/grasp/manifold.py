@@ -302,7 +302,9 @@ def build_manifold(
     for s0, s1 in zip(starts, stops, strict=True):
         if track is not None and s0 > 0:
             solve[s0:s1] &= (tracked if s0 <= k_all else lasting)[None, :]
-        ti, pi = np.nonzero(solve[s0:s1])
+        # point by point (each point's times in order): the entries of a point share
+        # their warm start, so the IK evaluates it once (see solve_position_ik)
+        pi, ti = np.nonzero(solve[s0:s1].T)
         if ti.size == 0:
             lasting[:] = False  # nothing reached in this chunk
             continue
