@@ -203,8 +203,9 @@ def _iterate(
         else:
             p, J = chain.tip_soa(qa, True, fast_trig)
         e = ta - p
-        err_sq = _rowdot(e, e)
-        err[active] = np.sqrt(err_sq)
+        e2 = e * e
+        err_sq = e2[0] + e2[1]  # the order of _rowdot(e, e)
+        err_sq += e2[2]
         # done: converged, or stalled far from the target (an unreachable target whose
         # error no longer drops by 0.5 % per iteration)
         keep = (err_sq > tol_m * tol_m) & (
@@ -212,11 +213,14 @@ def _iterate(
         )
         n_keep = int(np.count_nonzero(keep))
         if n_keep < keep.size:
-            q[:, active] = qa  # write back finished points
+            done = ~keep  # write back finished points
+            q[:, active[done]] = qa[:, done]
+            err[active[done]] = np.sqrt(err_sq[done])
             active, qa, ta = active[keep], qa[:, keep], ta[:, keep]
             J, e, err_sq = J[:, :, keep], e[:, keep], err_sq[keep]
         prev_sq = err_sq
         if n_keep == 0 or iters == max_iter:
+            err[active] = np.sqrt(err_sq)
             break
         iters += 1
         dq = _dls_step(J, e, err_sq)
