@@ -651,6 +651,9 @@ def initial_grasp(
     if min_finger_gap_m is None:
         min_finger_gap_m = contact.finger_trigger_m + 0.0005
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
+    # trials often complete the same combination: its score (a function of the
+    # contacts and of the fractions in their order) is computed once
+    scores: dict[tuple[bytes, tuple[float, ...]], tuple[float, float] | None] = {}
     for trial in range(trials):
         # trial 0 is greedy; later trials shuffle the fingers and perturb each finger's
         # ranking, still favouring the long-lasting contacts
@@ -670,7 +673,10 @@ def initial_grasp(
         pick = {n: int(per_finger[n][0][c]) for n, c in chosen_c.items()}
         fracs = [float(per_finger[n][1][c]) for n, c in chosen_c.items()]
         ii = np.array([pick[n] for n in names])
-        scored = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m)
+        key = (ii.tobytes(), tuple(fracs))
+        if key not in scores:
+            scores[key] = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m)
+        scored = scores[key]
         if scored is None:
             continue
         score, e = scored
