@@ -120,6 +120,50 @@ def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _dls_step(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
     """Damped least-squares step ``dq = J^T (J J^T + lambda^2 I)^-1 e``.
 
+    ``J`` is component-major ``(3, k, n)``, ``e`` is ``(3, n)``. Few points: in one batch
+    (:func:`_dls_step_few`, fewer numpy calls); many: :func:`_dls_step_loop` (fewer
+    operations). The two do the same operations on each point's numbers.
+    """
+    if e.shape[1] <= _FEW_POINTS:
+        return _dls_step_few(J, e, err_sq)
+    return _dls_step_loop(J, e, err_sq)
+
+
+def _dls_step_few(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
+    """:func:`_dls_step_loop` in a handful of numpy calls: ``A = J J^T`` from all
+    products ``J[a, k] J[b, k]`` summed in the order of ``k``; the adjugate from ``A``
+    extended cyclically (rows and columns 3, 4 = 0, 1), cofactor ``ab`` =
+    ``A[a+1, b+1] A[a+2, b+2] - A[a+1, b+2] A[a+2, b+1]``, which is the hand-written
+    one's products in commuted order (the same bits: ``A`` is symmetric bit for bit and
+    a product does not depend on its operands' order)."""
+    prod = J[:, None] * J[None, :]  # (3, 3, k, n)
+    A = prod[:, :, 0].copy()
+    for i in range(1, J.shape[1]):
+        A += prod[:, :, i]
+    A.reshape(9, -1)[::4] += _LAMBDA0_SQ + _LAMBDA_ERR * err_sq  # the diagonal
+    Ae = A[_CYCLIC][:, _CYCLIC]  # (5, 5, n)
+    C = Ae[1:4, 1:4] * Ae[2:5, 2:5]
+    C -= Ae[1:4, 2:5] * Ae[2:5, 1:4]
+    d = A[0] * C[0]  # det = a00 c00 + a01 c01 + a02 c02
+    det = d[0] + d[1]
+    det += d[2]
+    y = C * e[None]  # x_a = (c_a0 e0 + c_a1 e1 + c_a2 e2) / det
+    x = y[:, 0] + y[:, 1]
+    x += y[:, 2]
+    x /= det
+    s = J * x[:, None]  # dq = J[0] x0 + J[1] x1 + J[2] x2
+    dq = s[0] + s[1]
+    dq += s[2]
+    return dq  # (k, n)
+
+
+_CYCLIC = np.array([0, 1, 2, 0, 1])
+_FEW_POINTS = 256  # up to this many points, the DLS step in one batch
+
+
+def _dls_step_loop(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
+    """Damped least-squares step ``dq = J^T (J J^T + lambda^2 I)^-1 e``.
+
     ``J`` is component-major ``(3, k, n)``, ``e`` is ``(3, n)``.
     """
     a00 = _rowdot(J[0], J[0])
@@ -200,8 +244,8 @@ def _iterate(
     while True:
         if iters == 0:
             p, J = _first_evaluation(chain, qa, fast_trig)
-        else:
-            p, J = chain.tip_soa(qa, True, fast_trig)
+        else:  # the last evaluation only checks: no Jacobian (p is the same bits)
+            p, J = chain.tip_soa(qa, iters < max_iter, fast_trig)
         e = ta - p
         e2 = e * e
         err_sq = e2[0] + e2[1]  # the order of _rowdot(e, e)
@@ -212,16 +256,18 @@ def _iterate(
             (err_sq < _STALL_SQ * prev_sq) | (err_sq < (_STALL_TOL_FACTOR * tol_m) ** 2)
         )
         n_keep = int(np.count_nonzero(keep))
+        last = n_keep == 0 or iters == max_iter
         if n_keep < keep.size:
             done = ~keep  # write back finished points
             q[:, active[done]] = qa[:, done]
             err[active[done]] = np.sqrt(err_sq[done])
-            active, qa, ta = active[keep], qa[:, keep], ta[:, keep]
-            J, e, err_sq = J[:, :, keep], e[:, keep], err_sq[keep]
-        prev_sq = err_sq
-        if n_keep == 0 or iters == max_iter:
+            active, qa, ta, err_sq = active[keep], qa[:, keep], ta[:, keep], err_sq[keep]
+            if not last:
+                J, e = J[:, :, keep], e[:, keep]
+        if last:
             err[active] = np.sqrt(err_sq)
             break
+        prev_sq = err_sq
         iters += 1
         dq = _dls_step(J, e, err_sq)
         blocked = ((qa <= lo) & (dq < 0)) | ((qa >= hi) & (dq > 0))
@@ -229,10 +275,11 @@ def _iterate(
         if rows.size:
             Jb = J[:, :, rows] * ~blocked[None, :, rows]
             dq[:, rows] = _dls_step(Jb, e[:, rows], err_sq[rows]) * ~blocked[:, rows]
-        big = np.abs(dq).max(axis=0)
-        if big.max() > _MAX_STEP:
+        size = np.abs(dq)
+        if size.max() > _MAX_STEP:
+            big = size.max(axis=0)
             dq *= np.minimum(1.0, _MAX_STEP / np.maximum(big, 1e-300))
-        qa = np.clip(qa + dq, lo, hi)
+        qa = (qa + dq).clip(lo, hi)
     q[:, active] = qa
     return q, err, iters
 

@@ -20,10 +20,10 @@ so a joint costs one product with a 3 x 3 matrix and four column updates; the jo
 world axis is the third column of ``W'_j``.
 
 Every product with a constant is written out as elementwise sums in a fixed order
-(:func:`_combine`, :func:`_linear`) rather than handed to BLAS: a BLAS kernel rounds a point's result
-differently depending on where the point falls in the batch (vector lanes, fused
-multiply-adds, the tail) and on the machine, whereas here each point's result depends
-on that point alone, bit for bit. That is what lets a caller solve any subset of
+(:func:`_combine`, :func:`_linear`) rather than handed to BLAS: a BLAS kernel rounds a
+point's result differently depending on where the point falls in the batch (vector
+lanes, fused multiply-adds, the tail) and on the machine, whereas here each point's
+result depends on that point alone, bit for bit. That is what lets a caller solve any subset of
 points and get exactly the entries of the whole batch.
 """
 
@@ -37,6 +37,8 @@ import pinocchio as pin
 from ..exceptions import InputError
 
 __all__ = ["FingerChain"]
+
+_FEW_POINTS = 256  # up to this many points, the Jacobian in one batch over the joints
 
 
 def _rotation_z_to(axis: np.ndarray) -> np.ndarray:
@@ -323,6 +325,8 @@ class FingerChain:
             p = np.repeat(p, n, axis=1)
         if not want_jacobian:
             return p, cols, None
+        if n <= _FEW_POINTS:
+            return p, cols, self._jacobian_few(p, axes, origins)
         J = np.zeros((3, self.k, n))
         for jt, z, oj in zip(self._joints, axes, origins, strict=True):
             r = p - oj
@@ -337,6 +341,29 @@ class FingerChain:
                 col[1] += f * (z[2] * r[0] - z[0] * r[2])
                 col[2] += f * (z[0] * r[1] - z[1] * r[0])
         return p, cols, J
+
+    def _jacobian_few(
+        self, p: np.ndarray, axes: list[np.ndarray], origins: list[np.ndarray]
+    ) -> np.ndarray:
+        """The Jacobian ``(3, k, N)`` of :meth:`_kernel` for few points: every joint's
+        ``z x (p - o)`` in one batch, on rows extended cyclically (row 3 = row 0, row 4
+        = row 1) so that the rotated rows are slices. The same products and
+        differences per point as the loop over joints, in fewer numpy calls."""
+        m, n = len(axes), p.shape[1]
+        Z = np.empty((m, 5, n))
+        R = np.empty((m, 5, n))
+        for j, (z, o) in enumerate(zip(axes, origins, strict=True)):
+            Z[j, :3] = z
+            Z[j, 3:] = z[:2]
+            R[j, :3] = o
+            R[j, 3:] = o[:2]
+        np.subtract(np.concatenate([p, p[:2]]), R, out=R)  # r = p - o
+        X = Z[:, 1:4] * R[:, 2:5]  # (z1 r2, z2 r0, z0 r1) - (z2 r1, z0 r2, z1 r0)
+        X -= Z[:, 2:5] * R[:, 1:4]
+        J = np.zeros((3, self.k, n))
+        for j, jt in enumerate(self._joints):
+            J[:, jt.column] += X[j] if jt.scaling == 1.0 else jt.scaling * X[j]
+        return J
 
     def _forward(self, q: np.ndarray, want_jacobian: bool):
         p, W, J = self.forward_soa(np.ascontiguousarray(q.T), want_jacobian)
