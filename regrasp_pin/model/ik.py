@@ -377,21 +377,22 @@ def solve_position_ik(
     if restarts:
         bad = np.flatnonzero(err > tol_m)
         if bad.size:
-            # every seed for every failed point, in one batch; keep the best per point
+            # every seed for every failed point, in one batch, seed by seed (a seed's
+            # entries share its first evaluation); keep the best per point
             seeds = _seeds(lower, upper)
             ns = seeds.shape[0]
             k = q.shape[0]
-            q_try = np.repeat(seeds.T[:, None, :], bad.size, axis=1).reshape(k, -1)
-            t_try = np.repeat(targets[:, bad, None], ns, axis=2).reshape(3, -1)
+            q_try = np.repeat(seeds.T[:, :, None], bad.size, axis=2).reshape(k, -1)
+            t_try = np.tile(targets[:, bad], (1, ns))
             q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter, True)
             q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
             iters += it + it2
-            e_try = e_try.reshape(bad.size, ns)
+            e_try = e_try.reshape(ns, bad.size).T  # (point, seed)
             best = np.argmin(e_try, axis=1)
             rows = np.arange(bad.size)
             e_best = e_try[rows, best]
             better = e_best < err[bad]
-            q_best = q_try.reshape(k, bad.size, ns)[:, rows, best]
+            q_best = q_try.reshape(k, ns, bad.size)[:, best, rows]
             q[:, bad[better]] = q_best[:, better]
             err[bad[better]] = e_best[better]
     return IKResult(
