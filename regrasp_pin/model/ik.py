@@ -42,7 +42,7 @@ IK_BACKENDS = ("numpy", "numba")
 _LAMBDA0_SQ = 1e-8  # [m^2]
 _LAMBDA_ERR = 1e-2  # [-], weight of |e|^2 in lambda^2
 _MAX_STEP = 0.4  # [rad] largest joint change per iteration
-_BLOCK = 8192  # points per block
+_BLOCK = 32768  # points per block
 _STALL_SQ = 0.995**2  # an iteration must shrink the error by 0.5 % ...
 _STALL_TOL_FACTOR = 10.0  # ... unless it is already within 10 x tol
 _CONSTS = (_LAMBDA0_SQ, _LAMBDA_ERR, _MAX_STEP, _STALL_SQ, _STALL_TOL_FACTOR)
@@ -207,7 +207,7 @@ def _first_evaluation(
     first = np.flatnonzero(new)
     if first.size > 0.8 * n:  # few repeats: not worth the copies
         return chain.tip_soa(q, True, fast_trig)  # type: ignore[return-value]
-    p, J = chain.tip_soa(q[:, first], True, fast_trig)
+    p, J = chain.tip_soa(q.take(first, axis=1), True, fast_trig)
     counts = np.diff(np.append(first, n))
     return np.repeat(p, counts, axis=1), np.repeat(J, counts, axis=2)  # type: ignore[arg-type]
 
@@ -258,12 +258,13 @@ def _iterate(
         n_keep = int(np.count_nonzero(keep))
         last = n_keep == 0 or iters == max_iter
         if n_keep < keep.size:
-            done = ~keep  # write back finished points
-            q[:, active[done]] = qa[:, done]
+            kept, done = np.flatnonzero(keep), np.flatnonzero(~keep)
+            q[:, active[done]] = qa.take(done, axis=1)  # write back finished points
             err[active[done]] = np.sqrt(err_sq[done])
-            active, qa, ta, err_sq = active[keep], qa[:, keep], ta[:, keep], err_sq[keep]
+            active, err_sq = active[kept], err_sq[kept]
+            qa, ta = qa.take(kept, axis=1), ta.take(kept, axis=1)
             if not last:
-                J, e = J[:, :, keep], e[:, keep]
+                J, e = J.take(kept, axis=2), e.take(kept, axis=1)
         if last:
             err[active] = np.sqrt(err_sq)
             break
@@ -272,9 +273,10 @@ def _iterate(
         dq = _dls_step(J, e, err_sq)
         blocked = ((qa <= lo) & (dq < 0)) | ((qa >= hi) & (dq > 0))
         rows = np.flatnonzero(blocked.any(axis=0))
-        if rows.size:
-            Jb = J[:, :, rows] * ~blocked[None, :, rows]
-            dq[:, rows] = _dls_step(Jb, e[:, rows], err_sq[rows]) * ~blocked[:, rows]
+        if rows.size:  # (take: boolean or fancy indexing of a last axis is slow)
+            free = ~blocked.take(rows, axis=1)
+            Jb = J.take(rows, axis=2) * free[None]
+            dq[:, rows] = _dls_step(Jb, e.take(rows, axis=1), err_sq[rows]) * free
         size = np.abs(dq)
         if size.max() > _MAX_STEP:
             big = size.max(axis=0)
@@ -304,7 +306,9 @@ def _finish(
     bad = np.flatnonzero((err > tol_m) & (err <= _STALL_TOL_FACTOR * tol_m))
     iters = 0
     if bad.size:
-        qb, eb, iters = _iterate(chain, lower, upper, targets[:, bad], q[:, bad], tol_m, max_iter)
+        qb, eb, iters = _iterate(
+            chain, lower, upper, targets.take(bad, axis=1), q.take(bad, axis=1), tol_m, max_iter
+        )
         q[:, bad] = qb
         err[bad] = eb
     return q, err, iters
@@ -383,7 +387,7 @@ def solve_position_ik(
             ns = seeds.shape[0]
             k = q.shape[0]
             q_try = np.repeat(seeds.T[:, :, None], bad.size, axis=2).reshape(k, -1)
-            t_try = np.tile(targets[:, bad], (1, ns))
+            t_try = np.tile(targets.take(bad, axis=1), (1, ns))
             q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter, True)
             q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
             iters += it + it2
