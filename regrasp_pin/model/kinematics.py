@@ -178,7 +178,11 @@ class FingerChain:
         # the kernel's plan: nonzero terms of every constant product, the joints' angle
         # columns, scalings and offsets as arrays (all joints' angles in one batch)
         self._t_terms = tuple(_terms(jt.t) for jt in joints)
-        self._C_terms = tuple(tuple(_terms(jt.C[:, a]) for a in range(3)) for jt in joints)
+        # W <- W @ C: None where C is the identity (exactly: W is unchanged)
+        self._C_terms = tuple(
+            None if np.array_equal(jt.C, np.eye(3)) else tuple(_terms(jt.C[:, a]) for a in range(3))
+            for jt in joints
+        )
         self._tip_terms = _terms(self._tip_t)
         self._theta_column = np.array([jt.column for jt in joints], dtype=np.int64)
         self._scaled = tuple(i for i, jt in enumerate(joints) if jt.scaling != 1.0)
@@ -309,7 +313,9 @@ class FingerChain:
             if i:
                 d = _linear(self._t_terms[i], cols)  # o += W @ t, per point
                 o = o + (0.0 if d is None else d)
-                cols = [_linear(terms, cols) for terms in self._C_terms[i]]  # W <- W @ C
+                C_terms = self._C_terms[i]
+                if C_terms is not None:  # W <- W @ C
+                    cols = [_linear(terms, cols) for terms in C_terms]
             c, s = cos[i], sin[i]
             w0 = c * cols[0]  # column 0 of W Rz(theta): c m0 + s m1
             w0 += s * cols[1]
@@ -327,7 +333,14 @@ class FingerChain:
             return p, cols, None
         if n <= _FEW_POINTS:
             return p, cols, self._jacobian_few(p, axes, origins)
-        J = np.zeros((3, self.k, n))
+        return p, cols, self._jacobian_loop(p, axes, origins)
+
+    def _jacobian_loop(
+        self, p: np.ndarray, axes: list[np.ndarray], origins: list[np.ndarray]
+    ) -> np.ndarray:
+        """The Jacobian ``(3, k, N)`` of :meth:`_kernel`: joint by joint, component by
+        component, ``z x (p - o)`` (times the mimic scaling) added to its column."""
+        J = np.zeros((3, self.k, p.shape[1]))
         for jt, z, oj in zip(self._joints, axes, origins, strict=True):
             r = p - oj
             col = J[:, jt.column]
@@ -340,7 +353,7 @@ class FingerChain:
                 col[0] += f * (z[1] * r[2] - z[2] * r[1])
                 col[1] += f * (z[2] * r[0] - z[0] * r[2])
                 col[2] += f * (z[0] * r[1] - z[1] * r[0])
-        return p, cols, J
+        return J
 
     def _jacobian_few(
         self, p: np.ndarray, axes: list[np.ndarray], origins: list[np.ndarray]
