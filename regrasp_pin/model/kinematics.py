@@ -367,9 +367,9 @@ class FingerChain:
         R = np.empty((m, 5, n))
         for j, (z, o) in enumerate(zip(axes, origins, strict=True)):
             Z[j, :3] = z
-            Z[j, 3:] = z[:2]
             R[j, :3] = o
-            R[j, 3:] = o[:2]
+        Z[:, 3:] = Z[:, :2]
+        R[:, 3:] = R[:, :2]
         np.subtract(np.concatenate([p, p[:2]]), R, out=R)  # r = p - o
         X = Z[:, 1:4] * R[:, 2:5]  # (z1 r2, z2 r0, z0 r1) - (z2 r1, z0 r2, z1 r0)
         X -= Z[:, 2:5] * R[:, 1:4]
