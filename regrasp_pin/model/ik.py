@@ -14,9 +14,12 @@ best result is kept. An unreachable target is not an error: it comes back with
 ``success=False`` and its residual.
 
 The work is done on component-major arrays ``(k, N)`` and only on the points that
-have not converged yet. The iterations run in numpy (the default and the reference),
+have not converged yet (compacted with ``take``); consecutive points with the same start,
+bit for bit, share its first evaluation, and few points take the step in fewer numpy
+calls. Every point's result depends on that point alone, bit for bit, whatever the batch.
+The iterations run in numpy (the default and the reference),
 or, on request, in the same loop compiled per point by numba (:mod:`.ik_numba`,
-``pip install regrasp-pin[fast]``, 1.5 to 2 x faster): :func:`set_ik_backend` or the
+``pip install regrasp-pin[fast]``): :func:`set_ik_backend` or the
 environment variable ``REGRASP_PIN_IK_BACKEND=numba``. It is not chosen by merely
 being installed, because its single-precision cos/sin round differently from numpy's:
 the iterates differ by about 1e-7 rad, which can move a regrasp trigger by a grid step
