@@ -411,11 +411,10 @@ def _margins(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     plane (NaN where ``q`` is NaN): the minimum over the joints column by column, each
     joint's limits as scalars (a reduction over, or a broadcast along, a short last axis
     is slow in numpy; min is exact either way)."""
-    m = None
-    for j in range(q.shape[-1]):
+    m = np.minimum(q[..., 0] - lower[0], upper[0] - q[..., 0])
+    for j in range(1, q.shape[-1]):
         qj = q[..., j]
-        dj = np.minimum(qj - lower[j], upper[j] - qj)
-        m = dj if m is None else np.minimum(m, dj)
+        m = np.minimum(m, np.minimum(qj - lower[j], upper[j] - qj))
     return m
 
 

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -248,7 +249,8 @@ def _iterate(
         if iters == 0:
             p, J = _first_evaluation(chain, qa, fast_trig)
         else:  # the last evaluation only checks: no Jacobian (p is the same bits)
-            p, J = chain.tip_soa(qa, iters < max_iter, fast_trig)
+            p, J_or_none = chain.tip_soa(qa, iters < max_iter, fast_trig)
+            J = cast(np.ndarray, J_or_none)  # None only when this is the last evaluation
         e = ta - p
         e2 = e * e
         err_sq = e2[0] + e2[1]  # the order of _rowdot(e, e)

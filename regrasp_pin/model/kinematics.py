@@ -30,6 +30,7 @@ points and get exactly the entries of the whole batch.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -314,8 +315,8 @@ class FingerChain:
                 d = _linear(self._t_terms[i], cols)  # o += W @ t, per point
                 o = o + (0.0 if d is None else d)
                 C_terms = self._C_terms[i]
-                if C_terms is not None:  # W <- W @ C
-                    cols = [_linear(terms, cols) for terms in C_terms]
+                if C_terms is not None:  # W <- W @ C (a rotation has no zero column)
+                    cols = [cast(np.ndarray, _linear(terms, cols)) for terms in C_terms]
             c, s = cos[i], sin[i]
             w0 = c * cols[0]  # column 0 of W Rz(theta): c m0 + s m1
             w0 += s * cols[1]
