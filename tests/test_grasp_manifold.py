@@ -450,3 +450,19 @@ def test_fig2_draws_the_box_the_instants_p_and_q(scene):
     import matplotlib.pyplot as plt
 
     plt.close("all")
+
+
+def test_margins_and_outside_test_equal_the_vector_formulas():
+    # joint by joint with scalar limits: the same values as the vector formulas
+    from regrasp_pin.grasp.manifold import _margins, _outside
+
+    rng = np.random.default_rng(25)
+    lower, upper = np.array([-0.3, -0.2, 0.0]), np.array([0.3, 1.5, 1.6])
+    q = rng.uniform(-0.6, 1.9, (7, 50, 3))
+    q[:, ::4] = np.nan
+    ref = np.minimum(q - lower, upper - q).min(axis=-1)
+    assert np.array_equal(_margins(q, lower, upper), ref, equal_nan=True)
+    flat = q.reshape(-1, 3)
+    assert np.array_equal(
+        _outside(flat, lower, upper), np.any((flat < lower) | (flat > upper), axis=1)
+    )

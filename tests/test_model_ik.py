@@ -87,3 +87,48 @@ def test_ik_bad_inputs(five):
         finger.ik(np.zeros(3), tol_m=0.0)
     with pytest.raises(InputError, match="max_iter"):
         finger.ik(np.zeros(3), max_iter=0)
+
+
+def test_dls_step_in_one_batch_equals_the_loop_bit_for_bit():
+    # few points take _dls_step_few, many _dls_step_loop: the same operations per point,
+    # and both the damped least-squares step J^T (J J^T + lambda^2 I)^-1 e
+    from regrasp_pin.model.ik import _LAMBDA0_SQ, _LAMBDA_ERR, _dls_step_few, _dls_step_loop
+
+    rng = np.random.default_rng(23)
+    for k in (2, 3, 4):
+        J = rng.normal(0.0, 0.05, (3, k, 300))
+        J[:, 0, :40] = 0.0  # blocked joints
+        J[1, -1, 40:45] = -0.0
+        e = rng.normal(0.0, 1e-3, (3, 300))
+        err_sq = (e * e).sum(axis=0)
+        few, loop = _dls_step_few(J, e, err_sq), _dls_step_loop(J, e, err_sq)
+        assert few.tobytes() == loop.tobytes(), k
+        Jn = np.moveaxis(J, 2, 0)  # (n, 3, k)
+        lam = _LAMBDA0_SQ + _LAMBDA_ERR * err_sq
+        A = Jn @ np.swapaxes(Jn, 1, 2) + lam[:, None, None] * np.eye(3)
+        ref = np.einsum("nak,na->nk", Jn, np.linalg.solve(A, e.T[:, :, None])[..., 0])
+        # (nearly singular J J^T where joints are blocked: relative to the largest step)
+        assert_close(few.T, ref, atol=1e-6 * np.abs(ref).max(), what=f"DLS step, k={k}")
+
+
+def test_shared_starts_and_restarts_give_each_point_its_own_result(five):
+    # consecutive equal starts share their first evaluation and restarts run seed by
+    # seed; each point's result is still the one it gets solved alone, bit for bit
+    from regrasp_pin.model.ik import solve_position_ik
+
+    f = five.fingers["ring"]
+    rng = np.random.default_rng(24)
+    q_true = rng.uniform(f.lower - 0.3, f.upper + 0.3, (90, f.k))  # some out of reach
+    targets = f.chain.positions(q_true) + rng.normal(0.0, 2e-3, (90, 3))
+    starts = np.repeat(rng.uniform(f.lower, f.upper, (30, f.k)), 3, axis=0)  # runs of 3
+    starts[3:6, 0] = 0.0
+    starts[4, 0] = -0.0  # equal as numbers, not as bits: not shared
+    for restarts in (False, True):
+        batch = solve_position_ik(f.chain, f.lower, f.upper, targets, starts, restarts=restarts)
+        assert (~batch.success).sum() >= 5  # the restarts are exercised
+        for i in range(90):
+            one = solve_position_ik(
+                f.chain, f.lower, f.upper, targets[i : i + 1], starts[i : i + 1], restarts=restarts
+            )
+            assert np.array_equal(one.q[0], batch.q[i]), (restarts, i)
+            assert np.array_equal(one.error_m[0], batch.error_m[i]), (restarts, i)

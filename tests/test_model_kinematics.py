@@ -120,3 +120,34 @@ def test_chain_rejects_non_revolute_joint(tmp_path):
 
     with pytest.raises(InputError, match="not revolute"):
         FingerChain(model, "b")
+
+
+def test_linear_products_are_the_written_out_sums_bit_for_bit():
+    # _linear skips what _combine skips (zero terms, unit factors) and copies nothing;
+    # its sums are _combine's, term by term, including the sign of zeros
+    from regrasp_pin.model.kinematics import _combine, _linear, _terms
+
+    rng = np.random.default_rng(21)
+    cols = [rng.normal(size=(3, 40)) for _ in range(3)]
+    cols[1][:, :5] = -0.0
+    choices = np.array([0.0, -0.0, 1.0, -1.0, 0.37, -2.5])
+    for coef in [rng.choice(choices, 3) for _ in range(60)] + [np.zeros(3), np.eye(3)[1]]:
+        ref = _combine(coef, cols, np.empty((3, 40)))
+        got = _linear(_terms(coef), cols)
+        got = np.zeros((3, 40)) if got is None else got
+        assert ref.tobytes() == np.broadcast_to(got, ref.shape).tobytes(), coef
+
+
+def test_jacobian_in_one_batch_equals_the_joint_loop_bit_for_bit(hand):
+    # few points take the batched Jacobian, many the loop over joints: the same bits
+    rng = np.random.default_rng(22)
+    for finger in hand.fingers.values():
+        chain = finger.chain
+        q = np.ascontiguousarray(rng.uniform(finger.lower, finger.upper, (60, finger.k)).T)
+        q[:, :3] = 0.0
+        p, _, J_loop = chain.forward_soa(np.repeat(q, 6, axis=1), True)  # 360 > 256 points
+        p_few, J_few = chain.tip_soa(q, True)
+        assert np.array_equal(p_few, p[:, ::6])
+        assert J_few.tobytes() == np.ascontiguousarray(J_loop[:, :, ::6]).tobytes()
+        _, _, J_ref = _pin_reference(hand, finger, q.T[:10])
+        assert_close(np.moveaxis(J_few[:, :, :10], 2, 0), J_ref, atol=1e-12, what="Jacobian")

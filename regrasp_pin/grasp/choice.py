@@ -541,33 +541,61 @@ def _cannot_hold(
     )
 
 
+class _ScreeningEpsilons:
+    """The screening epsilon (:data:`SCREEN_EDGES` edges, a fixed torque scale) of
+    contact sets, each set computed once: a pure function of the contacts in their
+    order (the same bits in, the same hull out), which the grasp search asks for again
+    and again (a combination found by several trials, a leave-one-out set shared by
+    combinations that differ in the left-out finger)."""
+
+    def __init__(self, mu: float, scale_m: float) -> None:
+        self.mu = mu
+        self.scale_m = scale_m
+        self._known: dict[tuple[bytes, bytes], float] = {}
+
+    def __call__(self, p: np.ndarray, n: np.ndarray) -> float:
+        key = (np.ascontiguousarray(p).tobytes(), np.ascontiguousarray(n).tobytes())
+        if key not in self._known:
+            self._known[key] = ferrari_canny_epsilon(
+                p, n, self.mu, n_edges=SCREEN_EDGES, torque_scale_m=self.scale_m
+            )
+        return self._known[key]
+
+
 def _leave_one_out(
-    p: np.ndarray, n: np.ndarray, mu: float, scale_m: float, rows: Iterable[int]
+    p: np.ndarray,
+    n: np.ndarray,
+    mu: float,
+    scale_m: float,
+    rows: Iterable[int],
+    epsilons: _ScreeningEpsilons | None = None,
 ) -> list[float]:
     """The screening epsilon of contacts ``p``, ``n`` ``(F, 3)`` with each of ``rows``
-    left out in turn (> 0: the others hold without it)."""
-    return [
-        ferrari_canny_epsilon(
-            np.delete(p, j, 0), np.delete(n, j, 0), mu, n_edges=SCREEN_EDGES, torque_scale_m=scale_m
-        )
-        for j in rows
-    ]
+    left out in turn (> 0: the others hold without it); from ``epsilons`` if given."""
+    eps = epsilons or _ScreeningEpsilons(mu, scale_m)
+    return [eps(np.delete(p, j, 0), np.delete(n, j, 0)) for j in rows]
 
 
 def _grasp_score(
-    p: np.ndarray, n: np.ndarray, fracs: list[float], mu: float, scale_m: float
+    p: np.ndarray,
+    n: np.ndarray,
+    fracs: list[float],
+    mu: float,
+    scale_m: float,
+    epsilons: _ScreeningEpsilons | None = None,
 ) -> tuple[float, float] | None:
     """``(score, epsilon)`` of a combination of contacts ``p``, ``n`` ``(F, 3)`` whose
     lasting fractions are ``fracs``; None if it is not in force closure. The score
     counts first the fingers that can let go with the rest still in force closure (so
     that fingers can regrasp later, with four fingers or more), then the smallest of
     those leave-one-out epsilons, twice the shortest lasting fraction, the mean one and
-    the epsilon."""
-    e = ferrari_canny_epsilon(p, n, mu, n_edges=SCREEN_EDGES, torque_scale_m=scale_m)
+    the epsilon. Epsilons come from ``epsilons`` if given (the same values)."""
+    eps = epsilons or _ScreeningEpsilons(mu, scale_m)
+    e = eps(p, n)
     if e <= 0:
         return None
     F = p.shape[0]
-    loo = _leave_one_out(p, n, mu, scale_m, range(F)) if F > 3 else []
+    loo = _leave_one_out(p, n, mu, scale_m, range(F), eps) if F > 3 else []
     removable = [x for x in loo if x > 0]
     score = (
         len(removable)
@@ -651,6 +679,7 @@ def initial_grasp(
     if min_finger_gap_m is None:
         min_finger_gap_m = contact.finger_trigger_m + 0.0005
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
+    epsilons = _ScreeningEpsilons(mu, obj.radius_m)  # each contact set's hull once
     for trial in range(trials):
         # trial 0 is greedy; later trials shuffle the fingers and perturb each finger's
         # ranking, still favouring the long-lasting contacts
@@ -670,7 +699,7 @@ def initial_grasp(
         pick = {n: int(per_finger[n][0][c]) for n, c in chosen_c.items()}
         fracs = [float(per_finger[n][1][c]) for n, c in chosen_c.items()]
         ii = np.array([pick[n] for n in names])
-        scored = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m)
+        scored = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m, epsilons)
         if scored is None:
             continue
         score, e = scored

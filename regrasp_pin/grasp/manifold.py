@@ -145,9 +145,12 @@ class WorkspaceVoxels:
 
     def contains(self, p_palm: np.ndarray) -> np.ndarray:
         """``(...,)`` True where the points may be reachable (False = provably not)."""
-        idx = np.floor((p_palm - self.origin) / self.voxel_m).astype(np.int64)
+        # component by component (a broadcast along a short last axis is slow)
+        ix, iy, iz = (
+            np.floor((p_palm[..., a] - self.origin[a]) / self.voxel_m).astype(np.int64)
+            for a in range(3)
+        )
         nx, ny, nz = self.occupied.shape
-        ix, iy, iz = idx[..., 0], idx[..., 1], idx[..., 2]
         ok = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny) & (iz >= 0) & (iz < nz)
         flat = np.where(ok, (ix * ny + iy) * nz + iz, 0)  # C order of `occupied`
         return ok & self.occupied.ravel()[flat]
@@ -302,7 +305,9 @@ def build_manifold(
     for s0, s1 in zip(starts, stops, strict=True):
         if track is not None and s0 > 0:
             solve[s0:s1] &= (tracked if s0 <= k_all else lasting)[None, :]
-        ti, pi = np.nonzero(solve[s0:s1])
+        # point by point (each point's times in order): the entries of a point share
+        # their warm start, so the IK evaluates it once (see solve_position_ik)
+        pi, ti = np.nonzero(solve[s0:s1].T)
         if ti.size == 0:
             lasting[:] = False  # nothing reached in this chunk
             continue
@@ -341,7 +346,7 @@ def build_manifold(
         # its reflection about the violated boundary planes, and replaced when that
         # finds a solution inside (once per stay outside: not while the same point's
         # re-solve failed at the previous chunk's last time)
-        outside = ok & np.any((q_res < finger.lower) | (q_res > finger.upper), axis=1)
+        outside = ok & _outside(q_res, finger.lower, finger.upper)
         out = np.flatnonzero(outside & ~stays_out[pi])
         if out.size:
             q_o = q_res[out]
@@ -362,9 +367,7 @@ def build_manifold(
         reach[ti, pi] = ok
         last = ti == s1 - 1
         q_prev[pi[last]] = q_res[last]
-        stays_out[pi[last]] = ok[last] & np.any(
-            (q_res[last] < finger.lower) | (q_res[last] > finger.upper), axis=1
-        )
+        stays_out[pi[last]] = ok[last] & _outside(q_res[last], finger.lower, finger.upper)
         resid[pi[ok]] = 0.0  # reached: retry at once if it fails later
         if ok.any():
             cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
@@ -405,10 +408,22 @@ def build_manifold(
 
 def _margins(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """``(...,)`` signed distance [rad] of ``q`` ``(..., k)`` to the nearest boundary
-    plane (NaN where ``q`` is NaN): the minimum over the joints column by column (a
-    reduction over a short last axis is slow in numpy; min is exact either way)."""
-    d = np.minimum(q - lower, upper - q)
-    return functools.reduce(np.minimum, np.moveaxis(d, -1, 0))
+    plane (NaN where ``q`` is NaN): the minimum over the joints column by column, each
+    joint's limits as scalars (a reduction over, or a broadcast along, a short last axis
+    is slow in numpy; min is exact either way)."""
+    m = np.minimum(q[..., 0] - lower[0], upper[0] - q[..., 0])
+    for j in range(1, q.shape[-1]):
+        qj = q[..., j]
+        m = np.minimum(m, np.minimum(qj - lower[j], upper[j] - qj))
+    return m
+
+
+def _outside(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """``(n,)`` whether ``q`` ``(n, k)`` is outside the limits, joint by joint."""
+    out = np.zeros(q.shape[0], bool)
+    for j in range(q.shape[1]):
+        out |= (q[:, j] < lower[j]) | (q[:, j] > upper[j])
+    return out
 
 
 def _forget_untracked(

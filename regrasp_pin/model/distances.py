@@ -512,12 +512,19 @@ def capsule_gap(hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray) -
     gb = [_geometry(hand, g) for g in ids_b]
     Ra, pa = _placements(ga, q)
     Rb, pb = _placements(gb, q)
-    for i, g in enumerate(ga):
-        a1 = pa[:, i] + Ra[:, i] @ g.seg_a
-        b1 = pa[:, i] + Ra[:, i] @ g.seg_b
-        for j, h in enumerate(gb):
-            a2 = pb[:, j] + Rb[:, j] @ h.seg_a
-            b2 = pb[:, j] + Rb[:, j] @ h.seg_b
-            d, _ = _segment_distance(a1, b1, a2, b2)
-            gap = np.minimum(gap, d - g.radius - h.radius)
+    # every pair's segments in one batch (elementwise: each pair's distances as alone)
+    ends_a = [
+        (pa[:, i] + Ra[:, i] @ g.seg_a, pa[:, i] + Ra[:, i] @ g.seg_b) for i, g in enumerate(ga)
+    ]
+    ends_b = [
+        (pb[:, j] + Rb[:, j] @ h.seg_a, pb[:, j] + Rb[:, j] @ h.seg_b) for j, h in enumerate(gb)
+    ]
+    a1 = np.concatenate([a for a, _ in ends_a for _ in ends_b])
+    b1 = np.concatenate([b for _, b in ends_a for _ in ends_b])
+    a2 = np.concatenate([a for _ in ends_a for a, _ in ends_b])
+    b2 = np.concatenate([b for _ in ends_a for _, b in ends_b])
+    d, _ = _segment_distance(a1, b1, a2, b2)
+    radii = [(g.radius, h.radius) for g in ga for h in gb]
+    for dk, (ra, rb) in zip(d.reshape(len(radii), -1), radii, strict=True):  # pair order
+        gap = np.minimum(gap, dk - ra - rb)
     return gap

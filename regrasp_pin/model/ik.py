@@ -14,9 +14,12 @@ best result is kept. An unreachable target is not an error: it comes back with
 ``success=False`` and its residual.
 
 The work is done on component-major arrays ``(k, N)`` and only on the points that
-have not converged yet. The iterations run in numpy (the default and the reference),
+have not converged yet (compacted with ``take``); consecutive points with the same start,
+bit for bit, share its first evaluation, and few points take the step in fewer numpy
+calls. Every point's result depends on that point alone, bit for bit, whatever the batch.
+The iterations run in numpy (the default and the reference),
 or, on request, in the same loop compiled per point by numba (:mod:`.ik_numba`,
-``pip install regrasp-pin[fast]``, 1.5 to 2 x faster): :func:`set_ik_backend` or the
+``pip install regrasp-pin[fast]``): :func:`set_ik_backend` or the
 environment variable ``REGRASP_PIN_IK_BACKEND=numba``. It is not chosen by merely
 being installed, because its single-precision cos/sin round differently from numpy's:
 the iterates differ by about 1e-7 rad, which can move a regrasp trigger by a grid step
@@ -28,6 +31,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -42,7 +46,7 @@ IK_BACKENDS = ("numpy", "numba")
 _LAMBDA0_SQ = 1e-8  # [m^2]
 _LAMBDA_ERR = 1e-2  # [-], weight of |e|^2 in lambda^2
 _MAX_STEP = 0.4  # [rad] largest joint change per iteration
-_BLOCK = 8192  # points per block
+_BLOCK = 32768  # points per block
 _STALL_SQ = 0.995**2  # an iteration must shrink the error by 0.5 % ...
 _STALL_TOL_FACTOR = 10.0  # ... unless it is already within 10 x tol
 _CONSTS = (_LAMBDA0_SQ, _LAMBDA_ERR, _MAX_STEP, _STALL_SQ, _STALL_TOL_FACTOR)
@@ -120,6 +124,50 @@ def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _dls_step(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
     """Damped least-squares step ``dq = J^T (J J^T + lambda^2 I)^-1 e``.
 
+    ``J`` is component-major ``(3, k, n)``, ``e`` is ``(3, n)``. Few points: in one batch
+    (:func:`_dls_step_few`, fewer numpy calls); many: :func:`_dls_step_loop` (fewer
+    operations). The two do the same operations on each point's numbers.
+    """
+    if e.shape[1] <= _FEW_POINTS:
+        return _dls_step_few(J, e, err_sq)
+    return _dls_step_loop(J, e, err_sq)
+
+
+def _dls_step_few(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
+    """:func:`_dls_step_loop` in a handful of numpy calls: ``A = J J^T`` from all
+    products ``J[a, k] J[b, k]`` summed in the order of ``k``; the adjugate from ``A``
+    extended cyclically (rows and columns 3, 4 = 0, 1), cofactor ``ab`` =
+    ``A[a+1, b+1] A[a+2, b+2] - A[a+1, b+2] A[a+2, b+1]``, which is the hand-written
+    one's products in commuted order (the same bits: ``A`` is symmetric bit for bit and
+    a product does not depend on its operands' order)."""
+    prod = J[:, None] * J[None, :]  # (3, 3, k, n)
+    A = prod[:, :, 0].copy()
+    for i in range(1, J.shape[1]):
+        A += prod[:, :, i]
+    A.reshape(9, -1)[::4] += _LAMBDA0_SQ + _LAMBDA_ERR * err_sq  # the diagonal
+    Ae = A[_CYCLIC][:, _CYCLIC]  # (5, 5, n)
+    C = Ae[1:4, 1:4] * Ae[2:5, 2:5]
+    C -= Ae[1:4, 2:5] * Ae[2:5, 1:4]
+    d = A[0] * C[0]  # det = a00 c00 + a01 c01 + a02 c02
+    det = d[0] + d[1]
+    det += d[2]
+    y = C * e[None]  # x_a = (c_a0 e0 + c_a1 e1 + c_a2 e2) / det
+    x = y[:, 0] + y[:, 1]
+    x += y[:, 2]
+    x /= det
+    s = J * x[:, None]  # dq = J[0] x0 + J[1] x1 + J[2] x2
+    dq = s[0] + s[1]
+    dq += s[2]
+    return dq  # (k, n)
+
+
+_CYCLIC = np.array([0, 1, 2, 0, 1])
+_FEW_POINTS = 256  # up to this many points, the DLS step in one batch
+
+
+def _dls_step_loop(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
+    """Damped least-squares step ``dq = J^T (J J^T + lambda^2 I)^-1 e``.
+
     ``J`` is component-major ``(3, k, n)``, ``e`` is ``(3, n)``.
     """
     a00 = _rowdot(J[0], J[0])
@@ -144,6 +192,28 @@ def _dls_step(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarray:
     x1 = (c01 * e[0] + c11 * e[1] + c12 * e[2]) / det
     x2 = (c02 * e[0] + c12 * e[1] + c22 * e[2]) / det
     return J[0] * x0 + J[1] * x1 + J[2] * x2  # (k, n)
+
+
+def _first_evaluation(
+    chain: FingerChain, q: np.ndarray, fast_trig: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Tip positions ``(3, n)`` and Jacobians ``(3, k, n)`` at ``q`` ``(k, n)``, each run of
+    consecutive equal starts (bit for bit) evaluated once: warm starts shared by a
+    point's times, a common cold start. Each point's kernel result depends on that
+    point alone, so the copies are the same bits as evaluating every column."""
+    n = q.shape[1]
+    if n < 2:
+        return chain.tip_soa(q, True, fast_trig)  # type: ignore[return-value]
+    bits = q.view(np.int64)
+    new = np.empty(n, bool)
+    new[0] = True
+    np.any(bits[:, 1:] != bits[:, :-1], axis=0, out=new[1:])
+    first = np.flatnonzero(new)
+    if first.size > 0.8 * n:  # few repeats: not worth the copies
+        return chain.tip_soa(q, True, fast_trig)  # type: ignore[return-value]
+    p, J = chain.tip_soa(q.take(first, axis=1), True, fast_trig)
+    counts = np.diff(np.append(first, n))
+    return np.repeat(p, counts, axis=1), np.repeat(J, counts, axis=2)  # type: ignore[arg-type]
 
 
 def _iterate(
@@ -176,34 +246,47 @@ def _iterate(
     iters = 0
     prev_sq = np.full(n, np.inf)
     while True:
-        p, _, J = chain.forward_soa(qa, True, fast_trig)
+        if iters == 0:
+            p, J = _first_evaluation(chain, qa, fast_trig)
+        else:  # the last evaluation only checks: no Jacobian (p is the same bits)
+            p, J_or_none = chain.tip_soa(qa, iters < max_iter, fast_trig)
+            J = cast(np.ndarray, J_or_none)  # None only when this is the last evaluation
         e = ta - p
-        err_sq = _rowdot(e, e)
-        err[active] = np.sqrt(err_sq)
+        e2 = e * e
+        err_sq = e2[0] + e2[1]  # the order of _rowdot(e, e)
+        err_sq += e2[2]
         # done: converged, or stalled far from the target (an unreachable target whose
         # error no longer drops by 0.5 % per iteration)
         keep = (err_sq > tol_m * tol_m) & (
             (err_sq < _STALL_SQ * prev_sq) | (err_sq < (_STALL_TOL_FACTOR * tol_m) ** 2)
         )
         n_keep = int(np.count_nonzero(keep))
+        last = n_keep == 0 or iters == max_iter
         if n_keep < keep.size:
-            q[:, active] = qa  # write back finished points
-            active, qa, ta = active[keep], qa[:, keep], ta[:, keep]
-            J, e, err_sq = J[:, :, keep], e[:, keep], err_sq[keep]
-        prev_sq = err_sq
-        if n_keep == 0 or iters == max_iter:
+            kept, done = np.flatnonzero(keep), np.flatnonzero(~keep)
+            q[:, active[done]] = qa.take(done, axis=1)  # write back finished points
+            err[active[done]] = np.sqrt(err_sq[done])
+            active, err_sq = active[kept], err_sq[kept]
+            qa, ta = qa.take(kept, axis=1), ta.take(kept, axis=1)
+            if not last:
+                J, e = J.take(kept, axis=2), e.take(kept, axis=1)
+        if last:
+            err[active] = np.sqrt(err_sq)
             break
+        prev_sq = err_sq
         iters += 1
         dq = _dls_step(J, e, err_sq)
         blocked = ((qa <= lo) & (dq < 0)) | ((qa >= hi) & (dq > 0))
         rows = np.flatnonzero(blocked.any(axis=0))
-        if rows.size:
-            Jb = J[:, :, rows] * ~blocked[None, :, rows]
-            dq[:, rows] = _dls_step(Jb, e[:, rows], err_sq[rows]) * ~blocked[:, rows]
-        big = np.abs(dq).max(axis=0)
-        if big.max() > _MAX_STEP:
+        if rows.size:  # (take: boolean or fancy indexing of a last axis is slow)
+            free = ~blocked.take(rows, axis=1)
+            Jb = J.take(rows, axis=2) * free[None]
+            dq[:, rows] = _dls_step(Jb, e.take(rows, axis=1), err_sq[rows]) * free
+        size = np.abs(dq)
+        if size.max() > _MAX_STEP:
+            big = size.max(axis=0)
             dq *= np.minimum(1.0, _MAX_STEP / np.maximum(big, 1e-300))
-        qa = np.clip(qa + dq, lo, hi)
+        qa = (qa + dq).clip(lo, hi)
     q[:, active] = qa
     return q, err, iters
 
@@ -222,13 +305,15 @@ def _finish(
     Points far above the tolerance after the first pass have stalled (unreachable) or
     run out of iterations; more iterations would not help them (restarts might).
     """
-    p, _, _ = chain.forward_soa(q, False)
+    p, _ = chain.tip_soa(q, False)
     d = targets - p
     err = np.sqrt(_rowdot(d, d))
     bad = np.flatnonzero((err > tol_m) & (err <= _STALL_TOL_FACTOR * tol_m))
     iters = 0
     if bad.size:
-        qb, eb, iters = _iterate(chain, lower, upper, targets[:, bad], q[:, bad], tol_m, max_iter)
+        qb, eb, iters = _iterate(
+            chain, lower, upper, targets.take(bad, axis=1), q.take(bad, axis=1), tol_m, max_iter
+        )
         q[:, bad] = qb
         err[bad] = eb
     return q, err, iters
@@ -301,21 +386,22 @@ def solve_position_ik(
     if restarts:
         bad = np.flatnonzero(err > tol_m)
         if bad.size:
-            # every seed for every failed point, in one batch; keep the best per point
+            # every seed for every failed point, in one batch, seed by seed (a seed's
+            # entries share its first evaluation); keep the best per point
             seeds = _seeds(lower, upper)
             ns = seeds.shape[0]
             k = q.shape[0]
-            q_try = np.repeat(seeds.T[:, None, :], bad.size, axis=1).reshape(k, -1)
-            t_try = np.repeat(targets[:, bad, None], ns, axis=2).reshape(3, -1)
+            q_try = np.repeat(seeds.T[:, :, None], bad.size, axis=2).reshape(k, -1)
+            t_try = np.tile(targets.take(bad, axis=1), (1, ns))
             q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter, True)
             q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
             iters += it + it2
-            e_try = e_try.reshape(bad.size, ns)
+            e_try = e_try.reshape(ns, bad.size).T  # (point, seed)
             best = np.argmin(e_try, axis=1)
             rows = np.arange(bad.size)
             e_best = e_try[rows, best]
             better = e_best < err[bad]
-            q_best = q_try.reshape(k, bad.size, ns)[:, rows, best]
+            q_best = q_try.reshape(k, ns, bad.size)[:, best, rows]
             q[:, bad[better]] = q_best[:, better]
             err[bad[better]] = e_best[better]
     return IKResult(

@@ -20,16 +20,17 @@ so a joint costs one product with a 3 x 3 matrix and four column updates; the jo
 world axis is the third column of ``W'_j``.
 
 Every product with a constant is written out as elementwise sums in a fixed order
-(:func:`_combine`) rather than handed to BLAS: a BLAS kernel rounds a point's result
-differently depending on where the point falls in the batch (vector lanes, fused
-multiply-adds, the tail) and on the machine, whereas here each point's result depends
-on that point alone, bit for bit. That is what lets a caller solve any subset of
+(:func:`_combine`, :func:`_linear`) rather than handed to BLAS: a BLAS kernel rounds a
+point's result differently depending on where the point falls in the batch (vector
+lanes, fused multiply-adds, the tail) and on the machine, whereas here each point's
+result depends on that point alone, bit for bit. That is what lets a caller solve any subset of
 points and get exactly the entries of the whole batch.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pinocchio as pin
@@ -37,6 +38,8 @@ import pinocchio as pin
 from ..exceptions import InputError
 
 __all__ = ["FingerChain"]
+
+_FEW_POINTS = 256  # up to this many points, the Jacobian in one batch over the joints
 
 
 def _rotation_z_to(axis: np.ndarray) -> np.ndarray:
@@ -68,6 +71,29 @@ def _combine(coef: np.ndarray, cols: list[np.ndarray], out: np.ndarray) -> np.nd
     if first:
         out[...] = 0.0
     return out
+
+
+def _terms(coef: np.ndarray) -> tuple[tuple[int, float], ...]:
+    """The nonzero terms ``(b, coef[b])`` of a constant vector, in the order of ``b``."""
+    return tuple((b, c) for b, c in enumerate(coef.tolist()) if c != 0.0)
+
+
+def _linear(terms: tuple[tuple[int, float], ...], cols: list[np.ndarray]) -> np.ndarray | None:
+    """``sum_b coef[b] * cols[b]`` over ``terms`` in their order, the same operations as
+    :func:`_combine` (a unit coefficient multiplies by nothing) but without copies: a
+    single unit term is ``cols[b]`` itself (read-only use). None when there is no term
+    (the sum is zero)."""
+    acc = None
+    owned = False
+    for b, c in terms:
+        term = cols[b] if c == 1.0 else cols[b] * c
+        if acc is None:
+            acc, owned = term, c != 1.0
+        elif owned:
+            acc += term
+        else:
+            acc, owned = acc + term, True
+    return acc
 
 
 @dataclass(frozen=True)
@@ -150,6 +176,18 @@ class FingerChain:
         self._joints = tuple(joints)
         self._tip_t = A_prev.T @ frame.placement.translation
         self._tip_R = A_prev.T @ frame.placement.rotation
+        # the kernel's plan: nonzero terms of every constant product, the joints' angle
+        # columns, scalings and offsets as arrays (all joints' angles in one batch)
+        self._t_terms = tuple(_terms(jt.t) for jt in joints)
+        # W <- W @ C: None where C is the identity (exactly: W is unchanged)
+        self._C_terms = tuple(
+            None if np.array_equal(jt.C, np.eye(3)) else tuple(_terms(jt.C[:, a]) for a in range(3))
+            for jt in joints
+        )
+        self._tip_terms = _terms(self._tip_t)
+        self._theta_column = np.array([jt.column for jt in joints], dtype=np.int64)
+        self._scaled = tuple(i for i, jt in enumerate(joints) if jt.scaling != 1.0)
+        self._offset = tuple(i for i, jt in enumerate(joints) if jt.offset)
         self._packed = (
             np.array([jt.C for jt in joints]).reshape(-1, 3, 3),
             np.array([jt.t for jt in joints]).reshape(-1, 3),
@@ -227,41 +265,83 @@ class FingerChain:
             ``J`` ``(3, k, N)`` [m/rad] or None.
         """
         n = qT.shape[1]
+        p, cols, J = self._kernel(qT, want_jacobian, fast_trig)
+        W = np.empty((3, 3, n))
+        for a in range(3):
+            W[:, a] = cols[a]
+        return p, W, J
+
+    def tip_soa(
+        self, qT: np.ndarray, want_jacobian: bool, fast_trig: bool = False
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`forward_soa` without ``W``: ``p`` ``(3, N)`` and ``J`` ``(3, k, N)`` or
+        None, the same bits (internal; the batched IK's kernel)."""
+        p, _, J = self._kernel(qT, want_jacobian, fast_trig)
+        return p, J
+
+    def _kernel(
+        self, qT: np.ndarray, want_jacobian: bool, fast_trig: bool
+    ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray | None]:
+        """``p`` ``(3, N)``, the columns of the last ``W'`` (``(3, N)`` or ``(3, 1)``
+        each, read-only) and ``J`` or None.
+
+        The operations on each point's numbers are those of the kernel in the module
+        docstring, term by term in a fixed order; products with constants skip exact
+        terms (zero coefficients, unit factors) and a column that a constant product
+        only moves is not copied. The first joint's constants broadcast over the
+        points, and all joints' angles, cosines and sines are computed in one batch.
+        """
+        n = qT.shape[1]
+        theta = qT[self._theta_column]  # (m, N)
+        for i in self._scaled:
+            jt = self._joints[i]
+            theta[i] = qT[jt.column] * jt.scaling
+        for i in self._offset:
+            theta[i] += self._joints[i].offset
+        if fast_trig:
+            t32 = theta.astype(np.float32)
+            cos = np.cos(t32).astype(np.float64)
+            sin = np.sin(t32).astype(np.float64)
+        else:
+            cos = np.cos(theta)
+            sin = np.sin(theta)
         axes = []
         origins = []
-        for i, jt in enumerate(self._joints):
-            if i == 0:  # W = I: o = t, W = C (exactly what the products give)
-                o = np.repeat(jt.t[:, None], n, axis=1)
-                W = np.repeat(jt.C[:, :, None], n, axis=2)
-            else:
-                cols = [W[:, 0], W[:, 1], W[:, 2]]
-                o = o + _combine(jt.t, cols, np.empty((3, n)))  # o += W @ t, per point
-                # W <- W @ C  (W[:, b] is column b, shape (3, N))
-                W_new = np.empty_like(W)
-                for a in range(3):
-                    _combine(jt.C[:, a], cols, W_new[:, a])
-                W = W_new
-            theta = qT[jt.column] * jt.scaling if jt.scaling != 1.0 else qT[jt.column]
-            if jt.offset:
-                theta = theta + jt.offset
-            if fast_trig:
-                t32 = theta.astype(np.float32)
-                c = np.cos(t32).astype(np.float64)
-                s = np.sin(t32).astype(np.float64)
-            else:
-                c = np.cos(theta)
-                s = np.sin(theta)
-            m0 = W[:, 0].copy()
-            m1 = W[:, 1].copy()
-            W[:, 0] = c * m0 + s * m1  # column 0 of W Rz(theta)
-            W[:, 1] = c * m1 - s * m0  # column 1
+        first = self._joints[0]
+        o = first.t[:, None]  # W = I: o = t, W = C (exactly what the products give)
+        cols = [first.C[:, 0, None], first.C[:, 1, None], first.C[:, 2, None]]
+        for i in range(len(self._joints)):
+            if i:
+                d = _linear(self._t_terms[i], cols)  # o += W @ t, per point
+                o = o + (0.0 if d is None else d)
+                C_terms = self._C_terms[i]
+                if C_terms is not None:  # W <- W @ C (a rotation has no zero column)
+                    cols = [cast(np.ndarray, _linear(terms, cols)) for terms in C_terms]
+            c, s = cos[i], sin[i]
+            w0 = c * cols[0]  # column 0 of W Rz(theta): c m0 + s m1
+            w0 += s * cols[1]
+            w1 = c * cols[1]  # column 1: c m1 - s m0
+            w1 -= s * cols[0]
+            cols = [w0, w1, cols[2]]
             if want_jacobian:
-                axes.append(W[:, 2])
+                axes.append(cols[2])
                 origins.append(o)
-        p = o + _combine(self._tip_t, [W[:, 0], W[:, 1], W[:, 2]], np.empty((3, n)))
+        d = _linear(self._tip_terms, cols)
+        p = o + (0.0 if d is None else d)
+        if p.shape[1] != n:  # a single joint and a tip on its axis
+            p = np.repeat(p, n, axis=1)
         if not want_jacobian:
-            return p, W, None
-        J = np.zeros((3, self.k, n))
+            return p, cols, None
+        if n <= _FEW_POINTS:
+            return p, cols, self._jacobian_few(p, axes, origins)
+        return p, cols, self._jacobian_loop(p, axes, origins)
+
+    def _jacobian_loop(
+        self, p: np.ndarray, axes: list[np.ndarray], origins: list[np.ndarray]
+    ) -> np.ndarray:
+        """The Jacobian ``(3, k, N)`` of :meth:`_kernel`: joint by joint, component by
+        component, ``z x (p - o)`` (times the mimic scaling) added to its column."""
+        J = np.zeros((3, self.k, p.shape[1]))
         for jt, z, oj in zip(self._joints, axes, origins, strict=True):
             r = p - oj
             col = J[:, jt.column]
@@ -274,7 +354,30 @@ class FingerChain:
                 col[0] += f * (z[1] * r[2] - z[2] * r[1])
                 col[1] += f * (z[2] * r[0] - z[0] * r[2])
                 col[2] += f * (z[0] * r[1] - z[1] * r[0])
-        return p, W, J
+        return J
+
+    def _jacobian_few(
+        self, p: np.ndarray, axes: list[np.ndarray], origins: list[np.ndarray]
+    ) -> np.ndarray:
+        """The Jacobian ``(3, k, N)`` of :meth:`_kernel` for few points: every joint's
+        ``z x (p - o)`` in one batch, on rows extended cyclically (row 3 = row 0, row 4
+        = row 1) so that the rotated rows are slices. The same products and
+        differences per point as the loop over joints, in fewer numpy calls."""
+        m, n = len(axes), p.shape[1]
+        Z = np.empty((m, 5, n))
+        R = np.empty((m, 5, n))
+        for j, (z, o) in enumerate(zip(axes, origins, strict=True)):
+            Z[j, :3] = z
+            R[j, :3] = o
+        Z[:, 3:] = Z[:, :2]
+        R[:, 3:] = R[:, :2]
+        np.subtract(np.concatenate([p, p[:2]]), R, out=R)  # r = p - o
+        X = Z[:, 1:4] * R[:, 2:5]  # (z1 r2, z2 r0, z0 r1) - (z2 r1, z0 r2, z1 r0)
+        X -= Z[:, 2:5] * R[:, 1:4]
+        J = np.zeros((3, self.k, n))
+        for j, jt in enumerate(self._joints):
+            J[:, jt.column] += X[j] if jt.scaling == 1.0 else jt.scaling * X[j]
+        return J
 
     def _forward(self, q: np.ndarray, want_jacobian: bool):
         p, W, J = self.forward_soa(np.ascontiguousarray(q.T), want_jacobian)
