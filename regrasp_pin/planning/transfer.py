@@ -189,10 +189,10 @@ def plan_transfer(
             return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
         last = failure
     slowest: PlanningError | None = None  # the velocity failure a stretch fixes soonest
-    for _, q, exc in sorted(too_fast, key=lambda c: (_over_speed(c[2]), c[0])):
+    for _, q, speed_error in sorted(too_fast, key=lambda c: (_over_speed(c[2]), c[0])):
         failure, _, _ = coal_failure(q)
         if failure is None:
-            slowest = exc
+            slowest = speed_error
             break
         last = failure
     if slowest is not None:

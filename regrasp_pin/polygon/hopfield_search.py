@@ -506,10 +506,13 @@ def competitive_hopfield(
     trials = positive_int(trials, "trials", 0)
     block = positive_int(default_block(n, m, closed) if block is None else block, "block", 0)
     anneals = positive_int(anneals, "anneals", 0)
-    if points is None:
-        points = np.arange(n, dtype=float)[:, None] * np.array([[1.0, 0.0]])
+    pts = (
+        np.arange(n, dtype=float)[:, None] * np.array([[1.0, 0.0]])
+        if points is None
+        else np.asarray(points, dtype=float)
+    )
     if initial is None:
-        initial = initial_state(points, m, closed=closed)
+        initial = initial_state(pts, m, closed=closed)
     HT = np.ascontiguousarray(H.T)
     if plain is None:
         plain = run_from(H, HT, check_state(initial, n, closed), closed, MAX_SWEEPS)
@@ -528,7 +531,7 @@ def competitive_hopfield(
                 best_s, best_e = s2, e2
         history.append(best_e)
 
-    for start in _starts(H, HT, plain.indices, points, closed, trials, block, memo):
+    for start in _starts(H, HT, plain.indices, pts, closed, trials, block, memo):
         consider(start)
     rng = np.random.default_rng(seed)
     free = np.arange(m) if closed else np.arange(1, m - 1)
