@@ -260,3 +260,25 @@ def test_an_unknown_route_is_an_input_error_naming_it(scenes):
     with pytest.raises(InputError) as info:
         scene.plan(i_p, i_q, route="air")
     assert info.value.argument == "route" and "joint-space" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("scene_name", "case"), [("edge-moving", CASES[5]), ("upright-moving", CASES[3])]
+)
+def test_joint_velocities_are_continuous_where_the_transfer_meets_the_lift_and_approach(
+    scenes, scene_name, case
+):
+    # the lift and the approach follow the turning object, so the finger moves there;
+    # the transfer must leave and arrive at those velocities, not at rest: the
+    # finite-difference velocity changes across each junction by no more than
+    # one step's worth of the smooth motion's change (a step would be ~100 %)
+    moved = transfer(scenes[scene_name], case[1], case[2])
+    t, q = moved.times_s, moved.q
+    tau = (t - t[0]) / (t[-1] - t[0])
+    i_a = int(np.flatnonzero(tau <= LIFT_FRACTION + 1e-12)[-1])
+    i_b = int(np.flatnonzero(tau >= 1.0 - LIFT_FRACTION - 1e-12)[0])
+    v = np.diff(q, axis=0) / np.diff(t)[:, None]
+    for i in (i_a, i_b):
+        following = np.linalg.norm(v[i - 1])
+        assert following > 0.05  # the object turns at 10 deg/s: the finger moves
+        assert np.linalg.norm(v[i] - v[i - 1]) <= 0.2 * following

@@ -12,7 +12,9 @@ release and a join take (:mod:`.release`, :mod:`.join`):
 2. *transfer*: a move in the finger's joint space to the configuration above Q, through
    a via configuration whose fingertip is raised away from the object (none: a straight
    move), shape-preserving (PCHIP) through the three configurations, minimum-jerk in
-   time;
+   time, plus a drift that fades in and out (zero at both ends) so that the joint
+   velocities are continuous with the lift's and the approach's, which follow the
+   moving object;
 3. *approach*: over the last ``LIFT_FRACTION`` the fingertip comes down along Q's
    normal and touches Q at the landing time.
 
@@ -146,6 +148,8 @@ def plan_transfer(
     q_a, q_b = q_lift[-1], q_app[0]
     mid = times[i_a : i_b + 1]
     s = minimum_jerk((mid - mid[0]) / (mid[-1] - mid[0]))
+    drift = _drift(mid, (q_lift[-1] - q_lift[-2]) / (times[i_a] - times[i_a - 1]),
+                   (q_app[1] - q_app[0]) / (times[i_b + 1] - times[i_b]))  # fmt: skip
     required = np.where(lift | land, 0.0, clearance_m)
     required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
     paths = []
@@ -156,7 +160,7 @@ def plan_transfer(
             if via is None
             else PchipInterpolator([0.0, 0.5, 1.0], np.stack([q_a, via, q_b]), axis=0)
         )
-        paths.append((height, np.vstack([q_lift[:-1], path(s), q_app[1:]])))
+        paths.append((height, np.vstack([q_lift[:-1], path(s) + drift, q_app[1:]])))
 
     def coal_failure(q: np.ndarray) -> tuple[PlanningError | None, VerificationReport, np.ndarray]:
         q_full = np.array(q_hand(times), dtype=float)
@@ -253,6 +257,17 @@ def _transfer(
 
 def _over_speed(exc: PlanningError) -> float:
     return float(exc.measured or np.inf) / float(exc.required or 1.0)
+
+
+def _drift(times: np.ndarray, v_from: np.ndarray, v_to: np.ndarray) -> np.ndarray:
+    """``(S, k)`` joint offsets over the transfer's ``times`` ``(S,)`` [s] that are zero
+    at both ends and start at velocity ``v_from`` and end at ``v_to`` ``(k,)`` [rad/s]
+    (cubic Hermite velocity bases). Added to the minimum-jerk move, which starts and ends
+    at rest, they make the joint velocities continuous with the lift and the approach,
+    which follow the moving object."""
+    span = float(times[-1] - times[0])
+    u = (times - times[0]) / span
+    return span * (np.outer(u * (1.0 - u) ** 2, v_from) + np.outer(u**2 * (u - 1.0), v_to))
 
 
 def _along_normal(
