@@ -42,7 +42,12 @@ from regrasp_pin.grasp.choice import (
 )
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.manifold import Manifold, build_manifold
-from regrasp_pin.grasp.quality import ferrari_canny_epsilon, is_force_closure
+from regrasp_pin.grasp.quality import (
+    EPSILON_RTOL,
+    FORCE_CLOSURE_TOL,
+    ferrari_canny_epsilon,
+    is_force_closure,
+)
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
@@ -332,7 +337,7 @@ def _removable(other_p, other_n, p, n, scale_m):
             n_edges=SCREEN_EDGES,
             torque_scale_m=scale_m,
         )
-        > 0
+        > FORCE_CLOSURE_TOL
         for w in range(k)
     )
 
@@ -375,7 +380,7 @@ def _brute_force_q(hand, box, manifold, sample, ka, P, n_P, others, contact=CONT
     passing = []
     for rank, (neg_exit, _, _, i) in enumerate(rows):
         e = eps(sample.points[i], sample.normals[i])
-        if e <= 0:
+        if e <= FORCE_CLOSURE_TOL:
             continue
         q_i, T_i = manifold.q[ka, i], manifold.T_palm_object[ka]
         if _link_distance(hand, name, box, q_i, T_i) < contact.choice_link_clearance_m:
@@ -393,8 +398,9 @@ def _window_choice(passing, counts, eps_P, most):
     and keeps the quality): most fingers that could let go, then quality kept, then rank."""
     window = []
     for c, r in zip(passing, counts, strict=True):
-        window.append((r, c[3] >= eps_P, -c[0], c))
-        if (r == most and c[3] >= eps_P) or len(window) == 4:
+        kept = c[3] >= eps_P - EPSILON_RTOL * max(abs(eps_P), 1e-12)  # equal counts as kept
+        window.append((r, kept, -c[0], c))
+        if (r == most and kept) or len(window) == 4:
             break
     return max(window, key=lambda w: w[:3])[3] if window else None
 
@@ -456,7 +462,7 @@ def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
     assert q.distance_from_P_m == pytest.approx(np.linalg.norm(sample.points[i] - P))
     assert q.epsilon == pytest.approx(e) and q.epsilon > 0
     assert q.epsilon_with_P == pytest.approx(eps_P)
-    assert q.quality_kept == (q.epsilon >= eps_P)
+    assert q.quality_kept == (q.epsilon >= eps_P - EPSILON_RTOL * max(abs(eps_P), 1e-12))
     assert q.margin_rad >= CONTACT.choice_margin_rad
     # Q is far enough from every other contact
     for p_other, _ in others.values():

@@ -172,3 +172,18 @@ def test_bad_input():
         with pytest.raises(InputError) as info:
             ferrari_canny_epsilon(**kw)
         assert info.value.argument == argument
+
+
+def test_kept_quality_counts_equal_epsilons_as_kept_whatever_their_last_bits():
+    from regrasp_pin.grasp.quality import EPSILON_RTOL, kept_quality
+
+    # a hull facet set by the same contacts comes out 1-2 ulp apart (seen: 0x1.57c3e9b570750p-3
+    # and ...751p-3 for one grasp under two BLAS kernels): both orders count as kept
+    a = float.fromhex("0x1.57c3e9b570750p-3")
+    b = float.fromhex("0x1.57c3e9b570751p-3")
+    assert kept_quality(a, b) and kept_quality(b, a)
+    # a real loss of quality is not kept; a gain is
+    assert not kept_quality(a * (1.0 - 10 * EPSILON_RTOL), a)
+    assert kept_quality(a * 1.01, a)
+    # at zero quality (a grasp not in force closure) only a non-negative one keeps it
+    assert kept_quality(0.0, 0.0) and not kept_quality(-1e-6, 0.0)

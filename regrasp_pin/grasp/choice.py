@@ -33,7 +33,7 @@ from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
 from .manifold import Manifold
 from .necessity import MustHold
-from .quality import ferrari_canny_epsilon
+from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon, kept_quality
 
 __all__ = [
     "Grasp",
@@ -44,6 +44,9 @@ __all__ = [
 ]
 
 SCREEN_EDGES = 6  # friction-cone edges used when screening candidates
+#: grasp scores within this relative tolerance tie (the first found is kept): scores
+#: sum epsilons whose last bits follow the rounding of the hull computation
+SCORE_RTOL = 1e-9
 #: initial_grasp measures finger gaps over the first this many seconds [s]
 GAP_HORIZON_S = 1.0
 _REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
@@ -287,7 +290,9 @@ class _Ranking:
         if self.exit_tolerance_s > 0:
             # exit times within the tolerance of each other count as ties; among them the
             # shorter move first (a short move is less likely to cross another finger)
-            bins = np.floor((t_exit.max() - t_exit) / self.exit_tolerance_s)
+            # (on the 1e-9 lattice too: grid times carry float noise, e.g. 4.800000000000001,
+            # and a ratio of exactly 2.0 must not fall into bin 1 or 2 by one ulp)
+            bins = np.floor(np.round((t_exit.max() - t_exit) / self.exit_tolerance_s, 9))
             return np.lexsort((self.idx, -margin_key, dist_key, bins))
         # (b), then margin, then distance; a point usable to the end outlasts one that
         # leaves at the last grid time (both have exit time times_s[-1])
@@ -338,7 +343,7 @@ class _Screen:
 
     def rejection(self, i: int, e: float) -> str | None:
         """Why sample point ``i`` (epsilon ``e`` with the others) is refused, or None."""
-        if e <= 0.0:
+        if e <= FORCE_CLOSURE_TOL:
             return "force closure"
         q_i = self.manifold.q[self.ka, i]
         if self.link_clear is not None:
@@ -365,7 +370,7 @@ class _Screen:
             self.scale,
             range(k),
         )
-        return sum(e > 0.0 for e in loo)
+        return sum(e > FORCE_CLOSURE_TOL for e in loo)
 
     def first(
         self, order: np.ndarray, ranked: _Ranking, P_object: np.ndarray, n_P_object: np.ndarray
@@ -397,7 +402,7 @@ class _Screen:
                 distance_from_P_m=float(ranked.dist[j]),
                 epsilon=float(e),
                 epsilon_with_P=float(eps_P),
-                quality_kept=bool(e >= eps_P),
+                quality_kept=kept_quality(e, eps_P),
                 n_candidates=int(idx.size),
                 rank=position,
             )
@@ -592,11 +597,11 @@ def _grasp_score(
     the epsilon. Epsilons come from ``epsilons`` if given (the same values)."""
     eps = epsilons or _ScreeningEpsilons(mu, scale_m)
     e = eps(p, n)
-    if e <= 0:
+    if e <= FORCE_CLOSURE_TOL:
         return None
     F = p.shape[0]
     loo = _leave_one_out(p, n, mu, scale_m, range(F), eps) if F > 3 else []
-    removable = [x for x in loo if x > 0]
+    removable = [x for x in loo if x > FORCE_CLOSURE_TOL]
     score = (
         len(removable)
         + (min(removable) / (min(removable) + 0.05) if removable else 0.0)
@@ -703,7 +708,7 @@ def initial_grasp(
         if scored is None:
             continue
         score, e = scored
-        if score > best_score:
+        if best is None or score > best_score + SCORE_RTOL * max(1.0, abs(best_score)):
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
                 search.refused += 1

@@ -32,9 +32,12 @@ from scipy.spatial import ConvexHull, QhullError
 from .._validate import as_array, positive, positive_int
 from ..exceptions import InputError
 
-__all__ = ["contact_wrenches", "ferrari_canny_epsilon", "is_force_closure"]
+__all__ = ["contact_wrenches", "ferrari_canny_epsilon", "is_force_closure", "kept_quality"]
 
 FORCE_CLOSURE_TOL = 1e-9  # epsilon above this counts as force closure
+#: epsilons within this relative tolerance are equal: a hull facet set by the same
+#: contacts comes out 1-2 ulp apart when its wrenches were rounded differently
+EPSILON_RTOL = 1e-9
 _NORMAL_TOL = 1e-3  # accepted deviation of |n| from 1
 
 
@@ -209,3 +212,10 @@ def _tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t1 = np.cross(n, axis)
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
     return t1, np.cross(n, t1)
+
+
+def kept_quality(epsilon: float, epsilon_before: float) -> bool:
+    """Whether a grasp of quality ``epsilon`` keeps the quality ``epsilon_before``
+    (Ferrari-Canny epsilons): at least as large, within ``EPSILON_RTOL`` (equal in exact
+    arithmetic counts as kept, whatever the last bits)."""
+    return bool(epsilon >= epsilon_before - EPSILON_RTOL * max(abs(epsilon_before), 1e-12))
