@@ -127,7 +127,7 @@ def plan_transfer(
 
     Raises:
         PlanningError: the lift or the approach is out of reach (``ik-unreachable``),
-            no via passes the Coal check within the velocity limits: ``velocity`` if
+            or no via passes the Coal check within the velocity limits: ``velocity`` if
             one that is too fast passes its geometry (the least too fast: a longer
             duration may let it pass), else the kind, measured and required values
             of the last Coal failure.
@@ -148,8 +148,9 @@ def plan_transfer(
     q_a, q_b = q_lift[-1], q_app[0]
     mid = times[i_a : i_b + 1]
     s = minimum_jerk((mid - mid[0]) / (mid[-1] - mid[0]))
-    drift = _drift(mid, (q_lift[-1] - q_lift[-2]) / (times[i_a] - times[i_a - 1]),
-                   (q_app[1] - q_app[0]) / (times[i_b + 1] - times[i_b]))  # fmt: skip
+    v_lift = (q_lift[-1] - q_lift[-2]) / (times[i_a] - times[i_a - 1])
+    v_approach = (q_app[1] - q_app[0]) / (times[i_b + 1] - times[i_b])
+    drift = _drift(mid, v_lift, v_approach)
     required = np.where(lift | land, 0.0, clearance_m)
     required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
     paths = []
@@ -162,8 +163,10 @@ def plan_transfer(
         )
         paths.append((height, np.vstack([q_lift[:-1], path(s) + drift, q_app[1:]])))
 
+    q_others = np.array(q_hand(times), dtype=float)  # the same for every via
+
     def coal_failure(q: np.ndarray) -> tuple[PlanningError | None, VerificationReport, np.ndarray]:
-        q_full = np.array(q_hand(times), dtype=float)
+        q_full = q_others.copy()
         q_full[:, f.q_indices] = q
         report = verify_finger_motion(
             hand,
