@@ -14,6 +14,7 @@ from regrasp_pin.planning.timing import (
     minimum_jerk,
     next_duration,
     stretched_duration,
+    velocity_blend,
 )
 
 
@@ -94,3 +95,21 @@ def test_next_duration_without_a_trend_falls_back_to_time_scaling():
     # the second try was no slower: nothing to extrapolate, scale the last one
     tried = [(0.3, 1.2), (0.4, 1.3)]
     assert next_duration(tried, dt_s=0.01) == stretched_duration(0.4, 1.3, dt_s=0.01)
+
+
+def test_velocity_blend_is_zero_at_both_ends_with_the_given_end_velocities():
+    rng = np.random.default_rng(3)
+    times = np.linspace(0.2, 0.7, 50001)
+    v_from, v_to = rng.normal(size=3), rng.normal(size=3)
+    d = velocity_blend(times, v_from, v_to)
+    assert_close = np.testing.assert_allclose
+    assert_close(d[0], 0.0, atol=1e-15)
+    assert_close(d[-1], 0.0, atol=1e-15)
+    # finite differences at the ends give the requested velocities
+    h = times[1] - times[0]
+    assert_close((d[1] - d[0]) / h, v_from, rtol=1e-3, atol=1e-6)
+    assert_close((d[-1] - d[-2]) / h, v_to, rtol=1e-3, atol=1e-6)
+    # added to a move at rest at both ends, the sum starts and ends at those velocities
+    move = minimum_jerk((times - times[0]) / 0.5)[:, None] * np.ones(3)
+    total = move + d
+    assert_close((total[1] - total[0]) / h, v_from, rtol=1e-3, atol=1e-6)

@@ -26,6 +26,7 @@ __all__ = [
     "minimum_jerk",
     "next_duration",
     "stretched_duration",
+    "velocity_blend",
 ]
 
 MJ_PEAK = 1.875  # peak / mean speed of the minimum-jerk profile
@@ -134,3 +135,14 @@ def check_joint_speed(
             measured=float(vel[i, j]),
             required=float(velocity_limit[j]),
         )
+
+
+def velocity_blend(times: np.ndarray, v_from: np.ndarray, v_to: np.ndarray) -> np.ndarray:
+    """``(S, k)`` joint offsets [rad] over a move's ``times`` ``(S,)`` [s] that are zero
+    at both ends, start at velocity ``v_from`` and end at ``v_to`` ``(k,)`` [rad/s]
+    (cubic Hermite velocity bases). Added to a minimum-jerk move, which starts and ends
+    at rest, they make the joint velocities continuous with what comes before and after
+    (a finger following the moving object)."""
+    span = float(times[-1] - times[0])
+    u = (times - times[0]) / span
+    return span * (np.outer(u * (1.0 - u) ** 2, v_from) + np.outer(u**2 * (u - 1.0), v_to))

@@ -41,7 +41,7 @@ from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..verify.finger_motion import VerificationReport, verify_finger_motion
-from .timing import check_joint_speed, minimum_jerk
+from .timing import check_joint_speed, minimum_jerk, velocity_blend
 
 __all__ = ["LIFT_FRACTION", "VIA_HEIGHTS", "Transfer", "plan_transfer"]
 
@@ -150,7 +150,7 @@ def plan_transfer(
     s = minimum_jerk((mid - mid[0]) / (mid[-1] - mid[0]))
     v_lift = (q_lift[-1] - q_lift[-2]) / (times[i_a] - times[i_a - 1])
     v_approach = (q_app[1] - q_app[0]) / (times[i_b + 1] - times[i_b])
-    drift = _drift(mid, v_lift, v_approach)
+    drift = velocity_blend(mid, v_lift, v_approach)
     required = np.where(lift | land, 0.0, clearance_m)
     required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
     paths = []
@@ -260,17 +260,6 @@ def _transfer(
 
 def _over_speed(exc: PlanningError) -> float:
     return float(exc.measured or np.inf) / float(exc.required or 1.0)
-
-
-def _drift(times: np.ndarray, v_from: np.ndarray, v_to: np.ndarray) -> np.ndarray:
-    """``(S, k)`` joint offsets over the transfer's ``times`` ``(S,)`` [s] that are zero
-    at both ends and start at velocity ``v_from`` and end at ``v_to`` ``(k,)`` [rad/s]
-    (cubic Hermite velocity bases). Added to the minimum-jerk move, which starts and ends
-    at rest, they make the joint velocities continuous with the lift and the approach,
-    which follow the moving object."""
-    span = float(times[-1] - times[0])
-    u = (times - times[0]) / span
-    return span * (np.outer(u * (1.0 - u) ** 2, v_from) + np.outer(u**2 * (u - 1.0), v_to))
 
 
 def _along_normal(
