@@ -282,3 +282,11 @@ def test_joint_velocities_are_continuous_where_the_transfer_meets_the_lift_and_a
         following = np.linalg.norm(v[i - 1])
         assert following > 0.05  # the object turns at 10 deg/s: the finger moves
         assert np.linalg.norm(v[i] - v[i - 1]) <= 0.2 * following
+
+
+def test_a_landing_seed_of_the_wrong_shape_is_an_input_error_naming_it(scenes):
+    scene = scenes["edge-moving"]
+    i_p, i_q = (scene.contact(c) for c in CASES[5][1:])
+    with pytest.raises(InputError) as info:
+        scene.plan(i_p, i_q, q_land=np.zeros(7), route="surface")
+    assert info.value.argument == "q_land"

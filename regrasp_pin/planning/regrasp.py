@@ -303,6 +303,7 @@ def plan_regrasp(
     nP = as_array(n_P_object, "n_P_object", (3,))
     nQ = as_array(n_Q_object, "n_Q_object", (3,))
     q0 = as_array(q_start, "q_start", (f.k,))
+    q_seed = q0 if q_land is None else as_array(q_land, "q_land", (f.k,))
     if not np.isfinite(t_start):
         raise InputError("t_start", f"{t_start!r} is not finite", "a time within the motion [s]")
     t_end = float(t_start) + params.duration_s
@@ -344,7 +345,6 @@ def plan_regrasp(
     if route == "joint-space" or (
         route == "auto" and last is not None and last.kind not in CALLER_KINDS
     ):
-        q_seed = q0 if q_land is None else as_array(q_land, "q_land", (f.k,))
         try:
             moved = plan_transfer(
                 hand,
