@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 from test_planning_regrasp import (
     CASES,
+    EDGE,
     FINGER,
     PENETRATION_TOL_M,
+    UPRIGHT,
     CoalCheck,
     Scene,
     dense,
@@ -45,8 +47,6 @@ def checker(hand) -> CoalCheck:
 
 @pytest.fixture(scope="module")
 def scenes(hand) -> dict[str, Scene]:
-    from test_planning_regrasp import EDGE, UPRIGHT
-
     return {
         "upright-moving": Scene(hand, UPRIGHT, 10.0),
         "edge-static": Scene(hand, EDGE, 0.0, 0.1, 0.001),

@@ -27,7 +27,7 @@ from ..model.clearance import LinkClearance
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
-from ..verify.finger_motion import verify_finger_motion
+from ..verify.finger_motion import VerificationReport, verify_finger_motion
 from .timing import check_joint_speed, duration_for_move, minimum_jerk
 
 __all__ = ["Release", "plan_release", "verify_or_raise"]
@@ -192,15 +192,15 @@ def verify_or_raise(
     q_full: np.ndarray,
     T_palm_object: np.ndarray,
     **clearances: Any,
-) -> None:
+) -> VerificationReport:
     """Check a finger's motion with :func:`~regrasp_pin.verify.finger_motion.
-    verify_finger_motion` (``clearances``: its clearance keywords) and raise a
-    PlanningError of the worst failure's kind (``joint-limit`` if only a joint left
-    its limits), with its distance and the required one [m]; ``what`` names the motion
-    in the message."""
+    verify_finger_motion` (``clearances``: its clearance keywords) and return the
+    report if it passes; else raise a PlanningError of the worst failure's kind
+    (``joint-limit`` if only a joint left its limits), with its distance and the
+    required one [m]; ``what`` names the motion in the message."""
     report = verify_finger_motion(hand, obj, finger, times, q_full, T_palm_object, **clearances)
     if report.ok:
-        return
+        return report
     worst = report.worst_failure
     raise PlanningError(
         f"{what} fails the Coal check"

@@ -40,7 +40,8 @@ from ..model.clearance import LinkClearance
 from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
-from ..verify.finger_motion import VerificationReport, verify_finger_motion
+from ..verify.finger_motion import VerificationReport
+from .release import verify_or_raise
 from .timing import check_joint_speed, minimum_jerk, velocity_blend
 
 __all__ = ["LIFT_FRACTION", "VIA_HEIGHTS", "Transfer", "plan_transfer"]
@@ -165,21 +166,27 @@ def plan_transfer(
 
     q_others = np.array(q_hand(times), dtype=float)  # the same for every via
 
-    def coal_failure(q: np.ndarray) -> tuple[PlanningError | None, VerificationReport, np.ndarray]:
+    def coal_failure(
+        q: np.ndarray,
+    ) -> tuple[PlanningError | None, VerificationReport | None, np.ndarray]:
         q_full = q_others.copy()
         q_full[:, f.q_indices] = q
-        report = verify_finger_motion(
-            hand,
-            obj,
-            finger,
-            times,
-            q_full,
-            T,
-            tip_clearance_m=required,
-            link_clearance_m=np.maximum(required, link_clearance_m),
-            finger_clearance_m=finger_clearance_m,
-        )
-        return (None if report.ok else _coal_error(finger, report)), report, q_full
+        try:
+            report = verify_or_raise(
+                "the joint-space transfer",
+                hand,
+                obj,
+                finger,
+                times,
+                q_full,
+                T,
+                tip_clearance_m=required,
+                link_clearance_m=np.maximum(required, link_clearance_m),
+                finger_clearance_m=finger_clearance_m,
+            )
+        except PlanningError as exc:
+            return exc, None, q_full
+        return None, report, q_full
 
     # within the velocity limits first; the others only if none of those passes, and
     # then only their geometry decides whether a velocity failure is reported
@@ -192,7 +199,7 @@ def plan_transfer(
             too_fast.append((height, q, exc))
             continue
         failure, report, q_full = coal_failure(q)
-        if failure is None:
+        if report is not None:
             return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
         last = failure
     slowest: PlanningError | None = None  # the velocity failure a stretch fixes soonest
@@ -206,20 +213,6 @@ def plan_transfer(
         raise slowest
     assert last is not None  # VIA_HEIGHTS is not empty
     raise last
-
-
-def _coal_error(finger: str, report: VerificationReport) -> PlanningError:
-    """The typed failure of a transfer that fails the Coal check (its worst failure)."""
-    worst = report.worst_failure
-    return PlanningError(
-        "the joint-space transfer fails the Coal check"
-        + ("" if worst is None else f" ({worst.describe()})"),
-        finger=finger,
-        time_s=report.time_s,
-        kind=FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind,
-        measured=None if worst is None else worst.value,
-        required=None if worst is None else worst.required,
-    )
 
 
 def _transfer(
