@@ -524,11 +524,11 @@ def test_q_lets_more_fingers_go_among_the_first_that_pass():
     idx = np.array([low, high])
     ranked = _Ranking(np.ones(2), np.full(2, 0.2), np.zeros(2), idx, 0.0)
     P = np.array([0.0, 0.0, 0.02])  # the contact let go, on the top face
-    chosen = screen.first(np.array([0, 1]), ranked, P, np.array([0.0, 0.0, 1.0]))
+    chosen = screen.first(np.array([0, 1]), ranked, P, np.array([0.0, 0.0, 1.0]), 60)
     assert chosen.index == high and chosen.rank == 1  # taken from second place
     # outside the window of passing candidates the rank decides
     screen.window = 1
-    assert screen.first(np.array([0, 1]), ranked, P, np.array([0.0, 0.0, 1.0])).index == low
+    assert screen.first(np.array([0, 1]), ranked, P, np.array([0.0, 0.0, 1.0]), 60).index == low
 
 
 def test_q_skips_candidates_whose_links_touch(five):
@@ -565,6 +565,14 @@ def test_q_skips_candidates_whose_links_touch(five):
     (rank, i, _, _), _, _, _ = _brute_force_q(hand, box, m, sample, ka, P, n_P, others, strict)
     assert q.rank == rank >= 1 and q.index == i
     assert _link_distance(hand, finger, box, q.q_arrive, m.T_palm_object[ka]) > d_first
+    # candidates whose links touch do not use up the checks: one check is enough when
+    # the first candidate whose links clear the object passes the other tests
+    lean = dataclasses.replace(CONTACT, choice_link_clearance_m=d_first + 1e-4)
+    kwargs = dict(P_object=P, n_P_object=n_P, others=others, contact=lean, mu=MU)
+    first_clear = choose_new_contact(
+        hand, box, m, sample, t_arrive, min_separation_m=SEP_M, max_checks=1, **kwargs
+    )
+    assert first_clear.index == q.index
 
 
 def test_ties_within_an_exit_tolerance_prefer_the_shorter_move(five):
@@ -608,11 +616,21 @@ def test_no_feasible_q_names_the_finger_and_time(five):
             contact=impossible,
         )
     assert e.value.finger == "middle" and e.value.time_s == pytest.approx(1.5)
-    # alone on the object, no candidate is in force closure
-    with pytest.raises(ContactError, match="finger 'middle'.*force closure"):
+    # alone on the object, no candidate is in force closure (links not tested: they
+    # are tested first and would reject some candidates before their force closure)
+    with pytest.raises(ContactError, match="finger 'middle'.*force closure") as e:
         choose_new_contact(
-            hand, box, manifolds["middle"], sample, 1.5, P_object=P, n_P_object=n_P, others={}
+            hand,
+            box,
+            manifolds["middle"],
+            sample,
+            1.5,
+            P_object=P,
+            n_P_object=n_P,
+            others={},
+            link_check=False,
         )
+    assert e.value.kind == FailureKind.FORCE_CLOSURE
 
 
 @pytest.mark.parametrize("t_arrive", [np.nan, -0.5, 3.5])

@@ -50,6 +50,7 @@ SCORE_RTOL = 1e-9
 #: initial_grasp measures finger gaps over the first this many seconds [s]
 GAP_HORIZON_S = 1.0
 _REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
+_LINK_BATCH = 64  # candidates whose link clearance is measured at once (Coal)
 
 
 @dataclass(frozen=True)
@@ -152,7 +153,9 @@ def choose_new_contact(
             ``2 * tip_radius + 1 mm``.
         link_check: Check with Coal that no other link of the finger touches the
             object at arrival.
-        max_checks: Most candidates given the (slower) quality and Coal tests.
+        max_checks: Most candidates given the (slower) quality and finger-clearance
+            tests, among those whose links clear the object at arrival (tested in
+            batches, in the order of the ranking, until enough pass).
         exclude_radius_m: Candidates closer than this to P (and to each of
             ``exclude_points_object``) are ignored [m].
         exclude_points_object: ``(E, 3)`` points to stay away from (e.g. contacts
@@ -244,7 +247,7 @@ def choose_new_contact(
         q_hand_arrive,
         finger_clearance_m,
     )
-    return screen.first(order[:max_checks], ranked, P_object, n_P_object)
+    return screen.first(order, ranked, P_object, n_P_object, max_checks)
 
 
 def _arrival_indices(manifold: Manifold, t_arrive_s: float) -> tuple[int, int]:
@@ -341,15 +344,20 @@ class _Screen:
             torque_scale_m=self.scale,
         )
 
+    def links_clear(self, points: np.ndarray) -> np.ndarray:
+        """``(C,)`` bool: the finger at the sample ``points`` keeps its links clear of the
+        object at arrival (all True without the test)."""
+        if self.link_clear is None:
+            return np.ones(points.size, bool)
+        q_full = self.hand.to_full(self.finger.name, self.manifold.q[self.ka, points])
+        return self.link_clear(q_full, self.manifold.T_palm_object[self.ka])
+
     def rejection(self, i: int, e: float) -> str | None:
-        """Why sample point ``i`` (epsilon ``e`` with the others) is refused, or None."""
+        """Why sample point ``i`` (epsilon ``e`` with the others; its links already
+        clear of the object) is refused, or None."""
         if e <= FORCE_CLOSURE_TOL:
             return "force closure"
         q_i = self.manifold.q[self.ka, i]
-        if self.link_clear is not None:
-            q_full = self.hand.to_full(self.finger.name, q_i)
-            if not self.link_clear(q_full[None], self.manifold.T_palm_object[self.ka])[0]:
-                return "link clearance"
         if self.finger_clear is not None:
             q_all = np.array(self.q_hand_arrive, float)
             q_all[self.finger.q_indices] = q_i
@@ -373,17 +381,37 @@ class _Screen:
         return sum(e > FORCE_CLOSURE_TOL for e in loo)
 
     def first(
-        self, order: np.ndarray, ranked: _Ranking, P_object: np.ndarray, n_P_object: np.ndarray
+        self,
+        order: np.ndarray,
+        ranked: _Ranking,
+        P_object: np.ndarray,
+        n_P_object: np.ndarray,
+        max_checks: int,
     ) -> NewContact:
         """Among the first ``self.window`` candidates in ``order`` that pass, the one
         after which most other fingers could let go, then the first that keeps the grasp
         quality of P, then the first; ContactError (the most frequent rejection) if none
-        passes."""
+        passes.
+
+        The link clearance is tested first, in batches of ``_LINK_BATCH`` candidates in
+        order (Coal); at most ``max_checks`` candidates whose links clear the object get
+        the slower tests."""
         pts, normals, idx = self.sample.points, self.sample.normals, ranked.idx
         eps_P = self.eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
         passing: list[tuple[int, bool, int, NewContact]] = []
         best_removable = self.other_p.shape[0] if self.other_p.shape[0] >= 3 else 0
+        clear = np.zeros(order.size, bool)
+        screened = 0
         for position, j in enumerate(order):
+            if screened >= max_checks:
+                break
+            if position % _LINK_BATCH == 0:
+                batch = order[position : position + _LINK_BATCH]
+                clear[position : position + batch.size] = self.links_clear(idx[batch])
+            if not clear[position]:
+                self.rejected["link clearance"] += 1
+                continue
+            screened += 1
             i = int(idx[j])
             e = self.eps(pts[i], normals[i])
             why = self.rejection(i, e)
@@ -412,7 +440,7 @@ class _Screen:
                 break
         if passing:
             return max(passing, key=lambda c: c[:3])[3]
-        raise self.failure(order.size, idx.size)
+        raise self.failure(screened + self.rejected["link clearance"], idx.size)
 
     def failure(self, checked: int, n_candidates: int) -> ContactError:
         """The error when none of ``checked`` candidates passes."""
