@@ -15,8 +15,9 @@ planning times, and every scenario whose outcome changed. Writes ``results.jsonl
 ``skipped.jsonl`` and ``summary.txt`` into ``--out``, with the plans and partial plans.
 
 ``--hand`` picks the hands (bundled names or JSON hand files such as
-``examples/hands/shadow_hand.json``; a hand file's canonical pose is searched once per
-process, :func:`regrasp_pin.scenarios.setup_pose`).
+``examples/hands/shadow_hand.json``; a hand file's canonical pose,
+:func:`regrasp_pin.scenarios.setup_pose`, is searched once, here, and carried by its
+specs as ``base_pose``: the processes that build them do not search it again).
 
 The scenarios run on a local Dask cluster of ``--jobs`` workers, through the same code
 as ``regrasp-pin suite`` (:func:`regrasp_pin.suite.cluster.run_suite`). With more than

@@ -123,6 +123,11 @@ def test_bad_specs_name_the_field():
         ScenarioSpec.from_dict({**d, "colour": "red"})
     with pytest.raises(InputError, match="motion.angle_deg"):
         ScenarioSpec.from_dict({**d, "motion": {**d["motion"], "angle_deg": 0.0}})
+    sheared = np.eye(4)
+    sheared[0, 1] = 0.1
+    for bad in ([1.0] * 15, sheared.ravel().tolist(), [float("nan")] * 16):
+        with pytest.raises(InputError, match="base_pose"):
+            ScenarioSpec.from_dict({**d, "base_pose": bad})
 
 
 def test_random_meshes_are_seeded_convex_objects():
@@ -163,6 +168,25 @@ def test_a_neighbour_builds_the_same_scenario_as_make_scenario():
         assert_close(got.grasp.points_object[n], want.grasp.points_object[n], atol=0.0, what=n)
         assert_close(got.grasp.q[n], want.grasp.q[n], atol=1e-12, what=n)
     assert got.params == want.params
+
+
+def test_a_carried_base_pose_builds_the_scenario_of_the_hands_own():
+    spec = next(s for s in neighbour_specs() if s.hand == "allegro")
+    carried = dataclasses.replace(spec, base_pose=tuple(setup_pose("allegro").ravel()))
+    a, b = build_scenario(spec), build_scenario(carried)
+    assert np.array_equal(a.motion.T_palm_object, b.motion.T_palm_object)
+    for n in a.grasp.points_object:
+        assert np.array_equal(a.grasp.q[n], b.grasp.q[n])
+    # and another pose is another scenario
+    moved = np.reshape(carried.base_pose, (4, 4)).copy()
+    moved[0, 3] += 0.002
+    c = build_scenario(dataclasses.replace(spec, base_pose=tuple(moved.ravel())))
+    assert_close(
+        c.motion.T_palm_object[0, :3, 3] - a.motion.T_palm_object[0, :3, 3],
+        np.array([0.002, 0.0, 0.0]),
+        atol=1e-12,
+        what="start",
+    )
 
 
 def test_a_built_spec_starts_in_force_closure_with_its_offsets():
@@ -323,6 +347,11 @@ def test_hand_files_join_the_suite(tmp_path):
     assert ScenarioSpec.from_dict(json.loads(json.dumps(mixed[1].to_dict()))) == mixed[1]
     neighbours = neighbour_specs(hands=(hand,))
     assert len(neighbours) == 15 and all(s.name.startswith("my_hand-") for s in neighbours)
+    # the hand file's canonical pose travels with its specs (a process that builds one
+    # does not search it again); a bundled hand's is a constant, not carried
+    pose = tuple(setup_pose(hand).ravel())
+    assert all(s.base_pose == pose for s in [*mixed[1::2], *neighbours])
+    assert all(s.base_pose is None for s in mixed[::2])
     with pytest.raises(UnknownNameError):
         generate_specs(2, 0, hands=("shadow",))
     with pytest.raises(InputError):

@@ -85,7 +85,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     h = _hand(spec.hand)
     o = spec.object.build()
     m = spec.motion
-    T0 = setup_pose(spec.hand)
+    T0 = setup_pose(spec.hand) if spec.base_pose is None else np.reshape(spec.base_pose, (4, 4))
     T0[:3, :3] = Rotation.from_rotvec(spec.rotation_offset_rotvec).as_matrix() @ T0[:3, :3]
     T0[:3, 3] = T0[:3, 3] + np.asarray(spec.position_offset_m)
     fingers = setup_fingers(spec.hand)

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from .._validate import as_array, choice, known_fields, positive, positive_int
 from ..exceptions import InputError
 from ..model.objects import Box, ConvexMesh, ConvexObject, Prism
-from ..scenarios import HANDS, hand_label, is_hand_file, setup_objects
+from ..scenarios import HANDS, hand_label, is_hand_file, setup_objects, setup_pose
 
 __all__ = [
     "MAX_DRAWS_PER_SCENARIO",
@@ -214,6 +214,12 @@ class ScenarioSpec:
         grasp_clearance_m: If not None, the initial grasp must keep every finger at
             least this far from the others [m] (checked with Coal, idle fingers at
             their rest posture); None does not check (as make_scenario).
+        base_pose: The hand's canonical object pose ``T_palm_object`` that the offsets
+            move, row-major 4 x 4 (16 numbers, metres); None:
+            :func:`~regrasp_pin.scenarios.setup_pose` of the hand. The generators fill
+            it in for a hand file, whose canonical pose is searched (once per process,
+            tens of seconds): a spec that carries it saves every process that builds
+            it the search.
     """
 
     name: str
@@ -226,6 +232,7 @@ class ScenarioSpec:
     grasp_dt_s: float = 0.05
     grasp_horizon_s: float | None = None
     grasp_clearance_m: float | None = None
+    base_pose: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if not is_hand_file(self.hand):
@@ -248,6 +255,8 @@ class ScenarioSpec:
             positive(self.grasp_horizon_s, "grasp_horizon_s")
         if self.grasp_clearance_m is not None:
             positive(self.grasp_clearance_m, "grasp_clearance_m", allow_zero=True)
+        if self.base_pose is not None:
+            object.__setattr__(self, "base_pose", _pose16(self.base_pose))
 
     def to_dict(self) -> dict[str, Any]:
         """The spec as JSON values (:meth:`from_dict` rebuilds it exactly)."""
@@ -273,6 +282,22 @@ class ScenarioSpec:
                 "motion": MotionSpec(**d["motion"]),
             }
         )
+
+
+def _pose16(value: Any) -> tuple[float, ...]:
+    """``value`` as 16 floats of a rigid transform (row-major 4 x 4); InputError if it
+    is not one (rotation orthonormal to 1e-9, last row 0 0 0 1)."""
+    T = as_array(value, "base_pose", (16,)).reshape(4, 4)
+    R = T[:3, :3]
+    if np.abs(R.T @ R - np.eye(3)).max() > 1e-9 or not np.array_equal(T[3], [0, 0, 0, 1]):
+        raise InputError("base_pose", "is not a rigid transform", "a row-major 4 x 4 pose")
+    return tuple(float(x) for x in T.ravel())
+
+
+def _base_pose_of(hand: str) -> tuple[float, ...] | None:
+    """What a spec of ``hand`` carries as its ``base_pose``: a hand file's canonical
+    pose (searched once per process), None for a bundled hand (a constant)."""
+    return tuple(float(x) for x in setup_pose(hand).ravel()) if is_hand_file(hand) else None
 
 
 def _fields(obj: Any) -> dict[str, Any]:
@@ -356,6 +381,7 @@ def _draw_spec(i: int, seed: int, hands: tuple[str, ...] = HANDS) -> ScenarioSpe
         seed=int(rng.integers(0, 1000)),
         grasp_dt_s=round(grasp_dt, 3),
         grasp_horizon_s=round(horizon, 3) if horizon < motion.duration_s else None,
+        base_pose=_base_pose_of(hand),
     )
 
 
@@ -436,6 +462,7 @@ def neighbour_specs(hands: tuple[str, ...] = HANDS) -> list[ScenarioSpec]:
     contact, no offsets, grasp seed 0, grasp manifolds every 0.05 s (15 specs a hand)."""
     out = []
     for hand in _hands(hands):
+        pose = _base_pose_of(hand)
         p = setup_objects(hand)["hexagon"]().params
         obj = ObjectSpec(
             "prism",
@@ -454,6 +481,7 @@ def neighbour_specs(hands: tuple[str, ...] = HANDS) -> list[ScenarioSpec]:
                         seed=0,
                         grasp_dt_s=0.05,
                         grasp_clearance_m=None,
+                        base_pose=pose,
                     )
                 )
     return out
