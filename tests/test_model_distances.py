@@ -45,6 +45,12 @@ def test_capsule_gap_is_the_pair_by_pair_minimum_bit_for_bit(hand):
             ref = np.minimum(ref, _segment_distance(a1, b1, a2, b2)[0] - g.radius - h.radius)
     assert capsule_gap(hand, ids_a, ids_b, q).tobytes() == ref.tobytes()
     assert np.all(np.isinf(capsule_gap(hand, [], ids_b, q)))
+    # with a cap, the pairs whose bounding spheres are that far apart are skipped: the
+    # gaps below it are the same bits, the others the cap
+    for cap in (0.0, 0.004, float(np.median(ref)), 1.0):
+        capped = capsule_gap(hand, ids_a, ids_b, q, cap_m=cap)
+        assert capped.tobytes() == np.minimum(ref, cap).tobytes()
+    assert 0 < (ref < 0.004).sum() < ref.size  # both sides of the cap occur
 
 
 def test_capsule_gap_is_a_lower_bound_on_the_coal_distance(hand):

@@ -501,10 +501,14 @@ class PairDistances:
         self.n_queries += int(rows.size)
 
 
-def capsule_gap(hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray) -> np.ndarray:
+def capsule_gap(
+    hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray, *, cap_m: float = np.inf
+) -> np.ndarray:
     """Lower bound ``(N,)`` [m] on the distance between geometries ``ids_a`` and ``ids_b``
     of the hand at each configuration row of ``q`` ``(N, nq)``, from capsules that
-    contain the geometries (inf when either list is empty)."""
+    contain the geometries (inf when either list is empty); ``min(bound, cap_m)``: pairs
+    whose bounding spheres are ``cap_m`` apart are not measured (a bound below ``cap_m``
+    is the same, to the bit, as without the cap)."""
     gap = np.full(q.shape[0], np.inf)
     if not ids_a or not ids_b:
         return gap
@@ -512,19 +516,28 @@ def capsule_gap(hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray) -
     gb = [_geometry(hand, g) for g in ids_b]
     Ra, pa = _placements(ga, q)
     Rb, pb = _placements(gb, q)
-    # every pair's segments in one batch (elementwise: each pair's distances as alone)
     ends_a = [
         (pa[:, i] + Ra[:, i] @ g.seg_a, pa[:, i] + Ra[:, i] @ g.seg_b) for i, g in enumerate(ga)
     ]
     ends_b = [
         (pb[:, j] + Rb[:, j] @ h.seg_a, pb[:, j] + Rb[:, j] @ h.seg_b) for j, h in enumerate(gb)
     ]
-    a1 = np.concatenate([a for a, _ in ends_a for _ in ends_b])
-    b1 = np.concatenate([b for _, b in ends_a for _ in ends_b])
-    a2 = np.concatenate([a for _ in ends_a for a, _ in ends_b])
-    b2 = np.concatenate([b for _ in ends_a for _, b in ends_b])
-    d, _ = _segment_distance(a1, b1, a2, b2)
-    radii = [(g.radius, h.radius) for g in ga for h in gb]
-    for dk, (ra, rb) in zip(d.reshape(len(radii), -1), radii, strict=True):  # pair order
-        gap = np.minimum(gap, dk - ra - rb)
-    return gap
+    # broad phase: the bounding spheres of the capsules (centre: the segment's middle)
+    mid_a = np.stack([0.5 * (a + b) for a, b in ends_a])  # (A, N, 3)
+    mid_b = np.stack([0.5 * (a + b) for a, b in ends_b])
+    reach_a = np.array([0.5 * np.linalg.norm(g.seg_b - g.seg_a) + g.radius for g in ga])
+    reach_b = np.array([0.5 * np.linalg.norm(h.seg_b - h.seg_a) + h.radius for h in gb])
+    diff = mid_a[:, None] - mid_b[None]  # (A, B, N, 3)
+    far = np.sqrt(np.einsum("abni,abni->abn", diff, diff))
+    near = far - reach_a[:, None, None] - reach_b[None, :, None] < cap_m
+    i, j, n = np.nonzero(near)
+    if i.size:
+        A1 = np.stack([a for a, _ in ends_a])
+        B1 = np.stack([b for _, b in ends_a])
+        A2 = np.stack([a for a, _ in ends_b])
+        B2 = np.stack([b for _, b in ends_b])
+        d, _ = _segment_distance(A1[i, n], B1[i, n], A2[j, n], B2[j, n])
+        rad_a = np.array([g.radius for g in ga])
+        rad_b = np.array([h.radius for h in gb])
+        np.minimum.at(gap, n, d - rad_a[i] - rad_b[j])
+    return np.minimum(gap, cap_m)

@@ -133,7 +133,7 @@ def holding_proximity(
     ]
     for a, b in pairs:
         ids = (list(hand.fingers[a].geometry_ids), list(hand.fingers[b].geometry_ids))
-        cand = np.flatnonzero(capsule_gap(hand, *ids, q) < trigger_m)
+        cand = np.flatnonzero(capsule_gap(hand, *ids, q, cap_m=trigger_m) < trigger_m)
         if cand.size == 0:
             continue
         i_trig, d_trig = _first_below(dist, (a, b), q, cand, trigger_m)
@@ -182,7 +182,7 @@ def clear_of_fingers(
     dist = _PairDistance(hand)
     for o in others:
         ids = (list(f.geometry_ids), list(hand.fingers[o].geometry_ids))
-        near = (capsule_gap(hand, *ids, rows) < limit_m).reshape(C, K)
+        near = (capsule_gap(hand, *ids, rows, cap_m=limit_m) < limit_m).reshape(C, K)
         for c in np.flatnonzero(near.any(axis=1)):
             cand = np.flatnonzero(near[c] & ok[c])
             if cand.size == 0:

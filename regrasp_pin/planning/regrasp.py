@@ -576,7 +576,9 @@ def _surface_path(task: _Task, p: RegraspParams) -> tuple[GridPath, TipPath]:
         [np.interp(t_nodes[sel], t_others, q_others[:, j]) for j in range(q_others.shape[1])],
         axis=1,
     )
-    gap = _finger_gap(task.scene.hand, f.name, res.q, q_nodes)
+    # gaps from this cap on cost nothing and are never forbidden (nor set `allowed`)
+    cap = max(_FINGER_GAP_M, p.finger_gap_m + _FINGER_GAP_SLACK_M)
+    gap = _finger_gap(task.scene.hand, f.name, res.q, q_nodes, cap)
     cost[sel] += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
     # forbidden: nearer than the gap, but never more than P and Q themselves allow (the
     # capsules are conservative: a finger that holds P may already be "within" them)
@@ -603,14 +605,17 @@ def _surface_path(task: _Task, p: RegraspParams) -> tuple[GridPath, TipPath]:
     return gpath, tip_path
 
 
-def _finger_gap(hand: Hand, finger: str, q_finger: np.ndarray, q_others: np.ndarray) -> np.ndarray:
+def _finger_gap(
+    hand: Hand, finger: str, q_finger: np.ndarray, q_others: np.ndarray, cap_m: float
+) -> np.ndarray:
     """Lower bound ``(M,)`` on the distance between the finger (at each ``q_finger`` row)
-    and the other fingers (at the matching ``q_others`` row, ``(M, nq)``)."""
+    and the other fingers (at the matching ``q_others`` row, ``(M, nq)``), capped at
+    ``cap_m`` (:func:`~regrasp_pin.model.distances.capsule_gap`)."""
     f = hand.finger(finger)
     other_ids = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
     q_full = np.array(q_others, float)
     q_full[:, f.q_indices] = q_finger
-    return capsule_gap(hand, list(f.geometry_ids), other_ids, q_full)
+    return capsule_gap(hand, list(f.geometry_ids), other_ids, q_full, cap_m=cap_m)
 
 
 def _attempt(
