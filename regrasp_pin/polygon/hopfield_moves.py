@@ -27,6 +27,7 @@ from .hopfield import (
     column_groups,
     polygon_energy,
     tie_tolerance,
+    tolerant_order,
     window_costs,
     winners,
 )
@@ -34,6 +35,20 @@ from .hopfield import (
 #: Default reach of a column in a block move [curve steps]: bounds a block's work to
 #: ``k (2 BLOCK_RADIUS + 1)^2`` on long curves; short curves compete over all points.
 BLOCK_RADIUS = 24
+
+
+def min_plus(cost: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One step of a shortest-path dynamic programme: for every column ``y`` of ``step``,
+    ``min_x cost[x] + step[x, y]``, won by the first row ``x`` within the tie tolerance of
+    the minimum (:func:`~.hopfield.winners`). Returns (the new costs, the winning rows)."""
+    total = cost[:, None] + step
+    best = total.min(axis=0)
+    threshold = np.abs(best)
+    np.maximum(threshold, 1e-12, out=threshold)
+    threshold *= TIE_RTOL
+    threshold += best  # inf where best is inf: every row "wins", the first is taken
+    arg = np.argmax(total <= threshold, axis=0)
+    return total[arg, np.arange(arg.shape[0])], arg
 
 
 def block_costs(
@@ -68,12 +83,12 @@ def block_costs(
     X = [(p + 1 + c) % n for c in cand]
     cost = H[p, X[0]]
     back = []
+    same = radius is None or 2 * radius + 1 >= w  # every column over the whole interval
     for j in range(1, k):
-        step = H[X[j - 1][:, None], X[j][None, :]]
-        step = np.where(cand[j - 1][:, None] < cand[j][None, :], step, np.inf)
-        total = cost[:, None] + step  # previous vertex (rows), this one (columns)
-        arg = winners(total.T)
-        cost = total[arg, np.arange(arg.shape[0])]
+        if j == 1 or not same:
+            step = H[X[j - 1][:, None], X[j][None, :]]
+            step[cand[j - 1][:, None] >= cand[j][None, :]] = np.inf
+        cost, arg = min_plus(cost, step)
         back.append(arg)
     total = cost + H[X[-1], q]
     y = int(winners(total[None, :])[0])
@@ -183,7 +198,11 @@ __all__ = [
     "annealed_sweeps",
     "block_costs",
     "block_pass",
+    "group_relocations",
+    "min_plus",
     "spread_ties",
+    "subdivision_vertices",
+    "subdivisions",
     "update_block",
 ]
 
@@ -247,3 +266,121 @@ def spread_ties(
     if closed:
         s = np.sort(s)
     return s
+
+
+def subdivisions(H: np.ndarray, a: int, b: int, kmax: int) -> tuple[np.ndarray, list]:
+    """Best cost of the chord ``(a, b)`` subdivided by ``k = 0 .. kmax`` vertices of its arc.
+
+    Returns:
+        (costs, shape ``(kmax + 1,)``, inf where the arc has fewer than ``k`` points;
+        back-pointers to recover the vertices with :func:`subdivision_vertices`).
+    """
+    n = H.shape[0]
+    w = (b - a) % n - 1
+    costs = np.full(kmax + 1, np.inf)
+    costs[0] = H[a, b]
+    X = (a + 1 + np.arange(max(w, 0))) % n
+    if w < 1 or kmax < 1:
+        return costs, [X]
+    cost = H[a, X]  # one vertex, at each arc point
+    ends: list[int] = [0]  # the last vertex of the best subdivision by k (k = 0: none)
+    back: list = [X]
+    step = H[X[:, None], X[None, :]]
+    step[np.tri(w, dtype=bool)] = np.inf  # the vertices in order along the arc
+    for k in range(1, min(kmax, w) + 1):
+        if k > 1:
+            cost, arg = min_plus(cost, step)  # previous vertex (rows), this one (columns)
+            back.append(arg)
+        final = cost + H[X, b]
+        j = int(winners(final[None, :])[0])
+        costs[k] = final[j]
+        ends.append(j)
+    back.append(ends)
+    return costs, back
+
+
+def subdivision_vertices(back: list, k: int) -> np.ndarray:
+    """The ``k`` vertices of the best subdivision found by :func:`subdivisions`."""
+    X, ends = back[0], back[-1]
+    if k == 0:
+        return np.zeros(0, dtype=np.int64)
+    pos = [int(ends[k])]
+    for j in range(k - 1, 0, -1):
+        pos.append(int(back[j][pos[-1]]))
+    return X[np.array(pos[::-1])]
+
+
+def _best_split(
+    ins: np.ndarray, cand: list[np.ndarray], r: int, hit: set, tol: float
+) -> tuple[float, tuple]:
+    """Best way to place ``r`` vertices in one chord, or split over two, avoiding the
+    chords ``hit``: (energy change, ((chord, count), ...)); ties keep the first found."""
+    best: tuple[float, tuple] = (np.inf, ())
+    for k1 in range(r, (r - 1) // 2, -1):
+        k2 = r - k1
+        c1 = [j for j in cand[k1].tolist() if j not in hit][:2]
+        pairs: list[tuple]
+        if k2 == 0:
+            pairs = [((j1, k1),) for j1 in c1[:1]]
+        else:
+            c2 = [j for j in cand[k2].tolist() if j not in hit][:3]
+            pairs = [((j1, k1), (j2, k2)) for j1 in c1 for j2 in c2 if j1 != j2]
+        for pair in pairs:
+            gain = float(sum(ins[j, k] for j, k in pair))
+            if gain < best[0] - tol:
+                best = (gain, pair)
+    return best
+
+
+def group_relocations(
+    H: np.ndarray, s: np.ndarray, closed: bool, rmax: int, count: int, runs: int = 3
+) -> list[tuple[float, np.ndarray]]:
+    """The ``count`` most promising moves of a run of vertices to other chords.
+
+    A run of ``r <= rmax`` consecutive columns is removed (its chords merge into one) and
+    ``r`` vertices are inserted into one or two other chords, placed jointly: the best
+    subdivision of each chord by ``k`` vertices (:func:`subdivisions`). For every ``r`` the
+    ``runs`` runs cheapest to remove are tried. With ``"max"`` a curved arc costs nothing
+    only once enough vertices sit on it, so one vertex at a time gains nothing there; the
+    vertices have to move together.
+
+    Args:
+        H: Deviation matrix, shape ``(n, n)``.
+        s: State, shape ``(m,)``, ordered.
+        closed: Closed curve (an open path's end columns stay).
+        rmax: Most vertices moved together.
+        count: Moves returned.
+        runs: Runs tried per size.
+
+    Returns:
+        ``[(predicted energy change, new state), ...]``, most promising first (ties within
+        :data:`~.hopfield.TIE_RTOL` of the energy: in the order found).
+    """
+    m = s.shape[0]
+    nc = m if closed else m - 1
+    a, b = s[:nc], s[(np.arange(nc) + 1) % m]
+    chord = H[a, b]
+    tol = TIE_RTOL * max(float(np.abs(chord[np.isfinite(chord)]).sum()), 1e-12)
+    subs = [subdivisions(H, int(a[j]), int(b[j]), rmax) for j in range(nc)]
+    with np.errstate(invalid="ignore"):
+        ins = np.array([c for c, _ in subs]) - chord[:, None]  # (nc, rmax + 1)
+    ins[~np.isfinite(ins)] = np.inf
+    cand = [tolerant_order(ins[:, k], tol)[: rmax + 3] for k in range(rmax + 1)]
+    moves: list[tuple[float, np.ndarray]] = []
+    for r in range(1, min(rmax, m - 3 if closed else m - 2) + 1):
+        # removing columns i .. i + r - 1 merges chords i - 1 .. i + r - 1 into one
+        first = np.arange(m) if closed else np.arange(1, m - r)
+        merged = (first[:, None] - 1 + np.arange(r + 1)) % nc
+        with np.errstate(invalid="ignore"):
+            rem = H[s[(first - 1) % m], s[(first + r) % m]] - chord[merged].sum(axis=1)
+        for t in tolerant_order(rem, tol)[:runs].tolist():
+            if not np.isfinite(rem[t]):
+                break
+            gain, split = _best_split(ins, cand, r, set(merged[t].tolist()), tol)
+            if not np.isfinite(gain):
+                continue
+            kept = np.delete(s, (first[t] + np.arange(r)) % m)
+            added = [subdivision_vertices(subs[j][1], k) for j, k in split]
+            moves.append((float(rem[t]) + gain, np.sort(np.concatenate([kept, *added]))))
+    order = tolerant_order(np.array([g for g, _ in moves]), tol)[:count]
+    return [moves[k] for k in order.tolist()]

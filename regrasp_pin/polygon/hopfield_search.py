@@ -5,9 +5,10 @@ local minimum. :func:`competitive_hopfield` keeps the plain run from the paper's
 state and then tries more initial states (on closed curves the equidistant state shifted
 by half a spacing, a greedy bottom-up merge, a greedy top-down split) and perturbations
 (one or two columns' vertices relocated to other chords; several columns removed and
-greedily re-inserted; blocks of consecutive columns competing jointly and annealed runs of
-the winner-take-all, :mod:`regrasp_pin.polygon.hopfield_moves`), each followed by
-re-convergence of the same network. A result is
+greedily re-inserted; blocks of consecutive columns competing jointly, runs of columns
+moved together into other chords, and annealed runs of the winner-take-all,
+:mod:`regrasp_pin.polygon.hopfield_moves`; on closed curves the best state turned along
+the curve), each followed by re-convergence of the same network. A result is
 accepted only if its energy is lower, so the answer is never worse than the plain network.
 
 The network itself (states, input, energy, sweeps) is :mod:`regrasp_pin.polygon.hopfield`.
@@ -38,7 +39,7 @@ from .hopfield import (
     window_costs,
     winners,
 )
-from .hopfield_moves import annealed_sweeps, block_pass
+from .hopfield_moves import annealed_sweeps, block_pass, group_relocations
 
 logger = logging.getLogger(__name__)
 
@@ -51,6 +52,9 @@ _ANNEAL_SWEEPS = 40
 # which block moves are made by default.
 _BLOCK_MAX = 8
 _BLOCK_MAX_POINTS = 200
+# Turned starts: the best state shifted along a closed curve by 1/_TURNS of its points,
+# 2/_TURNS, ... (where block moves are made).
+_TURNS = 4
 
 
 @dataclass(frozen=True)
@@ -261,7 +265,9 @@ def _local_search(
     lower (by more than the tie tolerance, :func:`~.hopfield.improves`: no walk along
     plateaus of equal energy) is kept. When no relocation helps, blocks of ``block``
     consecutive columns compete jointly (:func:`~.hopfield_moves.block_pass`; 0 or 1: no
-    block moves).
+    block moves), and when that does not help either, the ``trials`` most promising moves
+    of a run of up to ``block`` consecutive vertices into one or two other chords are tried
+    (:func:`~.hopfield_moves.group_relocations`).
 
     The search is a deterministic function of the converged state it stands on, so
     ``memo`` (one dict per ``H``) maps every such state already searched to where the
@@ -273,6 +279,19 @@ def _local_search(
     n = H.shape[0]
     memo = {} if memo is None else memo
     visited: list[tuple] = []
+
+    def first_better(moves: list[tuple[float, np.ndarray]]) -> np.ndarray | None:
+        """The first move that, re-converged, ends lower than ``energy`` (ties, a move
+        along a plateau, are not taken)."""
+        nonlocal sweeps
+        for _gain, moved in moves:
+            dirty = _changed_columns(s, moved, n)
+            moved, sw = _converge(H, HT, moved, groups, closed, dirty)
+            sweeps += sw
+            if improves(polygon_energy(H, moved, closed=closed), energy):
+                return moved
+        return None
+
     for _ in range(budget):
         key = (block, trials, s.tobytes())
         if key in memo:
@@ -280,25 +299,17 @@ def _local_search(
             s = s.copy()
             break
         visited.append(key)
-        improved = False
-        for _gain, moved in _relocations(H, HT, s, closed, trials):
-            dirty = _changed_columns(s, moved, n)
-            moved, sw = _converge(H, HT, moved, groups, closed, dirty)
-            sweeps += sw
-            e2 = polygon_energy(H, moved, closed=closed)
-            if improves(e2, energy):  # ties (a move along a plateau) are not taken
-                s, energy, improved = moved, e2, True
-                break
-        if not improved and block > 1:
+        better = first_better(_relocations(H, HT, s, closed, trials))
+        if better is None and block > 1:
             moved = s.copy()
             if block_pass(H, moved, block, closed):
-                moved, sw = _converge(H, HT, np.sort(moved) if closed else moved, groups, closed)
-                sweeps += sw + 1
-                e2 = polygon_energy(H, moved, closed=closed)
-                if improves(e2, energy):
-                    s, energy, improved = moved, e2, True
-        if not improved:
+                sweeps += 1
+                better = first_better([(0.0, np.sort(moved) if closed else moved)])
+        if better is None and block > 1:
+            better = first_better(group_relocations(H, s, closed, block, trials))
+        if better is None:
             break
+        s, energy = better, polygon_energy(H, better, closed=closed)
     for key in visited:
         memo[key] = (s, energy)
     return s, energy, sweeps
@@ -460,8 +471,11 @@ def competitive_hopfield(
     First the plain network of the paper runs from its initial state (``initial``, or the
     equidistant state of :func:`initial_state`). Then, to escape its local minimum, the
     same network is re-converged from further states: the equidistant state shifted by half
-    a spacing (closed curves), a greedy bottom-up merge, a greedy top-down split, and
-    ``restarts`` rounds of
+    a spacing (closed curves), a greedy bottom-up merge, a greedy top-down split, where
+    block moves are made the growing start and the best state so far turned along the
+    closed curve by a quarter, a half and three quarters of its points (the whole polygon
+    moved as one block: a minimum whose vertices are packed on the wrong stretch of the
+    curve cannot move there a few columns at a time), and ``restarts`` rounds of
     perturbation (remove a few vertices, re-insert them greedily). Only strictly better
     results are kept, so the answer is never worse than the plain network.
 
@@ -470,8 +484,10 @@ def competitive_hopfield(
     re-convergence; the first that lowers the energy is kept and the search repeats. When
     none helps, blocks of ``block`` consecutive columns compete jointly
     (:mod:`~regrasp_pin.polygon.hopfield_moves`; the energy never rises) and the search
-    repeats if one moved. ``anneals`` annealed runs of the winner-take-all from the best
-    state give further initial states.
+    repeats if one moved; if none did, runs of up to ``block`` consecutive vertices are
+    moved together into one or two other chords (the ``trials`` most promising, each
+    re-converged and kept only if the energy drops). ``anneals`` annealed runs of the
+    winner-take-all from the best state give further initial states.
 
     Args:
         H: Deviation matrix, shape ``(n, n)``; ``inf`` marks chords that may not be used.
@@ -485,7 +501,8 @@ def competitive_hopfield(
         plain: The plain run from ``initial`` if already computed on this ``H`` (it is then
             not repeated).
         trials: Relocations tried (with re-convergence) when no single move helps.
-        block: Columns per block of the block winner-take-all (0 or 1: none); default
+        block: Columns per block of the block winner-take-all, and most vertices moved
+            together by a group relocation (0 or 1: neither, and no turned starts); default
             :func:`default_block`.
         anneals: Annealed runs from the best state (40 sweeps each, the temperature
             falling from the mean chord energy to 1/1000 of it).
@@ -533,6 +550,9 @@ def competitive_hopfield(
 
     for start in _starts(H, HT, plain.indices, pts, closed, trials, block, memo):
         consider(start)
+    turns = range(1, _TURNS if closed and block > 1 else 1)
+    for j in turns:  # the best state turned by a quarter of the curve, 3 times
+        consider(np.sort((best_s + (j * n) // _TURNS) % n))
     rng = np.random.default_rng(seed)
     free = np.arange(m) if closed else np.arange(1, m - 1)
     for _ in range(restarts):
