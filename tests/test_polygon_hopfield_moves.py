@@ -230,3 +230,25 @@ def test_min_plus_takes_the_first_of_near_ties():
     assert new.tolist() == [1.0, 2.0]
     new, arg = min_plus(np.full(2, np.inf), np.zeros((2, 3)))
     assert np.isinf(new).all() and arg.tolist() == [0, 0, 0]
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+@pytest.mark.parametrize("radius", [None, 3])
+def test_block_cache_changes_nothing(deviation, radius):
+    """Block passes with a shared cache of block updates end exactly where passes without
+    it end, pass after pass, from several states (so the cache is hit)."""
+    P = pixel_curve(45, seed=3)
+    H = deviation_matrix(P, deviation, closed=True)
+    cache: dict = {}
+    hits = 0
+    for phase in (0.0, 0.25, 0.5, 0.0):
+        a = initial_state(P, 12, closed=True, phase=phase)
+        b = a.copy()
+        for _ in range(4):
+            size = len(cache)
+            moved_a = block_pass(H, a, 4, True, radius=radius)
+            moved_b = block_pass(H, b, 4, True, radius=radius, cache=cache)
+            hits += len(cache) == size
+            assert moved_a == moved_b and np.array_equal(a, b)
+            a, b = np.sort(a), np.sort(b)
+    assert hits > 0

@@ -102,7 +102,12 @@ def block_costs(
 
 
 def update_block(
-    H: np.ndarray, s: np.ndarray, first: int, k: int, radius: int | None = None
+    H: np.ndarray,
+    s: np.ndarray,
+    first: int,
+    k: int,
+    radius: int | None = None,
+    cache: dict | None = None,
 ) -> bool:
     """Block winner-take-all of columns ``first .. first + k - 1`` (cyclic) in place.
 
@@ -113,6 +118,9 @@ def update_block(
         first: First column of the block.
         k: Block size.
         radius: See :func:`block_costs`.
+        cache: Results of :func:`block_costs` already computed on this ``H`` with this
+            ``radius`` (filled in): the block's best state depends only on ``p``, ``q``,
+            ``k`` and, if the radius is narrower than the interval, the current vertices.
 
     Returns:
         Whether the block moved (only to a strictly better joint state: the energy never
@@ -123,7 +131,14 @@ def update_block(
     p, q = int(s[(first - 1) % m]), int(s[(first + k) % m])
     chain = np.concatenate([[p], s[cols], [q]])
     current = float(H[chain[:-1], chain[1:]].sum())
-    best, pos = block_costs(H, p, q, s[cols], radius)
+    narrow = radius is not None and 2 * radius + 1 < (q - p) % H.shape[0] - 1
+    key = (p, q, k, s[cols].tobytes() if narrow else b"")
+    if cache is not None and key in cache:
+        best, pos = cache[key]
+    else:
+        best, pos = block_costs(H, p, q, s[cols], radius)
+        if cache is not None:
+            cache[key] = (best, pos)
     if pos is None:
         return False
     tol = tie_tolerance(np.array([[best]]))[0, 0]
@@ -134,10 +149,16 @@ def update_block(
 
 
 def block_pass(
-    H: np.ndarray, s: np.ndarray, k: int, closed: bool, radius: int | None = BLOCK_RADIUS
+    H: np.ndarray,
+    s: np.ndarray,
+    k: int,
+    closed: bool,
+    radius: int | None = BLOCK_RADIUS,
+    cache: dict | None = None,
 ) -> bool:
     """One pass of block updates over every block of ``k`` consecutive free columns
-    (each column within ``radius`` curve steps of its vertex, see :func:`block_costs`).
+    (each column within ``radius`` curve steps of its vertex, see :func:`block_costs`;
+    ``cache``: see :func:`update_block`).
 
     Returns:
         Whether any block moved. ``s`` is updated in place; on a closed curve it stays a
@@ -150,7 +171,7 @@ def block_pass(
     firsts = range(m) if closed else range(1, m - k)
     moved = False
     for i in firsts:
-        moved |= update_block(H, s, i, k, radius)
+        moved |= update_block(H, s, i, k, radius, cache)
     return moved
 
 

@@ -257,6 +257,7 @@ def _local_search(
     budget: int = 10_000,
     block: int = 0,
     memo: dict | None = None,
+    blocks: dict | None = None,
 ) -> tuple[np.ndarray, float, int]:
     """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
 
@@ -272,6 +273,7 @@ def _local_search(
     The search is a deterministic function of the converged state it stands on, so
     ``memo`` (one dict per ``H``) maps every such state already searched to where the
     search ended: reaching one again ends the search there at once, with the same result.
+    ``blocks`` (one dict per ``H``) likewise keeps the block updates already computed.
     """
     groups = column_groups(s.shape[0], closed)
     s, sweeps = _converge(H, HT, s.copy(), groups, closed)
@@ -302,7 +304,7 @@ def _local_search(
         better = first_better(_relocations(H, HT, s, closed, trials))
         if better is None and block > 1:
             moved = s.copy()
-            if block_pass(H, moved, block, closed):
+            if block_pass(H, moved, block, closed, cache=blocks):
                 sweeps += 1
                 better = first_better([(0.0, np.sort(moved) if closed else moved)])
         if better is None and block > 1:
@@ -538,11 +540,14 @@ def competitive_hopfield(
     sweeps = plain.sweeps
 
     memo: dict = {}  # converged states already searched -> where the search ended
+    blocks: dict = {}  # block updates already computed
 
     def consider(s: np.ndarray | None) -> None:
         nonlocal best_s, best_e, sweeps
         if s is not None and s.shape[0] == m:
-            s2, e2, sw = _local_search(H, HT, s, closed, trials, block=block, memo=memo)
+            s2, e2, sw = _local_search(
+                H, HT, s, closed, trials, block=block, memo=memo, blocks=blocks
+            )
             sweeps += sw
             if improves(e2, best_e):
                 best_s, best_e = s2, e2
