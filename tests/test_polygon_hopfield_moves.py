@@ -202,7 +202,7 @@ def test_subdivisions_equal_brute_force(deviation):
 @pytest.mark.parametrize("closed", [True, False])
 def test_group_relocations_predict_the_energy_change(deviation, closed):
     """Each move removes a run of r <= rmax consecutive vertices and puts r vertices into
-    one or two other chords: the state stays valid (m ordered vertices, an open path's
+    another chord: the state stays valid (m ordered vertices, an open path's
     ends kept) and its energy changes by exactly the predicted amount."""
     for seed in range(4):
         P = pixel_curve(40 + 7 * seed, seed)
@@ -217,7 +217,13 @@ def test_group_relocations_predict_the_energy_change(deviation, closed):
             assert state.shape == (m,) and np.all(np.diff(state) > 0)
             if not closed:
                 assert state[0] == 0 and state[-1] == len(P) - 1
-            assert len(np.setdiff1d(s, state)) <= 4
+            gone, added = np.setdiff1d(s, state), np.setdiff1d(state, s)
+            assert 1 <= len(gone) == len(added) <= 4
+            cols = set(np.flatnonzero(np.isin(s, gone)).tolist())  # consecutive columns
+            starts = range(m) if closed else range(1, m - 1)
+            assert any(cols == {(c + t) % m for t in range(len(cols))} for c in starts)
+            chord = np.searchsorted(s, added)  # all inside one chord of the old state
+            assert len(np.unique(chord % m if closed else chord)) == 1
             change = polygon_energy(H, state, closed=closed) - e0
             assert_close(change, gain, atol=1e-9 * max(e0, 1.0), what="predicted change")
 

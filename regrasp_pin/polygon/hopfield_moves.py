@@ -331,39 +331,17 @@ def subdivision_vertices(back: list, k: int) -> np.ndarray:
     return X[np.array(pos[::-1])]
 
 
-def _best_split(
-    ins: np.ndarray, cand: list[np.ndarray], r: int, hit: set, tol: float
-) -> tuple[float, tuple]:
-    """Best way to place ``r`` vertices in one chord, or split over two, avoiding the
-    chords ``hit``: (energy change, ((chord, count), ...)); ties keep the first found."""
-    best: tuple[float, tuple] = (np.inf, ())
-    for k1 in range(r, (r - 1) // 2, -1):
-        k2 = r - k1
-        c1 = [j for j in cand[k1].tolist() if j not in hit][:2]
-        pairs: list[tuple]
-        if k2 == 0:
-            pairs = [((j1, k1),) for j1 in c1[:1]]
-        else:
-            c2 = [j for j in cand[k2].tolist() if j not in hit][:3]
-            pairs = [((j1, k1), (j2, k2)) for j1 in c1 for j2 in c2 if j1 != j2]
-        for pair in pairs:
-            gain = float(sum(ins[j, k] for j, k in pair))
-            if gain < best[0] - tol:
-                best = (gain, pair)
-    return best
-
-
 def group_relocations(
     H: np.ndarray, s: np.ndarray, closed: bool, rmax: int, count: int, runs: int = 3
 ) -> list[tuple[float, np.ndarray]]:
-    """The ``count`` most promising moves of a run of vertices to other chords.
+    """The ``count`` most promising moves of a run of vertices into another chord.
 
     A run of ``r <= rmax`` consecutive columns is removed (its chords merge into one) and
-    ``r`` vertices are inserted into one or two other chords, placed jointly: the best
-    subdivision of each chord by ``k`` vertices (:func:`subdivisions`). For every ``r`` the
-    ``runs`` runs cheapest to remove are tried. With ``"max"`` a curved arc costs nothing
-    only once enough vertices sit on it, so one vertex at a time gains nothing there; the
-    vertices have to move together.
+    ``r`` vertices are inserted into the other chord whose best subdivision by ``r``
+    vertices (:func:`subdivisions`, the vertices placed jointly) gains most. For every
+    ``r`` the ``runs`` runs cheapest to remove are tried. With ``"max"`` a curved arc
+    costs nothing only once enough vertices sit on it, so one vertex at a time gains
+    nothing there; the vertices have to move together.
 
     Args:
         H: Deviation matrix, shape ``(n, n)``.
@@ -386,7 +364,6 @@ def group_relocations(
     with np.errstate(invalid="ignore"):
         ins = np.array([c for c, _ in subs]) - chord[:, None]  # (nc, rmax + 1)
     ins[~np.isfinite(ins)] = np.inf
-    cand = [tolerant_order(ins[:, k], tol)[: rmax + 3] for k in range(rmax + 1)]
     moves: list[tuple[float, np.ndarray]] = []
     for r in range(1, min(rmax, m - 3 if closed else m - 2) + 1):
         # removing columns i .. i + r - 1 merges chords i - 1 .. i + r - 1 into one
@@ -394,14 +371,16 @@ def group_relocations(
         merged = (first[:, None] - 1 + np.arange(r + 1)) % nc
         with np.errstate(invalid="ignore"):
             rem = H[s[(first - 1) % m], s[(first + r) % m]] - chord[merged].sum(axis=1)
+        targets = tolerant_order(ins[:, r], tol)[: r + 2].tolist()  # best chords for r
         for t in tolerant_order(rem, tol)[:runs].tolist():
             if not np.isfinite(rem[t]):
                 break
-            gain, split = _best_split(ins, cand, r, set(merged[t].tolist()), tol)
-            if not np.isfinite(gain):
+            hit = set(merged[t].tolist())
+            j = next((j for j in targets if j not in hit), None)
+            if j is None or not np.isfinite(ins[j, r]):
                 continue
             kept = np.delete(s, (first[t] + np.arange(r)) % m)
-            added = [subdivision_vertices(subs[j][1], k) for j, k in split]
-            moves.append((float(rem[t]) + gain, np.sort(np.concatenate([kept, *added]))))
+            added = subdivision_vertices(subs[j][1], r)
+            moves.append((float(rem[t] + ins[j, r]), np.sort(np.concatenate([kept, added]))))
     order = tolerant_order(np.array([g for g, _ in moves]), tol)[:count]
     return [moves[k] for k in order.tolist()]

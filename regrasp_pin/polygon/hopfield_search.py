@@ -267,7 +267,7 @@ def _local_search(
     plateaus of equal energy) is kept. When no relocation helps, blocks of ``block``
     consecutive columns compete jointly (:func:`~.hopfield_moves.block_pass`; 0 or 1: no
     block moves), and when that does not help either, the ``trials`` most promising moves
-    of a run of up to ``block`` consecutive vertices into one or two other chords are tried
+    of a run of up to ``block`` consecutive vertices into another chord are tried
     (:func:`~.hopfield_moves.group_relocations`).
 
     The search is a deterministic function of the converged state it stands on, so
@@ -487,7 +487,7 @@ def competitive_hopfield(
     none helps, blocks of ``block`` consecutive columns compete jointly
     (:mod:`~regrasp_pin.polygon.hopfield_moves`; the energy never rises) and the search
     repeats if one moved; if none did, runs of up to ``block`` consecutive vertices are
-    moved together into one or two other chords (the ``trials`` most promising, each
+    moved together into another chord (the ``trials`` most promising, each
     re-converged and kept only if the energy drops). ``anneals`` annealed runs of the
     winner-take-all from the best state give further initial states.
 
