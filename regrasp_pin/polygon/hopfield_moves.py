@@ -1,6 +1,7 @@
-"""Two further moves of the competitive network: block winner-take-all and annealed sweeps.
+"""Further moves of the competitive network: block winner-take-all, group relocations,
+annealed sweeps (and the tie-break of :func:`spread_ties`).
 
-Both act on the same state (one vertex index per column) and the same inputs (Eq. 10) as
+They act on the same state (one vertex index per column) and the same inputs (Eq. 10) as
 :mod:`regrasp_pin.polygon.hopfield`:
 
 * **Block winner-take-all** (:func:`update_block`): ``k`` consecutive columns compete
@@ -10,6 +11,10 @@ Both act on the same state (one vertex index per column) and the same inputs (Eq
   between ``p`` and ``q``), only if it is strictly better. As for one column, the energy
   never rises. With ``k = 1`` this is Eq. 6 itself; larger blocks see moves that single
   columns cannot make one at a time (several vertices shifting together).
+* **Group relocations** (:func:`group_relocations`): a run of consecutive columns is
+  removed and as many vertices are put jointly into another chord (its best subdivision,
+  :func:`subdivisions`, the same dynamic programme); a proposal, re-converged by the network
+  and kept by the search only if the energy drops.
 * **Annealed winner-take-all** (:func:`annealed_sweeps`): the winner of each column is drawn
   from the Boltzmann distribution of its inputs at a temperature ``T`` (``argmax`` of
   ``U / T`` plus Gumbel noise, seeded), ``T`` falling geometrically to almost 0. The energy
