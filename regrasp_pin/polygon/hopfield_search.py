@@ -555,15 +555,15 @@ def competitive_hopfield(
 
     for start in _starts(H, HT, plain.indices, pts, closed, trials, block, memo):
         consider(start)
-    turns = range(1, _TURNS if closed and block > 1 else 1)
-    for j in turns:  # the best state turned by a quarter of the curve, 3 times
-        consider(np.sort((best_s + (j * n) // _TURNS) % n))
     rng = np.random.default_rng(seed)
     free = np.arange(m) if closed else np.arange(1, m - 1)
     for _ in range(restarts):
         if free.size == 0 or not np.isfinite(best_e):
             break
         consider(_perturbed(H, HT, best_s, closed, rng, free))
+    turns = range(1, _TURNS if closed and block > 1 else 1)
+    for j in turns:  # the best state turned by a quarter of the curve, 3 times
+        consider(np.sort((best_s + (j * n) // _TURNS) % n))
     for _ in range(anneals if np.isfinite(best_e) else 0):
         t0 = _ANNEAL_T0 * best_e / m  # a typical chord's share of the energy
         temps = np.geomspace(max(t0, 1e-300), max(t0 * _ANNEAL_T1, 1e-300), _ANNEAL_SWEEPS)
