@@ -474,12 +474,13 @@ def competitive_hopfield(
     equidistant state of :func:`initial_state`). Then, to escape its local minimum, the
     same network is re-converged from further states: the equidistant state shifted by half
     a spacing (closed curves), a greedy bottom-up merge, a greedy top-down split, where
-    block moves are made the growing start and the best state so far turned along the
-    closed curve by a quarter, a half and three quarters of its points (the whole polygon
-    moved as one block: a minimum whose vertices are packed on the wrong stretch of the
-    curve cannot move there a few columns at a time), and ``restarts`` rounds of
-    perturbation (remove a few vertices, re-insert them greedily). Only strictly better
-    results are kept, so the answer is never worse than the plain network.
+    block moves are made the growing start, then ``restarts`` rounds of perturbation
+    (remove a few vertices, re-insert them greedily) and, where block moves are made, the
+    best state so far turned along the closed curve by a quarter, a half and three quarters
+    of its points (the whole polygon moved as one block: a minimum whose vertices are
+    packed on the wrong stretch of the curve cannot move there a few columns at a time).
+    Only strictly better results are kept, so the answer is never worse than the plain
+    network.
 
     Every state is polished by a local search: the network converges, then the ``trials``
     most promising relocations of one vertex to another chord are tried, each followed by
