@@ -15,6 +15,7 @@ from regrasp_pin.polygon.hopfield import (
     network_input,
     polygon_energy,
     run_network,
+    tolerant_order,
 )
 from regrasp_pin.polygon.hopfield_search import competitive_hopfield
 
@@ -171,3 +172,12 @@ def test_bad_inputs():
         competitive_hopfield(H, 2, closed=True)
     with pytest.raises(InputError, match="restarts"):
         competitive_hopfield(H, 4, restarts=-1)
+
+
+def test_tolerant_order_ignores_last_bit_noise():
+    """Values within the tolerance of the first of their group keep the index order, so
+    that noise in the last bits cannot reorder them; inf and NaN come last."""
+    v = np.array([3.0, 1.0 + 1e-15, np.inf, 1.0, 2.0, np.nan, 1.0 - 1e-15, 0.5])
+    assert tolerant_order(v, 1e-12).tolist() == [7, 1, 3, 6, 4, 0, 2, 5]
+    assert tolerant_order(v, 0.0)[:4].tolist() == [7, 6, 3, 1]  # no tolerance: by value
+    assert tolerant_order(np.zeros(0), 1e-9).tolist() == []

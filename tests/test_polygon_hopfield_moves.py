@@ -19,7 +19,11 @@ from regrasp_pin.polygon.hopfield_moves import (
     annealed_sweeps,
     block_costs,
     block_pass,
+    group_relocations,
+    min_plus,
     spread_ties,
+    subdivision_vertices,
+    subdivisions,
     update_block,
 )
 from regrasp_pin.polygon.hopfield_search import competitive_hopfield
@@ -167,3 +171,90 @@ def test_spreading_ties_keeps_the_energy_and_the_order(seed, closed):
     assert np.all(np.diff(after_s) > 0) and after_s.size == m
     if not closed:
         assert after_s[0] == s[0] and after_s[-1] == s[-1]  # the pinned ends stay
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+def test_subdivisions_equal_brute_force(deviation):
+    """The best k-vertex subdivision of a chord is the best over all ordered choices of
+    k points of its arc, for every k at once; the vertices returned cost what is claimed."""
+    P = pixel_curve(30, seed=2)
+    H = deviation_matrix(P, deviation, closed=True)
+    n = len(P)
+    for a, b in ((3, 13), (24, 5)):  # (24, 5) wraps around
+        inside = [(a + 1 + i) % n for i in range((b - a) % n - 1)]
+        costs, back = subdivisions(H, a, b, 4)
+        assert costs[0] == H[a, b]
+        for k in range(1, 5):
+            best = min(
+                sum(H[x, y] for x, y in itertools.pairwise([a, *c, b]))
+                for c in itertools.combinations(inside, k)
+            )
+            assert_close(costs[k], best, atol=1e-12, rtol=1e-12, what=f"{a}->{b}, k={k}")
+            xs = subdivision_vertices(back, k).tolist()
+            assert [inside.index(x) for x in xs] == sorted(inside.index(x) for x in xs)
+            chain = [a, *xs, b]
+            assert_close(sum(H[x, y] for x, y in itertools.pairwise(chain)), costs[k], atol=1e-12)
+    costs, _ = subdivisions(H, 3, 6, 4)  # two points on the arc: no 3- or 4-subdivision
+    assert np.isfinite(costs[:3]).all() and np.isinf(costs[3:]).all()
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+@pytest.mark.parametrize("closed", [True, False])
+def test_group_relocations_predict_the_energy_change(deviation, closed):
+    """Each move removes a run of r <= rmax consecutive vertices and puts r vertices into
+    another chord: the state stays valid (m ordered vertices, an open path's
+    ends kept) and its energy changes by exactly the predicted amount."""
+    for seed in range(4):
+        P = pixel_curve(40 + 7 * seed, seed)
+        H = deviation_matrix(P, deviation, closed=closed)
+        m = 9 + seed
+        s = run_network(H, initial_state(P, m, closed=closed), closed=closed).indices
+        e0 = polygon_energy(H, s, closed=closed)
+        moves = group_relocations(H, s, closed, 4, 50)
+        assert moves, "no move found"
+        assert [g for g, _ in moves] == sorted(g for g, _ in moves)
+        for gain, state in moves:
+            assert state.shape == (m,) and np.all(np.diff(state) > 0)
+            if not closed:
+                assert state[0] == 0 and state[-1] == len(P) - 1
+            gone, added = np.setdiff1d(s, state), np.setdiff1d(state, s)
+            assert 1 <= len(gone) == len(added) <= 4
+            cols = set(np.flatnonzero(np.isin(s, gone)).tolist())  # consecutive columns
+            starts = range(m) if closed else range(1, m - 1)
+            assert any(cols == {(c + t) % m for t in range(len(cols))} for c in starts)
+            chord = np.searchsorted(s, added)  # all inside one chord of the old state
+            assert len(np.unique(chord % m if closed else chord)) == 1
+            change = polygon_energy(H, state, closed=closed) - e0
+            assert_close(change, gain, atol=1e-9 * max(e0, 1.0), what="predicted change")
+
+
+def test_min_plus_takes_the_first_of_near_ties():
+    cost = np.array([1.0, 1.0 + 1e-13, 0.5, np.inf])
+    step = np.array([[0.0, 1.0], [-1e-13, 1.0], [0.5, np.inf], [0.0, 0.0]])
+    new, arg = min_plus(cost, step)
+    assert arg.tolist() == [0, 0]  # rows 0, 1 and 2 tie on column 0: the first wins
+    assert new.tolist() == [1.0, 2.0]
+    new, arg = min_plus(np.full(2, np.inf), np.zeros((2, 3)))
+    assert np.isinf(new).all() and arg.tolist() == [0, 0, 0]
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+@pytest.mark.parametrize("radius", [None, 3])
+def test_block_cache_changes_nothing(deviation, radius):
+    """Block passes with a shared cache of block updates end exactly where passes without
+    it end, pass after pass, from several states (so the cache is hit)."""
+    P = pixel_curve(45, seed=3)
+    H = deviation_matrix(P, deviation, closed=True)
+    cache: dict = {}
+    hits = 0
+    for phase in (0.0, 0.25, 0.5, 0.0):
+        a = initial_state(P, 12, closed=True, phase=phase)
+        b = a.copy()
+        for _ in range(4):
+            size = len(cache)
+            moved_a = block_pass(H, a, 4, True, radius=radius)
+            moved_b = block_pass(H, b, 4, True, radius=radius, cache=cache)
+            hits += len(cache) == size
+            assert moved_a == moved_b and np.array_equal(a, b)
+            a, b = np.sort(a), np.sort(b)
+    assert hits > 0

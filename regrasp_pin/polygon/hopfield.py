@@ -85,6 +85,22 @@ def _winners_and_tolerance(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.argmax(cost <= (best + tol)[:, None], axis=1), tol
 
 
+def tolerant_order(values: np.ndarray, tol: float) -> np.ndarray:
+    """Indices that sort ``values`` (1-D) ascending, values within ``tol`` of the first of
+    their group counting as ties, ordered by index: an order that does not follow last-bit
+    noise (inf and NaN last, by index)."""
+    v = np.asarray(values, dtype=float)
+    order = np.argsort(v, kind="stable")
+    fin = order[np.isfinite(v[order])]
+    out, start = [], 0
+    while start < fin.shape[0]:
+        stop = start + int(np.searchsorted(v[fin[start:]], v[fin[start]] + tol, side="right"))
+        out.append(np.sort(fin[start:stop]))
+        start = stop
+    out.append(np.sort(order[~np.isfinite(v[order])]))
+    return np.concatenate(out) if out else order
+
+
 @dataclass(frozen=True)
 class NetworkRun:
     """One run of the network from a given state until it no longer changes.
@@ -387,6 +403,7 @@ __all__ = [
     "polygon_energy",
     "run_from",
     "run_network",
+    "tolerant_order",
     "update_columns",
     "window_costs",
     "winners",

@@ -5,9 +5,10 @@ local minimum. :func:`competitive_hopfield` keeps the plain run from the paper's
 state and then tries more initial states (on closed curves the equidistant state shifted
 by half a spacing, a greedy bottom-up merge, a greedy top-down split) and perturbations
 (one or two columns' vertices relocated to other chords; several columns removed and
-greedily re-inserted; blocks of consecutive columns competing jointly and annealed runs of
-the winner-take-all, :mod:`regrasp_pin.polygon.hopfield_moves`), each followed by
-re-convergence of the same network. A result is
+greedily re-inserted; blocks of consecutive columns competing jointly, runs of columns
+moved together into other chords, and annealed runs of the winner-take-all,
+:mod:`regrasp_pin.polygon.hopfield_moves`; on closed curves the best state turned along
+the curve), each followed by re-convergence of the same network. A result is
 accepted only if its energy is lower, so the answer is never worse than the plain network.
 
 The network itself (states, input, energy, sweeps) is :mod:`regrasp_pin.polygon.hopfield`.
@@ -38,7 +39,7 @@ from .hopfield import (
     window_costs,
     winners,
 )
-from .hopfield_moves import annealed_sweeps, block_pass
+from .hopfield_moves import annealed_sweeps, block_pass, group_relocations
 
 logger = logging.getLogger(__name__)
 
@@ -51,6 +52,9 @@ _ANNEAL_SWEEPS = 40
 # which block moves are made by default.
 _BLOCK_MAX = 8
 _BLOCK_MAX_POINTS = 200
+# Turned starts: the best state shifted along a closed curve by 1/_TURNS of its points,
+# 2/_TURNS, ... (where block moves are made).
+_TURNS = 4
 
 
 @dataclass(frozen=True)
@@ -253,6 +257,7 @@ def _local_search(
     budget: int = 10_000,
     block: int = 0,
     memo: dict | None = None,
+    blocks: dict | None = None,
 ) -> tuple[np.ndarray, float, int]:
     """Network convergence alternated with vertex relocations; returns (state, energy, sweeps).
 
@@ -261,11 +266,14 @@ def _local_search(
     lower (by more than the tie tolerance, :func:`~.hopfield.improves`: no walk along
     plateaus of equal energy) is kept. When no relocation helps, blocks of ``block``
     consecutive columns compete jointly (:func:`~.hopfield_moves.block_pass`; 0 or 1: no
-    block moves).
+    block moves), and when that does not help either, the ``trials`` most promising moves
+    of a run of up to ``block`` consecutive vertices into another chord are tried
+    (:func:`~.hopfield_moves.group_relocations`).
 
     The search is a deterministic function of the converged state it stands on, so
     ``memo`` (one dict per ``H``) maps every such state already searched to where the
     search ended: reaching one again ends the search there at once, with the same result.
+    ``blocks`` (one dict per ``H``) likewise keeps the block updates already computed.
     """
     groups = column_groups(s.shape[0], closed)
     s, sweeps = _converge(H, HT, s.copy(), groups, closed)
@@ -273,6 +281,19 @@ def _local_search(
     n = H.shape[0]
     memo = {} if memo is None else memo
     visited: list[tuple] = []
+
+    def first_better(moves: list[tuple[float, np.ndarray]]) -> np.ndarray | None:
+        """The first move that, re-converged, ends lower than ``energy`` (ties, a move
+        along a plateau, are not taken)."""
+        nonlocal sweeps
+        for _gain, moved in moves:
+            dirty = _changed_columns(s, moved, n)
+            moved, sw = _converge(H, HT, moved, groups, closed, dirty)
+            sweeps += sw
+            if improves(polygon_energy(H, moved, closed=closed), energy):
+                return moved
+        return None
+
     for _ in range(budget):
         key = (block, trials, s.tobytes())
         if key in memo:
@@ -280,25 +301,17 @@ def _local_search(
             s = s.copy()
             break
         visited.append(key)
-        improved = False
-        for _gain, moved in _relocations(H, HT, s, closed, trials):
-            dirty = _changed_columns(s, moved, n)
-            moved, sw = _converge(H, HT, moved, groups, closed, dirty)
-            sweeps += sw
-            e2 = polygon_energy(H, moved, closed=closed)
-            if improves(e2, energy):  # ties (a move along a plateau) are not taken
-                s, energy, improved = moved, e2, True
-                break
-        if not improved and block > 1:
+        better = first_better(_relocations(H, HT, s, closed, trials))
+        if better is None and block > 1:
             moved = s.copy()
-            if block_pass(H, moved, block, closed):
-                moved, sw = _converge(H, HT, np.sort(moved) if closed else moved, groups, closed)
-                sweeps += sw + 1
-                e2 = polygon_energy(H, moved, closed=closed)
-                if improves(e2, energy):
-                    s, energy, improved = moved, e2, True
-        if not improved:
+            if block_pass(H, moved, block, closed, cache=blocks):
+                sweeps += 1
+                better = first_better([(0.0, np.sort(moved) if closed else moved)])
+        if better is None and block > 1:
+            better = first_better(group_relocations(H, s, closed, block, trials))
+        if better is None:
             break
+        s, energy = better, polygon_energy(H, better, closed=closed)
     for key in visited:
         memo[key] = (s, energy)
     return s, energy, sweeps
@@ -460,18 +473,24 @@ def competitive_hopfield(
     First the plain network of the paper runs from its initial state (``initial``, or the
     equidistant state of :func:`initial_state`). Then, to escape its local minimum, the
     same network is re-converged from further states: the equidistant state shifted by half
-    a spacing (closed curves), a greedy bottom-up merge, a greedy top-down split, and
-    ``restarts`` rounds of
-    perturbation (remove a few vertices, re-insert them greedily). Only strictly better
-    results are kept, so the answer is never worse than the plain network.
+    a spacing (closed curves), a greedy bottom-up merge, a greedy top-down split, where
+    block moves are made the growing start, then ``restarts`` rounds of perturbation
+    (remove a few vertices, re-insert them greedily) and, where block moves are made, the
+    best state so far turned along the closed curve by a quarter, a half and three quarters
+    of its points (the whole polygon moved as one block: a minimum whose vertices are
+    packed on the wrong stretch of the curve cannot move there a few columns at a time).
+    Only strictly better results are kept, so the answer is never worse than the plain
+    network.
 
     Every state is polished by a local search: the network converges, then the ``trials``
     most promising relocations of one vertex to another chord are tried, each followed by
     re-convergence; the first that lowers the energy is kept and the search repeats. When
     none helps, blocks of ``block`` consecutive columns compete jointly
     (:mod:`~regrasp_pin.polygon.hopfield_moves`; the energy never rises) and the search
-    repeats if one moved. ``anneals`` annealed runs of the winner-take-all from the best
-    state give further initial states.
+    repeats if one moved; if none did, runs of up to ``block`` consecutive vertices are
+    moved together into another chord (the ``trials`` most promising, each
+    re-converged and kept only if the energy drops). ``anneals`` annealed runs of the
+    winner-take-all from the best state give further initial states.
 
     Args:
         H: Deviation matrix, shape ``(n, n)``; ``inf`` marks chords that may not be used.
@@ -485,7 +504,8 @@ def competitive_hopfield(
         plain: The plain run from ``initial`` if already computed on this ``H`` (it is then
             not repeated).
         trials: Relocations tried (with re-convergence) when no single move helps.
-        block: Columns per block of the block winner-take-all (0 or 1: none); default
+        block: Columns per block of the block winner-take-all, and most vertices moved
+            together by a group relocation (0 or 1: neither, and no turned starts); default
             :func:`default_block`.
         anneals: Annealed runs from the best state (40 sweeps each, the temperature
             falling from the mean chord energy to 1/1000 of it).
@@ -521,11 +541,14 @@ def competitive_hopfield(
     sweeps = plain.sweeps
 
     memo: dict = {}  # converged states already searched -> where the search ended
+    blocks: dict = {}  # block updates already computed
 
     def consider(s: np.ndarray | None) -> None:
         nonlocal best_s, best_e, sweeps
         if s is not None and s.shape[0] == m:
-            s2, e2, sw = _local_search(H, HT, s, closed, trials, block=block, memo=memo)
+            s2, e2, sw = _local_search(
+                H, HT, s, closed, trials, block=block, memo=memo, blocks=blocks
+            )
             sweeps += sw
             if improves(e2, best_e):
                 best_s, best_e = s2, e2
@@ -539,6 +562,9 @@ def competitive_hopfield(
         if free.size == 0 or not np.isfinite(best_e):
             break
         consider(_perturbed(H, HT, best_s, closed, rng, free))
+    turns = range(1, _TURNS if closed and block > 1 else 1)
+    for j in turns:  # the best state turned by a quarter of the curve, 3 times
+        consider(np.sort((best_s + (j * n) // _TURNS) % n))
     for _ in range(anneals if np.isfinite(best_e) else 0):
         t0 = _ANNEAL_T0 * best_e / m  # a typical chord's share of the energy
         temps = np.geomspace(max(t0, 1e-300), max(t0 * _ANNEAL_T1, 1e-300), _ANNEAL_SWEEPS)
