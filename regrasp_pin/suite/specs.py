@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .._validate import as_array, choice, known_fields, positive, positive_int
-from ..exceptions import InputError
+from ..exceptions import ContactError, InputError
 from ..model.objects import Box, ConvexMesh, ConvexObject, Prism
 from ..scenarios import HANDS, hand_label, is_hand_file, setup_objects, setup_pose
 
@@ -296,8 +296,15 @@ def _pose16(value: Any) -> tuple[float, ...]:
 
 def _base_pose_of(hand: str) -> tuple[float, ...] | None:
     """What a spec of ``hand`` carries as its ``base_pose``: a hand file's canonical
-    pose (searched once per process), None for a bundled hand (a constant)."""
-    return tuple(float(x) for x in setup_pose(hand).ravel()) if is_hand_file(hand) else None
+    pose (searched once per process); None for a bundled hand (a constant), and for a
+    hand file without one (building its specs then raises the search's ContactError,
+    recorded per spec as before)."""
+    if not is_hand_file(hand):
+        return None
+    try:
+        return tuple(float(x) for x in setup_pose(hand).ravel())
+    except ContactError:
+        return None
 
 
 def _fields(obj: Any) -> dict[str, Any]:
