@@ -516,28 +516,20 @@ def capsule_gap(
     gb = [_geometry(hand, g) for g in ids_b]
     Ra, pa = _placements(ga, q)
     Rb, pb = _placements(gb, q)
-    ends_a = [
-        (pa[:, i] + Ra[:, i] @ g.seg_a, pa[:, i] + Ra[:, i] @ g.seg_b) for i, g in enumerate(ga)
-    ]
-    ends_b = [
-        (pb[:, j] + Rb[:, j] @ h.seg_a, pb[:, j] + Rb[:, j] @ h.seg_b) for j, h in enumerate(gb)
-    ]
-    # broad phase: the bounding spheres of the capsules (centre: the segment's middle)
-    mid_a = np.stack([0.5 * (a + b) for a, b in ends_a])  # (A, N, 3)
-    mid_b = np.stack([0.5 * (a + b) for a, b in ends_b])
-    reach_a = np.array([0.5 * np.linalg.norm(g.seg_b - g.seg_a) + g.radius for g in ga])
-    reach_b = np.array([0.5 * np.linalg.norm(h.seg_b - h.seg_a) + h.radius for h in gb])
-    diff = mid_a[:, None] - mid_b[None]  # (A, B, N, 3)
+    # capsule segments, (A, N, 3) and (B, N, 3)
+    A1 = np.stack([pa[:, i] + Ra[:, i] @ g.seg_a for i, g in enumerate(ga)])
+    B1 = np.stack([pa[:, i] + Ra[:, i] @ g.seg_b for i, g in enumerate(ga)])
+    A2 = np.stack([pb[:, j] + Rb[:, j] @ h.seg_a for j, h in enumerate(gb)])
+    B2 = np.stack([pb[:, j] + Rb[:, j] @ h.seg_b for j, h in enumerate(gb)])
+    rad_a = np.array([g.radius for g in ga])
+    rad_b = np.array([h.radius for h in gb])
+    # broad phase: the capsules' bounding spheres (centre: the segment's middle)
+    reach_a = np.array([0.5 * np.linalg.norm(g.seg_b - g.seg_a) for g in ga]) + rad_a
+    reach_b = np.array([0.5 * np.linalg.norm(h.seg_b - h.seg_a) for h in gb]) + rad_b
+    diff = 0.5 * (A1 + B1)[:, None] - 0.5 * (A2 + B2)[None]  # (A, B, N, 3)
     far = np.sqrt(np.einsum("abni,abni->abn", diff, diff))
-    near = far - reach_a[:, None, None] - reach_b[None, :, None] < cap_m
-    i, j, n = np.nonzero(near)
-    if i.size:
-        A1 = np.stack([a for a, _ in ends_a])
-        B1 = np.stack([b for _, b in ends_a])
-        A2 = np.stack([a for a, _ in ends_b])
-        B2 = np.stack([b for _, b in ends_b])
+    i, j, n = np.nonzero(far - reach_a[:, None, None] - reach_b[None, :, None] < cap_m)
+    if i.size:  # each pair's distances as computed alone (elementwise)
         d, _ = _segment_distance(A1[i, n], B1[i, n], A2[j, n], B2[j, n])
-        rad_a = np.array([g.radius for g in ga])
-        rad_b = np.array([h.radius for h in gb])
         np.minimum.at(gap, n, d - rad_a[i] - rad_b[j])
     return np.minimum(gap, cap_m)
