@@ -5,12 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import assert_close
 
 from regrasp_pin import Hand
 from regrasp_pin.model.distances import (
     _geometry,
     _placements,
     _segment_distance,
+    _segment_ends,
     capsule_gap,
 )
 
@@ -35,14 +37,19 @@ def test_capsule_gap_is_the_pair_by_pair_minimum_bit_for_bit(hand):
     ids_a, ids_b = (list(hand.fingers[n].geometry_ids) for n in names)
     q = _random_q(hand, names, 200, 31)
     ga, gb = [_geometry(hand, g) for g in ids_a], [_geometry(hand, g) for g in ids_b]
-    Ra, pa = _placements(ga, q)
-    Rb, pb = _placements(gb, q)
+    A1, B1 = _segment_ends(ga, q)
+    A2, B2 = _segment_ends(gb, q)
+    # the segments' ends are the geometries' placements applied to their capsules
+    for geoms, (A, B) in ((ga, (A1, B1)), (gb, (A2, B2))):
+        R, p = _placements(geoms, q)
+        for i, g in enumerate(geoms):
+            assert_close(A[i], p[:, i] + R[:, i] @ g.seg_a, atol=1e-15, what="segment start")
+            assert_close(B[i], p[:, i] + R[:, i] @ g.seg_b, atol=1e-15, what="segment end")
     ref = np.full(q.shape[0], np.inf)
     for i, g in enumerate(ga):
-        a1, b1 = pa[:, i] + Ra[:, i] @ g.seg_a, pa[:, i] + Ra[:, i] @ g.seg_b
         for j, h in enumerate(gb):
-            a2, b2 = pb[:, j] + Rb[:, j] @ h.seg_a, pb[:, j] + Rb[:, j] @ h.seg_b
-            ref = np.minimum(ref, _segment_distance(a1, b1, a2, b2)[0] - g.radius - h.radius)
+            d = _segment_distance(A1[i], B1[i], A2[j], B2[j])[0]
+            ref = np.minimum(ref, d - g.radius - h.radius)
     assert capsule_gap(hand, ids_a, ids_b, q).tobytes() == ref.tobytes()
     assert np.all(np.isinf(capsule_gap(hand, [], ids_b, q)))
     # with a cap, the pairs whose bounding spheres are that far apart are skipped: the

@@ -151,3 +151,33 @@ def test_jacobian_in_one_batch_equals_the_joint_loop_bit_for_bit(hand):
         assert J_few.tobytes() == np.ascontiguousarray(J_loop[:, :, ::6]).tobytes()
         _, _, J_ref = _pin_reference(hand, finger, q.T[:10])
         assert_close(np.moveaxis(J_few[:, :, :10], 2, 0), J_ref, atol=1e-12, what="Jacobian")
+
+
+def test_attached_frames_one_kernel_per_finger_and_pointwise(hand, monkeypatch):
+    # every collision geometry of the fingers (links on the way to the tips) against
+    # its chain's own poses composed with its offset; one kernel run per finger; each
+    # point's bits independent of the batch
+    from regrasp_pin.model.distances import _geometry
+    from regrasp_pin.model.kinematics import attached_placements, attached_points
+
+    geoms = [_geometry(hand, g) for f in hand.fingers.values() for g in f.geometry_ids]
+    chains = [g.chain for g in geoms]
+    R_off = np.array([g.R_frame_geom for g in geoms])
+    p_off = np.array([g.p_frame_geom for g in geoms])
+    rng = np.random.default_rng(5)
+    lo, hi = hand.model.lowerPositionLimit, hand.model.upperPositionLimit
+    q = rng.uniform(lo, hi, (300, hand.model.nq))
+    runs = []
+    kernel = FingerChain._kernel
+    monkeypatch.setattr(
+        FingerChain, "_kernel", lambda self, *a: runs.append(self) or kernel(self, *a)
+    )
+    R, p = attached_placements(chains, R_off, p_off, q)
+    assert len(runs) == len(hand.fingers) < len({id(c) for c in chains})
+    for j, c in enumerate(chains):
+        R_t, p_t = c.poses(q[:, c.q_indices])
+        assert_close(R[:, j], R_t @ R_off[j], atol=1e-14, what="rotation")
+        assert_close(p[:, j], p_t + R_t @ p_off[j], atol=1e-15, what="origin")
+    assert attached_points(chains, p_off, q).tobytes() == p.tobytes()  # origins alone
+    R_sub, p_sub = attached_placements(chains, R_off, p_off, q[7:19])
+    assert R_sub.tobytes() == R[7:19].tobytes() and p_sub.tobytes() == p[7:19].tobytes()

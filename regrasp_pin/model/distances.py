@@ -19,7 +19,7 @@ import coal
 import numpy as np
 
 from .hand import Finger, Hand
-from .kinematics import FingerChain
+from .kinematics import FingerChain, attached_placements, attached_points
 from .objects import ConvexObject
 
 #: Coal is called wherever a lower bound is below the requirement plus this [m].
@@ -146,19 +146,21 @@ def _support(u_local: np.ndarray, params: np.ndarray) -> np.ndarray:
 
 def _placements(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Geometry placements in the palm frame: ``R (D, G, 3, 3)``, ``p (D, G, 3)``."""
-    D, G = q.shape[0], len(geoms)
-    R = np.empty((D, G, 3, 3))
-    p = np.empty((D, G, 3))
-    poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    for j, g in enumerate(geoms):
-        key = id(g.chain)
-        if key not in poses:
-            R_f, p_f = g.chain.poses(q[:, g.chain.q_indices])
-            poses[key] = (R_f.reshape(-1, 3), p_f)  # rows of all R_f: one BLAS product
-        R_rows, p_f = poses[key]
-        R[:, j] = (R_rows @ g.R_frame_geom).reshape(D, 3, 3)
-        p[:, j] = p_f + (R_rows @ g.p_frame_geom).reshape(D, 3)
-    return R, p
+    return attached_placements(
+        [g.chain for g in geoms],
+        np.array([g.R_frame_geom for g in geoms]).reshape(-1, 3, 3),
+        np.array([g.p_frame_geom for g in geoms]).reshape(-1, 3),
+        q,
+    )
+
+
+def _segment_ends(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The capsule segments' ends of the geometries in the palm frame, ``(G, D, 3)``
+    each."""
+    ends = [g.p_frame_geom + g.R_frame_geom @ g.seg_a for g in geoms]
+    ends += [g.p_frame_geom + g.R_frame_geom @ g.seg_b for g in geoms]
+    p = attached_points([g.chain for g in geoms] * 2, np.array(ends), q).transpose(1, 0, 2)
+    return p[: len(geoms)], p[len(geoms) :]
 
 
 # ---------------------------------------------------------------------- lower bounds
@@ -514,13 +516,9 @@ def capsule_gap(
         return gap
     ga = [_geometry(hand, g) for g in ids_a]
     gb = [_geometry(hand, g) for g in ids_b]
-    Ra, pa = _placements(ga, q)
-    Rb, pb = _placements(gb, q)
     # capsule segments, (A, N, 3) and (B, N, 3)
-    A1 = np.stack([pa[:, i] + Ra[:, i] @ g.seg_a for i, g in enumerate(ga)])
-    B1 = np.stack([pa[:, i] + Ra[:, i] @ g.seg_b for i, g in enumerate(ga)])
-    A2 = np.stack([pb[:, j] + Rb[:, j] @ h.seg_a for j, h in enumerate(gb)])
-    B2 = np.stack([pb[:, j] + Rb[:, j] @ h.seg_b for j, h in enumerate(gb)])
+    A1, B1 = _segment_ends(ga, q)
+    A2, B2 = _segment_ends(gb, q)
     rad_a = np.array([g.radius for g in ga])
     rad_b = np.array([h.radius for h in gb])
     # broad phase: the capsules' bounding spheres (centre: the segment's middle)

@@ -29,6 +29,7 @@ points and get exactly the entries of the whole batch.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import cast
 
@@ -37,7 +38,7 @@ import pinocchio as pin
 
 from ..exceptions import InputError
 
-__all__ = ["FingerChain"]
+__all__ = ["FingerChain", "attached_placements", "attached_points"]
 
 _FEW_POINTS = 256  # up to this many points, the Jacobian in one batch over the joints
 
@@ -174,6 +175,8 @@ class FingerChain:
             )
             A_prev = A
         self._joints = tuple(joints)
+        #: Pinocchio ids of the joints on the chain, root to tip.
+        self.path: tuple[int, ...] = tuple(path)
         self._tip_t = A_prev.T @ frame.placement.translation
         self._tip_R = A_prev.T @ frame.placement.rotation
         # the kernel's plan: nonzero terms of every constant product, the joints' angle
@@ -280,7 +283,11 @@ class FingerChain:
         return p, J
 
     def _kernel(
-        self, qT: np.ndarray, want_jacobian: bool, fast_trig: bool
+        self,
+        qT: np.ndarray,
+        want_jacobian: bool,
+        fast_trig: bool,
+        keep: dict[int, tuple[np.ndarray, list[np.ndarray]]] | None = None,
     ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray | None]:
         """``p`` ``(3, N)``, the columns of the last ``W'`` (``(3, N)`` or ``(3, 1)``
         each, read-only) and ``J`` or None.
@@ -290,6 +297,8 @@ class FingerChain:
         terms (zero coefficients, unit factors) and a column that a constant product
         only moves is not copied. The first joint's constants broadcast over the
         points, and all joints' angles, cosines and sines are computed in one batch.
+        ``keep`` (joint index -> filled with the origin and the ``W'`` columns after that
+        joint) serves :func:`attached_placements`.
         """
         n = qT.shape[1]
         theta = qT[self._theta_column]  # (m, N)
@@ -323,6 +332,8 @@ class FingerChain:
             w1 = c * cols[1]  # column 1: c m1 - s m0
             w1 -= s * cols[0]
             cols = [w0, w1, cols[2]]
+            if keep is not None and i in keep:
+                keep[i] = (o, cols)
             if want_jacobian:
                 axes.append(cols[2])
                 origins.append(o)
@@ -416,3 +427,88 @@ class FingerChain:
         for a in range(3):
             _combine(self._tip_R[:, a], cols, R[:, a])
         return np.moveaxis(R, 2, 0), p.T
+
+    def _attached(
+        self,
+        o: np.ndarray,
+        cols: list[np.ndarray],
+        R_off: np.ndarray | None,
+        p_off: np.ndarray,
+        R_out: np.ndarray | None,
+        p_out: np.ndarray,
+    ) -> None:
+        """Palm-frame placement of the frame ``(R_off, p_off)`` in this chain's tip frame,
+        from the kernel's state after the chain's last joint, into ``R_out`` ``(N, 3,
+        3)`` (skipped when None) and ``p_out`` ``(N, 3)``: the constants folded into one
+        rotation and one offset in the last ``W'`` frame, then written-out sums per
+        point."""
+        t_c = self._tip_t + self._tip_R @ p_off
+        d = _linear(_terms(t_c), cols)
+        p_out[...] = (o + (0.0 if d is None else d)).T
+        if R_off is None or R_out is None:
+            return
+        R_c = self._tip_R @ R_off
+        for a in range(3):
+            R_out[:, :, a] = cast(np.ndarray, _linear(_terms(R_c[:, a]), cols)).T
+
+
+def _kernel_states(
+    chains: list[FingerChain], q: np.ndarray
+) -> Iterator[tuple[int, np.ndarray, list[np.ndarray]]]:
+    """``(j, o, cols)`` for every chain ``j``: the kernel's origin and ``W'`` columns after
+    the chain's last joint, at full model configurations ``q`` ``(N, nq)``, with one
+    kernel run per chain that does not start the path of a longer one (a finger's link
+    frames lie on prefixes of the path to its tip)."""
+    distinct = list({id(c): c for c in chains}.values())
+    distinct.sort(key=lambda c: -len(c.path))  # stable: ties keep the given order
+    hosts: list[FingerChain] = []
+    host_of: dict[int, FingerChain] = {}
+    for c in distinct:
+        host = next((h for h in hosts if h.path[: len(c.path)] == c.path), None)
+        if host is None:
+            hosts.append(c)
+            host = c
+        host_of[id(c)] = host
+    for host in hosts:
+        members = [j for j, c in enumerate(chains) if host_of[id(c)] is host]
+        keep: dict[int, tuple[np.ndarray, list[np.ndarray]]] = {
+            len(chains[j].path) - 1: (np.empty(0), []) for j in members
+        }
+        host._kernel(np.ascontiguousarray(q[:, host.q_indices].T), False, False, keep)
+        for j in members:
+            yield (j, *keep[len(chains[j].path) - 1])
+
+
+def attached_placements(
+    chains: list[FingerChain], R_off: np.ndarray, p_off: np.ndarray, q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Palm-frame placements of frames fixed to chains' tip frames (a finger's links and
+    their collision geometries), with one kernel run per finger (see
+    :func:`_kernel_states`). Each point's result depends on that point's numbers alone
+    (no BLAS).
+
+    Args:
+        chains: ``G`` chains of one model (repeats allowed).
+        R_off: Rotations of the attached frames in their chain's tip frame ``(G, 3, 3)``.
+        p_off: Their origins in the tip frame ``(G, 3)`` [m].
+        q: Full model configurations ``(N, nq)`` [rad].
+
+    Returns:
+        ``R`` ``(N, G, 3, 3)`` and ``p`` ``(N, G, 3)`` [m], palm frame.
+    """
+    n, g = q.shape[0], len(chains)
+    R, p = np.empty((n, g, 3, 3)), np.empty((n, g, 3))
+    for j, o, cols in _kernel_states(chains, q):
+        chains[j]._attached(o, cols, R_off[j], p_off[j], R[:, j], p[:, j])
+    return R, p
+
+
+def attached_points(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Palm-frame positions ``(N, G, 3)`` [m] of points fixed to chains' tip frames,
+    ``p_off`` ``(G, 3)`` [m] in the tip frames, at full model configurations ``q`` ``(N,
+    nq)``: :func:`attached_placements` without the rotations."""
+    n, g = q.shape[0], len(chains)
+    p = np.empty((n, g, 3))
+    for j, o, cols in _kernel_states(chains, q):
+        chains[j]._attached(o, cols, None, p_off[j], None, p[:, j])
+    return p
