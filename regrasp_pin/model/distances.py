@@ -22,7 +22,8 @@ from .hand import Finger, Hand
 from .kinematics import FingerChain, attached_placements, attached_points
 from .objects import ConvexObject
 
-#: Coal is called wherever a lower bound is below the requirement plus this [m].
+#: Pairs of geometries whose bounding spheres are within this of the requirement get
+#: the tighter capsule and separating-axis bounds [m].
 BROAD_PHASE_MARGIN_M = 0.005
 #: Extra Coal queries allowed per reported minimum (beyond the mandatory ones).
 MAX_MINIMUM_QUERIES = 256
@@ -375,7 +376,7 @@ class PairDistances:
         Returns:
             The minima ``{"tip", "link", "ff", "margin"}`` [m] and whether all are exact.
         """
-        rows, cols = np.nonzero(self.lb < self.required + BROAD_PHASE_MARGIN_M)
+        rows, cols = np.nonzero(self.lb < self.required)
         self._query(rows, cols)
         self._update_sweep(np.unique(cols))
         out, exact = {}, True
@@ -392,8 +393,8 @@ class PairDistances:
         The bound of a sample not queried is the larger of its broad-phase bound and
         the sweep bound from the exact values of its column. Each round queries, in
         every column whose bound is still below the best exact value, the sample with
-        the lowest bound, until no bound is below it. A minimum within the mandatory
-        zone (below requirement + margin) needs no extra query.
+        the lowest bound, until no bound is below it. A minimum below the requirement
+        needs no extra query (every sample whose bound is below it was queried).
 
         Args:
             offset: Added to every distance, shape (D, P) [m].

@@ -29,11 +29,10 @@ and spheres). Lower bounds on the signed distance:
   joining the capsules' nearest points.
 
 Both stay valid under penetration (they bound minus the penetration depth). Coal is
-called wherever a bound is below the requirement plus :data:`BROAD_PHASE_MARGIN_M`,
-so every pass/fail decision near a threshold, and every distance within that margin
-of it, is an exact Coal distance.
+called wherever a bound is below the requirement, so every pass/fail decision near a
+threshold is an exact Coal distance.
 
-Reported minima. A minimum within the margin is already exact. Otherwise a branch and
+Reported minima. A minimum below its requirement is already exact. Otherwise a branch and
 bound queries, per pair, the sample with the lowest bound until no bound is below the
 smallest exact value found. Its bounds are also raised by a sweep bound: between
 samples no point of a body moves more than ``|dc| + rho |dR|_2`` per step, so an exact
@@ -163,8 +162,8 @@ class VerificationReport:
             [m]: between two samples a distance is at most this much below the smaller
             of its two sampled values (to first order in the step).
         minima_exact: True when the four minima above are exact Coal distances. A
-            minimum below its requirement plus :data:`BROAD_PHASE_MARGIN_M` is always
-            exact; a larger one may be a lower bound (False here) when
+            minimum below its requirement is always exact; a larger one may be a lower
+            bound (False here) when
             :data:`MAX_MINIMUM_QUERIES` extra queries did not settle it.
         finger: Name of the finger verified.
         elapsed_s: Wall-clock time of the verification [s].
