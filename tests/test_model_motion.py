@@ -192,3 +192,23 @@ def test_bad_twist_arguments():
     with pytest.raises(InputError) as info:
         ObjectMotion.from_xyzquat([0.0, 1.0], np.zeros((2, 7)))
     assert info.value.argument == "xyzquat"
+
+
+def test_rotations_are_scipys_slerp_and_each_point_alone():
+    # random rotations, steps from 1e-7 rad (the series branch) to nearly pi
+    from scipy.spatial.transform import Slerp
+
+    rng = np.random.default_rng(41)
+    steps = [1e-7, 3e-5, 1e-3, 0.5, 2.0, 3.1]
+    R = [Rotation.random(random_state=7)]
+    for angle in steps:
+        axis = rng.normal(size=3)
+        R.append(R[-1] * Rotation.from_rotvec(angle * axis / np.linalg.norm(axis)))
+    rot = Rotation.concatenate(R)
+    t = np.arange(len(R), dtype=float)
+    motion = ObjectMotion(t, rot, rng.normal(size=(len(R), 3)))
+    tq = np.sort(np.concatenate([rng.uniform(0, t[-1], 400), t]))
+    got = motion.pose(tq)[:, :3, :3]
+    assert_close(got, Slerp(t, rot)(tq).as_matrix(), atol=2e-15, what="slerp")
+    assert_close(got[np.isin(tq, t)], rot.as_matrix(), atol=2e-15, what="at the samples")
+    assert motion.pose(tq[5:9]).tobytes() == motion.pose(tq)[5:9].tobytes()

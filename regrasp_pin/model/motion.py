@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from .._validate import as_array, positive
 from ..exceptions import InputError
@@ -48,9 +48,11 @@ class ObjectMotion:
         self._rot = rotations
         self._pos = np.array(positions_m, dtype=float)
         self._pos.setflags(write=False)
-        self._slerp = Slerp(self._t, rotations)
         mats = np.zeros((self._t.size, 4, 4))
         mats[:, :3, :3] = rotations.as_matrix()
+        # per step, the rotation vector from one sample's rotation to the next (local)
+        self._R = mats[:, :3, :3].copy()
+        self._w = (rotations[:-1].inv() * rotations[1:]).as_rotvec()
         mats[:, :3, 3] = self._pos
         mats[:, 3, 3] = 1.0
         mats.setflags(write=False)
@@ -270,7 +272,8 @@ class ObjectMotion:
         if times_s is None:
             return np.hstack([self._pos, self._rot.as_quat()])
         t, _ = self._check_query(np.atleast_1d(np.asarray(times_s, dtype=float)))
-        return np.hstack([self._positions(t), self._slerp(t).as_quat()])
+        R, p = self._interpolate(t)
+        return np.hstack([p, Rotation.from_matrix(R).as_quat()])
 
     def resample(self, dt_s: float) -> ObjectMotion:
         """The same motion on a uniform grid of ``ceil(duration / dt_s)`` equal steps.
@@ -284,7 +287,8 @@ class ObjectMotion:
         dt = positive(dt_s, "dt_s")
         n = max(1, math.ceil(self.duration_s / dt - 1e-9))
         t = np.linspace(self.t_start, self.t_end, n + 1)
-        return ObjectMotion(t, self._slerp(t), self._positions(t))
+        R, p = self._interpolate(t)
+        return ObjectMotion(t, Rotation.from_matrix(R), p)
 
     # ------------------------------------------------------------------ internals
     def _check_query(self, t_s: float | np.ndarray) -> tuple[np.ndarray, bool]:
@@ -304,13 +308,45 @@ class ObjectMotion:
 
     def _interpolate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rotation matrices (K, 3, 3) and positions (K, 3) at clamped times (K,)."""
-        return self._slerp(t).as_matrix(), self._positions(t)
+        i, a = self._segments(t)
+        return self._rotations(i, a), (1.0 - a) * self._pos[i] + a * self._pos[i + 1]
 
-    def _positions(self, t: np.ndarray) -> np.ndarray:
-        """Linearly interpolated positions (K, 3) at clamped times (K,)."""
+    def _segments(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Sample step ``i`` (K,) holding each clamped time and the fraction ``(K, 1)``
+        of that step elapsed."""
         i = np.clip(np.searchsorted(self._t, t, side="right") - 1, 0, self._t.size - 2)
-        a = ((t - self._t[i]) / (self._t[i + 1] - self._t[i]))[:, None]
-        return (1.0 - a) * self._pos[i] + a * self._pos[i + 1]
+        return i, ((t - self._t[i]) / (self._t[i + 1] - self._t[i]))[:, None]
+
+    def _rotations(self, i: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Slerp ``R_i exp(a w_i)`` (K, 3, 3) for steps ``i`` and fractions ``a``: the
+        rotation turns at a constant rate about a fixed axis through each step (what
+        scipy's ``Slerp`` computes), by Rodrigues' formula, written out per point."""
+        w = a * self._w[i]  # (K, 3)
+        th2 = np.einsum("ki,ki->k", w, w)
+        th = np.sqrt(th2)
+        small = th < 1e-4  # the series to th^4 (relative error < 1e-18)
+        safe = np.where(small, 1.0, th)
+        sinc = np.where(small, 1.0 - th2 / 6.0, np.sin(th) / safe)
+        cosc = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(th)) / (safe * safe))
+        cos = np.where(small, 1.0 - 0.5 * th2, np.cos(th))
+        x, y, z = w[:, 0], w[:, 1], w[:, 2]
+        E = np.empty((w.shape[0], 3, 3))  # cos I + sinc [w]x + cosc w w^T
+        E[:, 0, 0] = cos + cosc * x * x
+        E[:, 1, 1] = cos + cosc * y * y
+        E[:, 2, 2] = cos + cosc * z * z
+        E[:, 0, 1] = cosc * x * y - sinc * z
+        E[:, 1, 0] = cosc * x * y + sinc * z
+        E[:, 0, 2] = cosc * x * z + sinc * y
+        E[:, 2, 0] = cosc * x * z - sinc * y
+        E[:, 1, 2] = cosc * y * z - sinc * x
+        E[:, 2, 1] = cosc * y * z + sinc * x
+        R0 = self._R[i]
+        out = np.empty_like(E)
+        for r in range(3):
+            for c in range(3):
+                out[:, r, c] = R0[:, r, 0] * E[:, 0, c] + R0[:, r, 1] * E[:, 1, c]
+                out[:, r, c] += R0[:, r, 2] * E[:, 2, c]
+        return out
 
 
 def _check_times(times_s: np.ndarray) -> np.ndarray:
