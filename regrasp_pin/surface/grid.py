@@ -241,10 +241,10 @@ def build_surface_grid(
 
     region = choose_region(obj, p, q, n_max, include_neighbours)
     chain, pieces, p_uv, q_uv = region.chain, region.pieces, region.p_uv, region.q_uv
-    uv, edges = _lattice(p_uv, q_uv, s, pieces)
+    uv, edges, depth = _lattice(p_uv, q_uv, s, pieces)
     lengths = np.linalg.norm(uv[edges[:, 1]] - uv[edges[:, 0]], axis=1)
     m = uv.shape[0]
-    piece = np.argmax(depths(uv, pieces), axis=1)
+    piece = np.argmax(depth, axis=1)
     piece[0], piece[m - 1] = 0, len(chain) - 1  # P on its face, Q on its face
     points, normals, face_ids = lift(pieces, uv, piece)
     log.debug("surface grid: faces %s, %d nodes, %d edges", chain, m, edges.shape[0])
@@ -268,8 +268,9 @@ def build_surface_grid(
 
 def _lattice(
     p_uv: np.ndarray, q_uv: np.ndarray, s: float, pieces: Sequence[FaceUnfolding]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Lattice nodes inside the region (node 0 = P, last = Q) and their edges (E, 2)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lattice nodes inside the region (node 0 = P, last = Q), their edges (E, 2) and
+    their depths in the pieces (N, F) (see :func:`depths`)."""
     e1 = (q_uv - p_uv) / np.linalg.norm(q_uv - p_uv)
     axes = np.stack([e1, [-e1[1], e1[0]]])  # rows e1, e2
     corners = (np.vstack([pc.polygon_uv for pc in pieces]) - p_uv) @ axes.T / s
@@ -292,6 +293,7 @@ def _lattice(
     index = index.reshape(ii.shape)
     uv_nodes = uv[order]
     member = member[order]
+    depth = depth[order]
     member[0, 0] = True  # P lies in the root face (clamped into it)
     padded = np.pad(index, 2, constant_values=-1)
     ni, nj = (int(n) for n in np.shape(index))
@@ -306,8 +308,9 @@ def _lattice(
     near = np.flatnonzero(np.linalg.norm(uv_nodes - q_uv, axis=1) <= 2 * s * (1 + 1e-9))
     edges = np.concatenate([edges, np.stack([near, np.full(near.size, q_id)], axis=1)])
     uv_nodes = np.vstack([uv_nodes, q_uv])
-    q_member = depths(q_uv[None], pieces) >= -UNFOLD_TOL_M
-    member = np.vstack([member, q_member])
+    q_depth = depths(q_uv[None], pieces)
+    member = np.vstack([member, q_depth >= -UNFOLD_TOL_M])
+    depth = np.vstack([depth, q_depth])
     # An edge is valid if one piece holds both ends (pieces are convex) or, failing
     # that, if its segment is covered by the union of the pieces.
     same = np.any(member[edges[:, 0]] & member[edges[:, 1]], axis=1)
@@ -315,4 +318,4 @@ def _lattice(
     ok = same.copy()
     if cross.size:
         ok[cross] = segments_inside(uv_nodes[edges[cross, 0]], uv_nodes[edges[cross, 1]], pieces)
-    return uv_nodes, edges[ok].astype(np.int64)
+    return uv_nodes, edges[ok].astype(np.int64), depth

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -71,6 +72,15 @@ class FaceUnfolding:
     u_object: np.ndarray
     v_object: np.ndarray
     normal_object: np.ndarray
+
+    @cached_property
+    def edge_halfplanes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Inward unit edge normals ``m`` (k, 2) and offsets ``c`` (k,) [m] of
+        ``polygon_uv``: a point ``x`` is inside where ``m @ x - c >= 0`` for every edge."""
+        a = self.polygon_uv
+        e = np.roll(a, -1, axis=0) - a
+        m = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None]
+        return m, np.sum(a * m, axis=1)
 
     def to_unfolded(self, uv_face: np.ndarray) -> np.ndarray:
         """Unfolded coordinates of face coordinates.
@@ -210,11 +220,8 @@ def _halfplanes(pieces: Sequence[FaceUnfolding]) -> tuple[np.ndarray, np.ndarray
     normals = np.empty((len(pieces), k, 2))
     bias = np.empty((len(pieces), k))
     for i, p in enumerate(pieces):  # per face (a handful)
-        a = p.polygon_uv
-        e = np.roll(a, -1, axis=0) - a
-        m = np.stack([-e[:, 1], e[:, 0]], axis=1) / np.linalg.norm(e, axis=1)[:, None]
-        c = np.sum(a * m, axis=1)
-        pad = k - a.shape[0]
+        m, c = p.edge_halfplanes
+        pad = k - m.shape[0]
         normals[i] = np.concatenate([m, np.repeat(m[:1], pad, axis=0)])
         bias[i] = np.concatenate([c, np.repeat(c[:1], pad)])
     return normals, bias
