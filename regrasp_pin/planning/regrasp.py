@@ -734,7 +734,7 @@ def _attempt(
     )
 
 
-_IK_CHUNK = 16  # samples solved per IK batch, each warm-started from the previous batch
+_IK_CHUNK = 32  # samples solved per IK batch, each warm-started from the previous batch
 
 
 def _follow(
