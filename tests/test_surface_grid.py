@@ -202,3 +202,33 @@ def test_coinciding_points_and_bad_parameters_are_refused(box):
     with pytest.raises(InputError) as err:
         build_surface_grid(box, P, Q, max_faces=0)
     assert err.value.argument == "max_faces"
+    for bad in ((0.5, 0.0), (2.0, -0.01), (2.0, np.inf), 2.0, ("a", 1.0)):
+        with pytest.raises(InputError) as err:
+            build_surface_grid(box, P, Q, max_detour=bad)
+        assert err.value.argument == "max_detour"
+
+
+@pytest.mark.parametrize(
+    ("P", "Q"),
+    [((-0.02, -0.01, 0.02), (0.02, 0.015, 0.02)), ((-0.01, 0.0, 0.02), (0.025, 0.02, -0.01))],
+)
+def test_detour_ellipse_is_the_full_grid_cut_to_it(box, P, Q):
+    # the nodes kept are the full grid's nodes within the ellipse, in the same order,
+    # with the edges among them; the shortest path is that of the full grid whose
+    # nodes outside the ellipse are forbidden
+    P, Q = np.array(P), np.array(Q)
+    full = build_surface_grid(box, P, Q)
+    cut = build_surface_grid(box, P, Q, max_detour=(1.3, 0.004))
+    uvP, uvQ = full.uv[full.p_index], full.uv[full.q_index]
+    reach = 1.3 * np.linalg.norm(uvQ - uvP) + 0.004
+    inside = np.linalg.norm(full.uv - uvP, axis=1) + np.linalg.norm(full.uv - uvQ, axis=1)
+    inside = inside <= reach
+    assert 10 < inside.sum() < 0.8 * len(full)
+    assert np.array_equal(cut.uv, full.uv[inside])
+    assert np.array_equal(cut.points_object, full.points_object[inside])
+    renumber = np.cumsum(inside) - 1
+    kept = inside[full.edges].all(axis=1)
+    assert np.array_equal(cut.edges, renumber[full.edges[kept]])
+    cost = np.where(inside, 0.0, np.inf)
+    a, b = shortest_grid_path(full, cost), shortest_grid_path(cut)
+    assert np.array_equal(np.flatnonzero(inside)[b.nodes], a.nodes)

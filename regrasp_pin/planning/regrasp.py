@@ -68,6 +68,9 @@ __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
 log = logging.getLogger(__name__)
 
 _UNREACHABLE_COST = 20.0  # node cost where IK cannot reach the inflated point
+#: The grid path's nodes: on paths at most twice as long as the straight unfolded P -> Q
+#: segment plus 1 cm (an ellipse with foci P and Q; see ``build_surface_grid``).
+_DETOUR = (2.0, 0.01)
 #: DLS iterations per pass for the grid nodes' IK (from the contact's configuration).
 #: Reachable nodes converge within 4 (every node of the demo neighbourhood and the
 #: regrasp bench); the cap ends the slow creep of unreachable ones along their limits.
@@ -323,7 +326,7 @@ def plan_regrasp(
         else as_array(others_tips_object, "others_tips_object", (None, 3))
     )
     stages = _Stages()
-    grid = build_surface_grid(obj, P, Q, spacing_m=params.grid_spacing_m)
+    grid = build_surface_grid(obj, P, Q, spacing_m=params.grid_spacing_m, max_detour=_DETOUR)
     stages.lap("grid")
     # the other fingers over the whole regrasp: they hold, and move with the object
     t_others = float(t_start) + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
@@ -561,35 +564,29 @@ def _surface_path(task: _Task, p: RegraspParams) -> tuple[GridPath, TipPath]:
     d = uvQ - uvP
     s = np.clip((grid.uv - uvP) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
     t_nodes = t_start + p.duration_s * inverse_minimum_jerk(s)
-    # only nodes in an ellipse around P and Q can be on a sensible path (a detour of up
-    # to twice the straight distance plus 1 cm); the others are never evaluated
     from_p = np.linalg.norm(grid.uv - uvP, axis=1)
     from_q = np.linalg.norm(grid.uv - uvQ, axis=1)
-    near_pq = from_p + from_q <= 2.0 * float(np.linalg.norm(d)) + 0.01
-    near_pq[[grid.p_index, grid.q_index]] = True
-    sel = np.flatnonzero(near_pq)
-    T = task.scene.motion.pose(t_nodes[sel])
-    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips[sel]) + T[:, :3, 3]
+    T = task.scene.motion.pose(t_nodes)
+    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips) + T[:, :3, 3]
     res = f.ik(targets, task.q0, tol_m=1e-4, max_iter=_NODE_IK_ITERATIONS, restarts=False)
     margin = f.limit_margin(res.q)
-    cost = np.full(grid.uv.shape[0], np.inf)
-    cost[sel] = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
-    cost[sel[~res.success]] = _UNREACHABLE_COST
+    cost = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
+    cost[~res.success] = _UNREACHABLE_COST
     t_others, q_others = task.t_others, task.q_others
     q_nodes = np.stack(
-        [np.interp(t_nodes[sel], t_others, q_others[:, j]) for j in range(q_others.shape[1])],
+        [np.interp(t_nodes, t_others, q_others[:, j]) for j in range(q_others.shape[1])],
         axis=1,
     )
     # gaps from this cap on cost nothing and are never forbidden (nor set `allowed`)
     cap = max(_FINGER_GAP_M, p.finger_gap_m + _FINGER_GAP_SLACK_M)
     gap = _finger_gap(task.scene.hand, f.name, res.q, q_nodes, cap)
-    cost[sel] += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
+    cost += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
     # forbidden: nearer than the gap, but never more than P and Q themselves allow (the
     # capsules are conservative: a finger that holds P may already be "within" them)
-    ends = np.isin(sel, [grid.p_index, grid.q_index])
+    ends = [grid.p_index, grid.q_index]
     allowed = min(p.finger_gap_m, float(gap[ends].min()) - _FINGER_GAP_SLACK_M)
-    in_flight = (from_p[sel] > taper) & (from_q[sel] > taper)
-    cost[sel[in_flight & (gap < allowed)]] = np.inf
+    in_flight = (from_p > taper) & (from_q > taper)
+    cost[in_flight & (gap < allowed)] = np.inf
     others_tips = task.others_tips
     if others_tips.size:
         # under another fingertip: forbidden, but never more than P and Q themselves are

@@ -26,6 +26,7 @@ solve with :func:`regrasp_pin.surface.path.shortest_grid_path`. The region is ch
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -193,6 +194,7 @@ def build_surface_grid(
     spacing_m: float = 0.002,
     max_faces: int = 4,
     include_neighbours: bool = True,
+    max_detour: tuple[float, float] | None = None,
 ) -> SurfaceGrid:
     """Unfold the surface region holding P and Q into a plane and build a grid over it.
 
@@ -207,7 +209,9 @@ def build_surface_grid(
     Grid: the lattice ``P + spacing_m * (i e1 + j e2)`` (``e1`` along the unfolded
     P -> Q direction) inside the region, plus Q; 16-neighbour edges (king and knight
     moves) whose straight segment stays inside; Q joined to the lattice nodes within
-    two steps whose segment stays inside.
+    two steps whose segment stays inside. With ``max_detour = (ratio, slack_m)``, only the
+    lattice nodes ``x`` with ``|x - P| + |x - Q| <= ratio |PQ| + slack_m`` (unfolded
+    plane) are kept: the ellipse with foci P and Q that holds every path up to that long.
 
     Args:
         obj: The convex object.
@@ -216,6 +220,8 @@ def build_surface_grid(
         spacing_m: Lattice step [m], > 0.
         max_faces: Longest face chain considered, >= 1.
         include_neighbours: When P and Q share a face, also unfold its neighbours.
+        max_detour: ``(ratio >= 1, slack_m >= 0)`` bounding the paths kept (above), or
+            None for the whole region.
 
     Returns:
         The grid (see :class:`SurfaceGrid`).
@@ -231,6 +237,7 @@ def build_surface_grid(
     n_max = positive_int(max_faces, "max_faces", minimum=1)
     p = as_array(P_object, "P_object", (3,))
     q = as_array(Q_object, "Q_object", (3,))
+    detour = _check_detour(max_detour)
     gap = float(np.linalg.norm(q - p))
     if gap < 0.5 * s:
         raise InputError(
@@ -241,7 +248,7 @@ def build_surface_grid(
 
     region = choose_region(obj, p, q, n_max, include_neighbours)
     chain, pieces, p_uv, q_uv = region.chain, region.pieces, region.p_uv, region.q_uv
-    uv, edges, depth = _lattice(p_uv, q_uv, s, pieces)
+    uv, edges, depth = _lattice(p_uv, q_uv, s, pieces, detour)
     lengths = np.linalg.norm(uv[edges[:, 1]] - uv[edges[:, 0]], axis=1)
     m = uv.shape[0]
     piece = np.argmax(depth, axis=1)
@@ -266,8 +273,28 @@ def build_surface_grid(
     )
 
 
+def _check_detour(max_detour: object) -> tuple[float, float] | None:
+    if max_detour is None:
+        return None
+    try:
+        ratio, slack = (float(v) for v in max_detour)  # type: ignore[attr-defined]
+    except (TypeError, ValueError):
+        raise InputError(
+            "max_detour", f"is {max_detour!r}", "None or (ratio >= 1, slack_m >= 0)"
+        ) from None
+    if not (ratio >= 1.0 and slack >= 0.0 and math.isfinite(ratio) and math.isfinite(slack)):
+        raise InputError(
+            "max_detour", f"is ({ratio:g}, {slack:g})", "None or (ratio >= 1, slack_m >= 0)"
+        )
+    return ratio, slack
+
+
 def _lattice(
-    p_uv: np.ndarray, q_uv: np.ndarray, s: float, pieces: Sequence[FaceUnfolding]
+    p_uv: np.ndarray,
+    q_uv: np.ndarray,
+    s: float,
+    pieces: Sequence[FaceUnfolding],
+    detour: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lattice nodes inside the region (node 0 = P, last = Q), their edges (E, 2) and
     their depths in the pieces (N, F) (see :func:`depths`)."""
@@ -279,21 +306,30 @@ def _lattice(
     ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
     ij = np.stack([ii.ravel(), jj.ravel()], axis=1)
     uv = p_uv + s * (ij @ axes)
-    depth = depths(uv, pieces)  # (N, F)
+    p_cell = (0 - lo[0]) * ii.shape[1] + (0 - lo[1])
+    to_q = np.linalg.norm(uv - q_uv, axis=1)
+    near = np.ones(uv.shape[0], dtype=bool)
+    if detour is not None:
+        reach = detour[0] * float(np.linalg.norm(q_uv - p_uv)) + detour[1]
+        near = np.linalg.norm(uv - p_uv, axis=1) + to_q <= reach
+    near[p_cell] = True
+    cand = np.flatnonzero(near)
+    depth = depths(uv[cand], pieces)  # (C, F), each row its point's own
     member = depth >= -UNFOLD_TOL_M
     keep = np.any(member, axis=1)
-    keep &= np.linalg.norm(uv - q_uv, axis=1) > 1e-6 * s  # Q is added as its own node
-    p_cell = (0 - lo[0]) * ii.shape[1] + (0 - lo[1])
-    keep[p_cell] = True  # P (inside its face, up to rounding)
+    keep &= to_q[cand] > 1e-6 * s  # Q is added as its own node
+    keep[cand == p_cell] = True  # P (inside its face, up to rounding)
     # Number the nodes: P first, then the lattice, then Q.
-    order = np.flatnonzero(keep)
-    order = np.concatenate([[p_cell], order[order != p_cell]])
+    p_row = int(np.flatnonzero(cand == p_cell)[0])
+    rows = np.flatnonzero(keep)
+    rows = np.concatenate([[p_row], rows[rows != p_row]])
+    order = cand[rows]
     index = np.full(ij.shape[0], -1)
     index[order] = np.arange(order.size)
     index = index.reshape(ii.shape)
     uv_nodes = uv[order]
-    member = member[order]
-    depth = depth[order]
+    member = member[rows]
+    depth = depth[rows]
     member[0, 0] = True  # P lies in the root face (clamped into it)
     padded = np.pad(index, 2, constant_values=-1)
     ni, nj = (int(n) for n in np.shape(index))
