@@ -525,9 +525,17 @@ def capsule_gap(
     # broad phase: the capsules' bounding spheres (centre: the segment's middle)
     reach_a = np.array([0.5 * np.linalg.norm(g.seg_b - g.seg_a) for g in ga]) + rad_a
     reach_b = np.array([0.5 * np.linalg.norm(h.seg_b - h.seg_a) for h in gb]) + rad_b
-    diff = 0.5 * (A1 + B1)[:, None] - 0.5 * (A2 + B2)[None]  # (A, B, N, 3)
-    far = np.sqrt(np.einsum("abni,abni->abn", diff, diff))
-    i, j, n = np.nonzero(far - reach_a[:, None, None] - reach_b[None, :, None] < cap_m)
+    mid_a, mid_b = 0.5 * (A1 + B1), 0.5 * (A2 + B2)
+    # first the sphere holding all of ids_a's spheres (1 nm to spare over rounding: it
+    # keeps every (b, row) that a pair's own test below could keep)
+    centre = mid_a.mean(axis=0)  # (N, 3)
+    whole = np.max(np.linalg.norm(mid_a - centre, axis=2) + reach_a[:, None], axis=0)
+    to_b = np.linalg.norm(mid_b - centre, axis=2)  # (B, N)
+    j0, n0 = np.nonzero(to_b - whole - reach_b[:, None] < cap_m + 1e-9)
+    diff = mid_a[:, n0] - mid_b[j0, n0]  # (A, K, 3): every a against each kept (b, row)
+    far = np.sqrt(np.einsum("aki,aki->ak", diff, diff))
+    i, k = np.nonzero(far - reach_a[:, None] - reach_b[j0] < cap_m)
+    j, n = j0[k], n0[k]
     if i.size:  # each pair's distances as computed alone (elementwise)
         d, _ = _segment_distance(A1[i, n], B1[i, n], A2[j, n], B2[j, n])
         np.minimum.at(gap, n, d - rad_a[i] - rad_b[j])
