@@ -579,6 +579,35 @@ def assert_matches_brute_force(hand, obj, finger, t, q, T, clearance, step=0.02,
         1 + sum(len(o.geometry_ids) for name, o in hand.fingers.items() if name != finger)
     )
     assert r.n_distance_queries < 0.5 * t_d.size * n_pairs  # the broad phase prunes
+    # without the minima's branch and bound: the same decisions and failures, fewer
+    # queries, and minima that bound the exact ones from below
+    fast = verify_finger_motion(
+        hand,
+        obj,
+        finger,
+        t,
+        q,
+        T,
+        tip_clearance_m=clearance,
+        link_clearance_m=link,
+        finger_clearance_m=0.001,
+        max_joint_step_rad=step,
+        exact_minima=False,
+    )
+    assert (fast.ok, fast.failures, fast.n_failures, fast.time_s, fast.joint_limits_ok) == (
+        r.ok,
+        r.failures,
+        r.n_failures,
+        r.time_s,
+        r.joint_limits_ok,
+    )
+    assert fast.n_distance_queries <= r.n_distance_queries
+    for key, value in report_mins(fast).items():  # to Coal's GJK tolerance (its warm
+        # starts follow the order of the queries)
+        if fast.minima_exact:
+            assert_close(value, report_mins(r)[key], atol=1e-8, what=key)
+        else:
+            assert value <= report_mins(r)[key] + 1e-8
     return r
 
 

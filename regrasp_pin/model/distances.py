@@ -370,8 +370,12 @@ class PairDistances:
         self._result = coal.DistanceResult()
         self._functors: dict[int, Any] = {}
 
-    def run(self) -> tuple[dict[str, float], bool]:
+    def run(self, exact_minima: bool = True) -> tuple[dict[str, float], bool]:
         """Mandatory queries, then the minima.
+
+        Args:
+            exact_minima: Settle the minima by branch and bound; False: the smallest
+                of the exact distances and the bounds of the samples not queried.
 
         Returns:
             The minima ``{"tip", "link", "ff", "margin"}`` [m] and whether all are exact.
@@ -379,13 +383,27 @@ class PairDistances:
         rows, cols = np.nonzero(self.lb < self.required)
         self._query(rows, cols)
         self._update_sweep(np.unique(cols))
+        minimum = self._minimum if exact_minima else self._lowest
         out, exact = {}, True
         zero = np.zeros(self.lb.shape)
         for key, kind in (("tip", TIP), ("link", LINK), ("ff", FF)):
-            out[key], ok = self._minimum(zero, self.kind == kind)
+            out[key], ok = minimum(zero, self.kind == kind)
             exact &= ok
-        out["margin"], ok = self._minimum(-self.required, np.ones(self.kind.size, dtype=bool))
+        out["margin"], ok = minimum(-self.required, np.ones(self.kind.size, dtype=bool))
         return out, exact and ok
+
+    def _lowest(self, offset: np.ndarray, columns: np.ndarray) -> tuple[float, bool]:
+        """A lower bound on ``min(distance + offset)`` over the given columns, without
+        further queries, and whether it is exact (an exact distance no bound is below)."""
+        cols = np.nonzero(columns)[0]
+        if cols.size == 0:
+            return math.inf, True
+        ex = self.exact[:, cols] + offset[:, cols]
+        done = ~np.isnan(ex)
+        best = float(np.min(ex[done])) if done.any() else math.inf
+        bound = np.where(done, np.inf, np.maximum(self.lb[:, cols], self.swept[:, cols]))
+        low = float(np.min(bound + offset[:, cols]))
+        return min(best, low), best <= low
 
     def _minimum(self, offset: np.ndarray, columns: np.ndarray) -> tuple[float, bool]:
         """``min(distance + offset)`` over the given columns, by branch and bound.

@@ -197,8 +197,11 @@ def verify_or_raise(
     verify_finger_motion` (``clearances``: its clearance keywords) and return the
     report if it passes; else raise a PlanningError of the worst failure's kind
     (``joint-limit`` if only a joint left its limits), with its distance and the
-    required one [m]; ``what`` names the motion in the message."""
-    report = verify_finger_motion(hand, obj, finger, times, q_full, T_palm_object, **clearances)
+    required one [m]; ``what`` names the motion in the message. The report's minima are
+    lower bounds (``exact_minima=False``: nothing here reads them)."""
+    report = verify_finger_motion(
+        hand, obj, finger, times, q_full, T_palm_object, exact_minima=False, **clearances
+    )
     if report.ok:
         return report
     worst = report.worst_failure

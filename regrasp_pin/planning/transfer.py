@@ -65,7 +65,8 @@ class Transfer:
             via (when there is one), before the approach and at landing, object frame
             [m].
         keyframe_times_s: ``(K,)`` when each keyframe is passed [s].
-        report: The Coal verification report (``report.ok`` is True).
+        report: The Coal verification report (``report.ok`` is True; its minima are
+            lower bounds, see ``min_clearance_m``).
         min_clearance_m: Smallest Coal distance between the finger and the object
             during the transfer [m].
         via_height: The ``VIA_HEIGHTS`` entry that passed.

@@ -321,6 +321,7 @@ def verify_finger_motion(
     penetration_tol_m: float = 5e-5,
     max_joint_step_rad: float = 1e-3,
     max_tip_step_m: float | None = None,
+    exact_minima: bool = True,
 ) -> VerificationReport:
     """Check one finger's motion against the object, the other fingers and its limits.
 
@@ -353,6 +354,10 @@ def verify_finger_motion(
         penetration_tol_m: Tolerance on the object checks [m], >= 0.
         max_joint_step_rad: Largest joint step between dense samples [rad], > 0.
         max_tip_step_m: Optional largest fingertip step relative to the object [m], > 0.
+        exact_minima: Find the report's minima exactly (a branch and bound, module
+            docstring); False: only the pass/fail decisions and the failures, which are
+            exact either way, and the minima as lower bounds (``minima_exact`` False
+            unless every one is an exact distance).
 
     Returns:
         The :class:`VerificationReport`; call :meth:`VerificationReport.raise_if_failed`
@@ -420,7 +425,7 @@ def verify_finger_motion(
     )
 
     pairs = PairDistances(hand, obj, f, q_d, T_d, clr_d - tol, link_d - tol, ff_clr)
-    dist, minima_exact = pairs.run()
+    dist, minima_exact = pairs.run(exact_minima)
     joint_fail = _joint_limit_failures(f, t_d, q_d)
     dist_fail = _distance_failures(pairs, t_d)
     all_fail = sorted(dist_fail + joint_fail, key=lambda x: (x.t_first_s, x.kind, x.detail))
