@@ -200,8 +200,10 @@ def _compile() -> Callable[..., Any] | None:
         # the same functions, each calling the compiled versions of the others (inlined)
         glb = dict(iterate_python.__globals__)
         for f in (_cos_sin, _jacobian, _fk_jacobian, _dls_step, iterate_python):
-            inline = "never" if f is iterate_python else "always"
-            jit = numba.njit(cache=True, inline=inline)
+            if f is iterate_python:
+                jit = numba.njit(cache=True, inline="never")
+            else:
+                jit = numba.njit(cache=True, inline="always")
             glb[f.__name__] = jit(types.FunctionType(f.__code__, glb, f.__name__))
         _compiled = glb["iterate_python"]
     return _compiled
