@@ -33,12 +33,12 @@ from .exceptions import (
 )
 from .grasp.choice import GAP_HORIZON_S, Grasp, initial_grasp
 from .grasp.contact import ContactModel
-from .grasp.manifold import StartTracking, build_manifold
+from .grasp.manifold import Manifold, StartTracking, build_manifold
 from .grasp.necessity import MustHold, must_hold, with_idle_fingers
 from .model.clearance import palm_clearance
 from .model.hand import Hand
 from .model.motion import ObjectMotion
-from .model.objects import Box, ConvexObject, Prism
+from .model.objects import Box, ConvexObject, Prism, SurfaceSample
 from .planning.planner import PlannerParams
 from .planning.regrasp import RegraspParams
 
@@ -374,6 +374,8 @@ def grasp_for_motion(
     mu: float = 0.8,
     must_hold_check: bool = False,
     track_start: bool = True,
+    room_fingers: Sequence[str] = (),
+    room_after_s: float = 0.25,
 ) -> Grasp:
     """The initial grasp chosen for ``motion`` (:func:`~.contact_choice.initial_grasp`).
 
@@ -408,6 +410,14 @@ def grasp_for_motion(
             start, then the points feasible there through the finger-gap horizon and
             while they last); the same grasp as mapping every entry (False, the
             reference), which ``must_hold_check`` needs and then does.
+        room_fingers: Fingers whose room to regrasp ranks the grasps: of the
+            force-closure grasps found, the one kept has the largest smallest room over
+            these fingers (:func:`~regrasp_pin.placing.regrasp_room`: usable contacts
+            at which a finger stays ``contact.finger_trigger_m`` + 0.5 mm from the other
+            fingers, at the start and ``room_after_s`` later), then the best score.
+            Empty (default): the score alone.
+        room_after_s: The second time at which the room is counted, after the start [s]
+            (a regrasp's duration: where a finger that must let go at once lands).
 
     Returns:
         The :class:`~.contact_choice.Grasp` at the motion's start.
@@ -451,6 +461,7 @@ def grasp_for_motion(
         only[index] = True
         m = manifolds[name]
         manifolds[name] = replace(m, inside=m.inside & only[None, :])
+    rank = _room_rank(hand, manifolds, sample, room_fingers, room_after_s, contact)
     return initial_grasp(
         hand,
         obj,
@@ -463,7 +474,44 @@ def grasp_for_motion(
         finger_clearance=finger_clearance,
         gap_horizon_s=GAP_HORIZON_S,
         must_hold=runs,
+        rank=rank,
     )
+
+
+def _room_rank(
+    hand: Hand,
+    manifolds: Mapping[str, Manifold],
+    sample: SurfaceSample,
+    fingers: Sequence[str],
+    after_s: float,
+    contact: ContactModel,
+) -> Callable[[Mapping[str, int]], int] | None:
+    """The grasp search's rank of a combination: the smallest regrasp room over
+    ``fingers`` (:func:`~regrasp_pin.placing.regrasp_room`) at the manifolds' first time
+    and the first time ``after_s`` later; None without fingers."""
+    from .placing import RegraspRoom
+
+    if not fingers:
+        return None
+    for n in fingers:
+        if n not in manifolds:
+            raise UnknownNameError("room_fingers", n, list(manifolds))
+    times = next(iter(manifolds.values())).times_s
+    k_after = min(int(np.searchsorted(times, times[0] + after_s - 1e-9)), times.size - 1)
+    ks = sorted({0, k_after})
+    room = RegraspRoom(
+        hand,
+        manifolds,
+        sample,
+        ks,
+        margin_rad=contact.choice_margin_rad,
+        clearance_m=contact.finger_trigger_m + 0.0005,
+    )
+
+    def rank(pick: Mapping[str, int]) -> int:
+        return min(room(pick, fingers).values())
+
+    return rank
 
 
 def turn_about_thumb_contact(
@@ -572,6 +620,8 @@ def scenario_for_hand(
     poses = start_poses(
         hand, obj, names, contact, pose=pose, attempts=attempts, pivot=pivot, seed=seed
     )
+    # the grasp leaves each finger room to regrasp a regrasp's duration in
+    room_after = scenario_params(names, contact).regrasp.duration_s
     failed: list[Attempt] = []
     for i, T0 in enumerate(poses):
         what = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
@@ -587,6 +637,8 @@ def scenario_for_hand(
                 grasp_dt_s=grasp_dt_s,
                 horizon_s=min(_PIVOT_HORIZON_S, duration) if pivot is not None else None,
                 seed=seed,
+                room_fingers=names if pivot is None else (),
+                room_after_s=room_after,
             )
         except ContactError as exc:
             failed.append(exc.as_attempt(what))
@@ -616,6 +668,8 @@ def scenario_for_hand(
                     grasp_dt_s=grasp_dt_s,
                     seed=seed,
                     keep={pivot: grasp.indices[pivot]},
+                    room_fingers=[n for n in names if n != pivot],
+                    room_after_s=room_after,
                 )
             except ContactError as exc:
                 failed.append(exc.as_attempt(f"{what}, about the {pivot}'s contact"))

@@ -290,6 +290,31 @@ def test_initial_grasp_is_seeded(five):
     assert again.indices == grasp.indices
 
 
+def test_initial_grasp_keeps_the_highest_rank_then_the_best_score(five):
+    hand, box, _, sample, manifolds, grasp = five
+    kw = dict(mu=MU, min_separation_m=SEP_M, min_finger_gap_m=0.001)
+    # a constant rank leaves the score alone to decide: the same grasp
+    assert initial_grasp(hand, box, manifolds, sample, rank=lambda pick: 0, **kw).indices == (
+        grasp.indices
+    )
+    seen = []
+
+    def rank(pick):
+        # every index contact but the unranked grasp's ranks higher
+        r = int(pick["index"] != grasp.indices["index"])
+        seen.append((r, dict(pick)))
+        return r
+
+    ranked = initial_grasp(hand, box, manifolds, sample, rank=rank, **kw)
+    keys = [tuple(sorted(p.items())) for _, p in seen]
+    assert len(keys) == len(set(keys)), "each combination is ranked once"
+    assert grasp.indices in [p for _, p in seen]
+    best = max(r for r, _ in seen)
+    assert (int(ranked.indices["index"] != grasp.indices["index"])) == best
+    if best == 0:
+        assert ranked.indices == grasp.indices
+
+
 def test_grasps_with_fingers_too_close_are_refused_with_the_closest_distance(five):
     hand, box, _, sample, manifolds, grasp = five
     names = list(manifolds)

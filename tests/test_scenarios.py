@@ -97,3 +97,52 @@ def test_the_grasp_search_maps_only_what_it_reads_and_picks_the_same_grasp(hand,
     for n in fingers:
         assert np.array_equal(fast.q[n], full.q[n])
         assert np.array_equal(fast.points_object[n], full.points_object[n])
+
+
+def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
+    # with room_fingers, the grasp kept leaves those fingers at least as much room to
+    # regrasp (regrasp_room, recounted here on the same manifolds) as the score's pick
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.model.motion import ObjectMotion
+    from regrasp_pin.placing import regrasp_room
+    from regrasp_pin.scenarios import grasp_for_motion, hand_model, setup_pose
+
+    h = hand_model("five_finger")
+    obj = setup_objects("five_finger")["hexagon"]()
+    T0 = setup_pose("five_finger")
+    turn = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=T0[:3, 2],
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.radians(40.0),
+        duration_s=1.5,
+        dt_s=0.01,
+    )
+    contact = ContactModel()
+    fingers = setup_fingers("five_finger")
+    movers = [n for n in fingers if n != "thumb"]
+    kw = dict(contact=contact, grasp_dt_s=0.1, seed=0, track_start=False)
+    plain = grasp_for_motion(h, obj, turn, fingers, **kw)
+    roomy = grasp_for_motion(h, obj, turn, fingers, room_fingers=movers, room_after_s=0.25, **kw)
+    sample = obj.sample_surface(0.002)
+    times = np.linspace(turn.t_start, turn.t_end, int(turn.duration_s / 0.1) + 1)
+    manifolds = {
+        n: build_manifold(h.finger(n), sample, turn, times, contact=contact) for n in fingers
+    }
+
+    def room(g):
+        counts = regrasp_room(
+            h,
+            manifolds,
+            sample,
+            g.indices,
+            movers,
+            [0, 3],  # the start and the first time 0.25 s later
+            margin_rad=contact.choice_margin_rad,
+            clearance_m=contact.finger_trigger_m + 0.0005,
+        )
+        return min(counts.values())
+
+    assert room(roomy) >= room(plain) > 0
+    with pytest.raises(UnknownNameError):
+        grasp_for_motion(h, obj, turn, fingers, room_fingers=["pinky"], **kw)

@@ -657,6 +657,7 @@ def initial_grasp(
     min_finger_gap_m: float | None = None,
     gap_horizon_s: float = GAP_HORIZON_S,
     must_hold: Sequence[MustHold] = (),
+    rank: Callable[[Mapping[str, int]], int] | None = None,
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
 
@@ -679,6 +680,10 @@ def initial_grasp(
     distance [m]; a grasp where it is <= 0 is refused. ``must_hold`` (from
     :func:`~regrasp_pin.grasp.necessity.must_hold`) keeps, for a finger that cannot let
     go from ``t_index`` on, only the contacts that last through that run.
+    ``rank`` (optional) maps a combination (finger -> sample index) to an integer that
+    is compared before the score: the combination kept has the highest rank, and the
+    highest score among those (such as the fingers' room to regrasp,
+    :func:`~regrasp_pin.placing.regrasp_room`).
 
     Raises:
         ContactError: a finger has no usable contact (kind ``infeasible`` when none
@@ -709,6 +714,8 @@ def initial_grasp(
     sep = sep_default if min_separation_m is None else min_separation_m
     best = None
     best_score = -np.inf
+    best_rank = 0
+    ranks_known: dict[tuple[int, ...], int] = {}
     if min_finger_gap_m is None:
         min_finger_gap_m = contact.finger_trigger_m + 0.0005
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
@@ -736,12 +743,20 @@ def initial_grasp(
         if scored is None:
             continue
         score, e = scored
-        if best is None or score > best_score + SCORE_RTOL * max(1.0, abs(best_score)):
+        key = tuple(pick[n] for n in names)
+        if rank is not None and key not in ranks_known:
+            ranks_known[key] = int(rank(pick))
+        r = ranks_known.get(key, 0)
+        if (
+            best is None
+            or r > best_rank
+            or (r == best_rank and score > best_score + SCORE_RTOL * max(1.0, abs(best_score)))
+        ):
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
                 search.refused += 1
                 continue
-            best_score, best = score, (dict(pick), e, q_pick)
+            best_score, best_rank, best = score, r, (dict(pick), e, q_pick)
     closest = search.closest
     if best is None and search.refused:
         known = bool(np.isfinite(closest))
