@@ -276,22 +276,20 @@ def candidate_placements(
 class RegraspRoom:
     """How many places each finger of a grasp could regrasp to without touching the others.
 
-    For a grasp (finger -> contact) and each finger of ``fingers``, at each manifold time
-    of ``time_indices``: the sample points usable there (``margin_rad`` inside the
-    limits, pad facing), at least one tip radius from the finger's own contact, at whose
-    configuration the finger's links are at least ``clearance_m`` from the links of each
-    other grasping finger (every finger of ``manifolds``, at its contact at that time; one
-    that no longer reaches it stays where it was at the first of the times). Distances
-    are exact (Coal) where the capsule bound of a geometry pair is below ``clearance_m``.
-    A finger's room is the smallest of these counts over the times. Fingers not in
-    ``manifolds`` are not measured. A finger's clearances to one other finger at one
-    contact are computed once and reused by every grasp that shares them.
+    For a grasp (finger -> contact), a finger's room at a manifold time is the number of
+    sample points usable there (``margin_rad`` inside the limits, pad facing), at least
+    one tip radius from the finger's own contact, at whose configuration the finger's
+    links are at least ``clearance_m`` from the links of each other grasping finger
+    (every finger of ``manifolds``, at its contact at that time, or where it last reached
+    it). Distances are exact (Coal) where the capsule bound of a geometry pair is below
+    ``clearance_m``. Fingers not in ``manifolds`` are not measured. A finger's clearances
+    to one other finger at one contact and time are computed once and reused by every
+    grasp that shares them.
 
     Args:
         hand: The hand.
         manifolds: finger -> its manifold (every grasping finger, the same times).
         sample: The surface sample the manifolds map.
-        time_indices: Manifold time indices at which the room is counted.
         margin_rad: Joint-limit margin of a usable contact [rad].
         clearance_m: Smallest distance [m] to the other fingers' links.
     """
@@ -301,60 +299,63 @@ class RegraspRoom:
         hand: Hand,
         manifolds: Mapping[str, Manifold],
         sample: SurfaceSample,
-        time_indices: Sequence[int],
         *,
         margin_rad: float,
         clearance_m: float,
     ) -> None:
         self.hand, self.manifolds, self.sample = hand, manifolds, sample
-        self.ks = [int(k) for k in time_indices]
+        self.margin = float(margin_rad)
         self.clearance = float(clearance_m)
-        self._usable = {
-            n: [np.flatnonzero(m.usable(margin_rad)[k]) for k in self.ks]
-            for n, m in manifolds.items()
-        }
+        self._usable: dict[tuple[str, int], np.ndarray] = {}
         self._clear: dict[tuple[str, int, str, int], np.ndarray] = {}
         self._data = hand.model.createData()
         self._gdata = pin.GeometryData(hand.collision_model)
         self._req, self._res = coal.DistanceRequest(), coal.DistanceResult()
 
-    def __call__(self, indices: Mapping[str, int], fingers: Sequence[str]) -> dict[str, int]:
-        """Each finger's room (an integer count; 0 without time indices) at the grasp
-        ``indices`` (finger -> index into the sample, every finger of the manifolds)."""
-        names = list(self.manifolds)
-        out: dict[str, int] = {}
-        for name in fingers:
-            own = self.sample.points[int(indices[name])]
-            r_tip = self.hand.finger(name).tip_radius
-            counts = []
-            for j in range(len(self.ks)):
-                cand = self._usable[name][j]
-                ok = np.linalg.norm(self.sample.points[cand] - own, axis=1) >= r_tip
-                for other in names:
-                    if other != name:
-                        ok &= self._clear_of(name, j, other, int(indices[other]))
-                counts.append(int(np.count_nonzero(ok)))
-            out[name] = min(counts, default=0)
-        return out
+    def __call__(
+        self, indices: Mapping[str, int], fingers: Sequence[str], time_indices: Sequence[int]
+    ) -> dict[str, int]:
+        """Each finger's room at the grasp ``indices`` (finger -> index into the sample,
+        every finger of the manifolds): the smallest count over the manifold times
+        ``time_indices`` (0 without times)."""
+        return {
+            name: min((self.count(indices, name, int(k)) for k in time_indices), default=0)
+            for name in fingers
+        }
 
-    def _clear_of(self, name: str, j: int, other: str, i_other: int) -> np.ndarray:
-        """``(C,)`` whether each usable contact of ``name`` at time slot ``j`` keeps the
+    def count(self, indices: Mapping[str, int], name: str, k: int) -> int:
+        """The room of ``name`` at manifold time index ``k`` (an integer count)."""
+        key = (name, k)
+        if key not in self._usable:
+            self._usable[key] = np.flatnonzero(self.manifolds[name].usable(self.margin)[k])
+        cand = self._usable[key]
+        own = self.sample.points[int(indices[name])]
+        ok = (
+            np.linalg.norm(self.sample.points[cand] - own, axis=1)
+            >= self.hand.finger(name).tip_radius
+        )
+        for other in self.manifolds:
+            if other != name:
+                ok &= self._clear_of(name, k, other, int(indices[other]))
+        return int(np.count_nonzero(ok))
+
+    def _clear_of(self, name: str, k: int, other: str, i_other: int) -> np.ndarray:
+        """``(C,)`` whether each usable contact of ``name`` at time index ``k`` keeps the
         finger ``clearance`` from ``other`` holding its contact ``i_other`` then (where
-        it was at the first slot if it no longer reaches it)."""
-        key = (name, j, other, i_other)
+        it last reached it, if it no longer does)."""
+        key = (name, k, other, i_other)
         if key in self._clear:
             return self._clear[key]
         hand = self.hand
         f, g = hand.finger(name), hand.finger(other)
-        cand = self._usable[name][j]
-        q_other = self.manifolds[other].q[self.ks[j], i_other]
-        if not np.isfinite(q_other).all():
-            q_other = self.manifolds[other].q[self.ks[0], i_other]
+        cand = self._usable[(name, k)]
+        q_held = self.manifolds[other].q[: k + 1, i_other]
+        reached = np.flatnonzero(np.isfinite(q_held).all(axis=1))
         ok = np.ones(cand.size, bool)
-        if cand.size and np.isfinite(q_other).all():
+        if cand.size and reached.size:
             rows = np.repeat(hand.neutral()[None], cand.size, axis=0)
-            rows[:, g.q_indices] = q_other
-            rows[:, f.q_indices] = self.manifolds[name].q[self.ks[j], cand]
+            rows[:, g.q_indices] = q_held[reached[-1]]
+            rows[:, f.q_indices] = self.manifolds[name].q[k, cand]
             # geometry pairs whose capsules come within the clearance, and where
             close = capsule_pair_gaps(hand, list(f.geometry_ids), list(g.geometry_ids), rows)
             close = close < self.clearance
@@ -408,8 +409,7 @@ def regrasp_room(
     clearance_m: float,
 ) -> dict[str, int]:
     """The room to regrasp of each finger of ``fingers`` at the grasp ``indices``
-    (finger -> sample index): :class:`RegraspRoom`, counted once."""
-    room = RegraspRoom(
-        hand, manifolds, sample, time_indices, margin_rad=margin_rad, clearance_m=clearance_m
-    )
-    return room(indices, fingers)
+    (finger -> sample index), the smallest over the manifold times ``time_indices``:
+    :class:`RegraspRoom`, counted once."""
+    room = RegraspRoom(hand, manifolds, sample, margin_rad=margin_rad, clearance_m=clearance_m)
+    return room(indices, fingers, time_indices)

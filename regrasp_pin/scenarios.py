@@ -411,13 +411,15 @@ def grasp_for_motion(
             while they last); the same grasp as mapping every entry (False, the
             reference), which ``must_hold_check`` needs and then does.
         room_fingers: Fingers whose room to regrasp ranks the grasps: of the
-            force-closure grasps found, the one kept has the largest smallest room over
-            these fingers (:func:`~regrasp_pin.placing.regrasp_room`: usable contacts
-            at which a finger stays ``contact.finger_trigger_m`` + 0.5 mm from the other
-            fingers, at the start and ``room_after_s`` later), then the best score.
-            Empty (default): the score alone.
-        room_after_s: The second time at which the room is counted, after the start [s]
-            (a regrasp's duration: where a finger that must let go at once lands).
+            force-closure grasps found (and improved one finger at a time), the one
+            kept has first the fewest of these fingers' holds that cannot be regrasped
+            in turn, one regrasp of ``room_after_s`` after another, then the largest
+            smallest room over these fingers (:class:`~regrasp_pin.placing.RegraspRoom`:
+            usable contacts at which a finger stays ``contact.finger_trigger_m`` + 0.5
+            mm from the other fingers, at the start and ``room_after_s`` later), then
+            the best score. Empty (default): the score alone.
+        room_after_s: A regrasp's duration [s] (the second time at which the room is
+            counted: where a finger that must let go at once lands).
 
     Returns:
         The :class:`~.contact_choice.Grasp` at the motion's start.
@@ -483,12 +485,21 @@ def _room_rank(
     manifolds: Mapping[str, Manifold],
     sample: SurfaceSample,
     fingers: Sequence[str],
-    after_s: float,
+    regrasp_s: float,
     contact: ContactModel,
-) -> Callable[[Mapping[str, int]], int] | None:
-    """The grasp search's rank of a combination: the smallest regrasp room over
-    ``fingers`` (:func:`~regrasp_pin.placing.regrasp_room`) at the manifolds' first time
-    and the first time ``after_s`` later; None without fingers."""
+) -> Callable[[Mapping[str, int]], tuple[int, int]] | None:
+    """The grasp search's rank of a combination (None without fingers), two integers:
+
+    1. minus the number of ``fingers`` whose holds cannot all be regrasped in turn, one
+       regrasp of ``regrasp_s`` after another from the start: with their contacts' exit
+       times sorted, the ``j``-th (from 1) must be at least ``j * regrasp_s`` after the
+       start (holds that last through the manifolds' times need no regrasp);
+    2. the smallest regrasp room over ``fingers``
+       (:class:`~regrasp_pin.placing.RegraspRoom`: usable contacts at which a finger
+       stays ``contact.finger_trigger_m`` + 0.5 mm from the other grasping fingers) at
+       the manifolds' first time and the first time ``regrasp_s`` later.
+    """
+    from .grasp.choice import exit_times
     from .placing import RegraspRoom
 
     if not fingers:
@@ -497,19 +508,26 @@ def _room_rank(
         if n not in manifolds:
             raise UnknownNameError("room_fingers", n, list(manifolds))
     times = next(iter(manifolds.values())).times_s
-    k_after = min(int(np.searchsorted(times, times[0] + after_s - 1e-9)), times.size - 1)
+    k_after = min(int(np.searchsorted(times, times[0] + regrasp_s - 1e-9)), times.size - 1)
     ks = sorted({0, k_after})
     room = RegraspRoom(
         hand,
         manifolds,
         sample,
-        ks,
         margin_rad=contact.choice_margin_rad,
         clearance_m=contact.finger_trigger_m + 0.0005,
     )
+    held = {n: manifolds[n].usable(contact.limit_margin_rad) for n in fingers}
 
-    def rank(pick: Mapping[str, int]) -> int:
-        return min(room(pick, fingers).values())
+    def rank(pick: Mapping[str, int]) -> tuple[int, int]:
+        ends = [
+            float(exit_times(held[n][:, [int(pick[n])]], times, 0)[0]) - float(times[0])
+            for n in fingers
+            if not held[n][:, int(pick[n])].all()
+        ]
+        # on the manifolds' grid (multiples of their step): no floating-point ties
+        late = sum(t < j * regrasp_s - 1e-9 for j, t in enumerate(sorted(ends), start=1))
+        return -late, min(room(pick, fingers, ks).values())
 
     return rank
 

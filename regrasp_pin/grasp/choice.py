@@ -657,7 +657,7 @@ def initial_grasp(
     min_finger_gap_m: float | None = None,
     gap_horizon_s: float = GAP_HORIZON_S,
     must_hold: Sequence[MustHold] = (),
-    rank: Callable[[Mapping[str, int]], int] | None = None,
+    rank: Callable[[Mapping[str, int]], tuple[int, ...]] | None = None,
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
 
@@ -680,8 +680,8 @@ def initial_grasp(
     distance [m]; a grasp where it is <= 0 is refused. ``must_hold`` (from
     :func:`~regrasp_pin.grasp.necessity.must_hold`) keeps, for a finger that cannot let
     go from ``t_index`` on, only the contacts that last through that run.
-    ``rank`` (optional) maps a combination (finger -> sample index) to an integer that
-    is compared before the score: the combination kept has the highest rank, and the
+    ``rank`` (optional) maps a combination (finger -> sample index) to integers that
+    are compared (in order) before the score: the combination kept has the highest rank, and the
     highest score among those (such as the fingers' room to regrasp,
     :func:`~regrasp_pin.placing.regrasp_room`); the best combination found is then
     improved by changing one finger's contact at a time (fingers and candidates in
@@ -717,8 +717,8 @@ def initial_grasp(
     sep = sep_default if min_separation_m is None else min_separation_m
     best = None
     best_score = -np.inf
-    best_rank = 0
-    ranks_known: dict[tuple[int, ...], int] = {}
+    best_rank: tuple[int, ...] = ()
+    ranks_known: dict[tuple[int, ...], tuple[int, ...]] = {}
     if min_finger_gap_m is None:
         min_finger_gap_m = contact.finger_trigger_m + 0.0005
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
@@ -748,8 +748,8 @@ def initial_grasp(
         score, e = scored
         key = tuple(pick[n] for n in names)
         if rank is not None and key not in ranks_known:
-            ranks_known[key] = int(rank(pick))
-        r = ranks_known.get(key, 0)
+            ranks_known[key] = tuple(int(v) for v in rank(pick))
+        r = ranks_known.get(key, ())
         if (
             best is None
             or r > best_rank
@@ -815,7 +815,7 @@ class _RankClimb:
         mu: float,
         scale_m: float,
         epsilons: _ScreeningEpsilons,
-        ranks_known: dict[tuple[int, ...], int],
+        ranks_known: dict[tuple[int, ...], tuple[int, ...]],
         max_passes: int = 4,
     ) -> None:
         self.per_finger, self.pts, self.nrm, self.search = per_finger, pts, nrm, search
@@ -829,13 +829,13 @@ class _RankClimb:
     def run(
         self,
         best: tuple[dict[str, int], float, dict[str, np.ndarray]],
-        best_rank: int,
+        best_rank: tuple[int, ...],
         best_score: float,
-        rank: Callable[[Mapping[str, int]], int],
+        rank: Callable[[Mapping[str, int]], tuple[int, ...]],
         manifolds: Mapping[str, Manifold],
         t_index: int,
         finger_clearance: Callable[[dict[str, np.ndarray]], float] | None,
-    ) -> tuple[tuple[dict[str, int], float, dict[str, np.ndarray]], int, float]:
+    ) -> tuple[tuple[dict[str, int], float, dict[str, np.ndarray]], tuple[int, ...], float]:
         """The improved ``(best, rank, score)``."""
         names = list(manifolds)
         for _ in range(self.max_passes):
@@ -860,10 +860,10 @@ class _RankClimb:
         current: Mapping[str, int],
         name: str,
         i: int,
-        rank: Callable[[Mapping[str, int]], int],
-        best_rank: int,
+        rank: Callable[[Mapping[str, int]], tuple[int, ...]],
+        best_rank: tuple[int, ...],
         best_score: float,
-    ) -> tuple[dict[str, int], int, float, float] | None:
+    ) -> tuple[dict[str, int], tuple[int, ...], float, float] | None:
         """The grasp ``current`` with ``name`` at ``i`` (fingers in the order ``names``)
         and its rank, score and epsilon, if it is admissible and better; else None."""
         if i == current[name]:
@@ -883,7 +883,7 @@ class _RankClimb:
             return None
         key = tuple(int(v) for v in ii)
         if key not in self.ranks_known:
-            self.ranks_known[key] = int(rank(pick))
+            self.ranks_known[key] = tuple(int(v) for v in rank(pick))
         r = self.ranks_known[key]
         score, e = scored
         if r > best_rank or (
