@@ -594,7 +594,10 @@ def scenario_for_hand(
     finger the turn is then placed about the axis through that finger's contact along
     its normal, as in :func:`make_scenario`, so that the pivot finger pins the object
     while the others walk around it, and the other fingers' contacts are chosen again
-    for that turn. The
+    for that turn. Both grasp searches rank their grasps by the room the fingers other
+    than the pivot have to regrasp (``grasp_for_motion(room_fingers=...)``), so that
+    the pivot's contact, and the others', leave each finger somewhere to land clear of
+    its neighbours. The
     first pose (of at most ``attempts``) with a grasp, at which the object also stays
     clear of the palm over the whole motion, is the scenario's.
 
@@ -655,7 +658,7 @@ def scenario_for_hand(
                 grasp_dt_s=grasp_dt_s,
                 horizon_s=min(_PIVOT_HORIZON_S, duration) if pivot is not None else None,
                 seed=seed,
-                room_fingers=names if pivot is None else (),
+                room_fingers=[n for n in names if n != pivot],
                 room_after_s=room_after,
             )
         except ContactError as exc:
