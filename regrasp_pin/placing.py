@@ -27,26 +27,45 @@ Scores are integer counts and ties keep the fixed order above, so the ranking is
 same on every machine. Whether a force-closure grasp exists, and lasts under the
 motion, is decided afterwards by the grasp search
 (:func:`~regrasp_pin.scenarios.scenario_for_hand`).
+
+**Regrasp room.** A finger that holds a contact at the edge of its reach must soon
+regrasp, and it can only land where its body keeps clear of the fingers that go on
+holding. :func:`regrasp_room` counts, for each finger of a grasp, its usable contacts
+(away from its own) at which its links stay a given distance from the other grasping
+fingers' links at their contacts, at a few times of the motion: each pair of geometries
+is bounded from below by capsules (:func:`~regrasp_pin.model.distances.capsule_pair_gaps`, for
+all contacts at once) and measured by Coal only where the bound is below the distance.
+The scenario search ranks grasps by the smallest count.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import coal
 import numpy as np
+import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
 from ._validate import positive, positive_int
 from .exceptions import InputError
 from .grasp.contact import ContactModel
-from .grasp.manifold import build_manifold
+from .grasp.manifold import Manifold, build_manifold
 from .model.clearance import palm_clearance
+from .model.distances import capsule_pair_gaps
 from .model.hand import Hand
 from .model.motion import ObjectMotion
-from .model.objects import ConvexObject
+from .model.objects import ConvexObject, SurfaceSample
 
-__all__ = ["END_FACE_COS", "Placement", "candidate_placements", "workspace_centres"]
+__all__ = [
+    "END_FACE_COS",
+    "Placement",
+    "RegraspRoom",
+    "candidate_placements",
+    "regrasp_room",
+    "workspace_centres",
+]
 
 #: A pivot's contact normal must be this close to the object's z axis (cos 10 deg).
 END_FACE_COS = float(np.cos(np.radians(10.0)))
@@ -252,3 +271,145 @@ def candidate_placements(
                 out.append(placement)
     order = sorted(range(len(out)), key=lambda i: (-out[i].score, i))
     return [out[i] for i in order]
+
+
+class RegraspRoom:
+    """How many places each finger of a grasp could regrasp to without touching the others.
+
+    For a grasp (finger -> contact), a finger's room at a manifold time is the number of
+    sample points usable there (``margin_rad`` inside the limits, pad facing), at least
+    one tip radius from the finger's own contact, at whose configuration the finger's
+    links are at least ``clearance_m`` from the links of each other grasping finger
+    (every finger of ``manifolds``, at its contact at that time, or where it last reached
+    it). Distances are exact (Coal) where the capsule bound of a geometry pair is below
+    ``clearance_m``. Fingers not in ``manifolds`` are not measured. A finger's clearances
+    to one other finger at one contact and time are computed once and reused by every
+    grasp that shares them.
+
+    Args:
+        hand: The hand.
+        manifolds: finger -> its manifold (every grasping finger, the same times).
+        sample: The surface sample the manifolds map.
+        margin_rad: Joint-limit margin of a usable contact [rad].
+        clearance_m: Smallest distance [m] to the other fingers' links.
+    """
+
+    def __init__(
+        self,
+        hand: Hand,
+        manifolds: Mapping[str, Manifold],
+        sample: SurfaceSample,
+        *,
+        margin_rad: float,
+        clearance_m: float,
+    ) -> None:
+        self.hand, self.manifolds, self.sample = hand, manifolds, sample
+        self.margin = float(margin_rad)
+        self.clearance = float(clearance_m)
+        self._usable: dict[tuple[str, int], np.ndarray] = {}
+        self._clear: dict[tuple[str, int, str, int], np.ndarray] = {}
+        self._data = hand.model.createData()
+        self._gdata = pin.GeometryData(hand.collision_model)
+        self._req, self._res = coal.DistanceRequest(), coal.DistanceResult()
+
+    def __call__(
+        self, indices: Mapping[str, int], fingers: Sequence[str], time_indices: Sequence[int]
+    ) -> dict[str, int]:
+        """Each finger's room at the grasp ``indices`` (finger -> index into the sample,
+        every finger of the manifolds): the smallest count over the manifold times
+        ``time_indices`` (0 without times)."""
+        return {
+            name: min((self.count(indices, name, int(k)) for k in time_indices), default=0)
+            for name in fingers
+        }
+
+    def count(self, indices: Mapping[str, int], name: str, k: int) -> int:
+        """The room of ``name`` at manifold time index ``k`` (an integer count)."""
+        key = (name, k)
+        if key not in self._usable:
+            self._usable[key] = np.flatnonzero(self.manifolds[name].usable(self.margin)[k])
+        cand = self._usable[key]
+        own = self.sample.points[int(indices[name])]
+        ok = (
+            np.linalg.norm(self.sample.points[cand] - own, axis=1)
+            >= self.hand.finger(name).tip_radius
+        )
+        for other in self.manifolds:
+            if other != name:
+                ok &= self._clear_of(name, k, other, int(indices[other]))
+        return int(np.count_nonzero(ok))
+
+    def _clear_of(self, name: str, k: int, other: str, i_other: int) -> np.ndarray:
+        """``(C,)`` whether each usable contact of ``name`` at time index ``k`` keeps the
+        finger ``clearance`` from ``other`` holding its contact ``i_other`` then (where
+        it last reached it, if it no longer does)."""
+        key = (name, k, other, i_other)
+        if key in self._clear:
+            return self._clear[key]
+        hand = self.hand
+        f, g = hand.finger(name), hand.finger(other)
+        cand = self._usable[(name, k)]
+        q_held = self.manifolds[other].q[: k + 1, i_other]
+        reached = np.flatnonzero(np.isfinite(q_held).all(axis=1))
+        ok = np.ones(cand.size, bool)
+        if cand.size and reached.size:
+            rows = np.repeat(hand.neutral()[None], cand.size, axis=0)
+            rows[:, g.q_indices] = q_held[reached[-1]]
+            rows[:, f.q_indices] = self.manifolds[name].q[k, cand]
+            # geometry pairs whose capsules come within the clearance, and where
+            close = capsule_pair_gaps(hand, list(f.geometry_ids), list(g.geometry_ids), rows)
+            close = close < self.clearance
+            near = [
+                (a, b, close[ia, ib])
+                for ia, a in enumerate(f.geometry_ids)
+                for ib, b in enumerate(g.geometry_ids)
+                if close[ia, ib].any()
+            ]
+            if near:
+                self._measure(rows, near, ok)
+        self._clear[key] = ok
+        return ok
+
+    def _measure(
+        self, rows: np.ndarray, near: list[tuple[int, int, np.ndarray]], ok: np.ndarray
+    ) -> None:
+        """Clear ``ok[r]`` where a pair of ``near`` (geometry ids, the rows where their
+        capsules are close) is closer than the clearance at ``rows[r]`` (Coal)."""
+        model, cm = self.hand.model, self.hand.collision_model
+        objs = cm.geometryObjects
+        for r in np.flatnonzero(np.any([m for _, _, m in near], axis=0)):
+            pin.forwardKinematics(model, self._data, rows[r])
+            pin.updateGeometryPlacements(model, self._data, cm, self._gdata)
+            for a, b, m in near:
+                if not m[r]:
+                    continue
+                self._res.clear()
+                d = coal.distance(
+                    objs[a].geometry,
+                    self._gdata.oMg[a],
+                    objs[b].geometry,
+                    self._gdata.oMg[b],
+                    self._req,
+                    self._res,
+                )
+                if d < self.clearance:
+                    ok[r] = False
+                    break
+
+
+def regrasp_room(
+    hand: Hand,
+    manifolds: Mapping[str, Manifold],
+    sample: SurfaceSample,
+    indices: Mapping[str, int],
+    fingers: Sequence[str],
+    time_indices: Sequence[int],
+    *,
+    margin_rad: float,
+    clearance_m: float,
+) -> dict[str, int]:
+    """The room to regrasp of each finger of ``fingers`` at the grasp ``indices``
+    (finger -> sample index), the smallest over the manifold times ``time_indices``:
+    :class:`RegraspRoom`, counted once."""
+    room = RegraspRoom(hand, manifolds, sample, margin_rad=margin_rad, clearance_m=clearance_m)
+    return room(indices, fingers, time_indices)

@@ -33,12 +33,12 @@ from .exceptions import (
 )
 from .grasp.choice import GAP_HORIZON_S, Grasp, initial_grasp
 from .grasp.contact import ContactModel
-from .grasp.manifold import StartTracking, build_manifold
+from .grasp.manifold import Manifold, StartTracking, build_manifold
 from .grasp.necessity import MustHold, must_hold, with_idle_fingers
 from .model.clearance import palm_clearance
 from .model.hand import Hand
 from .model.motion import ObjectMotion
-from .model.objects import Box, ConvexObject, Prism
+from .model.objects import Box, ConvexObject, Prism, SurfaceSample
 from .planning.planner import PlannerParams
 from .planning.regrasp import RegraspParams
 
@@ -374,6 +374,8 @@ def grasp_for_motion(
     mu: float = 0.8,
     must_hold_check: bool = False,
     track_start: bool = True,
+    room_fingers: Sequence[str] = (),
+    room_after_s: float = 0.25,
 ) -> Grasp:
     """The initial grasp chosen for ``motion`` (:func:`~.contact_choice.initial_grasp`).
 
@@ -408,6 +410,16 @@ def grasp_for_motion(
             start, then the points feasible there through the finger-gap horizon and
             while they last); the same grasp as mapping every entry (False, the
             reference), which ``must_hold_check`` needs and then does.
+        room_fingers: Fingers whose room to regrasp ranks the grasps: of the
+            force-closure grasps found (and improved one finger at a time), the one
+            kept has first the fewest of these fingers' holds that cannot be regrasped
+            in turn, one regrasp of ``room_after_s`` after another, then the largest
+            smallest room over these fingers (:class:`~regrasp_pin.placing.RegraspRoom`:
+            usable contacts at which a finger stays ``contact.finger_trigger_m`` + 0.5
+            mm from the other fingers, at the start and ``room_after_s`` later), then
+            the best score. Empty (default): the score alone.
+        room_after_s: A regrasp's duration [s] (the second time at which the room is
+            counted: where a finger that must let go at once lands).
 
     Returns:
         The :class:`~.contact_choice.Grasp` at the motion's start.
@@ -451,6 +463,7 @@ def grasp_for_motion(
         only[index] = True
         m = manifolds[name]
         manifolds[name] = replace(m, inside=m.inside & only[None, :])
+    rank = _room_rank(hand, manifolds, sample, room_fingers, room_after_s, contact)
     return initial_grasp(
         hand,
         obj,
@@ -463,7 +476,60 @@ def grasp_for_motion(
         finger_clearance=finger_clearance,
         gap_horizon_s=GAP_HORIZON_S,
         must_hold=runs,
+        rank=rank,
     )
+
+
+def _room_rank(
+    hand: Hand,
+    manifolds: Mapping[str, Manifold],
+    sample: SurfaceSample,
+    fingers: Sequence[str],
+    regrasp_s: float,
+    contact: ContactModel,
+) -> Callable[[Mapping[str, int]], tuple[int, int]] | None:
+    """The grasp search's rank of a combination (None without fingers), two integers:
+
+    1. minus the number of ``fingers`` whose holds cannot all be regrasped in turn, one
+       regrasp of ``regrasp_s`` after another from the start: with their contacts' exit
+       times sorted, the ``j``-th (from 1) must be at least ``j * regrasp_s`` after the
+       start (holds that last through the manifolds' times need no regrasp);
+    2. the smallest regrasp room over ``fingers``
+       (:class:`~regrasp_pin.placing.RegraspRoom`: usable contacts at which a finger
+       stays ``contact.finger_trigger_m`` + 0.5 mm from the other grasping fingers) at
+       the manifolds' first time and the first time ``regrasp_s`` later.
+    """
+    from .grasp.choice import exit_times
+    from .placing import RegraspRoom
+
+    if not fingers:
+        return None
+    for n in fingers:
+        if n not in manifolds:
+            raise UnknownNameError("room_fingers", n, list(manifolds))
+    times = next(iter(manifolds.values())).times_s
+    k_after = min(int(np.searchsorted(times, times[0] + regrasp_s - 1e-9)), times.size - 1)
+    ks = sorted({0, k_after})
+    room = RegraspRoom(
+        hand,
+        manifolds,
+        sample,
+        margin_rad=contact.choice_margin_rad,
+        clearance_m=contact.finger_trigger_m + 0.0005,
+    )
+    held = {n: manifolds[n].usable(contact.limit_margin_rad) for n in fingers}
+
+    def rank(pick: Mapping[str, int]) -> tuple[int, int]:
+        ends = [
+            float(exit_times(held[n][:, [int(pick[n])]], times, 0)[0]) - float(times[0])
+            for n in fingers
+            if not held[n][:, int(pick[n])].all()
+        ]
+        # on the manifolds' grid (multiples of their step): no floating-point ties
+        late = sum(t < j * regrasp_s - 1e-9 for j, t in enumerate(sorted(ends), start=1))
+        return -late, min(room(pick, fingers, ks).values())
+
+    return rank
 
 
 def turn_about_thumb_contact(
@@ -528,7 +594,10 @@ def scenario_for_hand(
     finger the turn is then placed about the axis through that finger's contact along
     its normal, as in :func:`make_scenario`, so that the pivot finger pins the object
     while the others walk around it, and the other fingers' contacts are chosen again
-    for that turn. The
+    for that turn. Both grasp searches rank their grasps by the room the fingers other
+    than the pivot have to regrasp (``grasp_for_motion(room_fingers=...)``), so that
+    the pivot's contact, and the others', leave each finger somewhere to land clear of
+    its neighbours. The
     first pose (of at most ``attempts``) with a grasp, at which the object also stays
     clear of the palm over the whole motion, is the scenario's.
 
@@ -572,6 +641,8 @@ def scenario_for_hand(
     poses = start_poses(
         hand, obj, names, contact, pose=pose, attempts=attempts, pivot=pivot, seed=seed
     )
+    # the grasp leaves each finger room to regrasp a regrasp's duration in
+    room_after = scenario_params(names, contact).regrasp.duration_s
     failed: list[Attempt] = []
     for i, T0 in enumerate(poses):
         what = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
@@ -587,6 +658,8 @@ def scenario_for_hand(
                 grasp_dt_s=grasp_dt_s,
                 horizon_s=min(_PIVOT_HORIZON_S, duration) if pivot is not None else None,
                 seed=seed,
+                room_fingers=[n for n in names if n != pivot],
+                room_after_s=room_after,
             )
         except ContactError as exc:
             failed.append(exc.as_attempt(what))
@@ -616,6 +689,8 @@ def scenario_for_hand(
                     grasp_dt_s=grasp_dt_s,
                     seed=seed,
                     keep={pivot: grasp.indices[pivot]},
+                    room_fingers=[n for n in names if n != pivot],
+                    room_after_s=room_after,
                 )
             except ContactError as exc:
                 failed.append(exc.as_attempt(f"{what}, about the {pivot}'s contact"))

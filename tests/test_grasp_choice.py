@@ -290,6 +290,34 @@ def test_initial_grasp_is_seeded(five):
     assert again.indices == grasp.indices
 
 
+def test_initial_grasp_keeps_the_highest_rank_then_the_best_score(five):
+    hand, box, _, sample, manifolds, grasp = five
+    kw = dict(mu=MU, min_separation_m=SEP_M, min_finger_gap_m=0.001)
+    # a constant rank leaves the score alone to decide: the same grasp
+    flat = initial_grasp(hand, box, manifolds, sample, rank=lambda pick: (0,), **kw)
+    assert flat.indices == grasp.indices
+    seen = {}
+
+    def rank(pick):
+        # the index's contacts far from the unranked grasp's rank higher, then the
+        # middle's far from it (two integers, compared in order)
+        r = tuple(
+            int(np.linalg.norm(sample.points[pick[n]] - grasp.points_object[n]) * 1e3) // 5
+            for n in ("index", "middle")
+        )
+        key = tuple(sorted(pick.items()))
+        assert key not in seen, "each combination is ranked once"
+        seen[key] = r
+        return r
+
+    ranked = initial_grasp(hand, box, manifolds, sample, rank=rank, **kw)
+    assert seen[tuple(sorted(grasp.indices.items()))] == (0, 0)
+    kept = seen[tuple(sorted(ranked.indices.items()))]
+    assert kept == max(seen.values()) and kept > (0, 0)
+    assert len(seen) > 1
+    _check_grasp(hand, box, sample, manifolds, ranked, SEP_M)
+
+
 def test_grasps_with_fingers_too_close_are_refused_with_the_closest_distance(five):
     hand, box, _, sample, manifolds, grasp = five
     names = list(manifolds)

@@ -14,6 +14,7 @@ from regrasp_pin.model.distances import (
     _segment_distance,
     _segment_ends,
     capsule_gap,
+    capsule_pair_gaps,
 )
 
 
@@ -51,6 +52,15 @@ def test_capsule_gap_is_the_pair_by_pair_minimum_bit_for_bit(hand):
             d = _segment_distance(A1[i], B1[i], A2[j], B2[j])[0]
             ref = np.minimum(ref, d - g.radius - h.radius)
     assert capsule_gap(hand, ids_a, ids_b, q).tobytes() == ref.tobytes()
+    # pair by pair: the same bits, and their minimum is the bound
+    pairs = capsule_pair_gaps(hand, ids_a, ids_b, q)
+    assert pairs.shape == (len(ids_a), len(ids_b), q.shape[0])
+    for i, g in enumerate(ga):
+        for j, h in enumerate(gb):
+            d = _segment_distance(A1[i], B1[i], A2[j], B2[j])[0] - g.radius - h.radius
+            assert pairs[i, j].tobytes() == d.tobytes()
+    assert pairs.min(axis=(0, 1)).tobytes() == ref.tobytes()
+    assert np.all(np.isinf(capsule_pair_gaps(hand, ids_a, [], q)))
     assert np.all(np.isinf(capsule_gap(hand, [], ids_b, q)))
     # with a cap, the pairs whose bounding spheres are that far apart are skipped: the
     # gaps below it are the same bits, the others the cap

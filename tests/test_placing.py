@@ -7,10 +7,13 @@ import numpy as np
 import pytest
 from conftest import assert_close
 
+from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.model.clearance import palm_clearance
+from regrasp_pin.grasp.contact import ContactModel
+from regrasp_pin.grasp.manifold import build_manifold
+from regrasp_pin.model.clearance import FingerClearance, palm_clearance
 from regrasp_pin.model.hand import Hand
-from regrasp_pin.placing import candidate_placements, workspace_centres
+from regrasp_pin.placing import candidate_placements, regrasp_room, workspace_centres
 from regrasp_pin.scenarios import scenario_for_hand, setup_objects
 
 FINGERS = ("thumb", "index", "middle", "ring")
@@ -91,3 +94,69 @@ def test_scenario_for_hand_bad_inputs(five, hexagon):
         scenario_for_hand(five, hexagon, angle_deg=0.0)
     with pytest.raises(InputError, match="pose"):
         scenario_for_hand(five, hexagon, pose=np.eye(3))
+
+
+@pytest.fixture(scope="module")
+def held():
+    """The bundled hand's canonical grasp, its manifolds at three times of the turn."""
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
+    sample = scen.obj.sample_surface(0.002)
+    times = np.array([0.0, 0.3, 0.6])
+    manifolds = {
+        n: build_manifold(scen.hand.finger(n), sample, scen.motion, times, contact=ContactModel())
+        for n in scen.grasp.indices
+    }
+    return scen, sample, manifolds
+
+
+def _room_direct(hand, manifolds, sample, indices, name, k, margin, clearance):
+    """The contacts of ``name`` counted at time ``k``, one by one, and each one's Coal
+    distance to the other grasping fingers at their contacts."""
+    f = hand.finger(name)
+    m = manifolds[name]
+    q = hand.neutral()
+    for n, i in indices.items():
+        if n != name:
+            q[hand.finger(n).q_indices] = manifolds[n].q[k, i]
+    coal = FingerClearance(hand, name, others=[n for n in indices if n != name])
+    own = sample.points[indices[name]]
+    out = []
+    for i in np.flatnonzero(m.usable(margin)[k]):
+        if np.linalg.norm(sample.points[i] - own) < f.tip_radius:
+            continue
+        q[f.q_indices] = m.q[k, i]
+        out.append(coal(q))
+    return np.array(out)
+
+
+def test_regrasp_room_counts_contacts_clear_of_the_other_fingers(held):
+    """Each finger's room is the number of its usable contacts away from its own whose
+    Coal distance to the other fingers is at least the clearance (counted one by one
+    here), the smallest over the times, and shrinks as the clearance grows."""
+    scen, sample, manifolds = held
+    hand, idx = scen.hand, scen.grasp.indices
+    margin, clearance = 0.08, 0.002
+    names = list(idx)
+    room = regrasp_room(
+        hand, manifolds, sample, idx, names, [0, 2], margin_rad=margin, clearance_m=clearance
+    )
+    assert set(room) == set(names)
+    for name in names:
+        per_time = []
+        for k in (0, 2):
+            d = _room_direct(hand, manifolds, sample, idx, name, k, margin, clearance)
+            one = regrasp_room(
+                hand, manifolds, sample, idx, [name], [k], margin_rad=margin, clearance_m=clearance
+            )[name]
+            assert one == np.count_nonzero(d >= clearance), (name, k)
+            per_time.append(one)
+        assert room[name] == min(per_time)
+    wider = regrasp_room(
+        hand, manifolds, sample, idx, names, [0, 2], margin_rad=margin, clearance_m=0.01
+    )
+    assert all(wider[n] <= room[n] for n in names)
+    far = regrasp_room(hand, manifolds, sample, idx, names, [0], margin_rad=margin, clearance_m=1.0)
+    assert far == {n: 0 for n in names}
+    assert regrasp_room(
+        hand, manifolds, sample, idx, names, [], margin_rad=margin, clearance_m=clearance
+    ) == {n: 0 for n in names}

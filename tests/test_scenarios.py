@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import SHADOW_HAND_FILE, assert_close, shadow_urdf
 
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import InputError, UnknownNameError
@@ -97,3 +97,105 @@ def test_the_grasp_search_maps_only_what_it_reads_and_picks_the_same_grasp(hand,
     for n in fingers:
         assert np.array_equal(fast.q[n], full.q[n])
         assert np.array_equal(fast.points_object[n], full.points_object[n])
+
+
+def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
+    # with room_fingers, the grasp kept is at least as good as the score's pick by
+    # (holds that cannot be regrasped in turn, smallest regrasp room), both recounted
+    # here on the same manifolds: exit times by a loop, the room by regrasp_room
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.model.motion import ObjectMotion
+    from regrasp_pin.placing import regrasp_room
+    from regrasp_pin.scenarios import grasp_for_motion, hand_model, setup_pose
+
+    h = hand_model("five_finger")
+    obj = setup_objects("five_finger")["hexagon"]()
+    T0 = setup_pose("five_finger")
+    turn = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=T0[:3, 2],
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.radians(40.0),
+        duration_s=1.5,
+        dt_s=0.01,
+    )
+    contact = ContactModel()
+    fingers = setup_fingers("five_finger")
+    movers = [n for n in fingers if n != "thumb"]
+    kw = dict(contact=contact, grasp_dt_s=0.1, seed=0, track_start=False)
+    plain = grasp_for_motion(h, obj, turn, fingers, **kw)
+    roomy = grasp_for_motion(h, obj, turn, fingers, room_fingers=movers, room_after_s=0.25, **kw)
+    sample = obj.sample_surface(0.002)
+    times = np.linspace(turn.t_start, turn.t_end, int(turn.duration_s / 0.1) + 1)
+    manifolds = {
+        n: build_manifold(h.finger(n), sample, turn, times, contact=contact) for n in fingers
+    }
+
+    def rank(g):
+        ends = []
+        for n in movers:
+            ok = manifolds[n].usable(contact.limit_margin_rad)[:, g.indices[n]]
+            k = 0
+            while k < times.size and ok[k]:
+                k += 1
+            if k < times.size:
+                ends.append(times[k] - times[0])
+        late = sum(t < 0.25 * j - 1e-9 for j, t in enumerate(sorted(ends), start=1))
+        counts = regrasp_room(
+            h,
+            manifolds,
+            sample,
+            g.indices,
+            movers,
+            [0, 3],  # the start and the first time 0.25 s later
+            margin_rad=contact.choice_margin_rad,
+            clearance_m=contact.finger_trigger_m + 0.0005,
+        )
+        return -late, min(counts.values())
+
+    assert rank(roomy) >= rank(plain)
+    assert rank(roomy)[1] > 0
+    with pytest.raises(UnknownNameError):
+        grasp_for_motion(h, obj, turn, fingers, room_fingers=["pinky"], **kw)
+
+
+def test_the_shadow_hands_grasp_leaves_every_walking_finger_room_to_regrasp():
+    # the real Shadow Hand (third-party models, skipped when absent): with the score
+    # alone, no usable contact of the little finger cleared the middle finger's body;
+    # the room rank leaves each finger but the pivot somewhere to land, at the start
+    # and one regrasp later (recounted on manifolds built here at those two times)
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.placing import regrasp_room
+    from regrasp_pin.scenarios import hand_model, scenario_for_hand, setup_pose
+
+    shadow_urdf()
+    hand_file = str(SHADOW_HAND_FILE)
+    # at the hand file's canonical pose, as the suite builds its neighbourhood
+    scen = scenario_for_hand(
+        hand_model(hand_file),
+        setup_objects(hand_file)["hexagon"](),
+        fingers=setup_fingers(hand_file),
+        angle_deg=60.0,
+        rate_deg_s=10.0,
+        pose=setup_pose(hand_file),
+    )
+    contact = ContactModel()
+    sample = scen.obj.sample_surface(0.002)
+    t0 = scen.motion.t_start
+    times = np.array([t0, t0 + scen.params.regrasp.duration_s])
+    manifolds = {
+        n: build_manifold(scen.hand.finger(n), sample, scen.motion, times, contact=contact)
+        for n in scen.grasp.indices
+    }
+    walkers = [n for n in scen.grasp.indices if n != "thumb"]
+    room = regrasp_room(
+        scen.hand,
+        manifolds,
+        sample,
+        scen.grasp.indices,
+        walkers,
+        [0, 1],
+        margin_rad=contact.choice_margin_rad,
+        clearance_m=contact.finger_trigger_m + 0.0005,
+    )
+    assert min(room.values()) > 0, room

@@ -657,6 +657,7 @@ def initial_grasp(
     min_finger_gap_m: float | None = None,
     gap_horizon_s: float = GAP_HORIZON_S,
     must_hold: Sequence[MustHold] = (),
+    rank: Callable[[Mapping[str, int]], tuple[int, ...]] | None = None,
 ) -> Grasp:
     """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
 
@@ -679,6 +680,13 @@ def initial_grasp(
     distance [m]; a grasp where it is <= 0 is refused. ``must_hold`` (from
     :func:`~regrasp_pin.grasp.necessity.must_hold`) keeps, for a finger that cannot let
     go from ``t_index`` on, only the contacts that last through that run.
+    ``rank`` (optional) maps a combination (finger -> sample index) to integers that
+    are compared (in order) before the score: the combination kept has the highest rank, and the
+    highest score among those (such as the fingers' room to regrasp,
+    :func:`~regrasp_pin.placing.regrasp_room`); the best combination found is then
+    improved by changing one finger's contact at a time (fingers and candidates in
+    their fixed order, the first change to a higher rank, or to the same rank and a
+    higher score, taken) until no change improves it.
 
     Raises:
         ContactError: a finger has no usable contact (kind ``infeasible`` when none
@@ -709,6 +717,8 @@ def initial_grasp(
     sep = sep_default if min_separation_m is None else min_separation_m
     best = None
     best_score = -np.inf
+    best_rank: tuple[int, ...] = ()
+    ranks_known: dict[tuple[int, ...], tuple[int, ...]] = {}
     if min_finger_gap_m is None:
         min_finger_gap_m = contact.finger_trigger_m + 0.0005
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
@@ -736,12 +746,25 @@ def initial_grasp(
         if scored is None:
             continue
         score, e = scored
-        if best is None or score > best_score + SCORE_RTOL * max(1.0, abs(best_score)):
+        key = tuple(pick[n] for n in names)
+        if rank is not None and key not in ranks_known:
+            ranks_known[key] = tuple(int(v) for v in rank(pick))
+        r = ranks_known.get(key, ())
+        if (
+            best is None
+            or r > best_rank
+            or (r == best_rank and score > best_score + SCORE_RTOL * max(1.0, abs(best_score)))
+        ):
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
                 search.refused += 1
                 continue
-            best_score, best = score, (dict(pick), e, q_pick)
+            best_score, best_rank, best = score, r, (dict(pick), e, q_pick)
+    if rank is not None and best is not None:
+        climb = _RankClimb(per_finger, pts, nrm, search, mu, obj.radius_m, epsilons, ranks_known)
+        best, best_rank, best_score = climb.run(
+            best, best_rank, best_score, rank, manifolds, t_index, finger_clearance
+        )
     closest = search.closest
     if best is None and search.refused:
         known = bool(np.isfinite(closest))
@@ -776,6 +799,98 @@ def initial_grasp(
         indices={n: pick[n] for n in names},
         epsilon=float(e_full if e_full > 0 else e),
     )
+
+
+class _RankClimb:
+    """Improves a grasp by ``(rank, score)`` one finger's contact at a time (see
+    :func:`initial_grasp`): the changed contact passes the combination search's
+    separation and finger gaps, and the grasp stays in force closure."""
+
+    def __init__(
+        self,
+        per_finger: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        pts: np.ndarray,
+        nrm: np.ndarray,
+        search: _CombinationSearch,
+        mu: float,
+        scale_m: float,
+        epsilons: _ScreeningEpsilons,
+        ranks_known: dict[tuple[int, ...], tuple[int, ...]],
+        max_passes: int = 4,
+    ) -> None:
+        self.per_finger, self.pts, self.nrm, self.search = per_finger, pts, nrm, search
+        self.mu, self.scale_m, self.epsilons = mu, scale_m, epsilons
+        self.ranks_known, self.max_passes = ranks_known, max_passes
+
+    def _frac(self, name: str, i: int) -> float:
+        ids, fracs = self.per_finger[name]
+        return float(fracs[int(np.flatnonzero(ids == i)[0])])
+
+    def run(
+        self,
+        best: tuple[dict[str, int], float, dict[str, np.ndarray]],
+        best_rank: tuple[int, ...],
+        best_score: float,
+        rank: Callable[[Mapping[str, int]], tuple[int, ...]],
+        manifolds: Mapping[str, Manifold],
+        t_index: int,
+        finger_clearance: Callable[[dict[str, np.ndarray]], float] | None,
+    ) -> tuple[tuple[dict[str, int], float, dict[str, np.ndarray]], tuple[int, ...], float]:
+        """The improved ``(best, rank, score)``."""
+        names = list(manifolds)
+        for _ in range(self.max_passes):
+            moved = False
+            for name in names:
+                for i in self.per_finger[name][0]:
+                    found = self._try(names, best[0], name, int(i), rank, best_rank, best_score)
+                    if found is None:
+                        continue
+                    pick, r, score, e = found
+                    q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
+                    if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
+                        continue
+                    best, best_rank, best_score, moved = (pick, e, q_pick), r, score, True
+            if not moved:
+                break
+        return best, best_rank, best_score
+
+    def _try(
+        self,
+        names: list[str],
+        current: Mapping[str, int],
+        name: str,
+        i: int,
+        rank: Callable[[Mapping[str, int]], tuple[int, ...]],
+        best_rank: tuple[int, ...],
+        best_score: float,
+    ) -> tuple[dict[str, int], tuple[int, ...], float, float] | None:
+        """The grasp ``current`` with ``name`` at ``i`` (fingers in the order ``names``)
+        and its rank, score and epsilon, if it is admissible and better; else None."""
+        if i == current[name]:
+            return None
+        others = {n: j for n, j in current.items() if n != name}
+        g = self.search._gap(name, i, others)
+        if g is None or g < self.search.min_gap_m:
+            return None
+        pick = {n: int(current[n]) for n in names}
+        pick[name] = i
+        ii = np.array([pick[n] for n in names])
+        fracs = [self._frac(n, pick[n]) for n in names]
+        scored = _grasp_score(
+            self.pts[ii], self.nrm[ii], fracs, self.mu, self.scale_m, self.epsilons
+        )
+        if scored is None:
+            return None
+        key = tuple(int(v) for v in ii)
+        if key not in self.ranks_known:
+            self.ranks_known[key] = tuple(int(v) for v in rank(pick))
+        r = self.ranks_known[key]
+        score, e = scored
+        if r > best_rank or (
+            r == best_rank and score > best_score + SCORE_RTOL * max(1.0, abs(best_score))
+        ):
+            return pick, r, score, e
+        return None
 
 
 class _ObjectClearance:

@@ -558,3 +558,24 @@ def capsule_gap(
         d, _ = _segment_distance(A1[i, n], B1[i, n], A2[j, n], B2[j, n])
         np.minimum.at(gap, n, d - rad_a[i] - rad_b[j])
     return np.minimum(gap, cap_m)
+
+
+def capsule_pair_gaps(hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray) -> np.ndarray:
+    """Lower bounds ``(A, B, N)`` [m] on the distance between each geometry of ``ids_a``
+    and each of ``ids_b`` at each configuration row of ``q`` ``(N, nq)``, from capsules
+    that contain the geometries: :func:`capsule_gap`'s pairs one by one (its bound is their
+    minimum, to the bit), for a caller that measures the close pairs exactly."""
+    ga = [_geometry(hand, g) for g in ids_a]
+    gb = [_geometry(hand, g) for g in ids_b]
+    shape = (len(ga), len(gb), q.shape[0])
+    if not ga or not gb:
+        return np.full(shape, np.inf)
+    A1, B1 = _segment_ends(ga, q)
+    A2, B2 = _segment_ends(gb, q)
+    # every (pair, row) in one batch: each computed elementwise, as alone
+    ends = [np.broadcast_to(e, (*shape, 3)).reshape(-1, 3) for e in (A1[:, None], B1[:, None])]
+    ends += [np.broadcast_to(e, (*shape, 3)).reshape(-1, 3) for e in (A2[None], B2[None])]
+    d = _segment_distance(*ends)[0].reshape(shape)
+    rad_a = np.array([g.radius for g in ga])
+    rad_b = np.array([h.radius for h in gb])
+    return d - rad_a[:, None, None] - rad_b[None, :, None]
