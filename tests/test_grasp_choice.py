@@ -33,15 +33,18 @@ from regrasp_pin.exceptions import ContactError, FailureKind, InputError
 from regrasp_pin.grasp.choice import (
     SCREEN_EDGES,
     _CombinationSearch,
+    _link_exit,
     _Ranking,
     _Screen,
     _spread_out,
+    _start_candidates,
     choose_new_contact,
     exit_times,
     initial_grasp,
 )
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.manifold import Manifold, build_manifold
+from regrasp_pin.grasp.necessity import MustHold
 from regrasp_pin.grasp.quality import (
     EPSILON_RTOL,
     FORCE_CLOSURE_TOL,
@@ -694,6 +697,63 @@ def test_q_exit_time_counts_the_other_links_of_the_finger(five, finger, t_arrive
         assert d >= CONTACT.link_clearance_m, (finger, m.times_s[k], d)
         d = _link_distance(hand, finger, box, m.q[k, q.index], m.T_palm_object[k], tip=True)
         assert d >= -CONTACT.tip_penetration_m, (finger, m.times_s[k], d)
+
+
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 0.5), ("thumb", 0.75), ("ring", 0.0)])
+def test_link_exit_measures_only_until_each_point_leaves(five, finger, t_arrive):
+    """The exit times cut by the finger's links equal those of measuring every point at
+    every time (a loop over Pinocchio computeDistances), though only the times before a
+    point leaves its usable set are measured."""
+    hand, box, _, sample, manifolds, _ = five
+    m = manifolds[finger]
+    ka = m.time_index(t_arrive)
+    rng = np.random.default_rng(7)
+    usable = m.usable(CONTACT.limit_margin_rad)
+    pool = np.flatnonzero(usable[ka])
+    points = rng.choice(pool, size=min(12, pool.size), replace=False)
+    assert points.size >= 4
+    t_exit, lasts = _link_exit(hand, finger, box, m, points, ka, CONTACT)
+    for c, i in enumerate(points):
+        ok = []
+        for k in range(ka, m.times_s.size):
+            good = bool(usable[k, i])
+            if good:
+                d = _link_distance(hand, finger, box, m.q[k, i], m.T_palm_object[k])
+                d_tip = _link_distance(hand, finger, box, m.q[k, i], m.T_palm_object[k], tip=True)
+                good = d >= CONTACT.link_clearance_m and d_tip >= -CONTACT.tip_penetration_m
+            ok.append(good)
+        first_bad = ok.index(False) if False in ok else None
+        expected = m.times_s[-1] if first_bad is None else m.times_s[ka + first_bad]
+        assert t_exit[c] == pytest.approx(expected), (i, ok)
+        assert lasts[c] == (first_bad is None)
+
+
+@pytest.mark.parametrize("finger, k_to", [("index", 4), ("middle", 3)])
+def test_a_finger_that_must_hold_starts_where_its_links_last(allegro, finger, k_to):
+    """A finger that cannot let go over a run from the start gets only candidates at
+    which, followed by the manifold, its other links keep clear of the object and its
+    fingertip link does not sink in through the run (as the tracking will measure;
+    Pinocchio computeDistances), not only contacts inside its joint limits; and some
+    contacts that last through the run inside the limits do not keep clear."""
+    hand, box, _, sample, manifolds, _ = allegro
+    m = manifolds[finger]
+    lasting = m.usable(0.0)[: k_to + 1].all(axis=0)
+    run = MustHold(finger, 0, k_to, 0.0, float(m.times_s[k_to]), lasting)
+
+    def clear_through(i: int) -> bool:
+        for k in range(k_to + 1):
+            q_k, T_k = m.q[k, i], m.T_palm_object[k]
+            if _link_distance(hand, finger, box, q_k, T_k) < CONTACT.link_clearance_m:
+                return False
+            if _link_distance(hand, finger, box, q_k, T_k, tip=True) < -CONTACT.tip_penetration_m:
+                return False
+        return True
+
+    idx, _ = _start_candidates(hand, box, m, sample.points, 0, CONTACT, 40, run)
+    assert idx.size > 0
+    assert all(lasting[i] and clear_through(int(i)) for i in idx)
+    start = np.flatnonzero(lasting & m.usable(CONTACT.choice_margin_rad)[0])
+    assert not all(clear_through(int(i)) for i in start)
 
 
 # ------------------------------------------------------------------ grasp search parts

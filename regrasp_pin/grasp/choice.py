@@ -495,7 +495,9 @@ def _start_candidates(
     sample indices and lasting fractions, the longest-lasting first, spread over the
     surface (two tip radii apart first, then one), links clear of the object; only
     those that last through ``hold`` (a run from the start in which the finger cannot
-    let go) if it is given."""
+    let go) if it is given: inside the joint limits and, held there, with the finger's
+    other links clear of the object and its fingertip link not sinking in at every
+    manifold time of the run (as the tracking will measure; :func:`_link_ok`)."""
     name = man.finger
     finger = hand.finger(name)
     usable = man.usable(contact.limit_margin_rad)
@@ -522,7 +524,15 @@ def _start_candidates(
     T0 = man.T_palm_object[t_index]
 
     def link_clear(j: int) -> bool:
-        return bool(clear(q_rows[j : j + 1], T0)[0])
+        # clear of the object at the start and, for a finger that cannot let go, for
+        # as long as it must hold: its other links and fingertip link as the tracking
+        # will see them (the manifold knows nothing of them)
+        if not clear(q_rows[j : j + 1], T0)[0]:
+            return False
+        if hold is None:
+            return True
+        ok = _link_ok(hand, name, obj, man, idx[j : j + 1], t_index, contact)[:, 0]
+        return bool(ok[: hold.k_to - t_index + 1].all())
 
     chosen = _spread_out(
         pts[idx],
@@ -679,7 +689,9 @@ def initial_grasp(
     ``finger_clearance`` (optional) maps the fingers' configurations to a further
     distance [m]; a grasp where it is <= 0 is refused. ``must_hold`` (from
     :func:`~regrasp_pin.grasp.necessity.must_hold`) keeps, for a finger that cannot let
-    go from ``t_index`` on, only the contacts that last through that run.
+    go from ``t_index`` on, only the contacts that last through that run: inside its
+    joint limits, and with its other links and fingertip link clear of the object as
+    the tracking measures them (Coal, at the manifolds' times).
     ``rank`` (optional) maps a combination (finger -> sample index) to integers that
     are compared (in order) before the score: the combination kept has the highest rank, and the
     highest score among those (such as the fingers' room to regrasp,
@@ -1084,17 +1096,36 @@ def _link_exit(
     object or the fingertip link sinks in by more than ``contact.tip_penetration_m``
     (Coal, at the manifold's times) or ``lasting`` says so, and whether each stays
     usable to the end."""
-    usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
-    times = manifold.times_s
-    T = manifold.T_palm_object[ka:]
-    K = T.shape[0]
-    q = manifold.q[ka:, points]  # (K, C, k); NaN where IK did not reach (not usable)
-    q = np.where(np.isfinite(q), q, hand.finger(finger).q_mid)
-    full = hand.to_full(finger, q.transpose(1, 0, 2).reshape(-1, q.shape[-1]))
-    T_all = np.tile(T, (points.size, 1, 1))
-    d = LinkClearance(hand, finger, obj)(full, T_all).reshape(points.size, K).T
-    d_tip = LinkClearance(hand, finger, obj, tip_only=True)(full, T_all).reshape(points.size, K).T
-    ok = usable & (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
+    ok = _link_ok(hand, finger, obj, manifold, points, ka, contact)
     if lasting is not None:
         ok &= lasting(points, ka)
-    return exit_times(ok, times[ka:], 0), np.asarray(ok.all(axis=0))
+    return exit_times(ok, manifold.times_s[ka:], 0), np.asarray(ok.all(axis=0))
+
+
+def _link_ok(
+    hand: Hand,
+    finger: str,
+    obj: ConvexObject,
+    manifold: Manifold,
+    points: np.ndarray,
+    ka: int,
+    contact: ContactModel,
+) -> np.ndarray:
+    """``(K, C)`` bool over the manifold's times from index ``ka``: the points are usable
+    (``contact.limit_margin_rad``) and, held there, the finger's other links keep
+    ``contact.link_clearance_m`` from the object and its fingertip link sinks in by at
+    most ``contact.tip_penetration_m`` (Coal), at that time and every one before it.
+
+    Only the times before a point's first exit from the usable set are measured: what
+    comes after cannot change the first False of a column."""
+    usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
+    still = np.logical_and.accumulate(usable, axis=0)  # (K, C): not left yet
+    rows, cols = np.nonzero(still)
+    q = manifold.q[ka + rows, points[cols]]  # finite where usable
+    full = hand.to_full(finger, q)
+    T = manifold.T_palm_object[ka + rows]
+    d = LinkClearance(hand, finger, obj)(full, T)
+    d_tip = LinkClearance(hand, finger, obj, tip_only=True)(full, T)
+    ok = np.zeros_like(still)
+    ok[rows, cols] = (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
+    return np.logical_and.accumulate(ok, axis=0)
