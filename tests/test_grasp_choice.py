@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -154,6 +155,27 @@ def _usable_direct(hand, finger, manifold, sample, t, i, margin_rad) -> bool:
         return False
     R, _ = f.tip_poses(q)
     return float((R @ f.pad_axis_tip) @ -(T[:3, :3] @ sample.normals[i])) >= CONTACT.cos_cone
+
+
+def _tip_clear_direct(hand, finger, manifold, sample, t, i) -> bool:
+    """The fingertip link's geometries do not cross the plane on which the tip sphere
+    rests (Pinocchio computeDistances against a Coal half-space) by more than the
+    tolerance: inside a face, they do not sink into it."""
+    f = hand.finger(finger)
+    T = manifold.T_palm_object[t]
+    n_out = T[:3, :3] @ sample.normals[i]
+    contact_palm = T[:3, :3] @ sample.points[i] + T[:3, 3]
+    gm = pin.GeometryModel()
+    for g in hand.collision_model.geometryObjects:
+        gm.addGeometryObject(pin.GeometryObject(g))
+    plane = coal.Halfspace(n_out, float(n_out @ contact_palm))  # the object's side
+    oid = gm.addGeometryObject(pin.GeometryObject("plane", 0, pin.SE3.Identity(), plane))
+    for g in f.tip_geometry_ids:
+        gm.addCollisionPair(pin.CollisionPair(int(g), oid))
+    gdata = pin.GeometryData(gm)
+    q_full = hand.to_full(finger, manifold.q[t, i])
+    pin.computeDistances(hand.model, hand.model.createData(), gm, gdata, q_full)
+    return min(r.min_distance for r in gdata.distanceResults) >= -CONTACT.tip_penetration_m
 
 
 # ------------------------------------------------------------------ exit times
@@ -345,11 +367,14 @@ def test_no_initial_grasp_names_the_finger(five):
 
 # ------------------------------------------------------------------ the new contact Q
 def _exit_index_direct(hand, name, manifold, sample, ka, i, contact):
-    """The first manifold time from ``ka`` at which point ``i`` is not usable (the
-    number of times if it stays usable to the end), tested time by time."""
+    """The first manifold time from ``ka`` at which point ``i`` is not usable or its
+    fingertip link crosses the plane the tip rests on (the number of times if neither
+    happens before the end), tested time by time."""
     nt = manifold.times_s.size
     for t in range(ka, nt):
         if not _usable_direct(hand, name, manifold, sample, t, i, contact.limit_margin_rad):
+            return t
+        if not _tip_clear_direct(hand, name, manifold, sample, t, i):
             return t
     return nt
 

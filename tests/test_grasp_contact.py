@@ -12,7 +12,12 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
-from regrasp_pin.grasp.contact import ContactModel, pad_cosines, tip_targets
+from regrasp_pin.grasp.contact import (
+    ContactModel,
+    pad_cosines,
+    pad_cosines_and_overshoot,
+    tip_targets,
+)
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.objects import Box
 
@@ -96,3 +101,19 @@ def test_pad_points_where_the_tip_moves_when_the_finger_flexes(hand):
         dq[-1] = 1e-6
         v = (f.fk(f.q_mid + dq) - f.fk(f.q_mid)) / 1e-6
         assert v @ f.pad_normals(f.q_mid) / np.linalg.norm(v) > 0.95, name
+
+
+def test_pad_cosines_come_with_the_tip_overshoot_unchanged():
+    """pad_cosines_and_overshoot: the pad cosines bit for bit, and the fingertip link's
+    overshoot of the tip frame's inward normal (TipReach)."""
+    rng = np.random.default_rng(5)
+    hand = Hand.allegro()
+    f = hand.finger("index")
+    q = rng.uniform(f.lower, f.upper, (40, f.k))
+    n_palm = rng.normal(size=(40, 3))
+    n_palm /= np.linalg.norm(n_palm, axis=1, keepdims=True)
+    cos, over = pad_cosines_and_overshoot(f, q, n_palm)
+    assert np.array_equal(cos, pad_cosines(f, q, n_palm))
+    R, _ = f.tip_poses(q)
+    u_tip = np.array([-R[i].T @ n_palm[i] for i in range(40)])
+    assert_close(over, f.tip_reach.overshoot(u_tip), atol=1e-15, what="overshoot")

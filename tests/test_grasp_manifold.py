@@ -126,6 +126,28 @@ def test_inside_margin_and_pad_follow_from_the_coordinates(scene):
             assert np.array_equal(m.usable(margin), m.feasible & (m.margin_rad >= margin))
 
 
+def test_tip_clear_follows_from_the_tip_orientation(scene):
+    """tip_clear: reachable, and the fingertip link's overshoot past the plane the tip
+    rests on (from the tip rotations, not via contact.pad_cosines_and_overshoot) within
+    the tolerance; holdable = usable and tip_clear. The five-finger distal cylinder
+    overshoots when the pad tilts toward the palm, so some feasible entries are not
+    clear."""
+    hand, _, _, sample, _, manifolds = scene
+    tilted = 0
+    for name, m in manifolds.items():
+        f = hand.finger(name)
+        r = m.reachable
+        R, _ = f.tip_poses(m.q[r])
+        u_tip = -np.einsum("nji,nj->ni", R, _normals_palm(sample, m)[r])
+        clear = f.tip_reach.overshoot(u_tip) <= CONTACT.tip_penetration_m
+        assert np.array_equal(m.tip_clear[r], clear), name
+        assert not m.tip_clear[~r].any()
+        for margin in (0.0, 0.05):
+            assert np.array_equal(m.holdable(margin), m.usable(margin) & m.tip_clear)
+        tilted += int((m.feasible & ~m.tip_clear).sum())
+    assert tilted > 0
+
+
 def test_manifold_crosses_the_boundary_planes(scene):
     # the paper draws the manifold crossing the boundary planes: with the extended box
     # some reachable points lie outside the limits, by at most EXTEND_RAD

@@ -3,7 +3,9 @@
 Condition (a): Q lies inside the boundary planes (and is feasible) at the time the
 finger can arrive, ``t_arrive`` = trigger time + regrasp duration (between two
 manifold times, at both: the pad may turn away between them). Condition (b): among
-those, Q stays inside longest over the rest of the motion. Ties are broken by the
+those, Q stays inside longest over the rest of the motion (read from
+``Manifold.holdable``: inside the limits, pad facing, and the fingertip link not
+reaching past the plane the tip rests on). Ties are broken by the
 larger joint margin at arrival, then by the shorter distance from P.
 
 Beyond the paper, the grasp must keep holding: Q must be at least ``min_separation_m``
@@ -212,14 +214,17 @@ def choose_new_contact(
             measured=float(usable[ka].sum()),
             required=1.0,
         )
+    # condition (b) read from the contacts the finger can hold: inside the limits and,
+    # as far as the fingertip link's shape tells, without it sinking into the face
+    holdable = manifold.holdable(contact.limit_margin_rad)
     ranked = _Ranking(
-        t_exit=exit_times(usable[:, idx], manifold.times_s, ka),
+        t_exit=exit_times(holdable[:, idx], manifold.times_s, ka),
         margin=manifold.margin_rad[ka, idx],
         dist=np.linalg.norm(pts[idx] - P_object, axis=1),
         idx=idx,
         exit_tolerance_s=exit_tolerance_s,
     )
-    lasts = usable[-1, idx].copy()
+    lasts = holdable[-1, idx].copy()
     order = ranked.order(lasts)
     if link_check and rerank > 0:
         # the manifold knows nothing of the finger's other links: the first candidates'

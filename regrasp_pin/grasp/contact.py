@@ -23,7 +23,7 @@ import numpy as np
 
 from ..model.hand import Finger
 
-__all__ = ["ContactModel", "pad_cosines", "tip_targets"]
+__all__ = ["ContactModel", "pad_cosines", "pad_cosines_and_overshoot", "tip_targets"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,22 @@ def tip_targets(
     R = T_palm_object[..., :3, :3]
     t = T_palm_object[..., :3, 3]
     return c_object @ np.swapaxes(R, -1, -2) + t[..., None, :]
+
+
+def pad_cosines_and_overshoot(
+    finger: Finger, q: np.ndarray, normals_palm: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pad_cosines` (the same numbers) and how far the fingertip link reaches
+    past the plane on which the tip sphere rests, ``(N,)`` [m]
+    (:class:`~regrasp_pin.model.tip_reach.TipReach`; ``-inf`` without one): above
+    ``ContactModel.tip_penetration_m``, the link sinks into a face under it."""
+    R, _ = finger.chain.poses(q)
+    pad = R @ finger.pad_axis_tip
+    cos = -np.einsum("ij,ij->i", pad, normals_palm)
+    if finger.tip_reach is None:
+        return cos, np.full(cos.shape, -np.inf)
+    u_tip = -np.einsum("nji,nj->ni", R, normals_palm)  # R^T (-n): into the object
+    return cos, finger.tip_reach.overshoot(u_tip)
 
 
 def pad_cosines(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:

@@ -55,7 +55,7 @@ from ..model.hand import Finger
 from ..model.ik import solve_position_ik
 from ..model.motion import ObjectMotion
 from ..model.objects import SurfaceSample
-from .contact import ContactModel, pad_cosines, tip_targets
+from .contact import ContactModel, pad_cosines_and_overshoot, tip_targets
 
 __all__ = ["Manifold", "StartTracking", "WorkspaceVoxels", "build_manifold", "workspace_voxels"]
 
@@ -79,6 +79,12 @@ class Manifold:
         lower: ``(k,)`` joint limits [rad].
         upper: ``(k,)`` joint limits [rad].
         T_palm_object: ``(T, 4, 4)`` object poses at the grid times.
+        tip_clear: ``(T, N)`` reachable, and the fingertip link does not reach past the
+            plane on which the tip sphere rests by more than
+            ``ContactModel.tip_penetration_m`` (:class:`~regrasp_pin.model.tip_reach.
+            TipReach`): inside a face, where it is False the link sinks in. Not part of
+            :attr:`feasible` (near an edge the object may not be under the link);
+            :meth:`holdable` uses it. None: not computed (every entry counts as clear).
     """
 
     finger: str
@@ -91,6 +97,7 @@ class Manifold:
     lower: np.ndarray
     upper: np.ndarray
     T_palm_object: np.ndarray
+    tip_clear: np.ndarray | None = None
 
     @property
     def feasible(self) -> np.ndarray:
@@ -100,6 +107,13 @@ class Manifold:
     def usable(self, margin_rad: float) -> np.ndarray:
         """``(T, N)`` feasible with at least ``margin_rad`` to every boundary plane."""
         return self.feasible & (self.margin_rad >= margin_rad)
+
+    def holdable(self, margin_rad: float) -> np.ndarray:
+        """``(T, N)`` :meth:`usable` and, as far as the fingertip link's shape tells
+        (:attr:`tip_clear`), held there without the link sinking into the face: what
+        a held contact's exit time is read from (a ranking; Coal decides)."""
+        usable = self.usable(margin_rad)
+        return usable if self.tip_clear is None else usable & self.tip_clear
 
     def time_index(self, t_s: float) -> int:
         """Index of the first grid time >= ``t_s`` (clamped to the last)."""
@@ -271,6 +285,7 @@ def build_manifold(
     q_out = np.zeros((nt, n, k))
     reach = np.zeros((nt, n), bool)
     pad = np.zeros((nt, n), bool)
+    tip_clear = np.zeros((nt, n), bool)
     q_prev = np.broadcast_to(finger.q_mid, (n, k)).copy()
     q_out[:] = np.nan
     # per point: target and IK residual at its last failed cold solve (see _retry_failed)
@@ -370,8 +385,9 @@ def build_manifold(
         stays_out[pi[last]] = ok[last] & _outside(q_res[last], finger.lower, finger.upper)
         resid[pi[ok]] = 0.0  # reached: retry at once if it fails later
         if ok.any():
-            cos = pad_cosines(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
+            cos, over = pad_cosines_and_overshoot(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
             pad[ti[ok], pi[ok]] = cos >= contact.cos_cone
+            tip_clear[ti[ok], pi[ok]] = over <= contact.tip_penetration_m
         if track is not None:
             good = reach[s0:s1] & pad[s0:s1]
             m_chunk = _margins(q_out[s0:s1], finger.lower, finger.upper)
@@ -403,6 +419,7 @@ def build_manifold(
         lower=finger.lower.copy(),
         upper=finger.upper.copy(),
         T_palm_object=T_all,
+        tip_clear=tip_clear & reach,
     )
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from .hand import Finger, Hand
 from .kinematics import FingerChain, attached_placements, attached_points
 from .objects import ConvexObject
+from .support import support, support_parameters
 
 #: Pairs of geometries whose bounding spheres are within this of the requirement get
 #: the tighter capsule and separating-axis bounds [m].
@@ -78,7 +79,7 @@ def _geometry(hand: Hand, gid: int) -> _Geometry:
             chain = table[("chain", frame_name)] = FingerChain(model, frame_name)
         M = model.frames[fid].placement.inverse() * gobj.placement  # frame -> geometry
         a, b, r = _capsule(gobj.geometry)
-        centre, support = _support_parameters(gobj.geometry)
+        centre, params = support_parameters(gobj.geometry)
         table[gid] = _Geometry(
             gid=gid,
             name=gobj.name,
@@ -90,7 +91,7 @@ def _geometry(hand: Hand, gid: int) -> _Geometry:
             seg_b=b,
             radius=r,
             centre=centre,
-            support=support,
+            support=params,
         )
     return table[gid]
 
@@ -112,37 +113,6 @@ def _capsule(shape: Any) -> tuple[np.ndarray, np.ndarray, float]:
     shape.computeLocalAABB()
     c = np.asarray(shape.aabb_center, dtype=float)
     return c, c.copy(), float(shape.aabb_radius)
-
-
-def _support_parameters(shape: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and support parameters (see :class:`_Geometry`) of a Coal shape."""
-    out = np.zeros(6)
-    centre = np.zeros(3)
-    if isinstance(shape, coal.Box):
-        out[:3] = np.asarray(shape.halfSide, dtype=float)
-    elif isinstance(shape, coal.Cylinder):
-        out[3], out[4] = float(shape.halfLength), float(shape.radius)
-    elif isinstance(shape, coal.Capsule):
-        out[3], out[5] = float(shape.halfLength), float(shape.radius)
-    elif isinstance(shape, coal.Sphere):
-        out[5] = float(shape.radius)
-    else:
-        shape.computeLocalAABB()
-        centre = np.asarray(shape.aabb_center, dtype=float).copy()
-        out[5] = float(shape.aabb_radius)
-    return centre, out
-
-
-def _support(u_local: np.ndarray, params: np.ndarray) -> np.ndarray:
-    """Support function values ``(...)`` for unit directions ``(..., 3)`` in the geometry
-    frames and support parameters ``(..., 6)`` (broadcast)."""
-    uz = np.abs(u_local[..., 2])
-    return (
-        np.sum(params[..., :3] * np.abs(u_local), axis=-1)
-        + params[..., 3] * uz
-        + params[..., 4] * np.sqrt(np.maximum(0.0, 1.0 - uz * uz))
-        + params[..., 5]
-    )
 
 
 def _placements(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -222,7 +192,7 @@ def _object_lower_bound(
         Lower bounds (D, G) [m].
     """
     n_local = np.matmul(obj.normals, R_obj_geom)  # rows R^T n_f: (D, G, F, 3)
-    h = _support(n_local, params[None, :, None, :])
+    h = support(n_local, params[None, :, None, :])
     return np.max(c_obj @ obj.normals.T - obj.offsets - h, axis=-1)
 
 
@@ -329,8 +299,8 @@ class PairDistances:
         u = v / np.where(seg > 1e-12, seg, 1.0)[:, None]  # from geometry 2 towards 1
         gap = (
             np.einsum("ni,ni->n", u, c_[j1] - c_[j2])
-            - _support(np.einsum("ni,nij->nj", u, R_[j1]), params[g1])
-            - _support(np.einsum("ni,nij->nj", u, R_[j2]), params[g2])
+            - support(np.einsum("ni,nij->nj", u, R_[j1]), params[g1])
+            - support(np.einsum("ni,nij->nj", u, R_[j2]), params[g2])
         )
         lb_ff[d, k] = np.where(seg > 1e-12, np.maximum(lb, gap), lb)
         self.lb = np.concatenate([lb_obj, lb_ff], axis=1)

@@ -29,6 +29,7 @@ from .._validate import as_array, as_batch, positive
 from ..exceptions import InputError, ModelFileError, UnknownNameError
 from .ik import IKResult, solve_position_ik
 from .kinematics import FingerChain
+from .tip_reach import TipReach, tip_reach
 from .urdf import HandModels, load_hand_models
 
 __all__ = ["Finger", "Hand", "five_finger_urdf_path", "allegro_urdf_path"]
@@ -102,6 +103,9 @@ class Finger:
             by this finger's links.
         tip_geometry_ids: Those of them that touch the object at a contact (the
             fingertip sphere and the distal link it sits on).
+        tip_reach: How far those reach past the plane the tip sphere rests on, by the
+            plane's direction (:class:`~regrasp_pin.model.tip_reach.TipReach`); None
+            without collision geometry.
     """
 
     name: str
@@ -116,6 +120,7 @@ class Finger:
     chain: FingerChain = field(repr=False)
     geometry_ids: tuple[int, ...] = ()
     tip_geometry_ids: tuple[int, ...] = ()
+    tip_reach: TipReach | None = field(default=None, repr=False)
 
     @property
     def k(self) -> int:
@@ -431,6 +436,7 @@ class Hand:
                 chain=chain,
                 geometry_ids=geom_ids,
                 tip_geometry_ids=tip_ids,
+                tip_reach=tip_reach(model, collision, tip, radius, tip_ids),
             )
         _check_disjoint(model, built)
         hand = cls(model, collision, visual, urdf, built, name or urdf.stem)

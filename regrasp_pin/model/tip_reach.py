@@ -1,0 +1,97 @@
+"""How far a fingertip link reaches past the plane on which its tip sphere rests.
+
+At a contact the tip sphere (centre ``c``, radius ``r``) touches the surface, whose
+outward normal is ``n``; the convex object lies behind the tangent plane
+``{x : u . (x - c) = r}``, ``u = -n``. A geometry of the fingertip link that reaches past
+that plane (``max_x u . (x - c) > r``) may be inside the object; one that does not
+cannot be. For a contact inside a face, with the face under the geometry, "may" is
+"is": the fingertip link sinks in. So the overshoot, a function of ``u`` in the tip
+frame only, tells from the finger's orientation alone, without Coal, which contacts the
+fingertip link allows (e.g. the Allegro's distal box, 27.5 mm wide under a 24 mm tip
+sphere, lets the pad tilt sideways by about 10 deg).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .support import PRIMITIVES, support, support_parameters
+
+__all__ = ["TipReach", "tip_reach"]
+
+
+@dataclass(frozen=True, eq=False)
+class TipReach:
+    """The fingertip link's primitive geometries in the tip frame.
+
+    Attributes:
+        radius: The tip sphere radius [m].
+        centres: ``(G, 3)`` the geometries' centres in the tip frame [m].
+        rotations: ``(G, 3, 3)`` their orientations in the tip frame.
+        params: ``(G, 6)`` their support parameters (:mod:`.support`) [m].
+        names: The geometries' names.
+        skipped: Names of the tip link's geometries left out (meshes, or on another
+            joint than the tip frame): they bound nothing here.
+    """
+
+    radius: float
+    centres: np.ndarray
+    rotations: np.ndarray
+    params: np.ndarray
+    names: tuple[str, ...] = ()
+    skipped: tuple[str, ...] = ()
+
+    def overshoot(self, u_tip: np.ndarray) -> np.ndarray:
+        """How far the geometries reach past the tangent plane [m], ``(N,)``.
+
+        Args:
+            u_tip: ``(N, 3)`` unit directions from the tip centre into the object (the
+                inward surface normal), in the tip frame.
+
+        Returns:
+            ``max_g (u . c_g + h_g(R_g^T u)) - radius`` per direction (``-inf`` without
+            geometries); above a small tolerance, a geometry may sink into the object.
+        """
+        u = np.asarray(u_tip, float).reshape(-1, 3)
+        if self.params.shape[0] == 0:
+            return np.full(u.shape[0], -np.inf)
+        local = np.einsum("ni,gij->ngj", u, self.rotations)  # R_g^T u per geometry
+        reach = u @ self.centres.T + support(local, self.params[None])  # (N, G)
+        return reach.max(axis=1) - self.radius
+
+
+def tip_reach(
+    model: pin.Model,
+    collision: pin.GeometryModel,
+    tip_frame: str,
+    tip_radius: float,
+    geometry_ids: tuple[int, ...],
+) -> TipReach:
+    """The :class:`TipReach` of the fingertip link geometries ``geometry_ids`` (those on
+    the tip frame's joint) of a hand model."""
+    frame = model.frames[model.getFrameId(tip_frame)]
+    centres, rotations, params, names, skipped = [], [], [], [], []
+    for gid in geometry_ids:
+        gobj = collision.geometryObjects[gid]
+        if int(gobj.parentJoint) != int(frame.parentJoint) or not isinstance(
+            gobj.geometry, PRIMITIVES
+        ):
+            skipped.append(gobj.name)
+            continue
+        M = frame.placement.inverse() * gobj.placement  # tip frame -> geometry
+        centre, par = support_parameters(gobj.geometry)
+        centres.append(M.translation + M.rotation @ centre)
+        rotations.append(M.rotation.copy())
+        params.append(par)
+        names.append(gobj.name)
+    return TipReach(
+        radius=float(tip_radius),
+        centres=np.array(centres, float).reshape(-1, 3),
+        rotations=np.array(rotations, float).reshape(-1, 3, 3),
+        params=np.array(params, float).reshape(-1, 6),
+        names=tuple(names),
+        skipped=tuple(skipped),
+    )
