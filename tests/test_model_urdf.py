@@ -8,6 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import SHADOW_HAND_FILE, assert_close, shadow_urdf
+from scipy.spatial import ConvexHull
+from scipy.spatial.transform import Rotation
 
 from regrasp_pin.exceptions import InputError, UnknownNameError
 from regrasp_pin.model.hand import Hand
@@ -135,6 +137,33 @@ def test_collision_meshes_are_convex_with_signed_distances(shadow):
     )
     # the hull holds the point, a millimetre ball there is several millimetres deep
     assert d < -0.004
+
+
+def test_a_box_over_any_mesh_vertex_is_found_to_penetrate(shadow):
+    """The collision meshes are true convex hulls (not the mesh's own triangles, on
+    which GJK can stop at a local maximum): a box placed over any vertex of the
+    original mesh, up to 1 mm deep, is reported penetrating; and the hull has no more
+    vertices than qhull's hull of the mesh (scipy)."""
+    urdf = shadow_urdf()
+    model = pin.buildModelFromUrdf(str(urdf))
+    raw = pin.buildGeomFromUrdf(
+        model, str(urdf), pin.COLLISION, package_dirs=[str(urdf.parent), str(urdf.parent.parent)]
+    )
+    mesh = next(o for o in raw.geometryObjects if o.name.startswith("ffdistal")).geometry
+    vertices = np.asarray(mesh.vertices())
+    tip = next(o for o in shadow.collision_model.geometryObjects if o.name.startswith("ffdistal"))
+    assert tip.geometry.num_points == ConvexHull(vertices).vertices.size < len(vertices)
+    rng = np.random.default_rng(0)
+    box, req, res = coal.Box(0.02, 0.02, 0.02), coal.DistanceRequest(), coal.DistanceResult()
+    for _ in range(1000):
+        R = Rotation.random(random_state=int(rng.integers(1 << 30))).as_matrix()
+        v = vertices[rng.integers(len(vertices))]
+        centre = v + (0.01 - rng.uniform(0.0, 0.001)) * R[:, 0]  # v inside, near a face
+        res.clear()
+        d = coal.distance(
+            tip.geometry, coal.Transform3s(), box, coal.Transform3s(R, centre), req, res
+        )
+        assert d < 0.0
 
 
 def test_scale_factors_are_honoured(shadow):

@@ -371,9 +371,17 @@ def _drive_group(model: pin.Model, members: dict[str, tuple[float, float]]) -> p
 
 # ------------------------------------------------------------------ geometry
 def _convex_meshes(collision: pin.GeometryModel) -> None:
-    """Replace each mesh of the collision model by its convex hull, in place."""
+    """Replace each mesh of the collision model by its convex hull, in place.
+
+    The hull is computed (qhull, through Coal's ``buildConvexHull``): Coal's
+    ``buildConvexRepresentation`` would keep the mesh's own vertices and triangles, and
+    on a mesh that is not convex GJK's support search can stop at a local maximum and
+    miss a penetration (the Shadow Hand's distal link: 92 of 3000 boxes that held one
+    of its vertices up to 4.2 mm deep were reported apart).
+    """
     for gobj in collision.geometryObjects:
         shape = gobj.geometry
         if isinstance(shape, coal.BVHModelBase):
-            shape.buildConvexRepresentation(False)
+            # (the return value says whether the mesh was convex already, not success)
+            shape.buildConvexHull(True, "Qt")
             gobj.geometry = shape.convex
