@@ -31,7 +31,7 @@ from .exceptions import (
     ModelFileError,
     UnknownNameError,
 )
-from .grasp.choice import GAP_HORIZON_S, Grasp, initial_grasp
+from .grasp.choice import GAP_HORIZON_S, Grasp, exit_times, initial_grasp
 from .grasp.contact import ContactModel
 from .grasp.manifold import Manifold, StartTracking, build_manifold
 from .grasp.necessity import MustHold, must_hold, with_idle_fingers
@@ -499,7 +499,6 @@ def _room_rank(
        stays ``contact.finger_trigger_m`` + 0.5 mm from the other grasping fingers) at
        the manifolds' first time and the first time ``regrasp_s`` later.
     """
-    from .grasp.choice import exit_times
     from .placing import RegraspRoom
 
     if not fingers:

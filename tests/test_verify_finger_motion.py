@@ -538,18 +538,13 @@ def test_near_misses_match_brute_force(five, allegro, hand_name, seed):
 def assert_matches_brute_force(hand, obj, finger, t, q, T, clearance, step=0.02, link=0.002):
     """The report equals an all-pairs Coal check on the same dense samples."""
     f = hand.finger(finger)
-    r = verify_finger_motion(
-        hand,
-        obj,
-        finger,
-        t,
-        q,
-        T,
+    limits = dict(
         tip_clearance_m=clearance,
         link_clearance_m=link,
         finger_clearance_m=0.001,
         max_joint_step_rad=step,
     )
+    r = verify_finger_motion(hand, obj, finger, t, q, T, **limits)
     t_d, q_d, T_d = densify(t, q, T, step)
     assert r.n_samples == t_d.size
     mins, failing = brute_force(
@@ -581,19 +576,7 @@ def assert_matches_brute_force(hand, obj, finger, t, q, T, clearance, step=0.02,
     assert r.n_distance_queries < 0.5 * t_d.size * n_pairs  # the broad phase prunes
     # without the minima's branch and bound: the same decisions and failures, fewer
     # queries, and minima that bound the exact ones from below
-    fast = verify_finger_motion(
-        hand,
-        obj,
-        finger,
-        t,
-        q,
-        T,
-        tip_clearance_m=clearance,
-        link_clearance_m=link,
-        finger_clearance_m=0.001,
-        max_joint_step_rad=step,
-        exact_minima=False,
-    )
+    fast = verify_finger_motion(hand, obj, finger, t, q, T, **limits, exact_minima=False)
     assert (fast.ok, fast.failures, fast.n_failures, fast.time_s, fast.joint_limits_ok) == (
         r.ok,
         r.failures,

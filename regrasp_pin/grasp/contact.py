@@ -96,8 +96,7 @@ def pad_cosines_and_overshoot(
     (:class:`~regrasp_pin.model.tip_reach.TipReach`; ``-inf`` without one): above
     ``ContactModel.tip_penetration_m``, the link sinks into a face under it."""
     R, _ = finger.chain.poses(q)
-    pad = R @ finger.pad_axis_tip
-    cos = -np.einsum("ij,ij->i", pad, normals_palm)
+    cos = _pad_cosines(finger, R, normals_palm)
     if finger.tip_reach is None:
         return cos, np.full(cos.shape, -np.inf)
     u_tip = -np.einsum("nji,nj->ni", R, normals_palm)  # R^T (-n): into the object
@@ -116,5 +115,10 @@ def pad_cosines(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.n
         ``(N,)`` cosines in [-1, 1]; feasible contacts have ``cos >= cos(cone)``.
     """
     R, _ = finger.chain.poses(q)
-    pad = R @ finger.pad_axis_tip
+    return _pad_cosines(finger, R, normals_palm)
+
+
+def _pad_cosines(finger: Finger, R_tip: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
+    """:func:`pad_cosines` from the tip rotations ``(N, 3, 3)``."""
+    pad = R_tip @ finger.pad_axis_tip
     return -np.einsum("ij,ij->i", pad, normals_palm)
