@@ -650,6 +650,27 @@ def test_ties_within_an_exit_tolerance_prefer_the_shorter_move(five):
     assert loose.exit_time_s <= exact.exit_time_s
 
 
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.25), ("thumb", 0.75)])
+def test_reserved_room_is_left_free_and_nothing_else_changes(five, finger, t_arrive):
+    """Q keeps out of reserved room; it is the choice among the candidates outside it
+    (the same as excluding those points by hand)."""
+    hand, box, _, sample, manifolds, grasp = five
+    first = _choose_from_grasp(five, finger, t_arrive, max_checks=10_000)
+    radius = 0.006
+    again = _choose_from_grasp(
+        five, finger, t_arrive, max_checks=10_000, reserved=((first.p_object, radius),)
+    )
+    assert np.linalg.norm(again.p_object - first.p_object) >= radius
+    # the same as a manifold on which the reserved points are not inside the limits
+    m = manifolds[finger]
+    away = np.linalg.norm(sample.points - first.p_object, axis=1) >= radius
+    masked = {**manifolds, finger: dataclasses.replace(m, inside=m.inside & away[None, :])}
+    by_hand = _choose_from_grasp(
+        (hand, box, None, sample, masked, grasp), finger, t_arrive, max_checks=10_000
+    )
+    assert by_hand.index == again.index
+
+
 def test_no_feasible_q_names_the_finger_and_time(five):
     hand, box, _, sample, manifolds, grasp = five
     P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]

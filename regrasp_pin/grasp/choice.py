@@ -136,6 +136,7 @@ def choose_new_contact(
     exit_tolerance_s: float = 0.0,
     rerank: int = 12,
     lasting: Callable[[np.ndarray, int], np.ndarray] | None = None,
+    reserved: Sequence[tuple[np.ndarray, float]] = (),
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -177,6 +178,9 @@ def choose_new_contact(
         lasting: Optional ``(points (C,), ka) -> (K, C)`` bool over the manifold's times
             from index ``ka`` on: False where something else ends the contact (e.g.
             another holding finger comes too near); applied in the re-rank.
+        reserved: ``(point, radius)`` pairs, object frame [m]: room kept free for
+            another finger's landing; candidates closer than the radius to the point
+            are ignored.
 
     Returns:
         The :class:`NewContact`.
@@ -202,6 +206,8 @@ def choose_new_contact(
         r_ex = exclude_radius_m if exclude_points_radius_m is None else exclude_points_radius_m
         ex = np.asarray(exclude_points_object, float).reshape(-1, 3)
         cand &= _far_from(pts, list(ex), max(r_ex, 1e-12))
+    for point, radius in reserved:
+        cand &= _far_from(pts, [np.asarray(point, float)], float(radius))
     idx = np.flatnonzero(cand)
     if idx.size == 0:
         raise ContactError(

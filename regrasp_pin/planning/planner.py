@@ -16,8 +16,10 @@ For each start the search (:mod:`.planning.search`) tries new contacts Q and dur
 until one regrasp verifies and the contact it lands on is held (followed by IK from the
 landing) at least as long as the shortest regrasp takes, or to the end. When a finger
 finds none, the planner backs up once per failure (at most ``max_backtracks`` times):
-the previous regrasp is planned again to land before this finger's window closes, or, if
-time was not the problem, to land elsewhere. Every search shares one budget
+another finger due soon goes first; or a neighbour whose contact takes the room of the
+finger's best new contact regrasps first, out of that room (now, or before one of the
+last regrasps); or the previous regrasp is planned again to land before this finger's
+window closes, or, if time was not the problem, to land elsewhere. Every search shares one budget
 (``max_steps``, counted, not timed, so that it is the same on every machine); a failure
 that could not be backed out of because the budget was gone is a ``budget`` failure
 (its message names the failure). A hold that no regrasp can
@@ -42,7 +44,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..exceptions import Attempt, FailureKind, PlanningError
+from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
 from ..grasp.choice import Grasp, exit_times, initial_grasp
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
 from ..grasp.manifold import Manifold, build_manifold
@@ -242,6 +244,8 @@ def plan_manipulation(
             if may_back_up:
                 backtracks += 1
                 redone = _another_first(ctx, state, contenders, triggers, steps)
+                if redone is None:
+                    redone = _make_room(ctx, state, trig, triggers, steps, exc)
                 if redone is None and steps:
                     redone = _backtrack(ctx, steps, exc, state, trig)
             if redone is None:
@@ -348,8 +352,11 @@ def _advance(
     *,
     end_by_s: float | None = None,
     exclude: list[np.ndarray] | None = None,
+    reserved: tuple[tuple[np.ndarray, float], ...] = (),
 ) -> PlanState:
-    """The state after ``trig``: its finger held to the end, or one verified regrasp."""
+    """The state after ``trig``: its finger held to the end, or one verified regrasp
+    (landing by ``end_by_s``, away from the ``exclude`` points and out of the
+    ``reserved`` room: see :meth:`RegraspSearch.find`)."""
     p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
     D = p.regrasp.duration_s
     name, t_trig, reason = trig.finger, trig.time_s, trig.reason
@@ -407,6 +414,7 @@ def _advance(
             end_by_s=end_by,
             exclude=exclude,
             landing_check=lambda res: _check_landing(ctx, name, res, landed, triggers),
+            reserved=reserved,
         )
 
     tries = (starts, end_by_s)
@@ -766,6 +774,108 @@ def _another_first(
 
 
 _BACKTRACK_DEPTH = 3  # how many earlier regrasps a failure may revisit
+
+
+def _make_room(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    triggers: list[Trigger],
+    steps: list[_Step],
+    failure: PlanningError,
+) -> PlanState | None:
+    """When ``trig.finger`` finds no regrasp, let a neighbour whose contact takes the
+    room of the finger's best new contact regrasp first, away from that room; None if
+    no neighbour does or can.
+
+    A neighbour takes the room if, without its contact, the finger could choose a new
+    contact (:meth:`RegraspSearch.choose`) within the separation of the neighbour's
+    contact. The neighbour then regrasps (now, or before one of the last regrasps if
+    there is no time left now), lands before the finger's hold is lost, and keeps its
+    new contact out of that room (the finger's separation around the wanted contact);
+    what follows is planned again after it."""
+    if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
+        return None  # a matter of time, not of room
+    name, h = trig.finger, state.holding[trig.finger]
+    win, _ = _window(ctx, state, trig, triggers)
+    D = ctx.params.regrasp.duration_s
+    # where to go first from: now, or before one of the last regrasps (the finger
+    # holding the same contact), as long as a regrasp lands before its hold is lost
+    bases = [(state, triggers, len(steps))] + [
+        (steps[k].before, steps[k].triggers, k)
+        for k in range(len(steps) - 1, max(len(steps) - _BACKTRACK_DEPTH, 0) - 1, -1)
+        if steps[k].before.holding.get(name) is not None
+        and steps[k].before.holding[name].t_from == h.t_from
+    ]
+    bases = [b for b in bases if b[0].now + D <= win.latest_s - TIME_TOL_S]
+    if not bases:
+        return None
+    for other, wanted in _blockers(ctx, state, trig, win):
+        for base, base_triggers, k in bases:
+            if ctx.budget.exhausted:
+                return None
+            if other not in base.holding:
+                continue
+            key = (_signature(base), f"{other} makes room for {name}")
+            if key in ctx.tried:
+                continue
+            ctx.tried.add(key)
+            lost = {e.finger: e.lost_s for e in base_triggers}
+            go = Trigger(
+                time_s=max(base.now, base.holding[other].t_from),
+                finger=other,
+                reason=f"makes room for {name} (its {failure.kind.value} failure)",
+                lost_s=lost.get(other, ctx.scene.motion.t_end),
+            )
+            log.info("%s failed (%s): %s makes room first", name, failure.kind.value, other)
+            trial = list(steps[:k])
+            try:
+                new_state = _advance(
+                    ctx, base, go, base_triggers, trial, end_by_s=win.latest_s, reserved=(wanted,)
+                )
+            except PlanningError:
+                continue
+            steps[:] = trial
+            return new_state
+    return None
+
+
+def _blockers(
+    ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow
+) -> list[tuple[str, tuple[np.ndarray, float]]]:
+    """The holding fingers whose contacts take the room of ``trig.finger``'s best new
+    contact, nearest first, each with that room: ``(point, radius)`` (object frame,
+    the finger's separation [m]) as :func:`choose_new_contact` would choose it, landing
+    one regrasp after the neighbour's, were the neighbour's contact not there."""
+    hand, name = ctx.scene.hand, trig.finger
+    h = state.holding[name]
+    D = ctx.params.regrasp.duration_s
+    t_arrive = min(max(win.preferred_s, state.now + D) + D, ctx.scene.motion.t_end)
+    holding = [n for n in hand.finger_names if n != name and n in state.holding]
+    sep = 2 * hand.finger(name).tip_radius + 0.001
+    out = []
+    for other in sorted(
+        holding,
+        key=lambda n: (round(float(np.linalg.norm(state.holding[n].p - h.p)), 9), n),
+    ):
+        if ctx.budget.exhausted:
+            break
+        rest = [n for n in holding if n != other]
+        try:
+            ctx.budget.spend()
+            wanted = ctx.search.choose(
+                name,
+                (h.p, h.n),
+                t_arrive,
+                {n: (state.holding[n].p, state.holding[n].n) for n in rest},
+                q_hand_of(ctx, state, rest),
+                [],
+            )
+        except ContactError:
+            continue  # no room for the finger even without this neighbour
+        if np.linalg.norm(wanted.p_object - state.holding[other].p) < sep:
+            out.append((other, (wanted.p_object, sep)))
+    return out
 
 
 def _backtrack(

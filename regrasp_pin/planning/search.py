@@ -31,7 +31,7 @@ from __future__ import annotations
 import functools
 import logging
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -150,6 +150,7 @@ class RegraspSearch:
         end_by_s: float | None = None,
         exclude: list[np.ndarray] | None = None,
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
+        reserved: Sequence[tuple[np.ndarray, float]] = (),
     ) -> Found:
         """Search a verified regrasp of ``finger`` (see the module docstring).
 
@@ -168,6 +169,8 @@ class RegraspSearch:
             landing_check: Judges a verified regrasp by what follows its landing (e.g.
                 how long the new contact is held): an :class:`Attempt` rejects it and
                 excludes its Q like any other failure; None accepts it.
+            reserved: ``(point, radius)`` pairs (object frame, [m]): room Q must leave
+                free for another finger's landing.
 
         Raises:
             PlanningError: nothing verified; its ``kind`` is the dominant cause, its
@@ -212,6 +215,7 @@ class RegraspSearch:
                     attempts,
                     budget,
                     landing_check,
+                    reserved,
                 )
                 if found is None:
                     break  # no candidate left at this start
@@ -227,11 +231,13 @@ class RegraspSearch:
         others: Mapping[str, tuple[np.ndarray, np.ndarray]],
         q_hand: Callable[[np.ndarray], np.ndarray],
         excluded: list[np.ndarray],
+        reserved: Sequence[tuple[np.ndarray, float]] = (),
     ) -> NewContact:
         """The best new contact Q for ``finger`` landing at ``t_arrive`` [s]
         (:func:`~regrasp_pin.grasp.choice.choose_new_contact`: the paper's criterion, Q
         clear of the ``others`` and, while it is held, of their fingers under
-        ``q_hand``), away from ``P`` and from the ``excluded`` points (object frame).
+        ``q_hand``), away from ``P``, from the ``excluded`` points (object frame) and
+        out of the ``reserved`` room.
 
         Raises:
             ContactError: no candidate.
@@ -255,6 +261,7 @@ class RegraspSearch:
             finger_clearance_m=0.001,
             exit_tolerance_s=self.exit_tolerance_s,
             lasting=functools.partial(self._clear_of_others, finger, list(others), q_hand),
+            reserved=reserved,
         )
 
     # ------------------------------------------------------------------ internals
@@ -297,6 +304,7 @@ class RegraspSearch:
         attempts: list[Attempt],
         budget: SearchBudget,
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
+        reserved: Sequence[tuple[np.ndarray, float]] = (),
     ) -> Found | bool | None:
         """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q)."""
         f = self.scene.hand.finger(finger)
@@ -304,7 +312,7 @@ class RegraspSearch:
         where = f"start {start:.2f} s"
         try:
             budget.spend()
-            choice = self.choose(finger, P, start + d_min, others, q_hand, excluded)
+            choice = self.choose(finger, P, start + d_min, others, q_hand, excluded, reserved)
         except ContactError as exc:
             attempts.append(exc.as_attempt(where))
             return None
@@ -335,7 +343,9 @@ class RegraspSearch:
                 chosen_for = duration
                 try:
                     budget.spend()
-                    again = self.choose(finger, P, start + duration, others, q_hand, excluded)
+                    again = self.choose(
+                        finger, P, start + duration, others, q_hand, excluded, reserved
+                    )
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))
                     break
