@@ -52,7 +52,7 @@ from ._validate import positive, positive_int
 from .exceptions import InputError
 from .grasp.contact import ContactModel
 from .grasp.manifold import Manifold, build_manifold
-from .model.clearance import palm_clearance
+from .model.clearance import LinkClearance, palm_clearance
 from .model.distances import capsule_pair_gaps
 from .model.hand import Hand
 from .model.motion import ObjectMotion
@@ -286,12 +286,21 @@ class RegraspRoom:
     to one other finger at one contact and time are computed once and reused by every
     grasp that shares them.
 
+    With ``obj``, a place also passes what
+    :func:`~regrasp_pin.grasp.choice.choose_new_contact` asks of a new contact before
+    its force closure: it is at least two tip radii + 1 mm from each other finger's
+    contact, and at it the finger's other links keep ``contact.choice_link_clearance_m``
+    from the object and its fingertip link sinks in by at most
+    ``contact.tip_penetration_m`` (Coal, once per finger and time).
+
     Args:
         hand: The hand.
         manifolds: finger -> its manifold (every grasping finger, the same times).
         sample: The surface sample the manifolds map.
         margin_rad: Joint-limit margin of a usable contact [rad].
         clearance_m: Smallest distance [m] to the other fingers' links.
+        obj: The object (None: the places are not screened against it).
+        contact: The thresholds of that screening (default ``ContactModel()``).
     """
 
     def __init__(
@@ -302,8 +311,11 @@ class RegraspRoom:
         *,
         margin_rad: float,
         clearance_m: float,
+        obj: ConvexObject | None = None,
+        contact: ContactModel | None = None,
     ) -> None:
         self.hand, self.manifolds, self.sample = hand, manifolds, sample
+        self.obj, self.contact = obj, contact or ContactModel()
         self.margin = float(margin_rad)
         self.clearance = float(clearance_m)
         self._usable: dict[tuple[str, int], np.ndarray] = {}
@@ -327,17 +339,33 @@ class RegraspRoom:
         """The room of ``name`` at manifold time index ``k`` (an integer count)."""
         key = (name, k)
         if key not in self._usable:
-            self._usable[key] = np.flatnonzero(self.manifolds[name].usable(self.margin)[k])
+            self._usable[key] = self._places(name, k)
         cand = self._usable[key]
-        own = self.sample.points[int(indices[name])]
-        ok = (
-            np.linalg.norm(self.sample.points[cand] - own, axis=1)
-            >= self.hand.finger(name).tip_radius
-        )
+        pts = self.sample.points[cand]
+        tip_radius = self.hand.finger(name).tip_radius
+        ok = np.linalg.norm(pts - self.sample.points[int(indices[name])], axis=1) >= tip_radius
         for other in self.manifolds:
-            if other != name:
-                ok &= self._clear_of(name, k, other, int(indices[other]))
+            if other == name:
+                continue
+            if self.obj is not None:  # the chooser's separation from the other contacts
+                p_other = self.sample.points[int(indices[other])]
+                ok &= np.linalg.norm(pts - p_other, axis=1) >= 2 * tip_radius + 0.001
+            ok &= self._clear_of(name, k, other, int(indices[other]))
         return int(np.count_nonzero(ok))
+
+    def _places(self, name: str, k: int) -> np.ndarray:
+        """The sample indices usable by ``name`` at time index ``k`` and, with an
+        object, clear of it there (see the class docstring)."""
+        man = self.manifolds[name]
+        cand = np.flatnonzero(man.usable(self.margin)[k])
+        if self.obj is None or cand.size == 0:
+            return cand
+        q_full = self.hand.to_full(name, man.q[k, cand])
+        T = man.T_palm_object[k]
+        c = self.contact
+        links = LinkClearance(self.hand, name, self.obj)(q_full, T)
+        tip = LinkClearance(self.hand, name, self.obj, tip_only=True)(q_full, T)
+        return cand[(links >= c.choice_link_clearance_m) & (tip >= -c.tip_penetration_m)]
 
     def _clear_of(self, name: str, k: int, other: str, i_other: int) -> np.ndarray:
         """``(C,)`` whether each usable contact of ``name`` at time index ``k`` keeps the
@@ -407,9 +435,19 @@ def regrasp_room(
     *,
     margin_rad: float,
     clearance_m: float,
+    obj: ConvexObject | None = None,
+    contact: ContactModel | None = None,
 ) -> dict[str, int]:
     """The room to regrasp of each finger of ``fingers`` at the grasp ``indices``
     (finger -> sample index), the smallest over the manifold times ``time_indices``:
     :class:`RegraspRoom`, counted once."""
-    room = RegraspRoom(hand, manifolds, sample, margin_rad=margin_rad, clearance_m=clearance_m)
+    room = RegraspRoom(
+        hand,
+        manifolds,
+        sample,
+        margin_rad=margin_rad,
+        clearance_m=clearance_m,
+        obj=obj,
+        contact=contact,
+    )
     return room(indices, fingers, time_indices)

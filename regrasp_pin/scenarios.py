@@ -463,7 +463,7 @@ def grasp_for_motion(
         only[index] = True
         m = manifolds[name]
         manifolds[name] = replace(m, inside=m.inside & only[None, :])
-    rank = _room_rank(hand, manifolds, sample, room_fingers, room_after_s, contact)
+    rank = _room_rank(hand, obj, manifolds, sample, room_fingers, room_after_s, contact)
     return initial_grasp(
         hand,
         obj,
@@ -482,6 +482,7 @@ def grasp_for_motion(
 
 def _room_rank(
     hand: Hand,
+    obj: ConvexObject,
     manifolds: Mapping[str, Manifold],
     sample: SurfaceSample,
     fingers: Sequence[str],
@@ -496,7 +497,8 @@ def _room_rank(
        start (holds that last through the manifolds' times need no regrasp);
     2. the smallest regrasp room over ``fingers``
        (:class:`~regrasp_pin.placing.RegraspRoom`: usable contacts at which a finger
-       stays ``contact.finger_trigger_m`` + 0.5 mm from the other grasping fingers) at
+       stays ``contact.finger_trigger_m`` + 0.5 mm from the other grasping fingers,
+       clear of the object and of the other contacts as a new contact must be) at
        the manifolds' first time and the first time ``regrasp_s`` later.
     """
     from .placing import RegraspRoom
@@ -515,6 +517,8 @@ def _room_rank(
         sample,
         margin_rad=contact.choice_margin_rad,
         clearance_m=contact.finger_trigger_m + 0.0005,
+        obj=obj,
+        contact=contact,
     )
     held = {n: manifolds[n].usable(contact.limit_margin_rad) for n in fingers}
 

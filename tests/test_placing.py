@@ -11,7 +11,7 @@ from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import InputError
 from regrasp_pin.grasp.contact import ContactModel
 from regrasp_pin.grasp.manifold import build_manifold
-from regrasp_pin.model.clearance import FingerClearance, palm_clearance
+from regrasp_pin.model.clearance import FingerClearance, LinkClearance, palm_clearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.placing import candidate_placements, regrasp_room, workspace_centres
 from regrasp_pin.scenarios import scenario_for_hand, setup_objects
@@ -160,3 +160,44 @@ def test_regrasp_room_counts_contacts_clear_of_the_other_fingers(held):
     assert regrasp_room(
         hand, manifolds, sample, idx, names, [], margin_rad=margin, clearance_m=clearance
     ) == {n: 0 for n in names}
+
+
+def test_regrasp_room_with_the_object_counts_what_a_new_contact_must_pass(held):
+    """With the object, a place also lies two tip radii + 1 mm from each other contact,
+    and there the finger's other links keep the choice clearance from the object and
+    its fingertip link does not sink in (counted one by one here): never more places
+    than without the object."""
+    scen, sample, manifolds = held
+    hand, idx, obj = scen.hand, scen.grasp.indices, scen.obj
+    contact = ContactModel()
+    margin, clearance = contact.choice_margin_rad, 0.002
+    kw = dict(margin_rad=margin, clearance_m=clearance)
+    for name in idx:
+        f, m = hand.finger(name), manifolds[name]
+        links = LinkClearance(hand, name, obj)
+        tip = LinkClearance(hand, name, obj, tip_only=True)
+        for k in (0, 2):
+            d = _room_direct(hand, manifolds, sample, idx, name, k, margin, clearance)
+            usable = [
+                i
+                for i in np.flatnonzero(m.usable(margin)[k])
+                if np.linalg.norm(sample.points[i] - sample.points[idx[name]]) >= f.tip_radius
+            ]
+            expected = 0
+            for i, d_fingers in zip(usable, d, strict=True):
+                q_full = hand.to_full(name, m.q[k, i][None])
+                T = m.T_palm_object[k]
+                expected += bool(
+                    d_fingers >= clearance
+                    and links(q_full, T)[0] >= contact.choice_link_clearance_m
+                    and tip(q_full, T)[0] >= -contact.tip_penetration_m
+                    and all(
+                        np.linalg.norm(sample.points[i] - sample.points[j])
+                        >= 2 * f.tip_radius + 0.001
+                        for n, j in idx.items()
+                        if n != name
+                    )
+                )
+            room = regrasp_room(hand, manifolds, sample, idx, [name], [k], obj=obj, **kw)
+            assert room[name] == expected, (name, k)
+            assert room[name] <= regrasp_room(hand, manifolds, sample, idx, [name], [k], **kw)[name]
