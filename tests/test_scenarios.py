@@ -150,6 +150,8 @@ def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
             [0, 3],  # the start and the first time 0.25 s later
             margin_rad=contact.choice_margin_rad,
             clearance_m=contact.finger_trigger_m + 0.0005,
+            obj=obj,
+            contact=contact,
         )
         return -late, min(counts.values())
 
@@ -197,5 +199,7 @@ def test_the_shadow_hands_grasp_leaves_every_walking_finger_room_to_regrasp():
         [0, 1],
         margin_rad=contact.choice_margin_rad,
         clearance_m=contact.finger_trigger_m + 0.0005,
+        obj=scen.obj,
+        contact=contact,
     )
     assert min(room.values()) > 0, room
