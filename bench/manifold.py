@@ -31,8 +31,9 @@ from pathlib import Path
 import numpy as np
 
 from regrasp_pin.exceptions import ContactError
-from regrasp_pin.grasp.choice import choose_new_contact, initial_grasp
+from regrasp_pin.grasp.choice import choose_new_contact
 from regrasp_pin.grasp.contact import ContactModel, pad_cosines, tip_targets
+from regrasp_pin.grasp.initial import initial_grasp
 from regrasp_pin.grasp.manifold import build_manifold, workspace_voxels
 from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.model.hand import Hand

@@ -23,9 +23,10 @@ from .exceptions import (
     UnknownNameError,
     VerificationError,
 )
-from .grasp.choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
+from .grasp.choice import NewContact, choose_new_contact, exit_times
 from .grasp.contact import ContactModel
 from .grasp.holding import holding_hand
+from .grasp.initial import Grasp, initial_grasp
 from .grasp.manifold import Manifold, build_manifold
 from .grasp.quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
 from .grasp.tracking import ContactTrack, track_contact

@@ -31,8 +31,9 @@ from .exceptions import (
     ModelFileError,
     UnknownNameError,
 )
-from .grasp.choice import GAP_HORIZON_S, Grasp, exit_times, initial_grasp
+from .grasp.choice import exit_times
 from .grasp.contact import ContactModel
+from .grasp.initial import GAP_HORIZON_S, Grasp, initial_grasp
 from .grasp.manifold import Manifold, StartTracking, build_manifold
 from .grasp.necessity import MustHold, must_hold, with_idle_fingers
 from .model.clearance import palm_clearance
@@ -377,7 +378,7 @@ def grasp_for_motion(
     room_fingers: Sequence[str] = (),
     room_after_s: float = 0.25,
 ) -> Grasp:
-    """The initial grasp chosen for ``motion`` (:func:`~.contact_choice.initial_grasp`).
+    """The initial grasp chosen for ``motion`` (:func:`~regrasp_pin.grasp.initial.initial_grasp`).
 
     The fingers' joint-space manifolds are built over the surface sampled every 2 mm,
     at ``max(int(duration / grasp_dt_s), 1) + 1`` equally spaced times of the motion
@@ -422,7 +423,7 @@ def grasp_for_motion(
             counted: where a finger that must let go at once lands).
 
     Returns:
-        The :class:`~.contact_choice.Grasp` at the motion's start.
+        The :class:`~regrasp_pin.grasp.initial.Grasp` at the motion's start.
 
     Raises:
         InputError: non-positive ``grasp_dt_s`` or ``horizon_s``.

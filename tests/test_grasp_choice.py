@@ -32,18 +32,19 @@ from hypothesis import strategies as st
 
 from regrasp_pin.exceptions import ContactError, FailureKind, InputError
 from regrasp_pin.grasp.choice import (
-    SCREEN_EDGES,
-    _CombinationSearch,
     _link_exit,
     _Ranking,
     _Screen,
-    _spread_out,
-    _start_candidates,
     choose_new_contact,
     exit_times,
-    initial_grasp,
 )
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
+from regrasp_pin.grasp.initial import (
+    _CombinationSearch,
+    _spread_out,
+    _start_candidates,
+    initial_grasp,
+)
 from regrasp_pin.grasp.manifold import Manifold, build_manifold
 from regrasp_pin.grasp.necessity import MustHold
 from regrasp_pin.grasp.quality import (
@@ -52,6 +53,7 @@ from regrasp_pin.grasp.quality import (
     ferrari_canny_epsilon,
     is_force_closure,
 )
+from regrasp_pin.grasp.screening import SCREEN_EDGES
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
@@ -869,26 +871,26 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
 def test_screening_epsilons_are_the_hulls_each_computed_once(monkeypatch):
     # the grasp search's memo: the value of ferrari_canny_epsilon for the contacts in
     # their order, one hull per distinct set (a reordered set is another key)
-    import regrasp_pin.grasp.choice as choice
+    import regrasp_pin.grasp.screening as screening
 
     rng = np.random.default_rng(26)
     p = rng.normal(0.0, 0.02, (4, 3))
     n = rng.normal(size=(4, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     calls = []
-    real = choice.ferrari_canny_epsilon
+    real = screening.ferrari_canny_epsilon
     monkeypatch.setattr(
-        choice, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
+        screening, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
     )
-    eps = choice._ScreeningEpsilons(MU, 0.03)
+    eps = screening.ScreeningEpsilons(MU, 0.03)
     ref = real(p, n, MU, n_edges=SCREEN_EDGES, torque_scale_m=0.03)
     assert eps(p, n) == ref and eps(p.copy(), n.copy()) == ref
-    loo = choice._leave_one_out(p, n, MU, 0.03, range(4), eps)
+    loo = screening.leave_one_out(p, n, MU, 0.03, range(4), eps)
     assert loo == [
         real(np.delete(p, j, 0), np.delete(n, j, 0), MU, n_edges=SCREEN_EDGES, torque_scale_m=0.03)
         for j in range(4)
     ]
-    assert choice._leave_one_out(p, n, MU, 0.03, range(4), eps) == loo
+    assert screening.leave_one_out(p, n, MU, 0.03, range(4), eps) == loo
     assert len(calls) == 5
     eps(p[::-1], n[::-1])
     assert len(calls) == 6

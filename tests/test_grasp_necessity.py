@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from regrasp_pin.exceptions import ContactError, FailureKind, PlanningError
-from regrasp_pin.grasp.choice import Grasp
+from regrasp_pin.grasp.initial import Grasp
 from regrasp_pin.grasp.manifold import Manifold
 from regrasp_pin.grasp.necessity import (
     MustHold,

@@ -16,9 +16,10 @@ Takes the hand, the object and its motion. Gives:
   it exists), and whether any of its contacts lasts through them.
 """
 
-from .choice import Grasp, NewContact, choose_new_contact, exit_times, initial_grasp
+from .choice import NewContact, choose_new_contact, exit_times
 from .contact import ContactModel
 from .holding import Holding, holding_hand
+from .initial import Grasp, initial_grasp
 from .manifold import Manifold, build_manifold
 from .necessity import MustHold, first_infeasibility, must_hold
 from .quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure

@@ -17,8 +17,8 @@ import numpy as np
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
-from .choice import Grasp
 from .contact import ContactModel, tip_targets
+from .initial import Grasp
 from .tracking import ContactTrack, track_contact
 
 __all__ = [

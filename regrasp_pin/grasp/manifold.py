@@ -38,7 +38,7 @@ so the entries it maps equal the full manifold's.
 
 The link-vs-object Coal test of the contact model is not part of the manifold (it
 would cost a Coal query per point and time); it is applied where contacts are chosen
-(:mod:`.contact_choice`) and followed (:mod:`.tracking`).
+(:mod:`.choice`, :mod:`.initial`) and followed (:mod:`.tracking`).
 """
 
 from __future__ import annotations

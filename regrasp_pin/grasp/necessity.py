@@ -12,7 +12,7 @@ flight longer than the grid step leaves the finger in the air at some grid time 
 the run. So the finger's contact must stay usable at every time of the run; if none
 of its contacts does (or, for a run at the start, not the contact it starts on), no
 plan exists from there: :func:`first_infeasibility`. The planner fails early with
-``FailureKind.INFEASIBLE`` and :func:`~regrasp_pin.grasp.choice.initial_grasp` keeps
+``FailureKind.INFEASIBLE`` and :func:`~regrasp_pin.grasp.initial.initial_grasp` keeps
 only the contacts that last through a run at the start.
 
 Why it is a proof, and of what (docs/manifold.md):

@@ -37,7 +37,8 @@ class PlannerParams:
             tracking included) on top of ``max_steps``, with the same effect; None (the
             default): none, so that the outcome never depends on the machine's speed.
         exit_tolerance_s: New contacts whose exit times differ by less than this are
-            ties, broken by the shorter move (see :func:`~.contact_choice.choose_new_contact`).
+            ties, broken by the shorter move (see
+            :func:`~regrasp_pin.grasp.choice.choose_new_contact`).
         fingers: The fingers that take part (default: all). The others stay idle at
             the configuration of :func:`rest_configuration`, as obstacles that every
             regrasp is verified against.

@@ -45,8 +45,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
-from ..grasp.choice import Grasp, exit_times, initial_grasp
+from ..grasp.choice import exit_times
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
+from ..grasp.initial import Grasp, initial_grasp
 from ..grasp.manifold import Manifold, build_manifold
 from ..grasp.necessity import MustHold, must_hold, with_idle_fingers
 from ..grasp.quality import ferrari_canny_epsilon
@@ -132,7 +133,7 @@ def plan_manipulation(
         hand: The hand.
         obj: The object.
         motion: The object's motion ``T_palm_object(t)``.
-        grasp: Initial grasp; found by :func:`~.contact_choice.initial_grasp` if None.
+        grasp: Initial grasp; found by :func:`~regrasp_pin.grasp.initial.initial_grasp` if None.
         params: :class:`PlannerParams`.
         progress: Called with the planned time [s] as planning advances (e.g. to
             drive a progress bar).

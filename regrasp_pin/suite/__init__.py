@@ -20,7 +20,7 @@ many problems at once, the same ones on every machine.
 * :func:`build_scenario` (:mod:`.build`) builds a spec the way
   :func:`~regrasp_pin.scenarios.make_scenario` does: the object at the hand's
   canonical pose composed with the spec's offsets, an initial grasp chosen by
-  :func:`~regrasp_pin.grasp.choice.initial_grasp` over the manifolds of a turn about
+  :func:`~regrasp_pin.grasp.initial.initial_grasp` over the manifolds of a turn about
   an axis through the object's centre, then the motion placed.
   :func:`suite_scenarios` skips the specs without an initial grasp.
 * :func:`run_scenario` (:mod:`.run`) builds and plans one spec and records the outcome

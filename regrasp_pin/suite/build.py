@@ -65,7 +65,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
 
     The object starts at the hand's canonical pose (:func:`~regrasp_pin.scenarios.setup_pose`)
     moved by the spec's offsets. The initial grasp is chosen by
-    :func:`~regrasp_pin.grasp.choice.initial_grasp` for a turn about an axis through the
+    :func:`~regrasp_pin.grasp.initial.initial_grasp` for a turn about an axis through the
     object's centre: the motion itself for ``"object-axis"`` and
     ``"rotate-translate"``, the turn about the object's z axis for ``"contact-axis"``,
     whose motion is then placed about the thumb's contact (as

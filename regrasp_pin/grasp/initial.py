@@ -1,0 +1,601 @@
+"""The initial grasp: one contact per finger at the motion's start.
+
+:func:`initial_grasp` searches the fingers' usable contacts at a time index (each
+finger's candidates ranked by how long they last, spread over the surface, their links
+clear of the object) for combinations in force closure whose contacts and fingers are
+apart, and keeps the best by an optional integer rank and then a score (how many fingers
+could let go, lasting fractions, epsilons); see its docstring. The new contact Q of a
+regrasp is chosen by :mod:`.choice`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..exceptions import ContactError, FailureKind
+from ..model.clearance import FingerClearance
+from ..model.hand import Hand
+from ..model.objects import ConvexObject, SurfaceSample
+from .choice import exit_times
+from .contact import ContactModel
+from .manifold import Manifold
+from .necessity import MustHold
+from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon
+from .screening import ObjectClearance, ScreeningEpsilons, held_clear, leave_one_out
+
+__all__ = ["GAP_HORIZON_S", "Grasp", "initial_grasp"]
+
+#: grasp scores within this relative tolerance tie (the first found is kept): scores
+#: sum epsilons whose last bits follow the rounding of the hull computation
+SCORE_RTOL = 1e-9
+#: initial_grasp measures finger gaps over the first this many seconds [s]
+GAP_HORIZON_S = 1.0
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """One contact per finger.
+
+    Attributes:
+        points_object: finger -> contact point, object frame ``(3,)`` [m].
+        normals_object: finger -> outward normal, object frame ``(3,)``.
+        q: finger -> ``(k,)`` configuration at the grasp time [rad].
+        indices: finger -> index in the surface sample.
+        epsilon: Ferrari-Canny epsilon of all contacts.
+    """
+
+    points_object: dict[str, np.ndarray]
+    normals_object: dict[str, np.ndarray]
+    q: dict[str, np.ndarray]
+    indices: dict[str, int]
+    epsilon: float
+
+
+def _start_candidates(
+    hand: Hand,
+    obj: ConvexObject,
+    man: Manifold,
+    pts: np.ndarray,
+    t_index: int,
+    contact: ContactModel,
+    max_candidates: int,
+    hold: MustHold | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One finger's candidate contacts at ``t_index`` for :func:`initial_grasp`: their
+    sample indices and lasting fractions, the longest-lasting first, spread over the
+    surface (two tip radii apart first, then one), links clear of the object; only
+    those that last through ``hold`` (a run from the start in which the finger cannot
+    let go) if it is given: inside the joint limits and, held there, with the finger's
+    other links clear of the object and its fingertip link not sinking in at every
+    manifold time of the run (as the tracking will measure; :func:`held_clear`)."""
+    name = man.finger
+    finger = hand.finger(name)
+    usable = man.usable(contact.limit_margin_rad)
+    idx = np.flatnonzero(man.usable(contact.choice_margin_rad)[t_index])
+    if idx.size == 0:
+        raise ContactError(
+            "no usable contact at the start (inside the limits with margin, pad facing)",
+            finger=name,
+            time_s=float(man.times_s[t_index]),
+        )
+    if hold is not None:
+        if not hold.lasting[idx].any():
+            raise _cannot_hold(man, hold, idx, t_index, contact)
+        # what the planner needs: the trigger margin, up to the next grid time (the
+        # run may end anywhere before it); what is proven: margin >= 0 over the run
+        k_end = min(hold.k_to + 1, man.times_s.size - 1)
+        needed = np.asarray(usable[t_index : k_end + 1].all(axis=0))
+        idx = idx[needed[idx]] if needed[idx].any() else idx[hold.lasting[idx]]
+    last = exit_times(usable[:, idx], man.times_s, t_index)
+    frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
+    order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
+    clear = ObjectClearance(hand, name, obj, contact)
+    q_rows = hand.to_full(name, man.q[t_index, idx])
+    T0 = man.T_palm_object[t_index]
+
+    def link_clear(j: int) -> bool:
+        # clear of the object at the start and, for a finger that cannot let go, for
+        # as long as it must hold: its other links and fingertip link as the tracking
+        # will see them (the manifold knows nothing of them)
+        if not clear(q_rows[j : j + 1], T0)[0]:
+            return False
+        if hold is None:
+            return True
+        ok = held_clear(hand, name, obj, man, idx[j : j + 1], t_index, contact)[:, 0]
+        return bool(ok[: hold.k_to - t_index + 1].all())
+
+    chosen = _spread_out(
+        pts[idx],
+        order,
+        (2 * finger.tip_radius, finger.tip_radius),
+        max_candidates,
+        link_clear,
+    )
+    if not chosen:
+        lasting = "" if hold is None else f" that lasts until t={hold.t_to_s:.3f} s"
+        raise ContactError(
+            f"every usable contact{lasting} makes a link touch the object", finger=name
+        )
+    return idx[chosen], frac[chosen]
+
+
+def _cannot_hold(
+    man: Manifold, hold: MustHold, idx: np.ndarray, t_index: int, contact: ContactModel
+) -> ContactError:
+    """The error of a finger none of whose starting candidates ``idx`` lasts through
+    ``hold``: INFEASIBLE if no contact at all does (with how long the longest-lasting
+    one holds), NO_CANDIDATE if some do but lack the choice margin at the start."""
+    t0 = float(man.times_s[t_index])
+    head = (
+        f"it cannot let go until t={hold.t_to_s:.3f} s (until then no grasp without it is in "
+        f"force closure), but "
+    )
+    if hold.possible:
+        return ContactError(
+            head + f"its contacts that last that long are within "
+            f"{contact.choice_margin_rad:.2f} rad of a joint limit at the start",
+            finger=man.finger,
+            time_s=t0,
+            kind=FailureKind.NO_CANDIDATE,
+            measured=float(hold.lasting.sum()),
+            required=1.0,
+        )
+    usable = man.usable(0.0)
+    last = exit_times(usable[:, usable[t_index]], man.times_s, t_index)
+    t_last = float(last.max()) if last.size else t0
+    return ContactError(
+        head + "none of its contacts stays within its joint limits that long "
+        f"(the longest until t={t_last:.3f} s)",
+        finger=man.finger,
+        time_s=t0,
+        kind=FailureKind.INFEASIBLE,
+        measured=t_last - t0,
+        required=hold.t_to_s - t0,
+    )
+
+
+def _grasp_score(
+    p: np.ndarray,
+    n: np.ndarray,
+    fracs: list[float],
+    mu: float,
+    scale_m: float,
+    epsilons: ScreeningEpsilons | None = None,
+) -> tuple[float, float] | None:
+    """``(score, epsilon)`` of a combination of contacts ``p``, ``n`` ``(F, 3)`` whose
+    lasting fractions are ``fracs``; None if it is not in force closure. The score
+    counts first the fingers that can let go with the rest still in force closure (so
+    that fingers can regrasp later, with four fingers or more), then the smallest of
+    those leave-one-out epsilons, twice the shortest lasting fraction, the mean one and
+    the epsilon. Epsilons come from ``epsilons`` if given (the same values)."""
+    eps = epsilons or ScreeningEpsilons(mu, scale_m)
+    e = eps(p, n)
+    if e <= FORCE_CLOSURE_TOL:
+        return None
+    F = p.shape[0]
+    loo = leave_one_out(p, n, mu, scale_m, range(F), eps) if F > 3 else []
+    removable = [x for x in loo if x > FORCE_CLOSURE_TOL]
+    score = (
+        len(removable)
+        + (min(removable) / (min(removable) + 0.05) if removable else 0.0)
+        + 2.0 * min(fracs)
+        + sum(fracs) / F
+        + e / (e + 0.05)
+    )
+    return score, e
+
+
+def initial_grasp(
+    hand: Hand,
+    obj: ConvexObject,
+    manifolds: Mapping[str, Manifold],
+    sample: SurfaceSample,
+    *,
+    t_index: int = 0,
+    contact: ContactModel | None = None,
+    mu: float = 0.8,
+    min_separation_m: float | None = None,
+    candidates_per_finger: int = 40,
+    trials: int = 80,
+    seed: int = 0,
+    finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None,
+    min_finger_gap_m: float | None = None,
+    gap_horizon_s: float = GAP_HORIZON_S,
+    must_hold: Sequence[MustHold] = (),
+    rank: Callable[[Mapping[str, int]], tuple[int, ...]] | None = None,
+) -> Grasp:
+    """Pick one feasible contact per finger: good joint margins, long-lasting, force closure.
+
+    Each finger's candidates are its usable points at ``t_index`` (margin >=
+    ``contact.limit_margin_rad``, pad facing, links clear), ranked by how long they stay
+    usable and then by margin; up to ``candidates_per_finger`` of them are kept, first
+    two tip radii apart (covering the surface), then one radius apart (filling in). Each
+    of ``trials`` seeded trials (the first greedy, the others with the fingers shuffled
+    and the rankings perturbed) searches depth first, with forward checking, for a
+    combination whose contacts are ``min_separation_m`` apart and whose fingers are
+    ``min_finger_gap_m`` apart (Coal, pairwise, at up to 5 of the manifolds' times over
+    the first ``gap_horizon_s`` [s]; default ``contact.finger_trigger_m`` + 0.5 mm, so
+    that no two fingers start close enough to trigger a regrasp; idle fingers are parked
+    later and not checked). Among the force-closure combinations found, the one kept
+    maximizes first the number of fingers that can let go with the others still in force
+    closure (so that fingers can regrasp later), then twice the shortest lasting
+    fraction, the smallest of those leave-one-out epsilons, the mean lasting fraction
+    and the epsilon.
+    ``finger_clearance`` (optional) maps the fingers' configurations to a further
+    distance [m]; a grasp where it is <= 0 is refused. ``must_hold`` (from
+    :func:`~regrasp_pin.grasp.necessity.must_hold`) keeps, for a finger that cannot let
+    go from ``t_index`` on, only the contacts that last through that run: inside its
+    joint limits, and with its other links and fingertip link clear of the object as
+    the tracking measures them (Coal, at the manifolds' times).
+    ``rank`` (optional) maps a combination (finger -> sample index) to integers that
+    are compared (in order) before the score: the combination kept has the highest rank, and the
+    highest score among those (such as the fingers' room to regrasp,
+    :func:`~regrasp_pin.placing.regrasp_room`); the best combination found is then
+    improved by changing one finger's contact at a time (fingers and candidates in
+    their fixed order, the first change to a higher rank, or to the same rank and a
+    higher score, taken) until no change improves it.
+
+    Raises:
+        ContactError: a finger has no usable contact (kind ``infeasible`` when none
+            lasts through its ``must_hold`` run), or no combination is in force
+            closure.
+    """
+    contact = contact or ContactModel()
+    rng = np.random.default_rng(seed)
+    names = list(manifolds)
+    # finger gaps at a few times over the first ``gap_horizon_s``: two fingers that
+    # start apart but close in at once would trigger a regrasp right away
+    times = manifolds[names[0]].times_s
+    soon = np.flatnonzero(
+        (times >= times[t_index] - 1e-9) & (times <= times[t_index] + gap_horizon_s + 1e-9)
+    )
+    ks = soon[:: max(1, -(-soon.size // 5))]
+    gap = _PairGaps(hand, {n: manifolds[n].q[ks] for n in names})
+    pts, nrm = sample.points, sample.normals
+    hold = {r.finger: r for r in must_hold if r.k_from <= t_index <= r.k_to}
+    per_finger = {
+        name: _start_candidates(
+            hand, obj, manifolds[name], pts, t_index, contact, candidates_per_finger, hold.get(name)
+        )
+        for name in names
+    }
+
+    sep_default = 2 * max(hand.finger(n).tip_radius for n in names) + 0.001
+    sep = sep_default if min_separation_m is None else min_separation_m
+    best = None
+    best_score = -np.inf
+    best_rank: tuple[int, ...] = ()
+    ranks_known: dict[tuple[int, ...], tuple[int, ...]] = {}
+    if min_finger_gap_m is None:
+        min_finger_gap_m = contact.finger_trigger_m + 0.0005
+    search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
+    epsilons = ScreeningEpsilons(mu, obj.radius_m)  # each contact set's hull once
+    for trial in range(trials):
+        # trial 0 is greedy; later trials shuffle the fingers and perturb each finger's
+        # ranking, still favouring the long-lasting contacts
+        order_f = list(rng.permutation(names)) if trial else names
+        ranks = {
+            n: np.arange(per_finger[n][0].size)
+            if trial == 0
+            else np.argsort(
+                np.arange(per_finger[n][0].size) + rng.uniform(0.0, 4.0, per_finger[n][0].size),
+                kind="stable",
+            )
+            for n in order_f
+        }
+        chosen_c = search.complete(order_f, ranks)
+        if chosen_c is None:
+            continue
+        pick = {n: int(per_finger[n][0][c]) for n, c in chosen_c.items()}
+        fracs = [float(per_finger[n][1][c]) for n, c in chosen_c.items()]
+        ii = np.array([pick[n] for n in names])
+        scored = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m, epsilons)
+        if scored is None:
+            continue
+        score, e = scored
+        key = tuple(pick[n] for n in names)
+        if rank is not None and key not in ranks_known:
+            ranks_known[key] = tuple(int(v) for v in rank(pick))
+        r = ranks_known.get(key, ())
+        if (
+            best is None
+            or r > best_rank
+            or (r == best_rank and score > best_score + SCORE_RTOL * max(1.0, abs(best_score)))
+        ):
+            q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
+            if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
+                search.refused += 1
+                continue
+            best_score, best_rank, best = score, r, (dict(pick), e, q_pick)
+    if rank is not None and best is not None:
+        climb = _RankClimb(per_finger, pts, nrm, search, mu, obj.radius_m, epsilons, ranks_known)
+        best, best_rank, best_score = climb.run(
+            best, best_rank, best_score, rank, manifolds, t_index, finger_clearance
+        )
+    closest = search.closest
+    if best is None and search.refused:
+        known = bool(np.isfinite(closest))
+        raise ContactError(
+            f"every grasp tried ({search.refused}) puts two fingers too close"
+            + (
+                f" (the best {closest * 1e3:.2f} mm apart, need {min_finger_gap_m * 1e3:.2f} mm)"
+                if known
+                else " (finger_clearance refused them)"
+            ),
+            kind=FailureKind.FINGER_COLLISION,
+            measured=closest if known else None,
+            required=min_finger_gap_m if known else None,
+        )
+    if best is None:
+        raise ContactError(
+            f"no combination of the usable contacts is in force closure (mu={mu}) with the "
+            f"contacts {sep * 1e3:.0f} mm apart",
+            kind=FailureKind.FORCE_CLOSURE,
+        )
+    pick, e, q_pick = best
+    e_full = ferrari_canny_epsilon(
+        pts[[pick[n] for n in names]],
+        nrm[[pick[n] for n in names]],
+        mu,
+        torque_scale_m=obj.radius_m,
+    )
+    return Grasp(
+        points_object={n: pts[pick[n]].copy() for n in names},
+        normals_object={n: nrm[pick[n]].copy() for n in names},
+        q=q_pick,
+        indices={n: pick[n] for n in names},
+        epsilon=float(e_full if e_full > 0 else e),
+    )
+
+
+class _RankClimb:
+    """Improves a grasp by ``(rank, score)`` one finger's contact at a time (see
+    :func:`initial_grasp`): the changed contact passes the combination search's
+    separation and finger gaps, and the grasp stays in force closure."""
+
+    def __init__(
+        self,
+        per_finger: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        pts: np.ndarray,
+        nrm: np.ndarray,
+        search: _CombinationSearch,
+        mu: float,
+        scale_m: float,
+        epsilons: ScreeningEpsilons,
+        ranks_known: dict[tuple[int, ...], tuple[int, ...]],
+        max_passes: int = 4,
+    ) -> None:
+        self.per_finger, self.pts, self.nrm, self.search = per_finger, pts, nrm, search
+        self.mu, self.scale_m, self.epsilons = mu, scale_m, epsilons
+        self.ranks_known, self.max_passes = ranks_known, max_passes
+
+    def _frac(self, name: str, i: int) -> float:
+        ids, fracs = self.per_finger[name]
+        return float(fracs[int(np.flatnonzero(ids == i)[0])])
+
+    def run(
+        self,
+        best: tuple[dict[str, int], float, dict[str, np.ndarray]],
+        best_rank: tuple[int, ...],
+        best_score: float,
+        rank: Callable[[Mapping[str, int]], tuple[int, ...]],
+        manifolds: Mapping[str, Manifold],
+        t_index: int,
+        finger_clearance: Callable[[dict[str, np.ndarray]], float] | None,
+    ) -> tuple[tuple[dict[str, int], float, dict[str, np.ndarray]], tuple[int, ...], float]:
+        """The improved ``(best, rank, score)``."""
+        names = list(manifolds)
+        for _ in range(self.max_passes):
+            moved = False
+            for name in names:
+                for i in self.per_finger[name][0]:
+                    found = self._try(names, best[0], name, int(i), rank, best_rank, best_score)
+                    if found is None:
+                        continue
+                    pick, r, score, e = found
+                    q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
+                    if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
+                        continue
+                    best, best_rank, best_score, moved = (pick, e, q_pick), r, score, True
+            if not moved:
+                break
+        return best, best_rank, best_score
+
+    def _try(
+        self,
+        names: list[str],
+        current: Mapping[str, int],
+        name: str,
+        i: int,
+        rank: Callable[[Mapping[str, int]], tuple[int, ...]],
+        best_rank: tuple[int, ...],
+        best_score: float,
+    ) -> tuple[dict[str, int], tuple[int, ...], float, float] | None:
+        """The grasp ``current`` with ``name`` at ``i`` (fingers in the order ``names``)
+        and its rank, score and epsilon, if it is admissible and better; else None."""
+        if i == current[name]:
+            return None
+        others = {n: j for n, j in current.items() if n != name}
+        g = self.search._gap(name, i, others)
+        if g is None or g < self.search.min_gap_m:
+            return None
+        pick = {n: int(current[n]) for n in names}
+        pick[name] = i
+        ii = np.array([pick[n] for n in names])
+        fracs = [self._frac(n, pick[n]) for n in names]
+        scored = _grasp_score(
+            self.pts[ii], self.nrm[ii], fracs, self.mu, self.scale_m, self.epsilons
+        )
+        if scored is None:
+            return None
+        key = tuple(int(v) for v in ii)
+        if key not in self.ranks_known:
+            self.ranks_known[key] = tuple(int(v) for v in rank(pick))
+        r = self.ranks_known[key]
+        score, e = scored
+        if r > best_rank or (
+            r == best_rank and score > best_score + SCORE_RTOL * max(1.0, abs(best_score))
+        ):
+            return pick, r, score, e
+        return None
+
+
+def _spread_out(
+    points: np.ndarray,
+    order: np.ndarray,
+    spacings: tuple[float, ...],
+    limit: int,
+    admit: Callable[[int], bool],
+) -> list[int]:
+    """Up to ``limit`` indices into ``points``, in ``order``, each at least the pass's
+    spacing [m] from those chosen before; one pass per spacing (widest first), so the
+    first candidates cover the surface and the later ones fill in. ``admit`` filters."""
+    chosen: list[int] = []
+    refused: set[int] = set()
+    for spacing in spacings:
+        for j in order:
+            j = int(j)
+            if len(chosen) == limit:
+                return chosen
+            if j in refused or j in chosen:
+                continue
+            if chosen and np.min(np.linalg.norm(points[chosen] - points[j], axis=1)) < spacing:
+                continue
+            if not admit(j):
+                refused.add(j)
+                continue
+            chosen.append(j)
+    return chosen
+
+
+class _CombinationSearch:
+    """Depth-first search for one contact per finger under the pairwise constraints.
+
+    Contacts of two fingers must be ``sep`` apart and the two fingers' links
+    ``min_gap_m`` apart (:class:`_PairGaps`); a finger with no admissible candidate sends
+    the search back to the previous finger's next candidate, up to ``max_nodes``
+    candidates per call.
+
+    Attributes:
+        refused: Dead ends where every spaced candidate was too close to a picked finger.
+        closest: The largest finger distance [m] among those refused (-inf: none).
+    """
+
+    def __init__(
+        self,
+        per_finger: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        points: np.ndarray,
+        sep: float,
+        gaps: _PairGaps,
+        min_gap_m: float,
+        max_nodes: int = 2000,
+    ):
+        self.per_finger, self.points, self.sep = per_finger, points, sep
+        self.gaps, self.min_gap_m, self.max_nodes = gaps, min_gap_m, max_nodes
+        self.refused, self.closest = 0, -np.inf
+
+    def complete(self, order: list[str], ranks: Mapping[str, np.ndarray]) -> dict[str, int] | None:
+        """Candidate positions ``finger -> c`` (fingers in ``order``, candidates in
+        ``ranks[finger]`` order), the first admissible combination; None if none is
+        found within the node budget."""
+        budget = [self.max_nodes]
+        return self._extend(order, ranks, {}, {}, budget)
+
+    def _gap(self, name: str, i: int, picked: Mapping[str, int]) -> float | None:
+        """Smallest finger distance [m] of ``name`` at point ``i`` to the picked fingers;
+        None if the contact is closer than ``sep`` to a picked contact."""
+        if any(np.linalg.norm(self.points[i] - self.points[j]) < self.sep for j in picked.values()):
+            return None
+        return self.gaps.smallest(name, i, picked)
+
+    def _dead_end(self, gaps: list[float]) -> None:
+        """Record a finger whose spaced candidates (``gaps`` [m]) were all too close."""
+        if gaps:
+            self.refused += 1
+            self.closest = max(self.closest, max(gaps))
+
+    def _admissible(self, name: str, picked: Mapping[str, int]) -> bool:
+        """Whether some candidate of ``name`` is spaced from and clear of ``picked``."""
+        too_close = []
+        for i in self.per_finger[name][0]:
+            g = self._gap(name, int(i), picked)
+            if g is not None and g >= self.min_gap_m:
+                return True
+            if g is not None:
+                too_close.append(g)
+        self._dead_end(too_close)
+        return False
+
+    def _extend(
+        self,
+        order: list[str],
+        ranks: Mapping[str, np.ndarray],
+        chosen: dict[str, int],
+        picked: dict[str, int],
+        budget: list[int],
+    ) -> dict[str, int] | None:
+        if len(chosen) == len(order):
+            return dict(chosen)
+        name = order[len(chosen)]
+        ids = self.per_finger[name][0]
+        too_close = []
+        for c in ranks[name]:
+            if budget[0] <= 0:
+                return None
+            budget[0] -= 1
+            i = int(ids[c])
+            g = self._gap(name, i, picked)
+            if g is None or g < self.min_gap_m:
+                too_close += [] if g is None else [g]
+                continue
+            chosen[name], picked[name] = int(c), i
+            # forward check: every finger still to pick keeps an admissible candidate
+            if all(self._admissible(r, picked) for r in order[len(chosen) :]):
+                found = self._extend(order, ranks, chosen, picked, budget)
+                if found is not None:
+                    return found
+            del chosen[name], picked[name]
+        self._dead_end(too_close)
+        return None
+
+
+class _PairGaps:
+    """Coal distances [m] between two grasping fingers at their candidate contacts.
+
+    Each finger's configurations at candidate ``i`` are ``q[finger][:, i]`` (a few
+    times); a pair's distance is the smallest over the times where both reach their
+    contacts. The others sit at neutral (only the pair is measured). Distances are
+    cached per pair of candidates.
+    """
+
+    def __init__(self, hand: Hand, q: Mapping[str, np.ndarray]):
+        self.hand, self.q = hand, q
+        self._checks: dict[tuple[str, str], FingerClearance] = {}
+        self._cache: dict[tuple[str, int, str, int], float] = {}
+
+    def pair(self, a: str, ia: int, b: str, ib: int) -> float:
+        """Distance [m] between finger ``a`` at candidate ``ia`` and ``b`` at ``ib``."""
+        if b < a:
+            a, ia, b, ib = b, ib, a, ia
+        key = (a, ia, b, ib)
+        if key not in self._cache:
+            if (a, b) not in self._checks:
+                self._checks[(a, b)] = FingerClearance(self.hand, a, others=[b])
+            qa, qb = self.q[a][:, ia], self.q[b][:, ib]
+            both = np.isfinite(qa).all(axis=1) & np.isfinite(qb).all(axis=1)
+            both[0] = True  # the start always counts
+            d = np.inf
+            for k in np.flatnonzero(both):
+                q = self.hand.neutral()
+                q[self.hand.finger(a).q_indices] = qa[k]
+                q[self.hand.finger(b).q_indices] = qb[k]
+                d = min(d, self._checks[(a, b)](q))
+            self._cache[key] = d
+        return self._cache[key]
+
+    def smallest(self, finger: str, i: int, picked: Mapping[str, int]) -> float:
+        """Smallest distance [m] from ``finger`` at ``i`` to the picked fingers (inf: none)."""
+        return min((self.pair(finger, i, o, j) for o, j in picked.items()), default=np.inf)

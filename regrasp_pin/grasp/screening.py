@@ -1,0 +1,115 @@
+"""Screening a finger's contacts: the tests a new contact and an initial grasp share.
+
+- :class:`ScreeningEpsilons`: the Ferrari-Canny epsilon of contact sets with
+  :data:`SCREEN_EDGES` cone edges and a fixed torque scale, each set computed once;
+  :func:`leave_one_out`: the epsilons with each contact left out in turn.
+- :class:`ObjectClearance`: a finger at a candidate contact clears the object (Coal).
+- :func:`held_clear`: held at a contact, the finger stays clear of the object over the
+  manifold's times, as the tracking measures it (Coal).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+
+from ..model.clearance import LinkClearance
+from ..model.hand import Hand
+from ..model.objects import ConvexObject
+from .contact import ContactModel
+from .manifold import Manifold
+from .quality import ferrari_canny_epsilon
+
+__all__ = [
+    "SCREEN_EDGES",
+    "ObjectClearance",
+    "ScreeningEpsilons",
+    "held_clear",
+    "leave_one_out",
+]
+
+SCREEN_EDGES = 6  # friction-cone edges used when screening candidates
+
+
+class ScreeningEpsilons:
+    """The screening epsilon (:data:`SCREEN_EDGES` edges, a fixed torque scale) of
+    contact sets, each set computed once: a pure function of the contacts in their
+    order (the same bits in, the same hull out), which the grasp search asks for again
+    and again (a combination found by several trials, a leave-one-out set shared by
+    combinations that differ in the left-out finger)."""
+
+    def __init__(self, mu: float, scale_m: float) -> None:
+        self.mu = mu
+        self.scale_m = scale_m
+        self._known: dict[tuple[bytes, bytes], float] = {}
+
+    def __call__(self, p: np.ndarray, n: np.ndarray) -> float:
+        """The screening epsilon of contacts ``p``, ``n`` ``(F, 3)`` (object frame)."""
+        key = (np.ascontiguousarray(p).tobytes(), np.ascontiguousarray(n).tobytes())
+        if key not in self._known:
+            self._known[key] = ferrari_canny_epsilon(
+                p, n, self.mu, n_edges=SCREEN_EDGES, torque_scale_m=self.scale_m
+            )
+        return self._known[key]
+
+
+def leave_one_out(
+    p: np.ndarray,
+    n: np.ndarray,
+    mu: float,
+    scale_m: float,
+    rows: Iterable[int],
+    epsilons: ScreeningEpsilons | None = None,
+) -> list[float]:
+    """The screening epsilon of contacts ``p``, ``n`` ``(F, 3)`` with each of ``rows``
+    left out in turn (> 0: the others hold without it); from ``epsilons`` if given."""
+    eps = epsilons or ScreeningEpsilons(mu, scale_m)
+    return [eps(np.delete(p, j, 0), np.delete(n, j, 0)) for j in rows]
+
+
+class ObjectClearance:
+    """Whether a finger at a candidate contact clears the object: its other links by
+    ``contact.choice_link_clearance_m``, its fingertip link not sunk in by more than
+    ``contact.tip_penetration_m`` (Coal)."""
+
+    def __init__(self, hand: Hand, finger: str, obj: ConvexObject, contact: ContactModel):
+        self.links = LinkClearance(hand, finger, obj)
+        self.tip = LinkClearance(hand, finger, obj, tip_only=True)
+        self.contact = contact
+
+    def __call__(self, q_full: np.ndarray, T_palm_object: np.ndarray) -> np.ndarray:
+        """``(N,)`` bool for the ``(N, nq)`` configurations at the object pose(s)."""
+        c = self.contact
+        return (self.links(q_full, T_palm_object) >= c.choice_link_clearance_m) & (
+            self.tip(q_full, T_palm_object) >= -c.tip_penetration_m
+        )
+
+
+def held_clear(
+    hand: Hand,
+    finger: str,
+    obj: ConvexObject,
+    manifold: Manifold,
+    points: np.ndarray,
+    ka: int,
+    contact: ContactModel,
+) -> np.ndarray:
+    """``(K, C)`` bool over the manifold's times from index ``ka``: the points are usable
+    (``contact.limit_margin_rad``) and, held there, the finger's other links keep
+    ``contact.link_clearance_m`` from the object and its fingertip link sinks in by at
+    most ``contact.tip_penetration_m`` (Coal), at that time and every one before it.
+
+    Only the times before a point's first exit from the usable set are measured: what
+    comes after cannot change the first False of a column."""
+    usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
+    still = np.logical_and.accumulate(usable, axis=0)  # (K, C): not left yet
+    rows, cols = np.nonzero(still)
+    q = manifold.q[ka + rows, points[cols]]  # finite where usable
+    full = hand.to_full(finger, q)
+    T = manifold.T_palm_object[ka + rows]
+    d = LinkClearance(hand, finger, obj)(full, T)
+    d_tip = LinkClearance(hand, finger, obj, tip_only=True)(full, T)
+    ok = np.zeros_like(still)
+    ok[rows, cols] = (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
+    return np.logical_and.accumulate(ok, axis=0)
