@@ -266,6 +266,7 @@ def test_the_step_budget_stops_the_same_plan_at_the_same_step(demo, max_steps):
         ("candidates", 2.5),
         ("prove_infeasible", "yes"),
         ("release", 1),
+        ("rush_duration_s", 0.0),
     ],
 )
 def test_planner_params_name_a_bad_value(field, value):
@@ -367,3 +368,34 @@ def test_a_neighbour_makes_room_for_a_crowded_finger(tmp_path):
     assert np.linalg.norm(then.Q_object - first.Q_object) >= sep
     check = recheck_plan(plan, max_step_rad=1e-3)
     assert check.ok, check.problems
+
+
+def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
+    """Suite spec 81 (the Allegro hand turning a pentagonal prism 91 deg at 34 deg/s):
+    at t=2.16 s the middle finger's hold is lost 20 ms before a regrasp of the ring of
+    the shortest duration (0.25 s) could land. A faster one (as short as
+    rush_duration_s, within the joint velocity limits) lands in time: a full plan that
+    passes the independent re-check; without it, a finger-busy failure."""
+    scen = build_scenario(generate_specs(82, seed=0)[81])
+    result = plan_manipulation(
+        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
+    )
+    plan = Plan.load(result.plan.save(tmp_path / "plan.json"))
+    D = scen.params.regrasp.duration_s
+    fast = [r for r in plan.regrasps() if r.t_end - r.t_start < D - 1e-9]
+    assert fast, [(r.finger, r.t_end - r.t_start) for r in plan.regrasps()]
+    t, q = np.asarray(plan.t), np.asarray(plan.q)
+    for r in fast:
+        assert "a faster regrasp" in r.reason
+        assert r.t_end - r.t_start >= scen.params.rush_duration_s - 1e-9
+        # within the joint velocity limits (finite differences of the plan's samples)
+        f = scen.hand.finger(r.finger)
+        k = np.flatnonzero((t >= r.t_start - 1e-9) & (t <= r.t_end + 1e-9))
+        speed = np.abs(np.diff(q[k][:, f.q_indices], axis=0)) / np.diff(t[k])[:, None]
+        assert np.all(speed <= f.velocity_limit * (1 + 1e-6)), speed.max(axis=0)
+    check = recheck_plan(plan, max_step_rad=1e-3)
+    assert check.ok, check.problems
+    slow = replace(scen.params, rush_duration_s=None)
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=slow)
+    assert err.value.kind == FailureKind.FINGER_BUSY

@@ -45,6 +45,11 @@ class PlannerParams:
         contact: The contact model (trigger margin, pad cone, tolerances).
         regrasp: Parameters of each regrasp (``duration_s`` is the shortest duration;
             longer ones follow from the joint velocity limits).
+        rush_duration_s: When another finger's hold would be lost before a regrasp of
+            ``regrasp.duration_s`` could land, a regrasp as short as this [s] is
+            searched instead, landing before that hold is lost (the joint velocity
+            limits, checked by the search, decide whether it can be that fast); None:
+            never.
         release: Let a finger go for the rest of the motion when its hold is lost with
             no verified regrasp, if more than ``min_holding`` others remain to take
             turns, or if the others hold in force closure to the end
@@ -72,6 +77,7 @@ class PlannerParams:
     exit_tolerance_s: float = 0.25
     contact: ContactModel = field(default_factory=ContactModel)
     regrasp: RegraspParams = field(default_factory=RegraspParams)
+    rush_duration_s: float | None = 0.15
     release: bool = True
     release_back_off_s: float = 0.1
     prove_infeasible: bool = True
@@ -91,6 +97,8 @@ class PlannerParams:
             positive_int(getattr(self, name), f"PlannerParams.{name}", least)
         if self.budget_s is not None:
             positive(self.budget_s, "PlannerParams.budget_s", allow_zero=True)
+        if self.rush_duration_s is not None:
+            positive(self.rush_duration_s, "PlannerParams.rush_duration_s")
         for name in ("release", "prove_infeasible"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(

@@ -377,7 +377,12 @@ def _advance(
         )
         log.info("%s: %s", name, note)
         return replace(state, held_to_end={**state.held_to_end, name: note})
-    _refuse_dead_end(ctx, state, trig, triggers, win)
+    rush = _rush(ctx, state, trig, triggers, win)
+    if rush is not None:
+        # another hold is lost before a regrasp of D could land: a faster one, by then
+        D = p.rush_duration_s or D
+        end_by_s = rush.required if end_by_s is None else min(end_by_s, rush.required or 0.0)
+        why += f"; a faster regrasp, landing by t={end_by_s:.3f} s ({rush.reason})"
     stay = _fingers_that_stay(ctx, state, trig, win)
     end_by = motion.t_end if end_by_s is None else end_by_s
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
@@ -416,6 +421,7 @@ def _advance(
             exclude=exclude,
             landing_check=lambda res: _check_landing(ctx, name, res, landed, triggers),
             reserved=reserved,
+            shortest_s=D,
         )
 
     tries = (starts, end_by_s)
@@ -434,11 +440,21 @@ def _advance(
             why += f"; lands by t={deadline:.3f} s, in time for {other}'s hold"
     try:
         found = search(*tries)
-    except PlanningError:
+    except PlanningError as exc:
         released = let_go(ctx, state, trig, win, stay, why)
-        if released is None:
-            raise
-        return released
+        if released is not None:
+            return released
+        if rush is not None:  # the dead end stands: no faster regrasp either
+            raise PlanningError(
+                f"{rush.reason}; no faster regrasp either: {exc.reason}",
+                finger=name,
+                time_s=trig.time_s,
+                kind=FailureKind.FINGER_BUSY,
+                measured=rush.measured,
+                required=rush.required,
+                attempts=exc.attempts,
+            ) from exc
+        raise
     if abs(found.result.t_start - starts[0]) > TIME_TOL_S:
         why += (
             f"; lifted off at t={found.result.t_start:.3f} s: "
@@ -657,6 +673,27 @@ def _refuse_dead_end(
             measured=land,
             required=first.lost_s,
         )
+
+
+def _rush(
+    ctx: PlanContext, state: PlanState, trig: Trigger, triggers: list[Trigger], win: LiftOffWindow
+) -> PlanningError | None:
+    """The dead end of :func:`_refuse_dead_end` if a regrasp of
+    ``params.rush_duration_s`` could still land before that hold is lost (its
+    ``required``: the time to land by); None if there is no dead end; raises it if no
+    faster regrasp could land in time either."""
+    try:
+        _refuse_dead_end(ctx, state, trig, triggers, win)
+    except PlanningError as busy:
+        rush = ctx.params.rush_duration_s
+        if (
+            rush is None
+            or busy.required is None
+            or win.earliest_s + rush > busy.required - TIME_TOL_S
+        ):
+            raise
+        return busy
+    return None
 
 
 def _next_deadline(

@@ -151,6 +151,7 @@ class RegraspSearch:
         exclude: list[np.ndarray] | None = None,
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
         reserved: Sequence[tuple[np.ndarray, float]] = (),
+        shortest_s: float | None = None,
     ) -> Found:
         """Search a verified regrasp of ``finger`` (see the module docstring).
 
@@ -171,6 +172,7 @@ class RegraspSearch:
                 excludes its Q like any other failure; None accepts it.
             reserved: ``(point, radius)`` pairs (object frame, [m]): room Q must leave
                 free for another finger's landing.
+            shortest_s: The shortest regrasp [s] (default ``regrasp.duration_s``).
 
         Raises:
             PlanningError: nothing verified; its ``kind`` is the dominant cause, its
@@ -179,7 +181,7 @@ class RegraspSearch:
         end_by = (
             self.scene.motion.t_end if end_by_s is None else min(end_by_s, self.scene.motion.t_end)
         )
-        d_min = self.regrasp.duration_s
+        d_min = self.regrasp.duration_s if shortest_s is None else float(shortest_s)
         others_tips = np.array(
             [p + self.scene.hand.finger(n).tip_radius * nn for n, (p, nn) in others.items()]
         ).reshape(-1, 3)
@@ -216,6 +218,7 @@ class RegraspSearch:
                     budget,
                     landing_check,
                     reserved,
+                    d_min,
                 )
                 if found is None:
                     break  # no candidate left at this start
@@ -305,10 +308,11 @@ class RegraspSearch:
         budget: SearchBudget,
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
         reserved: Sequence[tuple[np.ndarray, float]] = (),
+        shortest_s: float | None = None,
     ) -> Found | bool | None:
         """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q)."""
         f = self.scene.hand.finger(finger)
-        d_min = self.regrasp.duration_s
+        d_min = self.regrasp.duration_s if shortest_s is None else shortest_s
         where = f"start {start:.2f} s"
         try:
             budget.spend()
