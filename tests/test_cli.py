@@ -113,9 +113,10 @@ def test_version_text(capsys):
 
 
 def test_no_plan_exits_1_with_json_on_stdout(tmp_path, capsys):
-    """A turn the five-finger hand cannot follow (180 deg at 40 deg/s): exit code 1,
-    the failure as JSON with its kind, and the partial plan written."""
-    argv = ["demo", "--angle", "180", "--rate", "40", "--no-plots", "--out", str(tmp_path)]
+    """A turn the five-finger hand cannot follow (-100 deg at 40 deg/s: two holds end
+    together at the start): exit code 1, the failure as JSON with its kind, and the
+    partial plan written."""
+    argv = ["demo", "--angle", "-100", "--rate", "40", "--no-plots", "--out", str(tmp_path)]
     assert main([*argv, "--json"]) == 1
     captured = capsys.readouterr()
     doc = json.loads(captured.out)

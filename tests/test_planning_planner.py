@@ -203,12 +203,12 @@ def test_a_neighbour_that_cannot_be_planned_ends_typed_with_a_verified_partial_p
 
 def _spec_6():
     """Suite spec 6 (five-finger hand, pentagonal prism, -175 deg about the thumb's
-    contact) with regrasps of at least 0.4 s, searched although it is proven to have no
-    plan (the ring finger cannot let go from 1.8 s on: tests/test_grasp_necessity.py
-    has such cases), to test how the search ends."""
+    contact) with regrasps of at least 0.4 s (none faster: no rush), searched although
+    it is proven to have no plan (the ring finger cannot let go from 1.8 s on:
+    tests/test_grasp_necessity.py has such cases), to test how the search ends."""
     scen = build_scenario(generate_specs(7, seed=0)[6])
     slow = replace(scen.params.regrasp, duration_s=0.4)
-    params = replace(scen.params, regrasp=slow, prove_infeasible=False)
+    params = replace(scen.params, regrasp=slow, prove_infeasible=False, rush_duration_s=None)
     return replace(scen, params=params)
 
 
