@@ -45,22 +45,20 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
-from ..grasp.choice import exit_times
 from ..grasp.holding import Holding, holding_q, holds_to_end, rest_configuration, start_holding
 from ..grasp.initial import Grasp, initial_grasp
 from ..grasp.manifold import Manifold, build_manifold
-from ..grasp.necessity import MustHold, must_hold, with_idle_fingers
 from ..grasp.quality import ferrari_canny_epsilon
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from ..model.scene import Scene
-from ..plan import ContactPhase, IdlePhase, Plan, RegraspPhase, hand_record
-from .join import Join
+from ..plan import Plan, RegraspPhase
+from .assembly import plan_until
+from .feasibility import first_infeasibility, must_hold_runs, no_plan_exists
 from .letgo import let_go
 from .params import PlannerParams
 from .regrasp import RegraspResult
-from .release import Release
 from .schedule import (
     TIME_TOL_S,
     LiftOffWindow,
@@ -169,7 +167,7 @@ def plan_manipulation(
     }
     stage["manifolds"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    every, runs = _must_hold(hand, obj, motion, sample, m_times, manifolds, params)
+    every, runs = must_hold_runs(hand, obj, motion, sample, m_times, manifolds, params)
     stage["must hold"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if grasp is None:
@@ -225,9 +223,9 @@ def plan_manipulation(
         now=motion.t_start,
         held_to_end={},
     )
-    infeasible = _first_infeasibility(ctx, state, runs)
+    infeasible = first_infeasibility(ctx, state, runs)
     if infeasible is not None:
-        raise _no_plan_exists(ctx, infeasible, state)
+        raise no_plan_exists(ctx, infeasible, state)
     t0 = time.perf_counter()
     steps: list[_Step] = []
     backtracks = 0
@@ -263,7 +261,7 @@ def plan_manipulation(
                     ),
                     finger=exc.finger or trig.finger,
                     time_s=when,
-                    partial=_plan_until(ctx, state, until),
+                    partial=plan_until(ctx, state, until),
                     kind=FailureKind.BUDGET if cut_short else exc.kind,
                     measured=exc.measured,
                     required=exc.required,
@@ -275,7 +273,7 @@ def plan_manipulation(
     stage["regrasps"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    plan = _plan_until(ctx, state, motion.t_end, final=True)
+    plan = plan_until(ctx, state, motion.t_end, final=True)
     stage["assembly"] = time.perf_counter() - t0
     plan.summary.update(
         {
@@ -469,91 +467,6 @@ def _tip_path_record(res: RegraspResult) -> list:
     inflated surface, or the executed tip of a joint-space transfer (object frame)."""
     pts = res.tip_object if res.tip_path is None else res.tip_path.points_object
     return pts[:: max(1, len(pts) // 200)].tolist()
-
-
-def _must_hold(
-    hand: Hand,
-    obj: ConvexObject,
-    motion: ObjectMotion,
-    sample: SurfaceSample,
-    m_times: np.ndarray,
-    manifolds: dict[str, Manifold],
-    params: PlannerParams,
-) -> tuple[dict[str, Manifold], list[MustHold]]:
-    """The manifolds of every finger that could hold and the runs in which a finger
-    cannot let go (:func:`~regrasp_pin.grasp.necessity.must_hold`).
-
-    An idle finger may join in place of one that lets go (:mod:`.planning.letgo`), so it
-    counts among those that could hold; its manifold is the one a join would build. The
-    runs are only claimed when every flight spans a grid time (regrasps last longer than
-    the grid step), as the proof needs, and ``params.prove_infeasible``; else there are
-    none.
-    """
-    step = float(np.diff(m_times).max()) if m_times.size > 1 else np.inf
-    if not params.prove_infeasible or params.regrasp.duration_s <= step + TIME_TOL_S:
-        return dict(manifolds), []
-    every = (
-        with_idle_fingers(hand, manifolds, sample, motion, params.contact)
-        if params.release
-        else dict(manifolds)
-    )
-    # a hold lost in the motion's last step counts as held to the end (planning.state)
-    until = motion.t_end - params.dt_s
-    return every, must_hold(every, sample, obj, params.mu, list(manifolds), until_s=until)
-
-
-def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
-    """The first time in ``[h.t_from, t_to]`` at which the tracked hold ``h`` is lost
-    (not reached, outside the limits or the pad turned away; the motion's last step
-    excepted, as the planner counts it held to the end), or None if it is held."""
-    tr, c = h.track, ctx.params.contact
-    sel = (tr.times_s <= min(t_to, ctx.scene.motion.t_end - ctx.params.dt_s) + TIME_TOL_S) & (
-        tr.times_s >= h.t_from - TIME_TOL_S
-    )
-    lost = sel & ((tr.error_m > c.ik_tol_m) | (tr.margin_rad < 0.0) | (tr.pad_cos < c.cos_cone))
-    return float(tr.times_s[np.argmax(lost)]) if lost.any() else None
-
-
-def _first_infeasibility(
-    ctx: PlanContext, state: PlanState, runs: list[MustHold]
-) -> tuple[MustHold, float] | None:
-    """The first run that no plan can get through, with the time the finger's contact
-    leaves its limits: a run from the start that the finger's tracked starting hold
-    does not last through, or a later run no contact of the finger lasts through (as
-    the manifolds find); None if there is none."""
-    bad = []
-    for run in runs:
-        held = state.holding.get(run.finger)
-        if held is not None and run.k_from == 0:
-            lost = _held_until(ctx, held, run.t_to_s)
-            if lost is not None:
-                bad.append((run, lost))
-        elif run.k_from > 0 and not run.possible:
-            man = ctx.manifolds[run.finger]
-            usable = man.usable(0.0)
-            last = exit_times(usable[:, usable[run.k_from]], man.times_s, run.k_from)
-            bad.append((run, float(last.max()) if last.size else run.t_from_s))
-    return min(bad, key=lambda b: (b[0].k_from, b[0].finger), default=None)
-
-
-def _no_plan_exists(
-    ctx: PlanContext, found: tuple[MustHold, float], state: PlanState
-) -> PlanningError:
-    """The INFEASIBLE failure of a finger that cannot let go during a run but cannot
-    hold that long either; the partial plan is the start."""
-    run, lost = found
-    which = "its contact does not stay" if run.k_from == 0 else "none of its contacts stays"
-    return PlanningError(
-        f"no plan exists: from t={run.t_from_s:.3f} s to t={run.t_to_s:.3f} s no grasp "
-        f"without it is in force closure, so it cannot let go, but {which} within its "
-        f"joint limits that long (it leaves them at t={lost:.3f} s)",
-        finger=run.finger,
-        time_s=run.t_from_s,
-        partial=_plan_until(ctx, state, ctx.scene.motion.t_start),
-        kind=FailureKind.INFEASIBLE,
-        measured=lost - run.t_from_s,
-        required=run.duration_s,
-    )
 
 
 def _fingers_that_stay(
@@ -981,100 +894,3 @@ def _backtrack(
             steps[:] = trial
             return new_state
     return None
-
-
-def _plan_until(ctx: PlanContext, state: PlanState, until: float, *, final: bool = False) -> Plan:
-    """The plan up to ``until``: every finger holding its current contact to then (the
-    whole plan with ``final``, which keeps a hold that starts at the very end)."""
-    phases = {n: list(state.phases[n]) for n in state.released}
-    for n, h in state.holding.items():
-        hold = ContactPhase(finger=n, t_start=h.t_from, t_end=until, p_object=h.p, n_object=h.n)
-        phases[n] = [*state.phases[n], *([hold] if final or h.t_from < until else [])]
-    return _assemble(
-        ctx.scene.hand,
-        ctx.scene.obj,
-        ctx.scene.motion,
-        ctx.grid,
-        state.history,
-        state.holding,
-        phases,
-        [*state.regrasps, *state.released.values(), *state.joined.values()],
-        until=until,
-        params=ctx.params,
-        base_q=ctx.base_q,
-    )
-
-
-def _assemble(
-    hand: Hand,
-    obj: ConvexObject,
-    motion: ObjectMotion,
-    grid: np.ndarray,
-    history: dict[str, tuple[Holding, ...]],
-    holding: dict[str, Holding],
-    phases: dict[str, list],
-    regrasps: list[RegraspResult | Release | Join],
-    *,
-    until: float,
-    params: PlannerParams,
-    base_q: np.ndarray,
-) -> Plan:
-    """Sample the whole hand: grid times outside the regrasps (and releases), their own
-    samples inside them (so linear interpolation between samples is what was verified).
-
-    Holding fingers are placed by exact IK on their contact at every sample (warm from
-    their track), which is exactly what the regrasp verification used for them.
-    """
-    keep = np.ones(grid.size, bool)
-    for r in regrasps:
-        keep &= ~((grid > r.t_start - TIME_TOL_S) & (grid < r.t_end + TIME_TOL_S))
-    times = np.unique(np.round(np.concatenate([grid[keep]] + [r.times_s for r in regrasps]), 9))
-    times = times[times <= until + TIME_TOL_S]
-    if times.size < 2:
-        times = np.array([motion.t_start, max(until, motion.t_start + params.dt_s)])
-    q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
-    for name in history:
-        f = hand.fingers[name]
-        in_air = np.zeros(times.size, bool)
-        for r in regrasps:
-            if r.finger == name:
-                sel = (times >= r.t_start - TIME_TOL_S) & (times <= r.t_end + TIME_TOL_S)
-                for j in range(f.k):
-                    q[sel, f.q_indices[j]] = np.interp(times[sel], r.times_s, r.q[:, j])
-                in_air |= sel
-        for h in [*history[name], *([holding[name]] if name in holding else [])]:
-            b = h.t_to if h.t_to is not None else until
-            sel = (times >= h.t_from - TIME_TOL_S) & (times <= b + TIME_TOL_S) & ~in_air
-            if sel.any():
-                q[np.ix_(np.flatnonzero(sel), f.q_indices)] = holding_q(
-                    hand, motion, name, h, times[sel], params.contact.ik_tol_m
-                )
-    hand_dict = hand_record(hand)
-    verts, faces = obj.mesh()
-    obj_dict = {
-        "kind": obj.kind,
-        "params": obj.params,
-        "vertices": np.asarray(verts).tolist(),
-        "faces": np.asarray(faces).tolist(),
-    }
-    return Plan(
-        hand=hand_dict,
-        object=obj_dict,
-        t=times,
-        q=q,
-        T_palm_object=motion.as_xyzquat(times),
-        phases=_with_idle(hand, phases, float(times[0]), float(times[-1])),
-        summary={},
-    )
-
-
-def _with_idle(hand: Hand, phases: dict[str, list], t0: float, t1: float) -> dict[str, list]:
-    """Every finger's phases from ``t0`` to ``t1`` [s]: an ``idle`` phase for a finger
-    that takes no part, and before the ``join`` of one that joins later."""
-    out = {n: list(ps) for n, ps in phases.items()}
-    for name in hand.finger_names:
-        ps = out.get(name, [])
-        start = min(ps[0].t_start, t1) if ps else t1
-        if start > t0 + TIME_TOL_S:
-            out[name] = [IdlePhase(name, t0, start), *ps]
-    return out

@@ -1,0 +1,108 @@
+"""What no plan can do: the runs in which a finger cannot let go, and the first one
+that no plan gets through (:mod:`~regrasp_pin.grasp.necessity` applied to a plan's
+start).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..exceptions import FailureKind, PlanningError
+from ..grasp.choice import exit_times
+from ..grasp.holding import Holding
+from ..grasp.manifold import Manifold
+from ..grasp.necessity import MustHold, must_hold, with_idle_fingers
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject, SurfaceSample
+from .assembly import plan_until
+from .params import PlannerParams
+from .schedule import TIME_TOL_S
+from .state import PlanContext, PlanState
+
+__all__ = ["first_infeasibility", "must_hold_runs", "no_plan_exists"]
+
+
+def must_hold_runs(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    sample: SurfaceSample,
+    m_times: np.ndarray,
+    manifolds: dict[str, Manifold],
+    params: PlannerParams,
+) -> tuple[dict[str, Manifold], list[MustHold]]:
+    """The manifolds of every finger that could hold and the runs in which a finger
+    cannot let go (:func:`~regrasp_pin.grasp.necessity.must_hold`).
+
+    An idle finger may join in place of one that lets go (:mod:`.planning.letgo`), so it
+    counts among those that could hold; its manifold is the one a join would build. The
+    runs are only claimed when every flight spans a grid time (regrasps last longer than
+    the grid step), as the proof needs, and ``params.prove_infeasible``; else there are
+    none.
+    """
+    step = float(np.diff(m_times).max()) if m_times.size > 1 else np.inf
+    if not params.prove_infeasible or params.regrasp.duration_s <= step + TIME_TOL_S:
+        return dict(manifolds), []
+    every = (
+        with_idle_fingers(hand, manifolds, sample, motion, params.contact)
+        if params.release
+        else dict(manifolds)
+    )
+    # a hold lost in the motion's last step counts as held to the end (planning.state)
+    until = motion.t_end - params.dt_s
+    return every, must_hold(every, sample, obj, params.mu, list(manifolds), until_s=until)
+
+
+def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
+    """The first time in ``[h.t_from, t_to]`` at which the tracked hold ``h`` is lost
+    (not reached, outside the limits or the pad turned away; the motion's last step
+    excepted, as the planner counts it held to the end), or None if it is held."""
+    tr, c = h.track, ctx.params.contact
+    sel = (tr.times_s <= min(t_to, ctx.scene.motion.t_end - ctx.params.dt_s) + TIME_TOL_S) & (
+        tr.times_s >= h.t_from - TIME_TOL_S
+    )
+    lost = sel & ((tr.error_m > c.ik_tol_m) | (tr.margin_rad < 0.0) | (tr.pad_cos < c.cos_cone))
+    return float(tr.times_s[np.argmax(lost)]) if lost.any() else None
+
+
+def first_infeasibility(
+    ctx: PlanContext, state: PlanState, runs: list[MustHold]
+) -> tuple[MustHold, float] | None:
+    """The first run that no plan can get through, with the time the finger's contact
+    leaves its limits: a run from the start that the finger's tracked starting hold
+    does not last through, or a later run no contact of the finger lasts through (as
+    the manifolds find); None if there is none."""
+    bad = []
+    for run in runs:
+        held = state.holding.get(run.finger)
+        if held is not None and run.k_from == 0:
+            lost = _held_until(ctx, held, run.t_to_s)
+            if lost is not None:
+                bad.append((run, lost))
+        elif run.k_from > 0 and not run.possible:
+            man = ctx.manifolds[run.finger]
+            usable = man.usable(0.0)
+            last = exit_times(usable[:, usable[run.k_from]], man.times_s, run.k_from)
+            bad.append((run, float(last.max()) if last.size else run.t_from_s))
+    return min(bad, key=lambda b: (b[0].k_from, b[0].finger), default=None)
+
+
+def no_plan_exists(
+    ctx: PlanContext, found: tuple[MustHold, float], state: PlanState
+) -> PlanningError:
+    """The INFEASIBLE failure of a finger that cannot let go during a run but cannot
+    hold that long either; the partial plan is the start."""
+    run, lost = found
+    which = "its contact does not stay" if run.k_from == 0 else "none of its contacts stays"
+    return PlanningError(
+        f"no plan exists: from t={run.t_from_s:.3f} s to t={run.t_to_s:.3f} s no grasp "
+        f"without it is in force closure, so it cannot let go, but {which} within its "
+        f"joint limits that long (it leaves them at t={lost:.3f} s)",
+        finger=run.finger,
+        time_s=run.t_from_s,
+        partial=plan_until(ctx, state, ctx.scene.motion.t_start),
+        kind=FailureKind.INFEASIBLE,
+        measured=lost - run.t_from_s,
+        required=run.duration_s,
+    )
