@@ -52,7 +52,8 @@ from ._validate import positive, positive_int
 from .exceptions import InputError
 from .grasp.contact import ContactModel
 from .grasp.manifold import Manifold, build_manifold
-from .model.clearance import LinkClearance, palm_clearance
+from .grasp.screening import ObjectClearance
+from .model.clearance import palm_clearance
 from .model.distances import capsule_pair_gaps
 from .model.hand import Hand
 from .model.motion import ObjectMotion
@@ -360,12 +361,8 @@ class RegraspRoom:
         cand = np.flatnonzero(man.usable(self.margin)[k])
         if self.obj is None or cand.size == 0:
             return cand
-        q_full = self.hand.to_full(name, man.q[k, cand])
-        T = man.T_palm_object[k]
-        c = self.contact
-        links = LinkClearance(self.hand, name, self.obj)(q_full, T)
-        tip = LinkClearance(self.hand, name, self.obj, tip_only=True)(q_full, T)
-        return cand[(links >= c.choice_link_clearance_m) & (tip >= -c.tip_penetration_m)]
+        clear = ObjectClearance(self.hand, name, self.obj, self.contact)
+        return cand[clear(self.hand.to_full(name, man.q[k, cand]), man.T_palm_object[k])]
 
     def _clear_of(self, name: str, k: int, other: str, i_other: int) -> np.ndarray:
         """``(C,)`` whether each usable contact of ``name`` at time index ``k`` keeps the

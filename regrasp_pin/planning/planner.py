@@ -378,9 +378,9 @@ def _advance(
     rush = _rush(ctx, state, trig, triggers, win)
     if rush is not None:
         # another hold is lost before a regrasp of D could land: a faster one, by then
-        D = p.rush_duration_s or D
-        end_by_s = rush.required if end_by_s is None else min(end_by_s, rush.required or 0.0)
-        why += f"; a faster regrasp, landing by t={end_by_s:.3f} s ({rush.reason})"
+        D, land_by, dead_end = rush
+        end_by_s = land_by if end_by_s is None else min(end_by_s, land_by)
+        why += f"; a faster regrasp, landing by t={end_by_s:.3f} s ({dead_end.reason})"
     stay = _fingers_that_stay(ctx, state, trig, win)
     end_by = motion.t_end if end_by_s is None else end_by_s
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
@@ -443,13 +443,14 @@ def _advance(
         if released is not None:
             return released
         if rush is not None:  # the dead end stands: no faster regrasp either
+            dead_end = rush[2]
             raise PlanningError(
-                f"{rush.reason}; no faster regrasp either: {exc.reason}",
+                f"{dead_end.reason}; no faster regrasp either: {exc.reason}",
                 finger=name,
                 time_s=trig.time_s,
                 kind=FailureKind.FINGER_BUSY,
-                measured=rush.measured,
-                required=rush.required,
+                measured=dead_end.measured,
+                required=dead_end.required,
                 attempts=exc.attempts,
             ) from exc
         raise
@@ -590,22 +591,19 @@ def _refuse_dead_end(
 
 def _rush(
     ctx: PlanContext, state: PlanState, trig: Trigger, triggers: list[Trigger], win: LiftOffWindow
-) -> PlanningError | None:
-    """The dead end of :func:`_refuse_dead_end` if a regrasp of
-    ``params.rush_duration_s`` could still land before that hold is lost (its
-    ``required``: the time to land by); None if there is no dead end; raises it if no
-    faster regrasp could land in time either."""
+) -> tuple[float, float, PlanningError] | None:
+    """``(shortest regrasp [s], time to land by [s], the dead end)`` if
+    :func:`_refuse_dead_end` finds a dead end that a regrasp of
+    ``params.rush_duration_s`` could still escape, landing before that hold is lost;
+    None if there is no dead end; raises the dead end if no faster regrasp could land
+    in time either."""
     try:
         _refuse_dead_end(ctx, state, trig, triggers, win)
     except PlanningError as busy:
-        rush = ctx.params.rush_duration_s
-        if (
-            rush is None
-            or busy.required is None
-            or win.earliest_s + rush > busy.required - TIME_TOL_S
-        ):
+        shortest, land_by = ctx.params.rush_duration_s, busy.required
+        if shortest is None or land_by is None or win.earliest_s + shortest > land_by - TIME_TOL_S:
             raise
-        return busy
+        return shortest, land_by, busy
     return None
 
 
