@@ -31,6 +31,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from regrasp_pin.exceptions import ContactError, FailureKind, InputError
+from regrasp_pin.grasp import choice as choice_module
 from regrasp_pin.grasp.choice import (
     _link_exit,
     _Ranking,
@@ -710,6 +711,39 @@ def test_no_feasible_q_names_the_finger_and_time(five):
             link_check=False,
         )
     assert e.value.kind == FailureKind.FORCE_CLOSURE
+
+
+def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
+    """A candidate too close to another finger is refused without its 6-D hull, and
+    counts as a finger-clearance rejection; with the clearance met, the same Q as
+    without the test."""
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]
+    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in grasp.points_object}
+    del others["middle"]
+    q_hand = np.zeros(hand.model.nq)
+    for n, q in grasp.q.items():
+        q_hand[hand.finger(n).q_indices] = q
+    kw = dict(P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False)
+    calls = []
+    real = choice_module.ferrari_canny_epsilon
+    monkeypatch.setattr(
+        choice_module, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
+    )
+    # 1 m from every other finger: nothing passes, and only P's epsilon is computed
+    with pytest.raises(ContactError) as e:
+        choose_new_contact(
+            hand, box, manifolds["middle"], sample, 1.5, q_hand_arrive=q_hand,
+            finger_clearance_m=1.0, **kw,
+        )  # fmt: skip
+    assert e.value.kind == FailureKind.FINGER_COLLISION and e.value.measured >= 1
+    assert len(calls) == 1
+    free = choose_new_contact(
+        hand, box, manifolds["middle"], sample, 1.5, q_hand_arrive=q_hand,
+        finger_clearance_m=-1.0, **kw,
+    )  # fmt: skip
+    alone = choose_new_contact(hand, box, manifolds["middle"], sample, 1.5, **kw)
+    assert (free.index, free.rank, free.epsilon) == (alone.index, alone.rank, alone.epsilon)
 
 
 @pytest.mark.parametrize("t_arrive", [np.nan, -0.5, 3.5])

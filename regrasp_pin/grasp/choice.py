@@ -356,18 +356,19 @@ class _Screen:
         q_full = self.hand.to_full(self.finger.name, self.manifold.q[self.ka, points])
         return self.link_clear(q_full, self.manifold.T_palm_object[self.ka])
 
-    def rejection(self, i: int, e: float) -> str | None:
-        """Why sample point ``i`` (epsilon ``e`` with the others; its links already
-        clear of the object) is refused, or None."""
-        if e <= FORCE_CLOSURE_TOL:
-            return "force closure"
-        q_i = self.manifold.q[self.ka, i]
+    def rejection(self, i: int, p: np.ndarray, n: np.ndarray) -> tuple[str | None, float]:
+        """Why sample point ``i`` at ``(p, n)`` (its links already clear of the object)
+        is refused, or None, and its epsilon with the other contacts (NaN when not
+        computed). The finger clearance is tested first: one Coal pass, where the
+        epsilon is a 6-D hull; a candidate that fails both counts as a finger-clearance
+        rejection."""
         if self.finger_clear is not None:
             q_all = np.array(self.q_hand_arrive, float)
-            q_all[self.finger.q_indices] = q_i
+            q_all[self.finger.q_indices] = self.manifold.q[self.ka, i]
             if self.finger_clear(q_all) < self.finger_clearance_m:
-                return "finger clearance"
-        return None
+                return "finger clearance", float("nan")
+        e = self.eps(p, n)
+        return ("force closure" if e <= FORCE_CLOSURE_TOL else None), e
 
     def removable(self, p: np.ndarray, n: np.ndarray) -> int:
         """How many of the other contacts could let go, with ``(p, n)`` landed, the rest
@@ -417,8 +418,7 @@ class _Screen:
                 continue
             screened += 1
             i = int(idx[j])
-            e = self.eps(pts[i], normals[i])
-            why = self.rejection(i, e)
+            why, e = self.rejection(i, pts[i], normals[i])
             if why is not None:
                 self.rejected[why] += 1
                 continue
