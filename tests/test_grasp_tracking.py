@@ -162,10 +162,23 @@ def test_track_records_what_it_checks(scene, finger):
     T = motion.pose(TIMES)
     targets = T[:, :3, :3] @ (p + f.tip_radius * n) + T[:, :3, 3]
     err = np.linalg.norm(f.fk(track.q) - targets, axis=1)
-    assert_close(track.error_m, err, atol=1e-12, what="residuals")
+    # followed until the contact is lost, then the documented fill
+    k = track.n_followed
+    assert track.followed_until_s == TIMES[k - 1]
+    if k < TIMES.size:
+        last = k - 1
+        assert (
+            err[last] > CONTACT.ik_tol_m
+            or track.margin_rad[last] < 0.0
+            or track.pad_cos[last] < CONTACT.cos_cone
+        ), "a track stops only where the contact is lost"
+        assert np.all(track.q[k:] == track.q[last]) and np.all(track.error_m[k:] == np.inf)
+        assert np.all(track.margin_rad[k:] == -np.inf) and np.all(track.pad_cos[k:] == -np.inf)
+        assert not track.holdable[k:].any()
+    assert_close(track.error_m[:k], err[:k], atol=1e-12, what="residuals")
     hold = track.holdable
     assert np.all(err[hold] <= CONTACT.ik_tol_m)
-    assert_close(track.margin_rad, f.limit_margin(track.q), atol=1e-15, what="margins")
+    assert_close(track.margin_rad[:k], f.limit_margin(track.q[:k]), atol=1e-15, what="margins")
     assert np.all(track.margin_rad[hold] >= CONTACT.limit_margin_rad)
     assert np.all(track.pad_cos[hold] >= CONTACT.cos_cone)
     assert np.all(track.link_clearance_m[hold] >= CONTACT.link_clearance_m)

@@ -44,6 +44,12 @@ class ContactTrack:
         tip_clearance_m: ``(T,)`` Coal distance of the fingertip link's geometries to
             the object [m] (about 0 at a contact; ``inf`` where not computed).
         reasons: ``(T,)`` why each time is not holdable ("" where it is).
+        n_followed: How many of the times were followed (None: all).
+
+    The contact is followed until it is lost (not reached, outside the joint limits, or
+    the pad turned away beyond the cone): after that time, ``q`` repeats its last
+    configuration, ``error_m`` is ``inf``, ``margin_rad`` and ``pad_cos`` are ``-inf``,
+    the clearances ``inf`` (not computed), and every time is not holdable.
     """
 
     finger: str
@@ -57,6 +63,13 @@ class ContactTrack:
     link_clearance_m: np.ndarray
     reasons: tuple[str, ...]
     tip_clearance_m: np.ndarray | None = None
+    n_followed: int | None = None
+
+    @property
+    def followed_until_s(self) -> float:
+        """The last time [s] followed: where the contact is lost, or the last time."""
+        n = len(self.times_s) if self.n_followed is None else self.n_followed
+        return float(self.times_s[n - 1])
 
     @property
     def holdable(self) -> np.ndarray:
@@ -105,7 +118,7 @@ def track_contact(
             solution of the previous one.
 
     Returns:
-        The :class:`ContactTrack`.
+        The :class:`ContactTrack`, followed until the contact is lost (see there).
     """
     contact = contact or ContactModel()
     f = hand.finger(finger)
@@ -117,26 +130,40 @@ def track_contact(
     q0 = as_array(q_start, "q_start", (f.k,))
     T_all = motion.pose(times)
     targets = tip_targets(p[None], n[None], f.tip_radius, T_all)[:, 0]  # (T, 3)
+    n_palm = T_all[:, :3, :3] @ n
     q = np.empty((times.size, f.k))
     err = np.empty(times.size)
+    margin = np.empty(times.size)
+    pad_cos = np.empty(times.size)
+    lost_at = times.size - 1  # the last time followed
     prev = q0
     for s0 in range(0, times.size, chunk):
         s1 = min(s0 + chunk, times.size)
         res = f.ik(targets[s0:s1], prev, tol_m=contact.ik_tol_m)
         q[s0:s1], err[s0:s1] = res.q, res.error_m
+        margin[s0:s1] = np.minimum(res.q - f.lower, f.upper - res.q).min(axis=1)
+        pad_cos[s0:s1] = pad_cosines(f, res.q, n_palm[s0:s1])
         prev = res.q[-1]
-    margin = np.minimum(q - f.lower, f.upper - q).min(axis=1)
-    n_palm = T_all[:, :3, :3] @ n
-    pad_cos = pad_cosines(f, q, n_palm)
+        lost = _lost(err[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact)
+        if lost.any():
+            lost_at = s0 + int(np.argmax(lost))
+            break
+    # not followed after the contact is lost: no IK (a restart at every later time
+    # would cost most of the track) and no Coal
+    after = slice(lost_at + 1, None)
+    q[after], err[after], margin[after], pad_cos[after] = q[lost_at], np.inf, -np.inf, -np.inf
     clearance = np.full(times.size, np.inf)
     tip_clear = np.full(times.size, np.inf)
     if check_links:
-        q_full = hand.to_full(finger, q)
-        clearance = LinkClearance(hand, finger, obj)(q_full, T_all)
-        tip_clear = LinkClearance(hand, finger, obj, tip_only=True)(q_full, T_all)
+        q_full = hand.to_full(finger, q[: lost_at + 1])
+        T_held = T_all[: lost_at + 1]
+        clearance[: lost_at + 1] = LinkClearance(hand, finger, obj)(q_full, T_held)
+        tip_clear[: lost_at + 1] = LinkClearance(hand, finger, obj, tip_only=True)(q_full, T_held)
     reasons = []
     for i in range(times.size):
-        if err[i] > contact.ik_tol_m:
+        if i > lost_at:
+            reasons.append(f"not followed after the contact is lost at t={times[lost_at]:.3f} s")
+        elif err[i] > contact.ik_tol_m:
             reasons.append(f"IK cannot reach the contact (residual {err[i] * 1e3:.2f} mm)")
         elif margin[i] < contact.limit_margin_rad:
             j = int(np.argmin(np.minimum(q[i] - f.lower, f.upper - q[i])))
@@ -167,4 +194,14 @@ def track_contact(
         link_clearance_m=clearance,
         reasons=tuple(reasons),
         tip_clearance_m=tip_clear,
+        n_followed=lost_at + 1,
     )
+
+
+def _lost(
+    err: np.ndarray, margin: np.ndarray, pad_cos: np.ndarray, contact: ContactModel
+) -> np.ndarray:
+    """Where the contact is lost: not reached, outside the joint limits, or the pad
+    turned away beyond the cone (the conditions that end every hold; the links and the
+    trigger margin come on top of them)."""
+    return (err > contact.ik_tol_m) | (margin < 0.0) | (pad_cos < contact.cos_cone)

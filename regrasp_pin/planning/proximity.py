@@ -118,7 +118,9 @@ def holding_proximity(
             a holding finger that comes near one of them must regrasp too.
 
     Returns:
-        finger -> its earliest :class:`Proximity` (fingers that stay apart are absent).
+        finger -> its earliest :class:`Proximity` (fingers that stay apart are absent),
+        over the times at which both fingers hold (up to where each hold's contact is
+        lost, :attr:`~regrasp_pin.grasp.tracking.ContactTrack.followed_until_s`).
     """
     times = np.asarray(times_s, float)
     out: dict[str, Proximity] = {}
@@ -131,9 +133,14 @@ def holding_proximity(
     pairs = list(itertools.combinations(sorted(holding), 2)) + [
         (a, b) for a in sorted(holding) for b in sorted(set(still) - set(holding))
     ]
+    # a pair is checked while both hold: a hold ends where its contact is lost (its
+    # track is not followed further)
+    until = {n: h.track.followed_until_s for n, h in holding.items()}
     for a, b in pairs:
         ids = (list(hand.fingers[a].geometry_ids), list(hand.fingers[b].geometry_ids))
-        cand = np.flatnonzero(capsule_gap(hand, *ids, q, cap_m=trigger_m) < trigger_m)
+        held = times <= min(until[a], until.get(b, math.inf)) + 1e-9
+        near = capsule_gap(hand, *ids, q, cap_m=trigger_m) < trigger_m
+        cand = np.flatnonzero(near & held)
         if cand.size == 0:
             continue
         i_trig, d_trig = _first_below(dist, (a, b), q, cand, trigger_m)
