@@ -99,10 +99,18 @@ def holds_to_end(track: ContactTrack, t_from: float, contact: ContactModel) -> b
 def holding_q(
     hand: Hand, motion: ObjectMotion, name: str, h: Holding, times: np.ndarray, tol_m: float
 ) -> np.ndarray:
-    """Exact IK of a holding finger at arbitrary times (warm from its track)."""
+    """Exact IK of a holding finger at arbitrary times (warm from its track); after its
+    contact is lost (where the track stops, :attr:`.ContactTrack.followed_until_s`), the
+    finger stays where it lost it."""
     f = hand.fingers[name]
-    targets = tip_targets(h.p[None], h.n[None], f.tip_radius, motion.pose(times))[:, 0]
-    return f.ik(targets, h.q_at(times), tol_m=tol_m).q
+    times = np.asarray(times, float)
+    q = h.q_at(times)
+    held = np.flatnonzero(times <= h.track.followed_until_s + 1e-9)
+    if held.size:
+        T = motion.pose(times[held])
+        targets = tip_targets(h.p[None], h.n[None], f.tip_radius, T)[:, 0]
+        q[held] = f.ik(targets, q[held], tol_m=tol_m).q
+    return q
 
 
 def rest_configuration(
