@@ -28,6 +28,7 @@ import numpy as np
 import regrasp_pin.scenarios as scenarios
 import regrasp_pin.suite.build as suite_build
 from regrasp_pin.exceptions import ContactError
+from regrasp_pin.grasp.manifold import forget_first_times
 from regrasp_pin.scenarios import Scenario
 from regrasp_pin.suite import ScenarioSpec, build_scenario, generate_specs, neighbour_specs
 
@@ -70,6 +71,7 @@ def build(spec: ScenarioSpec, reference: bool) -> tuple[float, dict[str, float],
     scenarios.initial_grasp = timer.wrap("initial grasp", saved["initial_grasp"])
     if reference:
         suite_build.grasp_for_motion = functools.partial(saved_gfm, track_start=False)
+    forget_first_times()  # each build solves its manifolds' first times itself
     try:
         t0 = time.perf_counter()
         try:

@@ -22,11 +22,13 @@ from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin.exceptions import InputError
+from regrasp_pin.grasp import manifold as manifold_module
 from regrasp_pin.grasp.choice import exit_times
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.manifold import (
     StartTracking,
     build_manifold,
+    forget_first_times,
     pad_directions,
     workspace_voxels,
 )
@@ -488,3 +490,29 @@ def test_margins_and_outside_test_equal_the_vector_formulas():
     assert np.array_equal(
         _outside(flat, lower, upper), np.any((flat < lower) | (flat > upper), axis=1)
     )
+
+
+def test_first_time_solves_are_remembered_and_copied(scene, monkeypatch):
+    """A second manifold of the same surface at the same first pose reuses the first
+    time's cold IK (no solve with restarts) and equals the first, bit for bit; the
+    remembered result is not changed by the builds that use it."""
+    hand, _, motion, sample = scene[:4]
+    f = hand.finger("index")
+    times = np.linspace(0.0, 1.0, 6)
+    forget_first_times()
+    first = build_manifold(f, sample, motion, times)
+    restarts = []
+    real = manifold_module.solve_position_ik
+    monkeypatch.setattr(
+        manifold_module,
+        "solve_position_ik",
+        lambda *a, **k: restarts.append(k["restarts"]) or real(*a, **k),
+    )
+    for _ in range(2):
+        again = build_manifold(f, sample, motion, times)
+        assert not any(restarts)
+        for field in ("q", "reachable", "inside", "pad_ok", "margin_rad"):
+            assert np.array_equal(getattr(again, field), getattr(first, field), equal_nan=True)
+    forget_first_times()
+    build_manifold(f, sample, motion, times)
+    assert any(restarts)

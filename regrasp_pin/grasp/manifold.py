@@ -43,8 +43,11 @@ would cost a Coal query per point and time); it is applied where contacts are ch
 
 from __future__ import annotations
 
+import collections
 import functools
+import hashlib
 import logging
+import struct
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,12 +55,19 @@ import numpy as np
 from .._validate import as_array, frozen, positive
 from ..exceptions import InputError
 from ..model.hand import Finger
-from ..model.ik import solve_position_ik
+from ..model.ik import IKResult, solve_position_ik
 from ..model.motion import ObjectMotion
 from ..model.objects import SurfaceSample
 from .contact import ContactModel, pad_cosines_and_overshoot, tip_targets
 
-__all__ = ["Manifold", "StartTracking", "WorkspaceVoxels", "build_manifold", "workspace_voxels"]
+__all__ = [
+    "Manifold",
+    "StartTracking",
+    "WorkspaceVoxels",
+    "build_manifold",
+    "forget_first_times",
+    "workspace_voxels",
+]
 
 log = logging.getLogger(__name__)
 
@@ -327,15 +337,15 @@ def build_manifold(
             lasting[:] = False  # nothing reached in this chunk
             continue
         ti = ti + s0
-        res = solve_position_ik(
-            finger.chain,
+        res = _chunk_solve(
+            finger,
             lo,
             hi,
             targets[ti, pi],
             q_prev[pi],
-            tol_m=contact.ik_tol_m,
-            max_iter=max_iter if s0 == 0 else max_iter_warm,
-            restarts=(s0 == 0),
+            contact,
+            max_iter if s0 == 0 else max_iter_warm,
+            first=s0 == 0,
         )
         q_res, ok = res.q, res.success
         if s0 == 0:
@@ -420,6 +430,85 @@ def build_manifold(
         upper=finger.upper.copy(),
         T_palm_object=T_all,
         tip_clear=tip_clear & reach,
+    )
+
+
+_FIRST_TIME: collections.OrderedDict[bytes, IKResult] = collections.OrderedDict()
+_FIRST_TIME_KEEP = 16  # results kept (a hand's fingers, a few objects)
+
+
+def forget_first_times() -> None:
+    """Forget the first-time IK solves that :func:`build_manifold` remembers (a
+    benchmark that times repeated runs calls it before each)."""
+    _FIRST_TIME.clear()
+
+
+def _chunk_solve(
+    finger: Finger,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    targets: np.ndarray,
+    q_init: np.ndarray,
+    contact: ContactModel,
+    max_iter: int,
+    *,
+    first: bool,
+) -> IKResult:
+    """A chunk's IK: cold with restarts at the first time (remembered, see
+    :func:`_first_time_solve`), warm without restarts after it."""
+    if first:
+        return _first_time_solve(finger, lo, hi, targets, q_init, contact, max_iter)
+    return solve_position_ik(
+        finger.chain,
+        lo,
+        hi,
+        targets,
+        q_init,
+        tol_m=contact.ik_tol_m,
+        max_iter=max_iter,
+        restarts=False,
+    )
+
+
+def _first_time_solve(
+    finger: Finger,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    targets: np.ndarray,
+    q_init: np.ndarray,
+    contact: ContactModel,
+    max_iter: int,
+) -> IKResult:
+    """The cold IK (with restarts) of a manifold's first time, remembered by its inputs'
+    bytes: a scenario's grasp search and the planner map the same surface at the same
+    start pose (the same numbers: the same result). Returns a copy."""
+    parts = [*finger.chain.packed(), lo, hi, targets, q_init]
+    key = hashlib.sha1(
+        b"".join(np.ascontiguousarray(a).tobytes() for a in parts)
+        + struct.pack("<dq", contact.ik_tol_m, max_iter)
+    ).digest()
+    res = _FIRST_TIME.get(key)
+    if res is None:
+        res = solve_position_ik(
+            finger.chain,
+            lo,
+            hi,
+            targets,
+            q_init,
+            tol_m=contact.ik_tol_m,
+            max_iter=max_iter,
+            restarts=True,
+        )
+        _FIRST_TIME[key] = res
+        while len(_FIRST_TIME) > _FIRST_TIME_KEEP:
+            _FIRST_TIME.popitem(last=False)
+    else:
+        _FIRST_TIME.move_to_end(key)
+    return IKResult(
+        q=res.q.copy(),
+        success=res.success.copy(),
+        error_m=res.error_m.copy(),
+        iterations=res.iterations,
     )
 
 
