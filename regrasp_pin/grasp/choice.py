@@ -307,8 +307,9 @@ class _Ranking:
 
 
 class _Screen:
-    """The slower tests of a ranked candidate: force closure with the other contacts,
-    the finger's links clear of the object and of the other fingers at arrival."""
+    """The slower tests of a ranked candidate, cheapest first: the finger's links clear
+    of the object and of the other fingers at arrival, force closure with the other
+    contacts."""
 
     def __init__(
         self,
