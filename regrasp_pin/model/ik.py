@@ -305,9 +305,12 @@ def _finish(
     Points far above the tolerance after the first pass have stalled (unreachable) or
     run out of iterations; more iterations would not help them (restarts might).
     """
-    p, _ = chain.tip_soa(q, False)
-    d = targets - p
-    err = np.sqrt(_rowdot(d, d))
+    if ik_backend() == "numba":
+        err = ik_numba.residuals(chain.packed(), targets, q)
+    else:
+        p, _ = chain.tip_soa(q, False)
+        d = targets - p
+        err = np.sqrt(_rowdot(d, d))
     bad = np.flatnonzero((err > tol_m) & (err <= _STALL_TOL_FACTOR * tol_m))
     iters = 0
     if bad.size:
