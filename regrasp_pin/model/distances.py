@@ -125,6 +125,17 @@ def _placements(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.n
     )
 
 
+def _place(R: np.ndarray, p: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """``R @ local + p`` ``(D, G, 3)`` for placements ``R`` ``(D, G, 3, 3)``, ``p`` ``(D, G,
+    3)`` and points ``local`` ``(G, 3)`` in the geometries' frames, column by column (a
+    stack of 3 x 3 products costs a call per matrix in ``matmul``)."""
+    out = R[..., 0] * local[:, 0, None]
+    out += R[..., 1] * local[:, 1, None]
+    out += R[..., 2] * local[:, 2, None]
+    out += p
+    return out
+
+
 def _segment_ends(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The capsule segments' ends of the geometries in the palm frame, ``(G, D, 3)``
     each."""
@@ -191,7 +202,11 @@ def _object_lower_bound(
     Returns:
         Lower bounds (D, G) [m].
     """
-    n_local = np.matmul(obj.normals, R_obj_geom)  # rows R^T n_f: (D, G, F, 3)
+    # rows R^T n_f: (D, G, F, 3), term by term (matmul costs a call per 3 x 3 matrix)
+    N = obj.normals
+    n_local = N[:, 0, None] * R_obj_geom[..., None, 0, :]
+    n_local += N[:, 1, None] * R_obj_geom[..., None, 1, :]
+    n_local += N[:, 2, None] * R_obj_geom[..., None, 2, :]
     h = support(n_local, params[None, :, None, :])
     return np.max(c_obj @ obj.normals.T - obj.offsets - h, axis=-1)
 
@@ -273,19 +288,20 @@ class PairDistances:
         c_loc = np.array([g.centre for g in geoms]).reshape(-1, 3)
         params = np.array([g.support for g in geoms]).reshape(-1, 6)
         rad = np.array([g.radius for g in geoms])
-        abc = np.matmul(R, np.stack([a_loc, b_loc, c_loc], axis=2)) + p[..., None]
-        a, b, c = abc[..., 0], abc[..., 1], abc[..., 2]
+        a, b, c = (_place(R, p, loc) for loc in (a_loc, b_loc, c_loc))
         # geometry vs object: the face-plane support bound, in the object frame
         R_po = T_d[:, None, :3, :3]
         c_o = np.matmul(c[:, :nm] - T_d[:, None, :3, 3], T_d[:, :3, :3])  # R^T (x - p)
-        lb_obj = _object_lower_bound(
-            obj, c_o, np.matmul(np.swapaxes(R_po, 2, 3), R[:, :nm]), params[:nm]
-        )
+        R_og = R_po[..., 0, :, None] * R[:, :nm, 0, None, :]  # R_po^T R, term by term
+        R_og += R_po[..., 1, :, None] * R[:, :nm, 1, None, :]
+        R_og += R_po[..., 2, :, None] * R[:, :nm, 2, None, :]
+        lb_obj = _object_lower_bound(obj, c_o, R_og, params[:nm])
         # geometry vs geometry: bounding spheres first; near pairs get the capsule bound
         # and the separating-axis bound along the capsules' nearest-point direction
         i1, i2 = self.first[nm:], self.second[nm:]
         mid = 0.5 * (a + b)
-        reach = 0.5 * np.linalg.norm(b - a, axis=2) + rad  # (D, G)
+        reach = 0.5 * np.linalg.norm(b_loc - a_loc, axis=1) + rad  # (G,): rotations keep lengths
+        reach = np.broadcast_to(reach, mid.shape[:2])
         diff = mid[:, i1] - mid[:, i2]
         lb_ff = np.sqrt(np.einsum("dpi,dpi->dp", diff, diff)) - reach[:, i1] - reach[:, i2]
         d, k = np.nonzero(lb_ff < ff_req + BROAD_PHASE_MARGIN_M)
