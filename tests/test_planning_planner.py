@@ -372,10 +372,13 @@ def test_a_neighbour_makes_room_for_a_crowded_finger(tmp_path):
 
 def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
     """Suite spec 81 (the Allegro hand turning a pentagonal prism 91 deg at 34 deg/s):
-    at t=2.16 s the middle finger's hold is lost 20 ms before a regrasp of the ring of
-    the shortest duration (0.25 s) could land. A faster one (as short as
-    rush_duration_s, within the joint velocity limits) lands in time: a full plan that
-    passes the independent re-check; without it, a finger-busy failure."""
+    a regrasp of the index lifts off when the next finger to regrasp (the ring) must
+    lift off before a regrasp of the shortest duration (0.25 s) could land. A faster
+    one (as short as rush_duration_s, within the joint velocity limits) lands in time:
+    a full plan that passes the independent re-check. Without faster regrasps, every
+    regrasp takes the shortest duration at least (this spec then finds another
+    sequence; before holding fingers stayed where their contacts were lost, it failed
+    finger-busy)."""
     scen = build_scenario(generate_specs(82, seed=0)[81])
     result = plan_manipulation(
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
@@ -385,7 +388,11 @@ def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
     fast = [r for r in plan.regrasps() if r.t_end - r.t_start < D - 1e-9]
     assert fast, [(r.finger, r.t_end - r.t_start) for r in plan.regrasps()]
     t, q = np.asarray(plan.t), np.asarray(plan.q)
+    starts = sorted(r.t_start for r in plan.regrasps())
     for r in fast:
+        # the next regrasp lifts off before one of the shortest duration would land
+        nxt = min(t for t in starts if t > r.t_start + 1e-9)
+        assert r.t_end - 1e-9 <= nxt < r.t_start + D - 1e-9, (r.finger, r.t_start, nxt)
         assert "a faster regrasp" in r.reason
         assert r.t_end - r.t_start >= scen.params.rush_duration_s - 1e-9
         # within the joint velocity limits (finite differences of the plan's samples)
@@ -396,6 +403,5 @@ def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
     check = recheck_plan(plan, max_step_rad=1e-3)
     assert check.ok, check.problems
     slow = replace(scen.params, rush_duration_s=None)
-    with pytest.raises(PlanningError) as err:
-        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=slow)
-    assert err.value.kind == FailureKind.FINGER_BUSY
+    other = plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=slow)
+    assert all(r.t_end - r.t_start >= D - 1e-9 for r in other.regrasps)
