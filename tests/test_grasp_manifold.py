@@ -495,7 +495,8 @@ def test_margins_and_outside_test_equal_the_vector_formulas():
 def test_first_time_solves_are_remembered_and_copied(scene, monkeypatch):
     """A second manifold of the same surface at the same first pose reuses the first
     time's cold IK (no solve with restarts) and equals the first, bit for bit; the
-    remembered result is not changed by the builds that use it."""
+    remembered result is not changed by the builds that use it; another IK backend or
+    forget_first_times solves it again."""
     hand, _, motion, sample = scene[:4]
     f = hand.finger("index")
     times = np.linspace(0.0, 1.0, 6)
@@ -513,6 +514,17 @@ def test_first_time_solves_are_remembered_and_copied(scene, monkeypatch):
         assert not any(restarts)
         for field in ("q", "reachable", "inside", "pad_ok", "margin_rad"):
             assert np.array_equal(getattr(again, field), getattr(first, field), equal_nan=True)
+    # another IK backend (its iterates differ in the last bits): solved again
+    monkeypatch.setattr(manifold_module, "ik_backend", lambda: "another")
+    build_manifold(f, sample, motion, times)
+    assert any(restarts)
+    restarts.clear()
     forget_first_times()
+    monkeypatch.undo()
+    monkeypatch.setattr(
+        manifold_module,
+        "solve_position_ik",
+        lambda *a, **k: restarts.append(k["restarts"]) or real(*a, **k),
+    )
     build_manifold(f, sample, motion, times)
     assert any(restarts)

@@ -48,6 +48,7 @@ import functools
 import hashlib
 import logging
 import struct
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,7 +56,7 @@ import numpy as np
 from .._validate import as_array, frozen, positive
 from ..exceptions import InputError
 from ..model.hand import Finger
-from ..model.ik import IKResult, solve_position_ik
+from ..model.ik import IKResult, ik_backend, solve_position_ik
 from ..model.motion import ObjectMotion
 from ..model.objects import SurfaceSample
 from .contact import ContactModel, pad_cosines_and_overshoot, tip_targets
@@ -435,12 +436,14 @@ def build_manifold(
 
 _FIRST_TIME: collections.OrderedDict[bytes, IKResult] = collections.OrderedDict()
 _FIRST_TIME_KEEP = 16  # results kept (a hand's fingers, a few objects)
+_FIRST_TIME_LOCK = threading.Lock()
 
 
 def forget_first_times() -> None:
     """Forget the first-time IK solves that :func:`build_manifold` remembers (a
     benchmark that times repeated runs calls it before each)."""
-    _FIRST_TIME.clear()
+    with _FIRST_TIME_LOCK:
+        _FIRST_TIME.clear()
 
 
 def _chunk_solve(
@@ -481,13 +484,18 @@ def _first_time_solve(
 ) -> IKResult:
     """The cold IK (with restarts) of a manifold's first time, remembered by its inputs'
     bytes: a scenario's grasp search and the planner map the same surface at the same
-    start pose (the same numbers: the same result). Returns a copy."""
-    parts = [*finger.chain.packed(), lo, hi, targets, q_init]
-    key = hashlib.sha1(
-        b"".join(np.ascontiguousarray(a).tobytes() for a in parts)
-        + struct.pack("<dq", contact.ik_tol_m, max_iter)
-    ).digest()
-    res = _FIRST_TIME.get(key)
+    start pose (the same numbers and IK backend: the same result). Returns a copy."""
+    parts = [np.ascontiguousarray(a) for a in (*finger.chain.packed(), lo, hi, targets, q_init)]
+    digest = hashlib.sha1(ik_backend().encode())
+    for a in parts:
+        digest.update(str(a.shape).encode())
+        digest.update(a.tobytes())
+    digest.update(struct.pack("<dq", contact.ik_tol_m, max_iter))
+    key = digest.digest()
+    with _FIRST_TIME_LOCK:
+        res = _FIRST_TIME.get(key)
+        if res is not None:
+            _FIRST_TIME.move_to_end(key)
     if res is None:
         res = solve_position_ik(
             finger.chain,
@@ -499,11 +507,10 @@ def _first_time_solve(
             max_iter=max_iter,
             restarts=True,
         )
-        _FIRST_TIME[key] = res
-        while len(_FIRST_TIME) > _FIRST_TIME_KEEP:
-            _FIRST_TIME.popitem(last=False)
-    else:
-        _FIRST_TIME.move_to_end(key)
+        with _FIRST_TIME_LOCK:
+            _FIRST_TIME[key] = res
+            while len(_FIRST_TIME) > _FIRST_TIME_KEEP:
+                _FIRST_TIME.popitem(last=False)
     return IKResult(
         q=res.q.copy(),
         success=res.success.copy(),
