@@ -457,43 +457,13 @@ def _chunk_solve(
     *,
     first: bool,
 ) -> IKResult:
-    """A chunk's IK: cold with restarts at the first time (remembered, see
-    :func:`_first_time_solve`), warm without restarts after it."""
-    if first:
-        return _first_time_solve(finger, lo, hi, targets, q_init, contact, max_iter)
-    return solve_position_ik(
-        finger.chain,
-        lo,
-        hi,
-        targets,
-        q_init,
-        tol_m=contact.ik_tol_m,
-        max_iter=max_iter,
-        restarts=False,
-    )
-
-
-def _first_time_solve(
-    finger: Finger,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    targets: np.ndarray,
-    q_init: np.ndarray,
-    contact: ContactModel,
-    max_iter: int,
-) -> IKResult:
-    """The cold IK (with restarts) of a manifold's first time, remembered by its inputs'
-    bytes: a scenario's grasp search and the planner map the same surface at the same
-    start pose (the same numbers and IK backend: the same result). Returns a copy."""
-    parts = [np.ascontiguousarray(a) for a in (*finger.chain.packed(), lo, hi, targets, q_init)]
-    digest = hashlib.sha1(ik_backend().encode())
-    for a in parts:
-        digest.update(str(a.shape).encode())
-        digest.update(a.tobytes())
-    digest.update(struct.pack("<dq", contact.ik_tol_m, max_iter))
-    key = digest.digest()
+    """A chunk's IK: warm without restarts, or at the first time cold with restarts and
+    remembered by its inputs' bytes (a scenario's grasp search and the planner map the
+    same surface at the same start pose: the same numbers and IK backend give the same
+    result; a remembered result comes back as a copy)."""
+    key = _first_time_key(finger, lo, hi, targets, q_init, contact, max_iter) if first else b""
     with _FIRST_TIME_LOCK:
-        res = _FIRST_TIME.get(key)
+        res = _FIRST_TIME.get(key) if first else None
         if res is not None:
             _FIRST_TIME.move_to_end(key)
     if res is None:
@@ -505,8 +475,10 @@ def _first_time_solve(
             q_init,
             tol_m=contact.ik_tol_m,
             max_iter=max_iter,
-            restarts=True,
+            restarts=first,
         )
+        if not first:
+            return res
         with _FIRST_TIME_LOCK:
             _FIRST_TIME[key] = res
             while len(_FIRST_TIME) > _FIRST_TIME_KEEP:
@@ -517,6 +489,25 @@ def _first_time_solve(
         error_m=res.error_m.copy(),
         iterations=res.iterations,
     )
+
+
+def _first_time_key(
+    finger: Finger,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    targets: np.ndarray,
+    q_init: np.ndarray,
+    contact: ContactModel,
+    max_iter: int,
+) -> bytes:
+    """The digest of everything a first-time solve depends on."""
+    digest = hashlib.sha1(ik_backend().encode())
+    for a in (*finger.chain.packed(), lo, hi, targets, q_init):
+        a = np.ascontiguousarray(a)
+        digest.update(str(a.shape).encode())
+        digest.update(a.tobytes())
+    digest.update(struct.pack("<dq", contact.ik_tol_m, max_iter))
+    return digest.digest()
 
 
 def _margins(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

@@ -138,9 +138,8 @@ def holding_proximity(
     until = {n: h.track.followed_until_s for n, h in holding.items()}
     for a, b in pairs:
         ids = (list(hand.fingers[a].geometry_ids), list(hand.fingers[b].geometry_ids))
-        held = times <= min(until[a], until.get(b, math.inf)) + 1e-9
-        near = capsule_gap(hand, *ids, q, cap_m=trigger_m) < trigger_m
-        cand = np.flatnonzero(near & held)
+        held = np.flatnonzero(times <= min(until[a], until.get(b, math.inf)) + 1e-9)
+        cand = held[capsule_gap(hand, *ids, q[held], cap_m=trigger_m) < trigger_m]
         if cand.size == 0:
             continue
         i_trig, d_trig = _first_below(dist, (a, b), q, cand, trigger_m)
