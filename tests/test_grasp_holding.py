@@ -34,3 +34,32 @@ def test_a_holding_finger_reaches_its_contact_then_stays_where_it_lost_it(scene)
         assert np.all(q[after] == h.track.q[k - 1]), name
         lost += int(after.any())
     assert lost >= 1  # the scene has contacts that are lost
+
+
+def test_the_same_question_is_answered_once(scene, monkeypatch):  # noqa: F811
+    """A hold asked at the same times again returns the same bits without solving IK;
+    other times, another tolerance or a copy of the hold with its end set behave as
+    before (the copy shares the answers)."""
+    from dataclasses import replace
+
+    hand, box, motion, contacts = scene
+    name, (p, n, q0) = next(iter(contacts.items()))
+    h = start_holding(hand, box, motion, TIMES, name, p, n, q0, 0.0, CONTACT)
+    f = hand.finger(name)
+    t = np.linspace(0.1, 0.9, 17)
+    first = holding_q(hand, motion, name, h, t, CONTACT.ik_tol_m)
+    calls = []
+    solve = type(f).ik
+    monkeypatch.setattr(
+        type(f), "ik", lambda self, *a, **k: calls.append(1) or solve(self, *a, **k)
+    )
+    again = holding_q(hand, motion, name, h, t, CONTACT.ik_tol_m)
+    ended = holding_q(hand, motion, name, replace(h, t_to=0.5), t, CONTACT.ik_tol_m)
+    assert calls == []
+    assert np.array_equal(again, first) and np.array_equal(ended, first)
+    again[:] = 0.0  # the caller's copy: the kept answer is not changed
+    assert np.array_equal(holding_q(hand, motion, name, h, t, CONTACT.ik_tol_m), first)
+    other = holding_q(hand, motion, name, h, t[:-1], CONTACT.ik_tol_m)
+    assert len(calls) == 1 and other.shape == first[:-1].shape
+    holding_q(hand, motion, name, h, t, 10 * CONTACT.ik_tol_m)
+    assert len(calls) == 2

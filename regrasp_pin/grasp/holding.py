@@ -10,7 +10,8 @@ callables that :func:`~.regrasp.plan_regrasp` needs, and parks idle fingers.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -31,6 +32,9 @@ __all__ = [
 ]
 
 
+_SOLVED_KEPT = 64  # holding_q answers kept per hold
+
+
 @dataclass
 class Holding:
     """A finger holding a contact from ``t_from`` (to ``t_to``, None while held).
@@ -41,6 +45,8 @@ class Holding:
         t_from: Start of the hold [s].
         track: The contact followed over the rest of the motion.
         t_to: End of the hold [s] (the lift-off of the next regrasp), or None.
+        solved: The configurations :func:`holding_q` solved for this hold, by its
+            arguments (shared by copies of the hold; bounded).
     """
 
     p: np.ndarray
@@ -48,6 +54,9 @@ class Holding:
     t_from: float
     track: ContactTrack
     t_to: float | None = None
+    solved: dict[tuple, tuple[Any, Any, np.ndarray]] = field(
+        default_factory=dict, repr=False, compare=False
+    )
 
     def q_at(self, times: np.ndarray) -> np.ndarray:
         """The track's configurations ``(S, k)`` interpolated at ``times`` [rad]."""
@@ -101,15 +110,26 @@ def holding_q(
 ) -> np.ndarray:
     """Exact IK of a holding finger at arbitrary times (warm from its track); after its
     contact is lost (where the track stops, :attr:`.ContactTrack.followed_until_s`), the
-    finger stays where it lost it."""
-    f = hand.fingers[name]
+    finger stays where it lost it.
+
+    The planner asks for the same hold at the same times again and again (each choice
+    of a new contact, each path variant): the answer to the same arguments is kept in
+    :attr:`Holding.solved` and returned again (a copy), the same bits."""
     times = np.asarray(times, float)
+    key = (id(hand), id(motion), name, float(tol_m), times.shape, times.tobytes())
+    known = h.solved.get(key)
+    if known is not None and known[0] is hand and known[1] is motion:
+        return known[2].copy()
+    f = hand.fingers[name]
     q = h.q_at(times)
     held = np.flatnonzero(times <= h.track.followed_until_s + 1e-9)
     if held.size:
         T = motion.pose(times[held])
         targets = tip_targets(h.p[None], h.n[None], f.tip_radius, T)[:, 0]
         q[held] = f.ik(targets, q[held], tol_m=tol_m).q
+    if len(h.solved) >= _SOLVED_KEPT:
+        h.solved.pop(next(iter(h.solved)), None)  # the oldest
+    h.solved[key] = (hand, motion, q.copy())  # hand and motion alive: their ids stay theirs
     return q
 
 
