@@ -278,13 +278,13 @@ def test_a_budget_that_runs_out_while_backing_up_is_the_failure(monkeypatch):
     """Suite spec 6 fails at t=0 (finger-busy, see above) and the planner would back up;
     with the budget gone at that moment the failure is ``budget``, not the finger-busy
     it could not back out of, and the message still names that failure."""
-    from regrasp_pin.planning import planner
+    from regrasp_pin.planning import recovery
 
     def out_of_time(ctx, *args, **kwargs):
         ctx.budget.deadline = float("-inf")  # the budget runs out here
         return None
 
-    monkeypatch.setattr(planner, "_another_first", out_of_time)
+    monkeypatch.setattr(recovery, "_another_first", out_of_time)
     scen = _spec_6()
     with pytest.raises(PlanningError) as err:
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)

@@ -1,0 +1,257 @@
+"""Backing up when a finger finds no regrasp (:func:`recover`): another decision than
+the one that failed.
+
+In order: another finger due soon goes first (:func:`_another_first`); a neighbour
+whose contact takes the room of the finger's best new contact regrasps first, out of
+that room, now or before one of the last regrasps (:func:`_make_room`); an earlier
+regrasp is planned again, to let the finger go before it or to land in time, or, if
+time was not the problem, to land elsewhere (:func:`_backtrack`). An option already
+tried from the same state is not tried again (a retry that repeats what failed is not
+a search).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import replace
+
+import numpy as np
+
+from ..exceptions import ContactError, FailureKind, PlanningError
+from .advance import Step, advance, window
+from .schedule import TIME_TOL_S, LiftOffWindow
+from .state import PlanContext, PlanState, Trigger, q_hand_of
+
+__all__ = ["recover"]
+
+log = logging.getLogger(__name__)
+
+
+def recover(
+    ctx: PlanContext,
+    state: PlanState,
+    contenders: list[Trigger],
+    triggers: list[Trigger],
+    steps: list[Step],
+    failure: PlanningError,
+) -> PlanState | None:
+    """The state after another decision than the one that failed with ``failure`` for
+    the first of ``contenders`` (see the module docstring); None if none helps. On
+    success ``steps`` holds the regrasps of the new state."""
+    trig = contenders[0]
+    redone = _another_first(ctx, state, contenders, triggers, steps)
+    if redone is None:
+        redone = _make_room(ctx, state, trig, triggers, steps, failure)
+    if redone is None and steps:
+        redone = _backtrack(ctx, steps, failure, state, trig)
+    return redone
+
+
+def _signature(state: PlanState) -> tuple:
+    """What identifies a state for the backtracking: who holds what since when."""
+    return (
+        round(state.now, 9),
+        tuple(
+            (n, round(h.t_from, 9), tuple(np.round(h.p, 6)))
+            for n, h in sorted(state.holding.items())
+        ),
+        tuple(sorted(state.held_to_end)),
+        tuple(sorted(state.released)),
+    )
+
+
+def _another_first(
+    ctx: PlanContext,
+    state: PlanState,
+    contenders: list[Trigger],
+    triggers: list[Trigger],
+    steps: list[Step],
+) -> PlanState | None:
+    """When the first contender finds no regrasp, let another contender go first
+    (e.g. the other finger of two that close in on each other); None if none can."""
+    for alt in contenders[1:]:
+        key = (_signature(state), f"{alt.finger} first")
+        if key in ctx.tried or ctx.budget.exhausted:
+            continue
+        ctx.tried.add(key)
+        log.info("%s failed: %s regrasps first", contenders[0].finger, alt.finger)
+        trial = list(steps)
+        try:
+            new_state = advance(ctx, state, alt, triggers, trial)
+        except PlanningError:
+            continue
+        steps[:] = trial
+        return new_state
+    return None
+
+
+_BACKTRACK_DEPTH = 3  # how many earlier regrasps a failure may revisit
+
+
+def _make_room(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    triggers: list[Trigger],
+    steps: list[Step],
+    failure: PlanningError,
+) -> PlanState | None:
+    """When ``trig.finger`` finds no regrasp, let a neighbour whose contact takes the
+    room of the finger's best new contact regrasp first, away from that room; None if
+    no neighbour does or can.
+
+    A neighbour takes the room if, without its contact, the finger could choose a new
+    contact (:meth:`RegraspSearch.choose`) within the separation of the neighbour's
+    contact. The neighbour then regrasps (now, or before one of the last regrasps if
+    there is no time left now), lands before the finger's hold is lost, and keeps its
+    new contact out of that room (the finger's separation around the wanted contact);
+    what follows is planned again after it."""
+    if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
+        return None  # a matter of time, not of room
+    name, h = trig.finger, state.holding[trig.finger]
+    win, _ = window(ctx, state, trig, triggers)
+    D = ctx.params.regrasp.duration_s
+    # where to go first from: now, or before one of the last regrasps (the finger
+    # holding the same contact), as long as a regrasp lands before its hold is lost
+    bases = [(state, triggers, len(steps))] + [
+        (steps[k].before, steps[k].triggers, k)
+        for k in range(len(steps) - 1, max(len(steps) - _BACKTRACK_DEPTH, 0) - 1, -1)
+        if steps[k].before.holding.get(name) is not None
+        and steps[k].before.holding[name].t_from == h.t_from
+    ]
+    bases = [b for b in bases if b[0].now + D <= win.latest_s - TIME_TOL_S]
+    if not bases:
+        return None
+    for other, wanted in _blockers(ctx, state, trig, win):
+        for base, base_triggers, k in bases:
+            if ctx.budget.exhausted:
+                return None
+            if other not in base.holding:
+                continue
+            key = (_signature(base), f"{other} makes room for {name}")
+            if key in ctx.tried:
+                continue
+            ctx.tried.add(key)
+            lost = {e.finger: e.lost_s for e in base_triggers}
+            go = Trigger(
+                time_s=max(base.now, base.holding[other].t_from),
+                finger=other,
+                reason=f"makes room for {name} (its {failure.kind.value} failure)",
+                lost_s=lost.get(other, ctx.scene.motion.t_end),
+            )
+            log.info("%s failed (%s): %s makes room first", name, failure.kind.value, other)
+            trial = list(steps[:k])
+            try:
+                new_state = advance(
+                    ctx, base, go, base_triggers, trial, end_by_s=win.latest_s, reserved=(wanted,)
+                )
+            except PlanningError:
+                continue
+            steps[:] = trial
+            return new_state
+    return None
+
+
+def _blockers(
+    ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow
+) -> list[tuple[str, tuple[np.ndarray, float]]]:
+    """The holding fingers whose contacts take the room of ``trig.finger``'s best new
+    contact, nearest first, each with that room: ``(point, radius)`` (object frame,
+    the finger's separation [m]) as :func:`choose_new_contact` would choose it, landing
+    one regrasp after the neighbour's, were the neighbour's contact not there."""
+    hand, name = ctx.scene.hand, trig.finger
+    h = state.holding[name]
+    D = ctx.params.regrasp.duration_s
+    t_arrive = min(max(win.preferred_s, state.now + D) + D, ctx.scene.motion.t_end)
+    holding = [n for n in hand.finger_names if n != name and n in state.holding]
+    sep = 2 * hand.finger(name).tip_radius + 0.001
+    out = []
+    for other in sorted(
+        holding,
+        key=lambda n: (round(float(np.linalg.norm(state.holding[n].p - h.p)), 9), n),
+    ):
+        if ctx.budget.exhausted:
+            break
+        rest = [n for n in holding if n != other]
+        try:
+            ctx.budget.spend()
+            wanted = ctx.search.choose(
+                name,
+                (h.p, h.n),
+                t_arrive,
+                {n: (state.holding[n].p, state.holding[n].n) for n in rest},
+                q_hand_of(ctx, state, rest),
+                [],
+            )
+        except ContactError:
+            continue  # no room for the finger even without this neighbour
+        if np.linalg.norm(wanted.p_object - state.holding[other].p) < sep:
+            out.append((other, (wanted.p_object, sep)))
+    return out
+
+
+def _backtrack(
+    ctx: PlanContext,
+    steps: list[Step],
+    failure: PlanningError,
+    state: PlanState,
+    trig: Trigger,
+) -> PlanState | None:
+    """Change an earlier decision so that ``trig.finger`` can go; None if none helps.
+
+    The last regrasps are revisited, the latest first (at most ``_BACKTRACK_DEPTH``).
+    If the finger ran out of time (its window closed, or no regrasp landed in time),
+    it regrasps early, before that regrasp; or that regrasp lands one regrasp before
+    the finger's hold is lost. Otherwise that regrasp lands elsewhere than it did.
+    On success the steps after the revisited one are dropped (they are planned again).
+    """
+    timing = failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE)
+    D = ctx.params.regrasp.duration_s
+    h_now = state.holding[trig.finger]
+    for depth in range(1, min(_BACKTRACK_DEPTH, len(steps)) + 1):
+        step = steps[-depth]
+        kept = steps[: len(steps) - depth]
+        options: list[tuple[str, Trigger, dict]] = []
+        h_then = step.before.holding.get(trig.finger)
+        if (
+            timing
+            and step.trig.finger != trig.finger
+            and h_then is not None
+            and (h_then.t_from == h_now.t_from)
+        ):
+            early = replace(
+                trig,
+                time_s=max(step.before.now, h_then.t_from),
+                reason=f"{trig.reason} at t={trig.time_s:.3f} s (early: no time left after "
+                f"{step.trig.finger}'s regrasp)",
+            )
+            options.append((f"{trig.finger} before {step.trig.finger}", early, {}))
+        if timing:
+            end_by = trig.lost_s - D
+            if end_by > step.before.now + D + TIME_TOL_S:
+                options.append(
+                    (
+                        f"{step.trig.finger} lands by t={end_by:.3f} s",
+                        step.trig,
+                        {"end_by_s": end_by},
+                    )
+                )
+        else:
+            exclude = [*step.excluded, step.Q_object]
+            options.append((f"{step.trig.finger} lands elsewhere", step.trig, {"exclude": exclude}))
+        for what, t_alt, kw in options:
+            if ctx.budget.exhausted:
+                return None
+            key = (_signature(step.before), what)
+            if key in ctx.tried:
+                continue  # a retry that repeats what already failed is not a search
+            ctx.tried.add(key)
+            log.info("%s failed (%s): %s", trig.finger, failure.kind.value, what)
+            trial = list(kept)
+            try:
+                new_state = advance(ctx, step.before, t_alt, step.triggers, trial, **kw)
+            except PlanningError:
+                continue
+            steps[:] = trial
+            return new_state
+    return None
