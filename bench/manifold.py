@@ -7,7 +7,9 @@ at 30 deg/s for 3 s, its surface sampled every 2 mm, 100 object poses. Prints:
 - the one-off workspace covers (cached per finger, built on the first manifold);
 - the five manifolds (:func:`regrasp_pin.grasp.manifold.build_manifold`), best of 3, on
   each IK backend available (numpy; numba when installed), and how many of their
-  flags differ between the backends;
+  flags differ between the backends; with numba, also the fingers on one thread per
+  core (:func:`~regrasp_pin.grasp.manifold.build_manifolds`: its kernels release the
+  GIL), checked equal to the one-thread manifolds bit for bit;
 - the baseline: a per-point loop calling ``Finger.ik`` on one target at a time,
   warm-started from the same point's previous time, on a random subset of the points
   (all 100 times), extrapolated to every point of every finger; and the ratio. Once
@@ -25,6 +27,7 @@ Saves Fig. 1 (object, contacts P and Q) and Fig. 2 (that finger's joint space) i
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -34,7 +37,12 @@ from regrasp_pin.exceptions import ContactError
 from regrasp_pin.grasp.choice import choose_new_contact
 from regrasp_pin.grasp.contact import ContactModel, pad_cosines, tip_targets
 from regrasp_pin.grasp.initial import initial_grasp
-from regrasp_pin.grasp.manifold import build_manifold, forget_first_times, workspace_voxels
+from regrasp_pin.grasp.manifold import (
+    build_manifold,
+    build_manifolds,
+    forget_first_times,
+    workspace_voxels,
+)
 from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.ik import IK_BACKENDS, ik_backend, set_ik_backend
@@ -104,12 +112,27 @@ def main() -> None:
         forget_first_times()  # each run solves its first times itself
         return {n: build_manifold(hand.finger(n), sample, motion, times) for n in names}
 
+    cores = os.cpu_count() or 1
+
+    def build_threaded():
+        forget_first_times()
+        return build_manifolds(hand, names, sample, motion, times, threads=cores)
+
     default = ik_backend()
     t_backend, built = {}, {}
+    t_threads, threads_same = None, None
     for backend in [b for b in IK_BACKENDS if b == "numpy" or available()]:
         set_ik_backend(backend)
         build_manifold(hand.finger(names[0]), sample, motion, times[:2])  # numba: load kernel
         t_backend[backend], built[backend] = best_time(build_all, 3)
+        if backend == "numba" and cores > 1:
+            t_threads, threaded = best_time(build_threaded, 3)
+            one = built[backend]
+            threads_same = all(
+                np.array_equal(getattr(threaded[n], f), getattr(one[n], f), equal_nan=True)
+                for n in names
+                for f in ("q", "reachable", "inside", "pad_ok", "tip_clear")
+            )
     set_ik_backend(default)
     manifolds = built[default]
     t_man = t_backend[default]
@@ -156,6 +179,17 @@ def main() -> None:
             (f"manifolds, 5 fingers, IK {b} (best of 3)", f"{t:8.2f} s", "<= 1 s")
             for b, t in t_backend.items()
         ],
+        *(
+            []
+            if t_threads is None
+            else [
+                (
+                    f"manifolds, IK numba, {cores} threads (best of 3)",
+                    f"{t_threads:8.2f} s",
+                    "<= 1 s",
+                )
+            ]
+        ),
         ("per-point Finger.ik loop, restarts (extrap.)", f"{full[True]:8.1f} s", "(~90 s)"),
         (f"  speed-up manifolds ({default}) / loop", f"{full[True] / t_man:8.1f} x", ""),
         ("per-point loop, no restarts (extrap.)", f"{full[False]:8.1f} s", ""),
@@ -163,6 +197,8 @@ def main() -> None:
     ]
     for name, value, target in rows:
         print(f"{name:44} {value:>10} {target:>10}")
+    if threads_same is not None:
+        print(f"numba on {cores} threads vs one: " + ("bit for bit" if threads_same else "DIFFER"))
     for b, d in flag_diff.items():
         if b != "numpy":
             print(

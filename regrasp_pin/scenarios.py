@@ -34,7 +34,7 @@ from .exceptions import (
 from .grasp.choice import exit_times
 from .grasp.contact import ContactModel
 from .grasp.initial import GAP_HORIZON_S, Grasp, initial_grasp
-from .grasp.manifold import Manifold, StartTracking, build_manifold
+from .grasp.manifold import Manifold, StartTracking, build_manifolds
 from .grasp.necessity import MustHold, must_hold, with_idle_fingers
 from .model.clearance import palm_clearance
 from .model.hand import Hand
@@ -442,10 +442,7 @@ def grasp_for_motion(
         if track_start and not must_hold_check
         else None
     )
-    manifolds = {
-        n: build_manifold(hand.fingers[n], sample, motion, times, contact=contact, track=track)
-        for n in fingers
-    }
+    manifolds = build_manifolds(hand, fingers, sample, motion, times, contact=contact, track=track)
     runs: list[MustHold] = []
     if must_hold_check:  # on the unrestricted manifolds: what every finger could use
         every = with_idle_fingers(hand, manifolds, sample, motion, contact)

@@ -21,13 +21,16 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
-from regrasp_pin.exceptions import InputError
+from regrasp_pin.exceptions import InputError, UnknownNameError
 from regrasp_pin.grasp import manifold as manifold_module
 from regrasp_pin.grasp.choice import exit_times
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.manifold import (
+    THREADS_ENV,
     StartTracking,
     build_manifold,
+    build_manifolds,
+    default_threads,
     forget_first_times,
     pad_directions,
     workspace_voxels,
@@ -528,3 +531,41 @@ def test_first_time_solves_are_remembered_and_copied(scene, monkeypatch):
     )
     build_manifold(f, sample, motion, times)
     assert any(restarts)
+
+
+FIELDS = ("q", "reachable", "inside", "pad_ok", "margin_rad", "tip_clear")
+
+
+@pytest.mark.parametrize("threads", [1, 2, 5])
+def test_fingers_mapped_on_threads_are_the_fingers_mapped_one_by_one(scene, threads):
+    """build_manifolds on any number of threads returns, in the order asked, each
+    finger's build_manifold bit for bit (each finger's manifold is its own)."""
+    hand, _, motion, sample, times, manifolds = scene
+    names = ["ring", "thumb", "index", "little", "middle"]
+    got = build_manifolds(hand, names, sample, motion, times, threads=threads)
+    assert list(got) == names
+    for n in names:
+        for field in FIELDS:
+            a, b = getattr(got[n], field), getattr(manifolds[n], field)
+            assert np.array_equal(a, b, equal_nan=True), (n, field)
+
+
+def test_thread_counts_come_from_the_argument_or_the_environment(scene, monkeypatch):
+    hand, _, motion, sample, times, _ = scene
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(InputError, match="threads"):
+            build_manifolds(hand, ["index"], sample, motion, times, threads=bad)
+    with pytest.raises(UnknownNameError, match="little_finger"):
+        build_manifolds(hand, ["index", "little_finger"], sample, motion, times)
+    monkeypatch.setenv(THREADS_ENV, "3")
+    assert default_threads() == 3
+    for bad in ("0", "two", "-2"):
+        monkeypatch.setenv(THREADS_ENV, bad)
+        with pytest.raises(InputError, match=THREADS_ENV):
+            default_threads()
+    monkeypatch.delenv(THREADS_ENV)
+    monkeypatch.setattr(manifold_module, "ik_backend", lambda: "numpy")
+    assert default_threads() == 1  # threads only contend for the GIL with numpy
+    monkeypatch.setattr(manifold_module, "ik_backend", lambda: "numba")
+    monkeypatch.setattr(manifold_module.os, "cpu_count", lambda: 4)
+    assert default_threads() == 4

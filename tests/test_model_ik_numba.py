@@ -132,6 +132,31 @@ def test_compiled_manifold_equals_numpy(five, backend):
         assert np.median(gap) < 1e-6, name
 
 
+def test_compiled_kernels_run_fingers_on_threads_alike(five, backend):
+    """The compiled kernels release the GIL; fingers mapped on two threads are those
+    mapped one by one, bit for bit."""
+    pytest.importorskip("numba")
+    from regrasp_pin.grasp.manifold import build_manifolds
+    from regrasp_pin.model.motion import ObjectMotion
+    from regrasp_pin.model.objects import Box
+
+    box = Box((0.04, 0.06, 0.04))
+    T0 = np.eye(4)
+    T0[:3, 3] = [0.065, 0.0, 0.06]
+    motion = ObjectMotion.constant_twist(
+        T0, axis_palm=[0, 1, 0], point_palm=T0[:3, 3], rate_rad_s=0.5, duration_s=2.0
+    )
+    sample = box.sample_surface(0.004)
+    times = np.linspace(0.0, 2.0, 21)
+    ik.set_ik_backend("numba")
+    names = five.finger_names
+    one = build_manifolds(five, names, sample, motion, times, threads=1)
+    two = build_manifolds(five, names, sample, motion, times, threads=2)
+    for n in names:
+        for field in ("q", "reachable", "inside", "pad_ok", "tip_clear"):
+            assert np.array_equal(getattr(one[n], field), getattr(two[n], field), equal_nan=True)
+
+
 def test_backend_switch_and_its_errors(backend, monkeypatch):
     assert ik.ik_backend() in ik.IK_BACKENDS
     with pytest.raises(InputError, match="one of"):

@@ -267,6 +267,7 @@ def test_the_step_budget_stops_the_same_plan_at_the_same_step(demo, max_steps):
         ("prove_infeasible", "yes"),
         ("release", 1),
         ("rush_duration_s", 0.0),
+        ("threads", 0),
     ],
 )
 def test_planner_params_name_a_bad_value(field, value):

@@ -47,15 +47,18 @@ import collections
 import functools
 import hashlib
 import logging
+import os
 import struct
 import threading
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._validate import as_array, frozen, positive
 from ..exceptions import InputError
-from ..model.hand import Finger
+from ..model.hand import Finger, Hand
 from ..model.ik import IKResult, ik_backend, solve_position_ik
 from ..model.motion import ObjectMotion
 from ..model.objects import SurfaceSample
@@ -66,6 +69,8 @@ __all__ = [
     "StartTracking",
     "WorkspaceVoxels",
     "build_manifold",
+    "build_manifolds",
+    "default_threads",
     "forget_first_times",
     "workspace_voxels",
 ]
@@ -432,6 +437,75 @@ def build_manifold(
         T_palm_object=T_all,
         tip_clear=tip_clear & reach,
     )
+
+
+THREADS_ENV = "REGRASP_PIN_THREADS"
+
+
+def default_threads() -> int:
+    """Threads that :func:`build_manifolds` uses when not told: ``REGRASP_PIN_THREADS``
+    if set, else one per core with the numba IK backend and one with numpy.
+
+    Raises:
+        InputError: the variable is not a whole number >= 1.
+    """
+    text = os.environ.get(THREADS_ENV)
+    if text is not None and text.strip():
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise InputError(THREADS_ENV, f"is {text!r}", "a whole number >= 1")
+        return n
+    return (os.cpu_count() or 1) if ik_backend() == "numba" else 1
+
+
+def build_manifolds(
+    hand: Hand,
+    fingers: Sequence[str],
+    sample: SurfaceSample,
+    motion: ObjectMotion,
+    times_s: np.ndarray,
+    *,
+    contact: ContactModel | None = None,
+    track: StartTracking | None = None,
+    threads: int | None = None,
+) -> dict[str, Manifold]:
+    """:func:`build_manifold` for each of ``fingers``, on up to ``threads`` threads.
+
+    Each finger's manifold is its own computation, so the result is the same on any
+    number of threads. Threads pay off with the numba IK backend, whose kernels release
+    the GIL (about 1.6x on two cores); with numpy's they contend for it (small arrays),
+    so ``threads=None`` means: the environment variable ``REGRASP_PIN_THREADS`` if set
+    (the scenario suite's workers set it to 1: they already run one scenario per
+    core), else one thread per core with numba and one with numpy (at most one per
+    finger either way).
+
+    Args:
+        hand: The hand.
+        fingers: The fingers to map, in the order of the returned dict.
+        sample, motion, times_s, contact, track: As :func:`build_manifold`.
+        threads: Most threads (>= 1); None: as above.
+
+    Returns:
+        finger name -> :class:`Manifold`.
+    """
+    names = list(fingers)
+    finger_objs = [hand.finger(n) for n in names]  # unknown names fail here, in order
+    if threads is None:
+        threads = default_threads()
+    elif not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
+        raise InputError("threads", f"is {threads!r}", "a whole number >= 1, or None")
+    workers = max(1, min(threads, len(names)))
+
+    def build(f: Finger) -> Manifold:
+        return build_manifold(f, sample, motion, times_s, contact=contact, track=track)
+
+    if workers == 1:
+        return {n: build(f) for n, f in zip(names, finger_objs, strict=True)}
+    with ThreadPoolExecutor(workers, thread_name_prefix="manifold") as pool:
+        return dict(zip(names, pool.map(build, finger_objs), strict=True))
 
 
 _FIRST_TIME: collections.OrderedDict[bytes, IKResult] = collections.OrderedDict()

@@ -47,7 +47,7 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
-from .manifold import Manifold, build_manifold
+from .manifold import Manifold, build_manifolds
 from .quality import contact_wrenches
 
 __all__ = [
@@ -102,12 +102,10 @@ def with_idle_fingers(
     """``manifolds`` and, on the same times, those of the hand's other fingers: an idle
     finger may join in place of one that lets go, so it counts among those that could
     hold (its manifold is the one a join would build)."""
-    every = dict(manifolds)
     times = next(iter(manifolds.values())).times_s
-    for name in hand.finger_names:
-        if name not in every:
-            every[name] = build_manifold(hand.fingers[name], sample, motion, times, contact=contact)
-    return every
+    idle = [n for n in hand.finger_names if n not in manifolds]
+    built = build_manifolds(hand, idle, sample, motion, times, contact=contact)
+    return {**manifolds, **built}
 
 
 def _face_corners(

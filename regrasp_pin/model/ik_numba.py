@@ -220,9 +220,9 @@ def _compile() -> Callable[..., Any] | None:
         kernels = (iterate_python, residuals_python)
         for f in (_cos_sin, _jacobian, _fk_jacobian, _dls_step, *kernels):
             if f in kernels:
-                jit = numba.njit(cache=True, inline="never")
+                jit = numba.njit(cache=True, nogil=True, inline="never")
             else:
-                jit = numba.njit(cache=True, inline="always")
+                jit = numba.njit(cache=True, nogil=True, inline="always")
             glb[f.__name__] = jit(types.FunctionType(f.__code__, glb, f.__name__))
         _compiled = glb["iterate_python"]
         _compiled_residuals.append(glb["residuals_python"])

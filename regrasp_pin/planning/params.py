@@ -55,6 +55,9 @@ class PlannerParams:
             turns, or if the others hold in force closure to the end
             (:mod:`.planning.release`).
         release_back_off_s: Duration of a release's back-off move [s].
+        threads: Threads that build the fingers' manifolds (the same manifolds on any
+            number; see :func:`~regrasp_pin.grasp.manifold.build_manifolds`); None:
+            its default (one per core with the numba IK backend, else one).
         prove_infeasible: Fail at once, with kind ``infeasible``, when a finger
             provably cannot hold as long as it must (:mod:`~regrasp_pin.grasp.necessity`),
             and choose the initial grasp with that proof; False: search anyway (the
@@ -81,6 +84,7 @@ class PlannerParams:
     release: bool = True
     release_back_off_s: float = 0.1
     prove_infeasible: bool = True
+    threads: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "manifold_dt_s", "sample_spacing_m", "mu", "start_step_s"):
@@ -95,6 +99,8 @@ class PlannerParams:
             ("max_steps", 1),
         ):
             positive_int(getattr(self, name), f"PlannerParams.{name}", least)
+        if self.threads is not None:
+            positive_int(self.threads, "PlannerParams.threads", 1)
         if self.budget_s is not None:
             positive(self.budget_s, "PlannerParams.budget_s", allow_zero=True)
         if self.rush_duration_s is not None:

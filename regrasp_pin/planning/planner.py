@@ -49,7 +49,7 @@ import numpy as np
 from ..exceptions import FailureKind, PlanningError
 from ..grasp.holding import rest_configuration, start_holding
 from ..grasp.initial import Grasp, initial_grasp
-from ..grasp.manifold import Manifold, build_manifold
+from ..grasp.manifold import Manifold, build_manifolds
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
@@ -136,10 +136,9 @@ def plan_manipulation(
     sample = obj.sample_surface(params.sample_spacing_m)
     n_m = max(int(round(motion.duration_s / params.manifold_dt_s)), 1) + 1
     m_times = np.linspace(motion.t_start, motion.t_end, n_m)
-    manifolds = {
-        name: build_manifold(hand.fingers[name], sample, motion, m_times, contact=params.contact)
-        for name in active
-    }
+    manifolds = build_manifolds(
+        hand, active, sample, motion, m_times, contact=params.contact, threads=params.threads
+    )
     stage["manifolds"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     every, runs = must_hold_runs(hand, obj, motion, sample, m_times, manifolds, params)

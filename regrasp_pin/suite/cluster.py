@@ -37,6 +37,7 @@ import numpy as np
 
 from .._validate import positive, positive_int
 from ..exceptions import InputError, MissingExtraError
+from ..grasp.manifold import THREADS_ENV
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
 from .specs import ScenarioSpec
@@ -152,6 +153,7 @@ def _client(workers: int | None, scheduler: str | None) -> Any:
     # isolate._forkserver: it slows the planner down by ~1.6x)
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    environ[THREADS_ENV] = "1"  # one scenario per core already: no manifold threads
     settings = {
         "distributed.scheduler.allowed-failures": 0,
         "distributed.worker.daemon": False,
