@@ -59,13 +59,13 @@ def build(spec: ScenarioSpec, reference: bool) -> tuple[float, dict[str, float],
     """Build one spec; its wall time [s], stage times [s] and fingerprint (or the error)."""
     timer = StageTimer()
     saved = {
-        "build_manifold": scenarios.build_manifold,
+        "build_manifolds": scenarios.build_manifolds,
         "must_hold": scenarios.must_hold,
         "with_idle_fingers": scenarios.with_idle_fingers,
         "initial_grasp": scenarios.initial_grasp,
     }
     saved_gfm = suite_build.grasp_for_motion
-    scenarios.build_manifold = timer.wrap("manifolds", saved["build_manifold"])
+    scenarios.build_manifolds = timer.wrap("manifolds", saved["build_manifolds"])
     scenarios.must_hold = timer.wrap("must hold", saved["must_hold"])
     scenarios.with_idle_fingers = timer.wrap("must hold", saved["with_idle_fingers"])
     scenarios.initial_grasp = timer.wrap("initial grasp", saved["initial_grasp"])

@@ -65,6 +65,7 @@ from ..model.objects import SurfaceSample
 from .contact import ContactModel, pad_cosines_and_overshoot, tip_targets
 
 __all__ = [
+    "THREADS_ENV",
     "Manifold",
     "StartTracking",
     "WorkspaceVoxels",
@@ -439,6 +440,7 @@ def build_manifold(
     )
 
 
+#: the environment variable that sets :func:`build_manifolds`' default thread count
 THREADS_ENV = "REGRASP_PIN_THREADS"
 
 
