@@ -4,7 +4,10 @@ A finger whose contact cannot be followed and that has no verified regrasp lets 
 for the rest of the motion (:func:`~.release.plan_release`, a ``release`` phase) if
 more than ``min_holding`` others remain to take turns, or if the others hold in force
 closure to the end; otherwise a finger that took no part so far may join in its place
-(:func:`~.join.plan_join`, a ``join`` phase) once it has let go: a hand-over.
+(:func:`~.join.plan_join`, a ``join`` phase) once it has let go: a hand-over. Either
+moves the plan's time on (to the release, or to the joining finger's landing); one
+that would take it past the loss of another finger's hold is refused, as a regrasp
+that would land after it is.
 """
 
 from __future__ import annotations
@@ -86,16 +89,30 @@ def _try_release(
     for t_r in _release_times(ctx, win):
         rel = _release_either(ctx, state, name, t_r, q_hand, tried)
         if rel is not None:
-            log.info("%s lets go at t=%.3f s", name, t_r)
             others = (
                 f"{len(stay)} others go on"
                 if len(stay) > p.min_holding
                 else "the others hold to the end"
             )
             note = f"{why}; no verified regrasp: let go ({others})"
-            return _apply_release(state, name, rel, note)
+            after = _apply_release(state, name, rel, note)
+            lost = _lost_before_now(ctx, after)
+            if lost is not None:
+                tried.append(f"{t_r:.3f} s: {lost.finger}'s hold is lost at {lost.lost_s:.3f} s")
+                continue
+            log.info("%s lets go at t=%.3f s", name, t_r)
+            return after
     log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
     return None
+
+
+def _lost_before_now(ctx: PlanContext, after: PlanState) -> Trigger | None:
+    """A hold of ``after`` that is lost before ``after.now`` (the plan would have that
+    finger hold past its loss while the others moved on), the first lost first; None
+    if every hold lasts until then."""
+    end = min(after.now, ctx.scene.motion.t_end - ctx.params.dt_s) - TIME_TOL_S
+    lost = [e for e in pending_triggers(ctx, after) if e.lost_s < end]
+    return min(lost, key=lambda e: (round(e.lost_s, 9), e.finger), default=None)
 
 
 def _release_times(ctx: PlanContext, win: LiftOffWindow) -> Iterator[float]:
@@ -236,9 +253,19 @@ def _try_handover(
             note = f"{why}; no verified regrasp: let go, {other} joins in its place"
             after = _apply_release(state, name, rel, note)
             joined = _join(ctx, after, other, t_r + p.release_back_off_s, stay, name)
-            if joined is not None:
-                log.info("%s lets go at t=%.3f s, %s joins", name, t_r, other)
-                return joined
+            if joined is None:
+                continue
+            lost = _lost_before_now(ctx, joined)
+            if lost is not None:
+                log.debug(
+                    "%s cannot join: %s's hold is lost at t=%.3f s, before it lands",
+                    other,
+                    lost.finger,
+                    lost.lost_s,
+                )
+                continue
+            log.info("%s lets go at t=%.3f s, %s joins", name, t_r, other)
+            return joined
     return None
 
 
