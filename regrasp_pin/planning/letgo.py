@@ -6,8 +6,8 @@ more than ``min_holding`` others remain to take turns, or if the others hold in 
 closure to the end; otherwise a finger that took no part so far may join in its place
 (:func:`~.join.plan_join`, a ``join`` phase) once it has let go: a hand-over. Either
 moves the plan's time on (to the release, or to the joining finger's landing); one
-that would take it past the loss of another finger's hold is refused, as a regrasp
-that would land after it is.
+that would take it past the loss of another finger's hold is refused (a regrasp is
+refused when such a loss comes before its earliest landing).
 """
 
 from __future__ import annotations
