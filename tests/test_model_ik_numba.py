@@ -106,9 +106,9 @@ def test_compiled_kernel_equals_numpy(five, allegro, backend):
             _check_same(finger, cold, a, b, f"{finger.name} cold")
 
 
-def test_compiled_manifold_equals_numpy(five, backend):
-    pytest.importorskip("numba")
-    from regrasp_pin.grasp.manifold import build_manifold
+def _turning_box():
+    """A 40 x 60 x 40 mm box turning about the palm y axis: its surface every 4 mm, the
+    motion and 21 times over its 2 s."""
     from regrasp_pin.model.motion import ObjectMotion
     from regrasp_pin.model.objects import Box
 
@@ -118,8 +118,14 @@ def test_compiled_manifold_equals_numpy(five, backend):
     motion = ObjectMotion.constant_twist(
         T0, axis_palm=[0, 1, 0], point_palm=T0[:3, 3], rate_rad_s=0.5, duration_s=2.0
     )
-    sample = box.sample_surface(0.004)
-    times = np.linspace(0.0, 2.0, 21)
+    return box.sample_surface(0.004), motion, np.linspace(0.0, 2.0, 21)
+
+
+def test_compiled_manifold_equals_numpy(five, backend):
+    pytest.importorskip("numba")
+    from regrasp_pin.grasp.manifold import build_manifold
+
+    sample, motion, times = _turning_box()
     for name in ("index", "middle", "little"):
         m = {}
         for b in ("numpy", "numba"):
@@ -137,17 +143,8 @@ def test_compiled_kernels_run_fingers_on_threads_alike(five, backend):
     mapped one by one, bit for bit."""
     pytest.importorskip("numba")
     from regrasp_pin.grasp.manifold import build_manifolds
-    from regrasp_pin.model.motion import ObjectMotion
-    from regrasp_pin.model.objects import Box
 
-    box = Box((0.04, 0.06, 0.04))
-    T0 = np.eye(4)
-    T0[:3, 3] = [0.065, 0.0, 0.06]
-    motion = ObjectMotion.constant_twist(
-        T0, axis_palm=[0, 1, 0], point_palm=T0[:3, 3], rate_rad_s=0.5, duration_s=2.0
-    )
-    sample = box.sample_surface(0.004)
-    times = np.linspace(0.0, 2.0, 21)
+    sample, motion, times = _turning_box()
     ik.set_ik_backend("numba")
     names = five.finger_names
     one = build_manifolds(five, names, sample, motion, times, threads=1)

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_array, frozen, positive
+from .._validate import as_array, frozen, positive, positive_int
 from ..exceptions import InputError
 from ..model.hand import Finger, Hand
 from ..model.ik import IKResult, ik_backend, solve_position_ik
@@ -495,10 +495,7 @@ def build_manifolds(
     """
     names = list(fingers)
     finger_objs = [hand.finger(n) for n in names]  # unknown names fail here, in order
-    if threads is None:
-        threads = default_threads()
-    elif not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
-        raise InputError("threads", f"is {threads!r}", "a whole number >= 1, or None")
+    threads = default_threads() if threads is None else positive_int(threads, "threads")
     workers = max(1, min(threads, len(names)))
 
     def build(f: Finger) -> Manifold:
