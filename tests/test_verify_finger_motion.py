@@ -209,6 +209,33 @@ def test_lower_bounds_never_exceed_coal_distances(hand_name):
             assert np.mean(checker.lb > 0) > 0.3  # and they are not trivial
 
 
+@pytest.mark.parametrize("stride", [4, 8, 32])
+@pytest.mark.parametrize("case", range(4))
+def test_coarse_bounds_are_sound_and_query_the_same_samples(five, allegro, case, stride):
+    """Bounds evaluated coarse to fine (a smooth dense motion, the object near the
+    finger) stay below Coal's distances, and are below the requirement exactly where
+    every bound evaluated is: the same mandatory queries."""
+    hand_name, finger, obj, centre, _ = CASES[case]
+    hand = five if hand_name == "five_finger" else allegro
+    f = hand.finger(finger)
+    rng = np.random.default_rng(7 + case)
+    n = 4
+    t = np.arange(n, dtype=float)
+    q_f = f.q_mid + rng.uniform(-0.3, 0.3, (n, f.k)) * (f.upper - f.lower)
+    q = hand.to_full(finger, q_f, np.tile(hand.neutral(), (n, 1)))
+    T = np.stack([pose(np.asarray(centre) + rng.normal(0, 0.01, 3), rng.normal(0, 0.2, 3))] * n)
+    _, q_d, T_d = densify(t, q, T, 0.005)
+    D = q_d.shape[0]
+    args = (hand, obj, f, q_d, T_d, np.full(D, 0.002), 0.002, 0.004)
+    every = PairDistances(*args)
+    coarse = PairDistances(*args, coarse_stride=stride)
+    assert D > 4 * stride
+    assert np.array_equal(coarse.lb < coarse.required, every.lb < every.required)
+    assert np.mean(coarse.lb != every.lb) > 0.3  # most bounds were carried, not evaluated
+    coarse._query(*np.nonzero(np.ones(coarse.lb.shape, dtype=bool)))
+    assert np.all(coarse.exact >= coarse.lb - 1e-9)
+
+
 def test_densify_bounds_steps_and_stays_on_the_interpolation():
     rng = np.random.default_rng(2)
     t = np.array([0.0, 0.4, 1.0, 1.3])

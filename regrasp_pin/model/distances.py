@@ -197,17 +197,17 @@ def _object_lower_bound(
         obj: The object.
         c_obj: Geometry centres in the object frame, (D, G, 3) [m].
         R_obj_geom: Geometry orientations in the object frame, (D, G, 3, 3).
-        params: Support parameters, (G, 6).
+        params: Support parameters, (G, 6), or broadcast against the leading axes.
 
     Returns:
-        Lower bounds (D, G) [m].
+        Lower bounds (D, G) [m] (the leading axes).
     """
     # rows R^T n_f: (D, G, F, 3), term by term (matmul costs a call per 3 x 3 matrix)
     N = obj.normals
     n_local = N[:, 0, None] * R_obj_geom[..., None, 0, :]
     n_local += N[:, 1, None] * R_obj_geom[..., None, 1, :]
     n_local += N[:, 2, None] * R_obj_geom[..., None, 2, :]
-    h = support(n_local, params[None, :, None, :])
+    h = support(n_local, params[..., None, :])
     return np.max(c_obj @ obj.normals.T - obj.offsets - h, axis=-1)
 
 
@@ -248,8 +248,9 @@ class PairDistances:
         tip_req: np.ndarray,
         link_req: float | np.ndarray,
         ff_req: float,
+        coarse_stride: int = 1,
     ) -> None:
-        """Place the geometries and evaluate every lower bound.
+        """Place the geometries and evaluate the lower bounds.
 
         Args:
             hand: The hand.
@@ -261,91 +262,55 @@ class PairDistances:
             link_req: Required distance of the other finger geometries to the object [m],
                 one for all samples or one per dense sample (D,).
             ff_req: Required distance to the other fingers [m].
+            coarse_stride: 1: every bound as it is. ``s > 1``: the bounds are evaluated
+                at every ``s``-th sample (and the last); a sample between two of them
+                gets the better of their bounds less the sweep bound to it, and only
+                where that is below the requirement its own bound. The mandatory
+                queries are the same (a bound below the requirement is the sample's
+                own); the bounds above it are weaker, which only the minima read.
         """
         moving = [_geometry(hand, g) for g in f.geometry_ids]
         own = set(f.geometry_ids)
         other_ids = sorted(
             {g for name, o in hand.fingers.items() if name != f.name for g in o.geometry_ids} - own
         )
-        others = [_geometry(hand, g) for g in other_ids]
-        geoms = moving + others
-        R, p = _placements(geoms, q_d)
-        self._R, self._p, self._T = R, p, T_d
+        geoms = moving + [_geometry(hand, g) for g in other_ids]
         self.geoms = geoms
-        self._obj_shape = obj.coal_geometry()
-        nm, no = len(moving), len(others)
+        self._R, self._p = _placements(geoms, q_d)
+        self._T = T_d
+        self._obj, self._obj_shape = obj, obj.coal_geometry()
+        self._nm = nm = len(moving)
+        # columns: the moving geometries vs the object, then each vs each other geometry
+        no = len(geoms) - nm
         tip = set(f.tip_geometry_ids)
-        # columns
         self.first = np.concatenate([np.arange(nm), np.repeat(np.arange(nm), no)]).astype(int)
         self.second = np.concatenate([np.full(nm, -1), nm + np.tile(np.arange(no), nm)])
         self.second = self.second.astype(int)
         self.kind = np.concatenate(
             [[TIP if g.gid in tip else LINK for g in moving], np.full(nm * no, FF)]
         ).astype(int)
-        # capsule endpoints and centres in the palm frame, (D, G, 3)
-        a_loc = np.array([g.seg_a for g in geoms]).reshape(-1, 3)
-        b_loc = np.array([g.seg_b for g in geoms]).reshape(-1, 3)
-        c_loc = np.array([g.centre for g in geoms]).reshape(-1, 3)
-        params = np.array([g.support for g in geoms]).reshape(-1, 6)
-        rad = np.array([g.radius for g in geoms])
-        a, b, c = (_place(R, p, loc) for loc in (a_loc, b_loc, c_loc))
-        # geometry vs object: the face-plane support bound, in the object frame
-        R_po = T_d[:, None, :3, :3]
-        c_o = np.matmul(c[:, :nm] - T_d[:, None, :3, 3], T_d[:, :3, :3])  # R^T (x - p)
-        R_og = R_po[..., 0, :, None] * R[:, :nm, 0, None, :]  # R_po^T R, term by term
-        R_og += R_po[..., 1, :, None] * R[:, :nm, 1, None, :]
-        R_og += R_po[..., 2, :, None] * R[:, :nm, 2, None, :]
-        lb_obj = _object_lower_bound(obj, c_o, R_og, params[:nm])
-        # geometry vs geometry: bounding spheres first; near pairs get the capsule bound
-        # and the separating-axis bound along the capsules' nearest-point direction
-        i1, i2 = self.first[nm:], self.second[nm:]
-        mid = 0.5 * (a + b)
-        reach = 0.5 * np.linalg.norm(b_loc - a_loc, axis=1) + rad  # (G,): rotations keep lengths
-        reach = np.broadcast_to(reach, mid.shape[:2])
-        diff = mid[:, i1] - mid[:, i2]
-        lb_ff = np.sqrt(np.einsum("dpi,dpi->dp", diff, diff)) - reach[:, i1] - reach[:, i2]
-        d, k = np.nonzero(lb_ff < ff_req + BROAD_PHASE_MARGIN_M)
-        n_g = len(geoms)
-        j1, j2 = d * n_g + i1[k], d * n_g + i2[k]  # flat (sample, geometry) indices
-        g1, g2 = i1[k], i2[k]
-        a_, b_, c_ = a.reshape(-1, 3), b.reshape(-1, 3), c.reshape(-1, 3)
-        R_ = R.reshape(-1, 3, 3)
-        seg, v = _segment_distance(a_[j1], b_[j1], a_[j2], b_[j2])
-        lb = seg - rad[g1] - rad[g2]
-        u = v / np.where(seg > 1e-12, seg, 1.0)[:, None]  # from geometry 2 towards 1
-        gap = (
-            np.einsum("ni,ni->n", u, c_[j1] - c_[j2])
-            - support(np.einsum("ni,nij->nj", u, R_[j1]), params[g1])
-            - support(np.einsum("ni,nij->nj", u, R_[j2]), params[g2])
-        )
-        lb_ff[d, k] = np.where(seg > 1e-12, np.maximum(lb, gap), lb)
-        self.lb = np.concatenate([lb_obj, lb_ff], axis=1)
-        # sweep bound: between samples s and s', no point of a geometry moves by more
-        # than the sum of its per-step bounds |dc| + rho |dR|_2, so a distance is
-        # 1-Lipschitz in the cumulative sum of the two bodies' steps (see _update_sweep)
-        rho = np.array(
-            [
-                np.linalg.norm(g.support[:3])
-                + math.hypot(g.support[3], g.support[4])
-                + g.support[5]
-                for g in geoms
-            ]
-        )
-        step_g = _step_bound(c, R, rho)  # (D - 1, G)
-        step_o = _step_bound(T_d[:, None, :3, 3], T_d[:, None, :3, :3], np.array([obj.radius_m]))[
-            :, 0
-        ]
-        second = np.where(self.second < 0, 0, self.second)
-        step = step_g[:, self.first] + np.where(self.second < 0, step_o[:, None], step_g[:, second])
-        self._sweep = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])
-        #: Largest per-step bound on the relative motion of two checked bodies [m].
-        self.max_step_m = float(step.max()) if step.size else 0.0
-        self.swept = np.full(self.lb.shape, -np.inf)
-        self.required = np.empty(self.lb.shape)
+        self.required = np.empty((q_d.shape[0], self.first.size))
         self.required[:, self.kind == TIP] = tip_req[:, None]
         link = np.asarray(link_req, dtype=float)
         self.required[:, self.kind == LINK] = link[:, None] if link.ndim else link
         self.required[:, self.kind == FF] = ff_req
+        self._ff_req = float(ff_req)
+        # the geometries' bounding shapes (see _Geometry), one row each
+        self._params = np.array([g.support for g in geoms]).reshape(-1, 6)
+        self._rad = np.array([g.radius for g in geoms])
+        self._reach = 0.5 * np.array([np.linalg.norm(g.seg_b - g.seg_a) for g in geoms]) + self._rad
+        self._local = [
+            np.array([getattr(g, key) for g in geoms]).reshape(-1, 3)
+            for key in ("seg_a", "seg_b", "centre")
+        ]
+        self._mid_local = 0.5 * (self._local[0] + self._local[1])  # capsule segments' middles
+        self._c = _place(self._R, self._p, self._local[2])  # centres, palm frame (D, G, 3)
+        step = self._steps(obj.radius_m)
+        self._sweep = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])
+        #: Largest per-step bound on the relative motion of two checked bodies [m].
+        self.max_step_m = float(step.max()) if step.size else 0.0
+        self.lb = self._bounds_coarse_to_fine(coarse_stride)
+        self.swept = np.full(self.lb.shape, -np.inf)
         self.exact = np.full(self.lb.shape, np.nan)
         self.n_queries = 0
         self._request = coal.DistanceRequest()
@@ -355,6 +320,120 @@ class PairDistances:
         self._request.epa_tolerance = 1e-6
         self._result = coal.DistanceResult()
         self._functors: dict[int, Any] = {}
+
+    def _steps(self, obj_radius_m: float) -> np.ndarray:
+        """Per-step bounds ``(D - 1, P)`` [m] on the relative motion of each column's
+        two bodies: between samples s and s', no point of a geometry moves by more than
+        the sum of its per-step bounds ``|dc| + rho |dR|_2``, so a distance is
+        1-Lipschitz in the cumulative sum of the two bodies' steps (the sweep bound,
+        see :meth:`_update_sweep`)."""
+        rho = np.array(
+            [
+                np.linalg.norm(g.support[:3])
+                + math.hypot(g.support[3], g.support[4])
+                + g.support[5]
+                for g in self.geoms
+            ]
+        )
+        step_g = _step_bound(self._c, self._R, rho)  # (D - 1, G)
+        T = self._T
+        step_o = _step_bound(T[:, None, :3, 3], T[:, None, :3, :3], np.array([obj_radius_m]))
+        second = np.where(self.second < 0, 0, self.second)
+        return step_g[:, self.first] + np.where(self.second < 0, step_o[:, :1], step_g[:, second])
+
+    def _bounds_coarse_to_fine(self, stride: int) -> np.ndarray:
+        """Lower bounds ``(D, P)`` of every (sample, column), see ``coarse_stride``."""
+        n_d = self._R.shape[0]
+        if stride <= 1 or n_d <= 2 * stride:
+            return self._bounds_rows(np.arange(n_d))
+        coarse = np.unique(np.concatenate([np.arange(0, n_d, stride), [n_d - 1]]))
+        lb_c = self._bounds_rows(coarse)
+        # a distance is 1-Lipschitz in the sweep parameter S (see _update_sweep): from
+        # the coarse samples c0 <= s <= c1 around s, d(s) >= lb(c) - |S(s) - S(c)|
+        s = np.arange(n_d)
+        hi = np.searchsorted(coarse, s)
+        lo = np.where(coarse[hi] == s, hi, hi - 1)
+        S = self._sweep
+        lb = np.maximum(lb_c[lo] - (S - S[coarse[lo]]), lb_c[hi] - (S[coarse[hi]] - S))
+        lb -= 1e-12  # rounding of S
+        lb[coarse] = lb_c
+        rows, cols = np.nonzero(lb < self.required)
+        if rows.size:
+            lb[rows, cols] = self._bounds(rows, cols)
+        return lb
+
+    def _bounds_rows(self, rows: np.ndarray) -> np.ndarray:
+        """Lower bounds ``(R, P)`` of every column at the samples ``rows``."""
+        nm, n_g = self._nm, len(self.geoms)
+        R, p, T = self._R[rows], self._p[rows], self._T[rows]
+        # geometry vs object: the face-plane support bound, in the object frame
+        c = self._c[rows, :nm]
+        R_po = T[:, None, :3, :3]
+        c_o = np.matmul(c - T[:, None, :3, 3], T[:, :3, :3])  # R^T (x - p)
+        R_og = R_po[..., 0, :, None] * R[:, :nm, 0, None, :]  # R_po^T R, term by term
+        R_og += R_po[..., 1, :, None] * R[:, :nm, 1, None, :]
+        R_og += R_po[..., 2, :, None] * R[:, :nm, 2, None, :]
+        lb_obj = _object_lower_bound(self._obj, c_o, R_og, self._params[None, :nm])
+        # geometry vs geometry: bounding spheres first; near pairs get the capsule bound
+        # and the separating-axis bound along the capsules' nearest-point direction
+        i1, i2 = self.first[nm:], self.second[nm:]
+        mid = _place(R, p, self._mid_local)
+        diff = mid[:, i1] - mid[:, i2]
+        reach = self._reach
+        lb_ff = np.sqrt(np.einsum("dpi,dpi->dp", diff, diff)) - reach[i1] - reach[i2]
+        d, k = np.nonzero(lb_ff < self._ff_req + BROAD_PHASE_MARGIN_M)
+        lb_ff[d, k] = self._near_pair_bounds(rows[d] * n_g + i1[k], rows[d] * n_g + i2[k])
+        return np.concatenate([lb_obj, lb_ff], axis=1)
+
+    def _bounds(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Lower bounds ``(K,)`` of the (sample, column) pairs ``rows``, ``cols``: the
+        same numbers as :meth:`_bounds_rows`, pair by pair."""
+        out = np.empty(rows.size)
+        n_g = len(self.geoms)
+        g1, g2 = self.first[cols], self.second[cols]
+        obj = g2 < 0
+        if obj.any():
+            r, g = rows[obj], g1[obj]
+            R, T = self._R[r, g], self._T[r]
+            c = _place(R, self._p[r, g], self._local[2][g])
+            c_o = np.einsum("ki,kij->kj", c - T[:, :3, 3], T[:, :3, :3])
+            R_og = np.einsum("kji,kjl->kil", T[:, :3, :3], R)
+            out[obj] = _object_lower_bound(self._obj, c_o, R_og, self._params[g])
+        ff = np.flatnonzero(~obj)
+        if ff.size:
+            j1, j2 = rows[ff] * n_g + g1[ff], rows[ff] * n_g + g2[ff]
+            R_, p_, mid = self._R.reshape(-1, 3, 3), self._p.reshape(-1, 3), self._mid_local
+            diff = _place(R_[j1], p_[j1], mid[g1[ff]]) - _place(R_[j2], p_[j2], mid[g2[ff]])
+            reach = self._reach[g1[ff]] + self._reach[g2[ff]]
+            lb = np.sqrt(np.einsum("ki,ki->k", diff, diff)) - reach
+            near = np.flatnonzero(lb < self._ff_req + BROAD_PHASE_MARGIN_M)
+            lb[near] = self._near_pair_bounds(j1[near], j2[near])
+            out[ff] = lb
+        return out
+
+    def _near_pair_bounds(self, j1: np.ndarray, j2: np.ndarray) -> np.ndarray:
+        """The capsule bound and the separating-axis bound along the capsules'
+        nearest-point direction, the larger, of the geometry pairs at flat (sample,
+        geometry) indices ``j1``, ``j2`` (K,)."""
+        n_g = len(self.geoms)
+        g1, g2 = j1 % n_g, j2 % n_g
+        R_, p_ = self._R.reshape(-1, 3, 3), self._p.reshape(-1, 3)
+        R1, p1, R2, p2 = R_[j1], p_[j1], R_[j2], p_[j2]
+        a_loc, b_loc, c_loc = self._local
+        seg, v = _segment_distance(
+            _place(R1, p1, a_loc[g1]),
+            _place(R1, p1, b_loc[g1]),
+            _place(R2, p2, a_loc[g2]),
+            _place(R2, p2, b_loc[g2]),
+        )
+        lb = seg - self._rad[g1] - self._rad[g2]
+        u = v / np.where(seg > 1e-12, seg, 1.0)[:, None]  # from geometry 2 towards 1
+        gap = (
+            np.einsum("ni,ni->n", u, _place(R1, p1, c_loc[g1]) - _place(R2, p2, c_loc[g2]))
+            - support(np.einsum("ni,nij->nj", u, R1), self._params[g1])
+            - support(np.einsum("ni,nij->nj", u, R2), self._params[g2])
+        )
+        return np.where(seg > 1e-12, np.maximum(lb, gap), lb)
 
     def run(self, exact_minima: bool = True) -> tuple[dict[str, float], bool]:
         """Mandatory queries, then the minima.

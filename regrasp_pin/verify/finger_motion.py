@@ -30,7 +30,11 @@ and spheres). Lower bounds on the signed distance:
 
 Both stay valid under penetration (they bound minus the penetration depth). Coal is
 called wherever a bound is below the requirement, so every pass/fail decision near a
-threshold is an exact Coal distance.
+threshold is an exact Coal distance. Without exact minima (``exact_minima=False``, the
+planner's check) the bounds are evaluated coarse to fine: at every
+:data:`COARSE_STRIDE`-th sample, and between two of them from theirs less the sweep
+bound (below); a sample's own bound is evaluated only where that is below the
+requirement. The same samples get a Coal query, so the same pass/fail and failures.
 
 Reported minima. A minimum below its requirement is already exact. Otherwise a branch and
 bound queries, per pair, the sample with the lowest bound until no bound is below the
@@ -78,6 +82,9 @@ MAX_REPORTED_FAILURES = 20
 OBJECT_LEVER_M = 0.1
 #: Refuse to verify more dense samples than this (a bad step size or a huge motion).
 MAX_DENSE_SAMPLES = 2_000_000
+#: Without exact minima, the broad phase's bounds are evaluated at every this many
+#: samples, and elsewhere only where those carried by the sweep bound do not settle it.
+COARSE_STRIDE = 8
 
 _KINDS = ("tip-object", "link-object", "finger-finger")  # by PairDistances.kind
 _FAILURE_KIND = {
@@ -424,7 +431,10 @@ def verify_finger_motion(
         float(np.max(np.linalg.norm(np.diff(tip_obj, axis=0), axis=1))) if t_d.size > 1 else 0.0
     )
 
-    pairs = PairDistances(hand, obj, f, q_d, T_d, clr_d - tol, link_d - tol, ff_clr)
+    stride = 1 if exact_minima else COARSE_STRIDE
+    pairs = PairDistances(
+        hand, obj, f, q_d, T_d, clr_d - tol, link_d - tol, ff_clr, coarse_stride=stride
+    )
     dist, minima_exact = pairs.run(exact_minima)
     joint_fail = _joint_limit_failures(f, t_d, q_d)
     dist_fail = _distance_failures(pairs, t_d)
