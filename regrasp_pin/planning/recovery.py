@@ -2,8 +2,8 @@
 the one that failed.
 
 In order: another finger due soon goes first (:func:`_another_first`); a neighbour
-whose contact takes the room of the finger's best new contact regrasps first, out of
-that room, now or before one of the last regrasps (:func:`_make_room`); an earlier
+whose contact or links take the room of the finger's best new contact regrasps first,
+out of that room, now or before one of the last regrasps (:func:`_make_room`); an earlier
 regrasp is planned again, to let the finger go before it or to land in time, or, if
 time was not the problem, to land elsewhere (:func:`_backtrack`). An option already
 tried from the same state is not tried again (a retry that repeats what failed is not
@@ -18,8 +18,11 @@ from dataclasses import replace
 import numpy as np
 
 from ..exceptions import ContactError, FailureKind, PlanningError
+from ..grasp.choice import NewContact
+from ..model.clearance import FingerClearance
 from .advance import Step, advance, window
 from .schedule import TIME_TOL_S, LiftOffWindow
+from .search import LANDING_FINGER_CLEARANCE_M
 from .state import PlanContext, PlanState, Trigger, q_hand_of
 
 __all__ = ["recover"]
@@ -96,16 +99,16 @@ def _make_room(
     steps: list[Step],
     failure: PlanningError,
 ) -> PlanState | None:
-    """When ``trig.finger`` finds no regrasp, let a neighbour whose contact takes the
-    room of the finger's best new contact regrasp first, away from that room; None if
-    no neighbour does or can.
+    """When ``trig.finger`` finds no regrasp, let a neighbour whose contact or links
+    take the room of the finger's best new contact regrasp first, away from that room;
+    None if no neighbour does or can.
 
-    A neighbour takes the room if, without its contact, the finger could choose a new
-    contact (:meth:`RegraspSearch.choose`) within the separation of the neighbour's
-    contact. The neighbour then regrasps (now, or before one of the last regrasps if
-    there is no time left now), lands before the finger's hold is lost, and keeps its
-    new contact out of that room (the finger's separation around the wanted contact);
-    what follows is planned again after it."""
+    A neighbour takes the room if, without it, the finger could choose a new contact
+    (:meth:`RegraspSearch.choose`) within the separation of the neighbour's contact, or
+    one at which the two fingers' links would meet (:func:`_room_taken`). The neighbour
+    then regrasps (now, or before one of the last regrasps if there is no time left
+    now), lands before the finger's hold is lost, and keeps its new contact out of that
+    room (around the wanted contact); what follows is planned again after it."""
     if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
         return None  # a matter of time, not of room
     name, h = trig.finger, state.holding[trig.finger]
@@ -155,10 +158,10 @@ def _make_room(
 def _blockers(
     ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow
 ) -> list[tuple[str, tuple[np.ndarray, float]]]:
-    """The holding fingers whose contacts take the room of ``trig.finger``'s best new
-    contact, nearest first, each with that room: ``(point, radius)`` (object frame,
-    the finger's separation [m]) as :func:`choose_new_contact` would choose it, landing
-    one regrasp after the neighbour's, were the neighbour's contact not there."""
+    """The holding fingers whose contacts or links take the room of ``trig.finger``'s
+    best new contact, nearest first, each with that room: ``(point, radius)`` (object
+    frame [m], :func:`_room_taken`) around the contact :func:`choose_new_contact` would
+    choose, landing one regrasp after the neighbour's, were the neighbour not there."""
     hand, name = ctx.scene.hand, trig.finger
     h = state.holding[name]
     D = ctx.params.regrasp.duration_s
@@ -185,9 +188,29 @@ def _blockers(
             )
         except ContactError:
             continue  # no room for the finger even without this neighbour
-        if np.linalg.norm(wanted.p_object - state.holding[other].p) < sep:
-            out.append((other, (wanted.p_object, sep)))
+        room = _room_taken(ctx, state, name, other, wanted, sep)
+        if room is not None:
+            out.append((other, (wanted.p_object, room)))
     return out
+
+
+def _room_taken(
+    ctx: PlanContext, state: PlanState, name: str, other: str, wanted: NewContact, sep: float
+) -> float | None:
+    """The radius [m] of the room around ``wanted`` (``name``'s new contact) that the
+    holding finger ``other`` must leave, or None if its hold leaves ``name`` room there:
+    ``sep`` if its contact is nearer than that; if the fingers' links would meet (Coal,
+    closer than :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing), farther
+    than its contact is now by a tip radius."""
+    d = float(np.linalg.norm(wanted.p_object - state.holding[other].p))
+    if d < sep:
+        return sep
+    hand = ctx.scene.hand
+    q = q_hand_of(ctx, state, [other])(np.array([wanted.t_arrive_s]))[0]
+    q[hand.finger(name).q_indices] = wanted.q_arrive
+    if FingerClearance(hand, name, [other])(q) < LANDING_FINGER_CLEARANCE_M:
+        return d + hand.finger(name).tip_radius
+    return None
 
 
 def _backtrack(

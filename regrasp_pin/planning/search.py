@@ -48,6 +48,9 @@ from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import TIME_TOL_S
 from .timing import duration_for_move, next_duration
 
+#: A new contact Q must keep the finger this far from the other fingers at landing [m].
+LANDING_FINGER_CLEARANCE_M = 0.001
+
 __all__ = ["Found", "RegraspSearch", "SearchBudget"]
 
 log = logging.getLogger(__name__)
@@ -261,7 +264,7 @@ class RegraspSearch:
             exclude_points_object=np.array(excluded) if excluded else None,
             exclude_points_radius_m=self._exclude_radius(finger),
             q_hand_arrive=q_hand(np.array([t_arrive]))[0],
-            finger_clearance_m=0.001,
+            finger_clearance_m=LANDING_FINGER_CLEARANCE_M,
             exit_tolerance_s=self.exit_tolerance_s,
             lasting=functools.partial(self._clear_of_others, finger, list(others), q_hand),
             reserved=reserved,

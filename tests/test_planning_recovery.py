@@ -1,0 +1,96 @@
+"""Backing up (regrasp_pin.planning.recovery): which neighbour takes a finger's room."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from regrasp_pin import make_scenario
+from regrasp_pin.grasp.choice import NewContact
+from regrasp_pin.grasp.holding import start_holding
+from regrasp_pin.model.clearance import FingerClearance
+from regrasp_pin.planning.recovery import _room_taken
+from regrasp_pin.planning.search import LANDING_FINGER_CLEARANCE_M
+
+
+@pytest.fixture(scope="module")
+def crowded():
+    """The demo scene at t = 0.5 s with the middle finger holding its grasp contact,
+    and ring configurations whose links come within the landing clearance of the
+    middle finger (Coal) or stay well clear of it."""
+    scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=20)
+    hand, g, p = scen.hand, scen.grasp, scen.params
+    grid = np.arange(0.0, scen.motion.t_end + 1e-9, p.dt_s)
+    hold = start_holding(
+        hand,
+        scen.obj,
+        scen.motion,
+        grid,
+        "middle",
+        g.points_object["middle"],
+        g.normals_object["middle"],
+        g.q["middle"],
+        0.0,
+        p.contact,
+    )
+    ctx = SimpleNamespace(scene=scen, params=p, base_q=hand.neutral())
+    state = SimpleNamespace(holding={"middle": hold}, released={})
+    # the middle finger's configuration at the landing, from the hold's own IK
+    t = 0.5
+    q = hand.neutral()
+    q[hand.finger("middle").q_indices] = hold.q_at(np.array([t]))[0]
+    ring = hand.finger("ring")
+    rng = np.random.default_rng(0)
+    meet, clear = None, None
+    gap = FingerClearance(hand, "ring", ["middle"])
+    for q_ring in ring.lower + rng.random((400, ring.k)) * (ring.upper - ring.lower):
+        q[ring.q_indices] = q_ring
+        d = gap(q)
+        if meet is None and d < LANDING_FINGER_CLEARANCE_M:
+            meet = q_ring.copy()
+        if clear is None and d > 0.005:
+            clear = q_ring.copy()
+    assert meet is not None and clear is not None
+    return ctx, state, hold, meet, clear, t
+
+
+def _wanted(p_object, q_arrive, t):
+    return NewContact(
+        finger="ring",
+        index=0,
+        p_object=np.asarray(p_object, float),
+        n_object=np.array([0.0, 0.0, 1.0]),
+        q_arrive=q_arrive,
+        t_arrive_s=t,
+        exit_time_s=t + 1.0,
+        margin_rad=0.1,
+        distance_from_P_m=0.02,
+        epsilon=0.1,
+        epsilon_with_P=0.1,
+        quality_kept=True,
+        n_candidates=1,
+        rank=0,
+    )
+
+
+def test_a_neighbour_whose_contact_is_within_the_separation_takes_the_room(crowded):
+    ctx, state, hold, _, clear, t = crowded
+    sep = 0.017
+    near = hold.p + np.array([0.01, 0.0, 0.0])  # 10 mm from the middle's contact
+    assert _room_taken(ctx, state, "ring", "middle", _wanted(near, clear, t), sep) == sep
+
+
+def test_a_neighbour_whose_links_meet_the_finger_takes_the_room_beyond_its_contact(crowded):
+    """Contacts 30 mm apart, but the ring at the wanted contact would come within the
+    landing clearance of the middle finger: the middle must land farther from the
+    wanted contact than its contact is now (by a tip radius)."""
+    ctx, state, hold, meet, clear, t = crowded
+    sep = 0.017
+    far = hold.p + np.array([0.0, 0.03, 0.0])
+    r = ctx.scene.hand.finger("ring").tip_radius
+    got = _room_taken(ctx, state, "ring", "middle", _wanted(far, meet, t), sep)
+    assert got == pytest.approx(0.03 + r, abs=1e-12)
+    # the same contact with the fingers apart leaves the room
+    assert _room_taken(ctx, state, "ring", "middle", _wanted(far, clear, t), sep) is None
