@@ -92,5 +92,7 @@ def test_a_neighbour_whose_links_meet_the_finger_takes_the_room_beyond_its_conta
     r = ctx.scene.hand.finger("ring").tip_radius
     got = _room_taken(ctx, state, "ring", "middle", _wanted(far, meet, t), sep)
     assert got == pytest.approx(0.03 + r, abs=1e-12)
+    # not counting the links (a failure they cannot have caused), it leaves the room
+    assert _room_taken(ctx, state, "ring", "middle", _wanted(far, meet, t), sep, False) is None
     # the same contact with the fingers apart leaves the room
     assert _room_taken(ctx, state, "ring", "middle", _wanted(far, clear, t), sep) is None

@@ -104,8 +104,9 @@ def _make_room(
     None if no neighbour does or can.
 
     A neighbour takes the room if, without it, the finger could choose a new contact
-    (:meth:`RegraspSearch.choose`) within the separation of the neighbour's contact, or
-    one at which the two fingers' links would meet (:func:`_room_taken`). The neighbour
+    (:meth:`RegraspSearch.choose`) within the separation of the neighbour's contact, or,
+    after a finger-collision failure, one at which the two fingers' links would meet
+    (:func:`_room_taken`). The neighbour
     then regrasps (now, or before one of the last regrasps if there is no time left
     now), lands before the finger's hold is lost, and keeps its new contact out of that
     room (around the wanted contact); what follows is planned again after it."""
@@ -125,7 +126,8 @@ def _make_room(
     bases = [b for b in bases if b[0].now + D <= win.latest_s - TIME_TOL_S]
     if not bases:
         return None
-    for other, wanted in _blockers(ctx, state, trig, win):
+    links = failure.kind == FailureKind.FINGER_COLLISION
+    for other, wanted in _blockers(ctx, state, trig, win, links):
         for base, base_triggers, k in bases:
             if ctx.budget.exhausted:
                 return None
@@ -156,12 +158,14 @@ def _make_room(
 
 
 def _blockers(
-    ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow
+    ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow, links: bool
 ) -> list[tuple[str, tuple[np.ndarray, float]]]:
     """The holding fingers whose contacts or links take the room of ``trig.finger``'s
     best new contact, nearest first, each with that room: ``(point, radius)`` (object
     frame [m], :func:`_room_taken`) around the contact :func:`choose_new_contact` would
-    choose, landing one regrasp after the neighbour's, were the neighbour not there."""
+    choose, landing one regrasp after the neighbour's, were the neighbour not there
+    (``links``: a neighbour's links count too; only after a finger-collision failure,
+    the one failure they can cause)."""
     hand, name = ctx.scene.hand, trig.finger
     h = state.holding[name]
     D = ctx.params.regrasp.duration_s
@@ -188,23 +192,31 @@ def _blockers(
             )
         except ContactError:
             continue  # no room for the finger even without this neighbour
-        room = _room_taken(ctx, state, name, other, wanted, sep)
+        room = _room_taken(ctx, state, name, other, wanted, sep, links)
         if room is not None:
             out.append((other, (wanted.p_object, room)))
     return out
 
 
 def _room_taken(
-    ctx: PlanContext, state: PlanState, name: str, other: str, wanted: NewContact, sep: float
+    ctx: PlanContext,
+    state: PlanState,
+    name: str,
+    other: str,
+    wanted: NewContact,
+    sep: float,
+    links: bool = True,
 ) -> float | None:
     """The radius [m] of the room around ``wanted`` (``name``'s new contact) that the
     holding finger ``other`` must leave, or None if its hold leaves ``name`` room there:
     ``sep`` if its contact is nearer than that; if the fingers' links would meet (Coal,
     closer than :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing), farther
-    than its contact is now by a tip radius."""
+    than its contact is now by a tip radius (only with ``links``)."""
     d = float(np.linalg.norm(wanted.p_object - state.holding[other].p))
     if d < sep:
         return sep
+    if not links:
+        return None
     hand = ctx.scene.hand
     q = q_hand_of(ctx, state, [other])(np.array([wanted.t_arrive_s]))[0]
     q[hand.finger(name).q_indices] = wanted.q_arrive
