@@ -132,3 +132,36 @@ def test_shared_starts_and_restarts_give_each_point_its_own_result(five):
             )
             assert np.array_equal(one.q[0], batch.q[i]), (restarts, i)
             assert np.array_equal(one.error_m[0], batch.error_m[i]), (restarts, i)
+
+
+def test_restarts_keep_the_first_seed_that_converges(five):
+    # among the seeds that converge, the first in seed order is kept (the smallest
+    # residual below the tolerance would follow rounding); without one, the smallest
+    from regrasp_pin.model.ik import _seeds, solve_position_ik
+
+    f = five.fingers["middle"]
+    rng = np.random.default_rng(42)
+    targets = f.chain.positions(rng.uniform(f.lower, f.upper, (60, f.k)))
+    far_start = np.broadcast_to(f.lower, (60, f.k))
+    kw = dict(tol_m=1e-5, max_iter=4)
+    res = solve_position_ik(f.chain, f.lower, f.upper, targets, far_start, restarts=True, **kw)
+    first = solve_position_ik(f.chain, f.lower, f.upper, targets, far_start, restarts=False, **kw)
+    seeds = _seeds(f.lower, f.upper)
+    per_seed = [
+        solve_position_ik(
+            f.chain, f.lower, f.upper, targets, np.broadcast_to(s, (60, f.k)), restarts=False, **kw
+        )
+        for s in seeds
+    ]
+    ok = np.stack([r.success for r in per_seed], axis=1)  # (point, seed)
+    err = np.stack([r.error_m for r in per_seed], axis=1)
+    retried = ~first.success
+    assert retried.sum() >= 10 and (ok[retried].sum(axis=1) >= 2).sum() >= 5  # exercised
+    for i in np.flatnonzero(retried):
+        if ok[i].any():
+            want = per_seed[int(np.argmax(ok[i]))]
+        elif err[i].min() < first.error_m[i]:
+            want = per_seed[int(np.argmin(err[i]))]
+        else:
+            want = first
+        assert np.array_equal(res.q[i], want.q[i]), i

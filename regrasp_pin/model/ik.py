@@ -400,7 +400,10 @@ def solve_position_ik(
             q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
             iters += it + it2
             e_try = e_try.reshape(ns, bad.size).T  # (point, seed)
-            best = np.argmin(e_try, axis=1)
+            # the first seed that converged (not the smallest residual below the
+            # tolerance: that one follows rounding noise), else the smallest residual
+            conv = e_try <= tol_m
+            best = np.where(conv.any(axis=1), np.argmax(conv, axis=1), np.argmin(e_try, axis=1))
             rows = np.arange(bad.size)
             e_best = e_try[rows, best]
             better = e_best < err[bad]
