@@ -9,8 +9,10 @@ nearly Gauss-Newton. Inner iterations evaluate cos/sin in
 single precision (errors of order 1e-8 m, far below any useful tolerance) and a final
 double-precision pass checks, and if needed finishes, every point, so the reported
 residuals are exact. Points that have not converged after ``max_iter`` iterations are
-restarted from a fixed set of seeds spread over the joint box (deterministic), and the
-best result is kept. An unreachable target is not an error: it comes back with
+restarted from a fixed set of seeds spread over the joint box (deterministic); the
+first seed (in their fixed order) that converges is kept, else the smallest residual
+(not the smallest residual below the tolerance: between converged seeds that choice
+follows rounding noise). An unreachable target is not an error: it comes back with
 ``success=False`` and its residual.
 
 The work is done on component-major arrays ``(k, N)`` and only on the points that
@@ -22,9 +24,10 @@ or, on request, in the same loop compiled per point by numba (:mod:`.ik_numba`,
 ``pip install regrasp-pin[fast]``): :func:`set_ik_backend` or the
 environment variable ``REGRASP_PIN_IK_BACKEND=numba``. It is not chosen by merely
 being installed, because its single-precision cos/sin round differently from numpy's:
-the iterates differ by about 1e-7 rad, which can move a regrasp trigger by a grid step
-and so change a plan (1 of the 30 neighbour scenarios). A plan should not depend on
-which packages happen to be installed.
+the iterates differ by about 1e-7 rad, and a few points in a million stop one
+iteration earlier or converge on another branch (cold starts at the iteration cap),
+which can change a plan (2 or 3 of the 30 neighbour scenarios end differently). A plan
+should not depend on which packages happen to be installed.
 """
 
 from __future__ import annotations
