@@ -31,7 +31,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from regrasp_pin.exceptions import ContactError, FailureKind, InputError
-from regrasp_pin.grasp import choice as choice_module
+from regrasp_pin.grasp import screening as screening_module
 from regrasp_pin.grasp.choice import (
     _link_exit,
     _Ranking,
@@ -54,7 +54,13 @@ from regrasp_pin.grasp.quality import (
     ferrari_canny_epsilon,
     is_force_closure,
 )
-from regrasp_pin.grasp.screening import SCREEN_EDGES
+from regrasp_pin.grasp.screening import (
+    SCREEN_EDGES,
+    ManifoldClearance,
+    ScreeningEpsilons,
+    held_clear,
+)
+from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
@@ -726,9 +732,9 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
         q_hand[hand.finger(n).q_indices] = q
     kw = dict(P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False)
     calls = []
-    real = choice_module.ferrari_canny_epsilon
+    real = screening_module.ferrari_canny_epsilon
     monkeypatch.setattr(
-        choice_module, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
+        screening_module, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
     )
     # 1 m from every other finger: nothing passes, and only P's epsilon is computed
     with pytest.raises(ContactError) as e:
@@ -808,6 +814,61 @@ def test_link_exit_measures_only_until_each_point_leaves(five, finger, t_arrive)
         expected = m.times_s[-1] if first_bad is None else m.times_s[ka + first_bad]
         assert t_exit[c] == pytest.approx(expected), (i, ok)
         assert lasts[c] == (first_bad is None)
+
+
+def test_kept_distances_equal_pinocchio_and_are_measured_once(five, monkeypatch):
+    """ManifoldClearance gives each entry's link and fingertip distances as Pinocchio
+    computeDistances does, and a second question about known entries measures nothing:
+    the same bits as the first answer."""
+    hand, box, _, sample, manifolds, _ = five
+    m = manifolds["index"]
+    rng = np.random.default_rng(11)
+    rows, cols = np.nonzero(np.isfinite(m.q[..., 0]))
+    pick = rng.choice(rows.size, size=8, replace=False)
+    rows, cols = rows[pick], cols[pick]
+    kept = ManifoldClearance(hand, "index", box, m)
+    d, d_tip = kept(rows, cols)
+    for j in range(rows.size):
+        q_j, T_j = m.q[rows[j], cols[j]], m.T_palm_object[rows[j]]
+        assert d[j] == pytest.approx(_link_distance(hand, "index", box, q_j, T_j), abs=1e-9)
+        assert d_tip[j] == pytest.approx(
+            _link_distance(hand, "index", box, q_j, T_j, tip=True), abs=1e-9
+        )
+    measured = []
+    real = LinkClearance.__call__
+    monkeypatch.setattr(
+        LinkClearance, "__call__", lambda self, *a: measured.append(1) or real(self, *a)
+    )
+    again, again_tip = kept(rows[::-1], cols[::-1])
+    assert not measured
+    assert again.tolist() == d[::-1].tolist() and again_tip.tolist() == d_tip[::-1].tolist()
+    with pytest.raises(InputError, match="distances"):
+        held_clear(hand, "middle", box, manifolds["middle"], cols[:2], 0, CONTACT, kept)
+
+
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 1.25), ("thumb", 0.75)])
+def test_choices_with_kept_distances_and_epsilons_are_the_same(five, finger, t_arrive):
+    """Choosing Q again and again with the distances and epsilons kept between the
+    calls (as the planner's search does) gives, call by call, the same choice as
+    measuring afresh, while later calls find what they need already known."""
+    hand, box, _, sample, manifolds, grasp = five
+    kept = ManifoldClearance(hand, finger, box, manifolds[finger])
+    epsilons = ScreeningEpsilons(MU, box.radius_m)
+    excluded: list[np.ndarray] = []
+    for _ in range(3):
+        kw = {"exclude_points_object": np.array(excluded)} if excluded else {}
+        fresh = _choose_from_grasp(five, finger, t_arrive, **kw)
+        reused = _choose_from_grasp(five, finger, t_arrive, distances=kept, epsilons=epsilons, **kw)
+        assert (reused.index, reused.rank, reused.epsilon, reused.exit_time_s) == (
+            fresh.index,
+            fresh.rank,
+            fresh.epsilon,
+            fresh.exit_time_s,
+        )
+        excluded.append(fresh.p_object)
+    assert len(kept._known) > 0 and len(epsilons._known) > 0
+    with pytest.raises(InputError, match="epsilons"):
+        _choose_from_grasp(five, finger, t_arrive, epsilons=ScreeningEpsilons(MU + 0.1, 1.0))
 
 
 @pytest.mark.parametrize("finger, k_to", [("index", 4), ("middle", 3)])

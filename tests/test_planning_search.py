@@ -34,9 +34,13 @@ def problem():
         n: build_manifold(hand.finger(n), sample, motion, times, contact=p.contact)
         for n in p.fingers
     }
-    search = RegraspSearch(
-        Scene(hand, scen.obj, motion), manifolds, sample, regrasp=p.regrasp, contact=p.contact
-    )
+
+    def new_search():
+        return RegraspSearch(
+            Scene(hand, scen.obj, motion), manifolds, sample, regrasp=p.regrasp, contact=p.contact
+        )
+
+    kept = new_search()  # one search for every test: what it measured stays with it
     h = holding[FINGER]
     t_trig, _ = h.track.trigger()
     assert t_trig is not None  # the demo's index contact nears its limits
@@ -50,7 +54,8 @@ def problem():
             )
         return q
 
-    def find(**kwargs):
+    def find(fresh=False, **kwargs):
+        search = new_search() if fresh else kept
         return search.find(
             FINGER,
             (h.p, h.n),
@@ -83,6 +88,32 @@ def test_a_rejected_landing_costs_only_its_q(problem):
     # the rejection is recorded as data, after the attempts that preceded the first
     assert second.attempts[: len(first.attempts)] == first.attempts
     assert second.attempts[len(first.attempts)].kind == FailureKind.SHORT_HOLD
+
+
+def test_a_search_that_keeps_what_it_measured_finds_the_same(problem):
+    """The search keeps the link distances, the epsilons and the finger clearances it
+    measured between its choices of Q: asked again (and after other searches), it finds
+    the same regrasp after the same failed attempts as a search that starts afresh."""
+
+    def second_only(result):
+        second_only.seen += 1
+        return _reject(result) if second_only.seen == 1 else None
+
+    found = []
+    for fresh in (True, False, False):
+        second_only.seen = 0
+        found.append(problem(fresh=fresh, landing_check=second_only))
+    for again in found[1:]:
+        assert again.attempts == found[0].attempts
+        assert again.result.t_start == found[0].result.t_start
+        assert again.result.Q_object.tolist() == found[0].result.Q_object.tolist()
+        mine, first = again.choice, found[0].choice
+        assert (mine.index, mine.rank, mine.epsilon, mine.exit_time_s) == (
+            first.index,
+            first.rank,
+            first.epsilon,
+            first.exit_time_s,
+        )
 
 
 def test_every_landing_rejected_ends_typed_with_every_attempt(problem):

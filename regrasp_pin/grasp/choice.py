@@ -35,8 +35,14 @@ from ..model.hand import Finger, Hand
 from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
 from .manifold import Manifold
-from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon, kept_quality
-from .screening import SCREEN_EDGES, ObjectClearance, held_clear, leave_one_out
+from .quality import FORCE_CLOSURE_TOL, kept_quality
+from .screening import (
+    ManifoldClearance,
+    ObjectClearance,
+    ScreeningEpsilons,
+    held_clear,
+    leave_one_out,
+)
 
 __all__ = [
     "NewContact",
@@ -130,6 +136,8 @@ def choose_new_contact(
     rerank: int = 12,
     lasting: Callable[[np.ndarray, int], np.ndarray] | None = None,
     reserved: Sequence[tuple[np.ndarray, float]] = (),
+    distances: ManifoldClearance | None = None,
+    epsilons: ScreeningEpsilons | None = None,
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -174,6 +182,11 @@ def choose_new_contact(
         reserved: ``(point, radius)`` pairs, object frame [m]: room kept free for
             another finger's landing; candidates closer than the radius to the point
             are ignored.
+        distances: The finger's link-object distances on ``manifold``, kept between
+            calls (the searches of one plan ask for the same entries again); None:
+            measured afresh. The same choice either way.
+        epsilons: The screening epsilons of contact sets, kept between calls (with
+            ``mu`` and the object's radius as torque scale); None: computed afresh.
 
     Returns:
         The :class:`NewContact`.
@@ -232,7 +245,7 @@ def choose_new_contact(
         top = order[:rerank]
         t_exit, lasts = ranked.t_exit.copy(), lasts.copy()
         t_exit[top], last = _link_exit(
-            hand, finger.name, obj, manifold, idx[top], ka, contact, lasting
+            hand, finger.name, obj, manifold, idx[top], ka, contact, lasting, distances
         )
         lasts[top] &= last
         ranked = replace(ranked, t_exit=t_exit)
@@ -247,11 +260,39 @@ def choose_new_contact(
         ka,
         others,
         mu,
-        ObjectClearance(hand, finger.name, obj, contact) if link_check else None,
+        _arrival_clearance(hand, finger.name, obj, manifold, ka, contact, distances)
+        if link_check
+        else None,
         q_hand_arrive,
         finger_clearance_m,
+        epsilons,
     )
     return screen.first(order, ranked, P_object, n_P_object, max_checks)
+
+
+def _arrival_clearance(
+    hand: Hand,
+    finger: str,
+    obj: ConvexObject,
+    manifold: Manifold,
+    ka: int,
+    contact: ContactModel,
+    distances: ManifoldClearance | None,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """``points (C,) -> (C,)`` bool: held at the sample ``points`` at the manifold time
+    ``ka``, the finger clears the object (:class:`ObjectClearance`'s test, on the kept
+    ``distances`` if given)."""
+    if distances is None:
+        clear = ObjectClearance(hand, finger, obj, contact)
+        return lambda points: clear(
+            hand.to_full(finger, manifold.q[ka, points]), manifold.T_palm_object[ka]
+        )
+
+    def kept(points: np.ndarray) -> np.ndarray:
+        d, d_tip = distances(np.full(points.size, ka), points)
+        return (d >= contact.choice_link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
+
+    return kept
 
 
 def _arrival_indices(manifold: Manifold, t_arrive_s: float) -> tuple[int, int]:
@@ -321,15 +362,25 @@ class _Screen:
         ka: int,
         others: Mapping[str, tuple[np.ndarray, np.ndarray]],
         mu: float,
-        link_clear: ObjectClearance | None,
+        link_clear: Callable[[np.ndarray], np.ndarray] | None,
         q_hand_arrive: np.ndarray | None,
         finger_clearance_m: float,
+        epsilons: ScreeningEpsilons | None = None,
     ) -> None:
         self.hand, self.finger, self.manifold, self.sample = hand, finger, manifold, sample
         self.ka = ka
         self.other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
         self.other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
         self.mu, self.scale = mu, obj.radius_m
+        if epsilons is None:
+            epsilons = ScreeningEpsilons(mu, obj.radius_m)
+        elif (epsilons.mu, epsilons.scale_m) != (mu, obj.radius_m):
+            raise InputError(
+                "epsilons",
+                f"use mu={epsilons.mu}, scale {epsilons.scale_m} m",
+                f"mu={mu} and the object's radius {obj.radius_m} m",
+            )
+        self.epsilons = epsilons
         self.link_clear = link_clear
         self.q_hand_arrive = q_hand_arrive
         self.finger_clear = (
@@ -341,21 +392,14 @@ class _Screen:
 
     def eps(self, p: np.ndarray, n: np.ndarray) -> float:
         """Ferrari-Canny epsilon of the other contacts and ``(p, n)``."""
-        return ferrari_canny_epsilon(
-            np.vstack([self.other_p, p[None]]),
-            np.vstack([self.other_n, n[None]]),
-            self.mu,
-            n_edges=SCREEN_EDGES,
-            torque_scale_m=self.scale,
-        )
+        return self.epsilons(np.vstack([self.other_p, p[None]]), np.vstack([self.other_n, n[None]]))
 
     def links_clear(self, points: np.ndarray) -> np.ndarray:
         """``(C,)`` bool: the finger at the sample ``points`` keeps its links clear of the
         object at arrival (all True without the test)."""
         if self.link_clear is None:
             return np.ones(points.size, bool)
-        q_full = self.hand.to_full(self.finger.name, self.manifold.q[self.ka, points])
-        return self.link_clear(q_full, self.manifold.T_palm_object[self.ka])
+        return self.link_clear(points)
 
     def rejection(self, i: int, p: np.ndarray, n: np.ndarray) -> tuple[str | None, float]:
         """Why sample point ``i`` at ``(p, n)`` (its links already clear of the object)
@@ -383,6 +427,7 @@ class _Screen:
             self.mu,
             self.scale,
             range(k),
+            self.epsilons,
         )
         return sum(e > FORCE_CLOSURE_TOL for e in loo)
 
@@ -476,13 +521,14 @@ def _link_exit(
     ka: int,
     contact: ContactModel,
     lasting: Callable[[np.ndarray, int], np.ndarray] | None = None,
+    distances: ManifoldClearance | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exit times ``(C,)`` [s] of the manifold points ``points`` from grid index ``ka``,
     cut where another link of the finger comes within ``contact.link_clearance_m`` of the
     object or the fingertip link sinks in by more than ``contact.tip_penetration_m``
     (Coal, at the manifold's times) or ``lasting`` says so, and whether each stays
     usable to the end."""
-    ok = held_clear(hand, finger, obj, manifold, points, ka, contact)
+    ok = held_clear(hand, finger, obj, manifold, points, ka, contact, distances)
     if lasting is not None:
         ok &= lasting(points, ka)
     return exit_times(ok, manifold.times_s[ka:], 0), np.asarray(ok.all(axis=0))

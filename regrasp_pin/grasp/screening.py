@@ -6,6 +6,8 @@
 - :class:`ObjectClearance`: a finger at a candidate contact clears the object (Coal).
 - :func:`held_clear`: held at a contact, the finger stays clear of the object over the
   manifold's times, as the tracking measures it (Coal).
+- :class:`ManifoldClearance`: those Coal distances at a manifold's (time, point)
+  entries, each measured once for the searches of a whole plan.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from ..exceptions import InputError
 from ..model.clearance import LinkClearance
 from ..model.hand import Hand
 from ..model.objects import ConvexObject
@@ -23,6 +26,7 @@ from .quality import ferrari_canny_epsilon
 
 __all__ = [
     "SCREEN_EDGES",
+    "ManifoldClearance",
     "ObjectClearance",
     "ScreeningEpsilons",
     "held_clear",
@@ -68,6 +72,48 @@ def leave_one_out(
     return [eps(np.delete(p, j, 0), np.delete(n, j, 0)) for j in rows]
 
 
+class ManifoldClearance:
+    """The Coal distances [m] of one finger, held at its manifold's points, to the
+    object: from its other links and from its fingertip link (negative when sunk in),
+    each ``(time index, point)`` entry measured once.
+
+    An entry is a pure function of the manifold's configuration and object pose there,
+    so the answers are the same bits as measuring afresh; the searches of one plan ask
+    for the same entries again and again (the same candidates at the next lift-off
+    time, after a failed attempt, when backing up).
+
+    Args:
+        hand: The hand.
+        finger: Finger name.
+        obj: The object.
+        manifold: The finger's manifold (the entries' configurations and poses).
+    """
+
+    def __init__(self, hand: Hand, finger: str, obj: ConvexObject, manifold: Manifold):
+        self.hand, self.finger, self.manifold = hand, finger, manifold
+        self._links = LinkClearance(hand, finger, obj)
+        self._tip = LinkClearance(hand, finger, obj, tip_only=True)
+        self._n = int(manifold.q.shape[1])
+        self._known: dict[int, tuple[float, float]] = {}
+
+    def __call__(self, rows: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(links, tip)`` distances ``(M,)`` [m] at the manifold entries
+        ``(rows[j], points[j])`` (time indices and sample indices, ``(M,)`` each)."""
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        points = np.asarray(points, np.int64).reshape(-1)
+        keys = (rows * self._n + points).tolist()
+        missing = np.array([j for j, k in enumerate(keys) if k not in self._known], np.int64)
+        if missing.size:
+            r, c = rows[missing], points[missing]
+            full = self.hand.to_full(self.finger, self.manifold.q[r, c])
+            T = self.manifold.T_palm_object[r]
+            d, d_tip = self._links(full, T), self._tip(full, T)
+            for j, a, b in zip(missing.tolist(), d.tolist(), d_tip.tolist(), strict=True):
+                self._known[keys[j]] = (a, b)
+        out = np.array([self._known[k] for k in keys], float).reshape(-1, 2)
+        return out[:, 0], out[:, 1]
+
+
 class ObjectClearance:
     """Whether a finger at a candidate contact clears the object: its other links by
     ``contact.choice_link_clearance_m``, its fingertip link not sunk in by more than
@@ -94,6 +140,7 @@ def held_clear(
     points: np.ndarray,
     ka: int,
     contact: ContactModel,
+    distances: ManifoldClearance | None = None,
 ) -> np.ndarray:
     """``(K, C)`` bool over the manifold's times from index ``ka``: the points are usable
     (``contact.limit_margin_rad``) and, held there, the finger's other links keep
@@ -101,15 +148,17 @@ def held_clear(
     most ``contact.tip_penetration_m`` (Coal), at that time and every one before it.
 
     Only the times before a point's first exit from the usable set are measured: what
-    comes after cannot change the first False of a column."""
+    comes after cannot change the first False of a column. ``distances``: where the
+    distances are kept between calls (the finger's, on this manifold); None: measured
+    afresh."""
+    if distances is None:
+        distances = ManifoldClearance(hand, finger, obj, manifold)
+    elif distances.manifold is not manifold or distances.finger != finger:
+        raise InputError("distances", "belong to another finger or manifold", f"{finger}'s")
     usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
     still = np.logical_and.accumulate(usable, axis=0)  # (K, C): not left yet
     rows, cols = np.nonzero(still)
-    q = manifold.q[ka + rows, points[cols]]  # finite where usable
-    full = hand.to_full(finger, q)
-    T = manifold.T_palm_object[ka + rows]
-    d = LinkClearance(hand, finger, obj)(full, T)
-    d_tip = LinkClearance(hand, finger, obj, tip_only=True)(full, T)
+    d, d_tip = distances(ka + rows, points[cols])  # finite where usable
     ok = np.zeros_like(still)
     ok[rows, cols] = (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
     return np.logical_and.accumulate(ok, axis=0)

@@ -32,7 +32,7 @@ import functools
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
 from ..grasp.choice import NewContact, choose_new_contact
 from ..grasp.contact import ContactModel
 from ..grasp.manifold import Manifold
+from ..grasp.screening import ManifoldClearance, ScreeningEpsilons
 from ..model.objects import SurfaceSample
 from ..model.scene import Scene
 from .outcomes import dominant_kind, failure_summary
@@ -139,6 +140,13 @@ class RegraspSearch:
     exclude_radius_m: float | None = None
     exit_tolerance_s: float = 0.25
     stretches: int = 2
+    _distances: dict[str, ManifoldClearance] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    _lasting: tuple[tuple, dict[int, np.ndarray]] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
+    _epsilons: ScreeningEpsilons | None = field(default=None, init=False, repr=False, compare=False)
 
     def find(
         self,
@@ -268,6 +276,8 @@ class RegraspSearch:
             exit_tolerance_s=self.exit_tolerance_s,
             lasting=functools.partial(self._clear_of_others, finger, list(others), q_hand),
             reserved=reserved,
+            distances=self._distances_of(finger),
+            epsilons=self._screening_epsilons(),
         )
 
     # ------------------------------------------------------------------ internals
@@ -280,16 +290,47 @@ class RegraspSearch:
         ka: int,
     ) -> np.ndarray:
         """``(K, C)``: the candidates ``points`` stay clear of the holding fingers (by
-        the trigger distance) at the manifold's times from index ``ka`` on."""
+        the trigger distance) at the manifold's times from index ``ka`` on.
+
+        A candidate's column depends on it alone; the columns of the last ``(finger,
+        others, q_hand, ka)`` asked are kept (the candidates of one lift-off time are
+        ranked again after each failed attempt)."""
+        key = (finger, tuple(others), q_hand, ka)
+        if self._lasting is None or self._lasting[0] != key:
+            self._lasting = (key, {})
+        known = self._lasting[1]
+        wanted = [int(i) for i in np.asarray(points).reshape(-1)]
+        missing = sorted({i for i in wanted if i not in known})
+        if missing:
+            m = self.manifolds[finger]
+            ok = clear_of_fingers(
+                self.scene.hand,
+                finger,
+                m.q[ka:, missing],
+                q_hand(m.times_s[ka:]),
+                others,
+                self.contact.finger_trigger_m,
+            )
+            known.update(zip(missing, ok.T, strict=True))
+        K = self.manifolds[finger].times_s.size - ka
+        return np.stack([known[i] for i in wanted], axis=1) if wanted else np.ones((K, 0), bool)
+
+    def _screening_epsilons(self) -> ScreeningEpsilons:
+        """The screening epsilons of contact sets, kept for the whole plan."""
+        if self._epsilons is None:
+            self._epsilons = ScreeningEpsilons(self.mu, self.scene.obj.radius_m)
+        return self._epsilons
+
+    def _distances_of(self, finger: str) -> ManifoldClearance:
+        """The finger's link-object distances on its manifold, kept for the whole plan
+        (measured again for a manifold that replaced it)."""
         m = self.manifolds[finger]
-        return clear_of_fingers(
-            self.scene.hand,
-            finger,
-            m.q[ka:, points],
-            q_hand(m.times_s[ka:]),
-            others,
-            self.contact.finger_trigger_m,
-        )
+        kept = self._distances.get(finger)
+        if kept is None or kept.manifold is not m:
+            kept = self._distances[finger] = ManifoldClearance(
+                self.scene.hand, finger, self.scene.obj, m
+            )
+        return kept
 
     def _exclude_radius(self, finger: str) -> float:
         if self.exclude_radius_m is not None:
