@@ -156,5 +156,6 @@ class FingerClearance:
         if not self.pairs:
             return float(np.inf)
         q = np.asarray(q_full, float)
-        pin.computeDistances(self.hand.model, self._data, self._model, self._gdata, q)
-        return float(min(r.min_distance for r in self._gdata.distanceResults))
+        # Pinocchio returns the pair of the smallest distance (the first of equals)
+        k = pin.computeDistances(self.hand.model, self._data, self._model, self._gdata, q)
+        return float(self._gdata.distanceResults[k].min_distance)
