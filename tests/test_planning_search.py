@@ -163,3 +163,30 @@ def test_a_surface_path_too_fast_at_every_duration_falls_back_to_joint_space(pro
     else:  # the first candidate's fallback passed
         assert result is not None and result.route == "joint-space" and result.report.ok
         assert result.t_end - result.t_start == pytest.approx(durations[-1], abs=1e-9)
+
+
+def test_a_regrasp_that_failed_is_not_planned_again(problem, monkeypatch):
+    """Every regrasp fails by its joint speeds: each Q is tried at longer durations,
+    and the Q chosen for a later arrival takes over; a Q given up that way comes back
+    as the best of the next round, at the duration that failed already. No regrasp (the
+    same lift-off, Q, duration and route) is planned or recorded twice."""
+    import regrasp_pin.planning.search as search_module
+
+    planned = []
+
+    def too_fast(hand, obj, motion, finger, t_start, P, n_P, Q, n_Q, q_start, q_hand, **kw):
+        planned.append(
+            (round(t_start, 9), tuple(Q), round(kw["params"].duration_s, 9), kw["route"])
+        )
+        raise PlanningError(
+            "too fast (test)", finger=finger, kind=FailureKind.VELOCITY, measured=2.0, required=1.0
+        )
+
+    monkeypatch.setattr(search_module, "plan_regrasp", too_fast)
+    with pytest.raises(PlanningError) as err:
+        problem(fresh=True)
+    assert err.value.kind == FailureKind.VELOCITY
+    assert len(planned) >= 6
+    assert len(set(planned)) == len(planned)
+    recorded = [a.what for a in err.value.attempts if a.kind == FailureKind.VELOCITY]
+    assert len(recorded) == len(planned) and len(set(recorded)) == len(recorded)

@@ -197,6 +197,7 @@ class RegraspSearch:
             [p + self.scene.hand.finger(n).tip_radius * nn for n, (p, nn) in others.items()]
         ).reshape(-1, 3)
         attempts: list[Attempt] = []
+        failed: dict[tuple, PlanningError] = {}  # regrasps that failed, by what they were
         for start in starts:
             if start + d_min > end_by + TIME_TOL_S:
                 attempts.append(
@@ -230,6 +231,7 @@ class RegraspSearch:
                     landing_check,
                     reserved,
                     d_min,
+                    failed,
                 )
                 if found is None:
                     break  # no candidate left at this start
@@ -353,8 +355,15 @@ class RegraspSearch:
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
         reserved: Sequence[tuple[np.ndarray, float]] = (),
         shortest_s: float | None = None,
+        failed: dict[tuple, PlanningError] | None = None,
     ) -> Found | bool | None:
-        """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q)."""
+        """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q).
+
+        ``failed`` holds the regrasps of this search that failed, by lift-off, Q, its
+        arrival configuration, duration and route: one asked for again (a Q given up for
+        another at a longer duration comes back as the best of the next round) fails
+        as before without being planned, recorded or paid for again."""
+        failed = {} if failed is None else failed
         f = self.scene.hand.finger(finger)
         d_min = self.regrasp.duration_s if shortest_s is None else shortest_s
         where = f"start {start:.2f} s"
@@ -401,28 +410,12 @@ class RegraspSearch:
                     speeds.clear()  # another Q: another path
                 choice = again
                 what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
-            budget.spend()
             try:
-                result = plan_regrasp(
-                    self.scene.hand,
-                    self.scene.obj,
-                    self.scene.motion,
-                    finger,
-                    start,
-                    P[0],
-                    P[1],
-                    choice.p_object,
-                    choice.n_object,
-                    q0,
-                    q_hand,
-                    others_tips_object=others_tips,
-                    params=replace(self.regrasp, duration_s=duration),
-                    q_land=choice.q_arrive,
-                    route=route,
-                )
+                result = self._plan_once(
+                    finger, P, start, choice, q0, q_hand, others_tips, duration, route,
+                    failed, budget, attempts, what,
+                )  # fmt: skip
             except PlanningError as exc:
-                attempts.append(exc.as_attempt(what))
-                log.debug("regrasp %s: %s", finger, exc)
                 retry = self._after_velocity(exc, speeds, duration, start, end_by, stretches, route)
                 if retry is None:
                     break
@@ -435,6 +428,53 @@ class RegraspSearch:
             return Found(result, choice, tuple(attempts))
         excluded.append(choice.p_object)
         return False
+
+    def _plan_once(
+        self,
+        finger: str,
+        P: tuple[np.ndarray, np.ndarray],
+        start: float,
+        choice: NewContact,
+        q0: np.ndarray,
+        q_hand: Callable[[np.ndarray], np.ndarray],
+        others_tips: np.ndarray,
+        duration: float,
+        route: str,
+        failed: dict[tuple, PlanningError],
+        budget: SearchBudget,
+        attempts: list[Attempt],
+        what: str,
+    ) -> RegraspResult:
+        """:func:`~.regrasp.plan_regrasp` of ``choice`` at ``duration`` by ``route``; a
+        failure is recorded in ``attempts`` and ``failed``, and one already in
+        ``failed`` is raised again at no cost."""
+        key = (round(start, 9), choice.index, choice.q_arrive.tobytes(), round(duration, 9), route)
+        if key in failed:
+            raise failed[key]
+        budget.spend()
+        try:
+            return plan_regrasp(
+                self.scene.hand,
+                self.scene.obj,
+                self.scene.motion,
+                finger,
+                start,
+                P[0],
+                P[1],
+                choice.p_object,
+                choice.n_object,
+                q0,
+                q_hand,
+                others_tips_object=others_tips,
+                params=replace(self.regrasp, duration_s=duration),
+                q_land=choice.q_arrive,
+                route=route,
+            )
+        except PlanningError as exc:
+            failed[key] = exc
+            attempts.append(exc.as_attempt(what))
+            log.debug("regrasp %s: %s", finger, exc)
+            raise
 
     def _after_velocity(
         self,
