@@ -154,7 +154,11 @@ def held_clear(
     if distances is None:
         distances = ManifoldClearance(hand, finger, obj, manifold)
     elif distances.manifold is not manifold or distances.finger != finger:
-        raise InputError("distances", "belong to another finger or manifold", f"{finger}'s")
+        raise InputError(
+            "distances",
+            f"are {distances.finger!r}'s, on another manifold or finger",
+            f"a ManifoldClearance of {finger!r} on this manifold",
+        )
     usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
     still = np.logical_and.accumulate(usable, axis=0)  # (K, C): not left yet
     rows, cols = np.nonzero(still)
