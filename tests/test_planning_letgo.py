@@ -12,7 +12,8 @@ import numpy as np
 
 from regrasp_pin import plan_manipulation
 from regrasp_pin.exceptions import PlanningError
-from regrasp_pin.planning import advance
+from regrasp_pin.planning import advance, letgo
+from regrasp_pin.planning.release import plan_release
 from regrasp_pin.suite import build_scenario
 from regrasp_pin.suite.specs import neighbour_specs
 
@@ -49,3 +50,49 @@ def test_a_let_go_leaves_every_other_hold_unlost(monkeypatch):
             upto = (tr.times_s >= h.t_from - 1e-9) & (tr.times_s <= after.now + 1e-9)
             held = (tr.error_m <= c.ik_tol_m) & (tr.margin_rad >= 0.0) & (tr.pad_cos >= c.cos_cone)
             assert np.all(held[upto]), (name, after.now)
+
+
+class _Forgetful(dict):
+    """A ``PlanContext.releases`` that keeps nothing."""
+
+    def __setitem__(self, key, value):
+        pass
+
+
+def _plan_recording_releases(monkeypatch, name, forget):
+    spec = next(s for s in neighbour_specs(("five_finger",)) if s.name == name)
+    scen = build_scenario(spec)
+    planned = []
+
+    def recorded_release(hand, obj, motion, finger, t_r, P, q_r, q_hand, **kw):
+        times = np.linspace(t_r, motion.t_end, 20)
+        planned.append(
+            (finger, round(t_r, 9), kw["q_park"] is None, q_r.tobytes(), q_hand(times).tobytes())
+        )
+        return plan_release(hand, obj, motion, finger, t_r, P, q_r, q_hand, **kw)
+
+    def let_go(ctx, *args):
+        if forget:
+            ctx.releases = _Forgetful()
+        return letgo.let_go(ctx, *args)
+
+    monkeypatch.setattr(letgo, "plan_release", recorded_release)
+    monkeypatch.setattr(advance, "let_go", let_go)
+    try:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    except PlanningError as exc:
+        return planned, (exc.kind, exc.finger, exc.time_s, len(exc.partial.regrasps()))
+    return planned, "full plan"
+
+
+def test_a_release_is_planned_once_for_a_plan(monkeypatch):
+    """Backing up asks for the same release (the finger, the time, its hold and the
+    others' motion) again from other branches: it is planned once. A plan that forgets
+    the releases it planned asks for some twice, and ends the same way."""
+    name = "five_finger-hexagon--100deg-20dps"
+    kept, outcome = _plan_recording_releases(monkeypatch, name, forget=False)
+    forgot, outcome_forgot = _plan_recording_releases(monkeypatch, name, forget=True)
+    assert kept and len(set(kept)) == len(kept)
+    assert len(set(forgot)) < len(forgot)  # the repeats the plan no longer makes
+    assert set(forgot) == set(kept)
+    assert outcome == outcome_forgot

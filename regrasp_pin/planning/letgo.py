@@ -19,7 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..exceptions import ContactError, PlanningError
-from ..grasp.holding import holding_q, rest_configuration
+from ..grasp.holding import Holding, holding_q, rest_configuration
 from ..grasp.manifold import build_manifold
 from ..plan import JoinPhase, ReleasePhase
 from .join import join_duration, plan_join
@@ -87,7 +87,7 @@ def _try_release(
     q_hand = q_hand_of(ctx, state, stay)
     tried: list[str] = []
     for t_r in _release_times(ctx, win):
-        rel = _release_either(ctx, state, name, t_r, q_hand, tried)
+        rel = _release_either(ctx, state, name, t_r, stay, q_hand, tried)
         if rel is not None:
             others = (
                 f"{len(stay)} others go on"
@@ -140,18 +140,19 @@ def _release_either(
     state: PlanState,
     name: str,
     t_r: float,
+    stay: list[str],
     q_hand: Callable[[np.ndarray], np.ndarray],
     tried: list[str],
 ) -> Release | None:
-    """A verified release of ``name`` at ``t_r`` [s]: staying where it backed off, else
-    moving to its parking posture (:func:`_park`); None if neither verifies (the
-    failures noted in ``tried``)."""
+    """A verified release of ``name`` at ``t_r`` [s] (``q_hand``: the ``stay`` fingers
+    holding): staying where it backed off, else moving to its parking posture
+    (:func:`_park`); None if neither verifies (the failures noted in ``tried``)."""
     h = state.holding[name]
     q_r = holding_q(
         ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), ctx.params.contact.ik_tol_m
     )[0]
     for park in (None, _park(ctx, name)):
-        rel = _release_at(ctx, state, name, t_r, q_r, q_hand, park, tried)
+        rel = _release_at(ctx, state, name, t_r, q_r, stay, q_hand, park, tried)
         if rel is not None:
             return rel
     return None
@@ -163,12 +164,51 @@ def _release_at(
     name: str,
     t_r: float,
     q_r: np.ndarray,
+    stay: list[str],
     q_hand: Callable[[np.ndarray], np.ndarray],
     park: np.ndarray | None,
     tried: list[str],
 ) -> Release | None:
     """A verified release of ``name`` at ``t_r`` (``park``: see plan_release), or None
-    (the failure noted in ``tried``)."""
+    (the failure noted in ``tried``).
+
+    The outcome is kept for the plan (``ctx.releases``), by what it depends on: the
+    finger, the time, parked or not, its hold and the holds and releases the others'
+    motion comes from. Backing up asks for the same release again from other
+    branches; it is answered, not planned or paid for again."""
+    key = (
+        name,
+        round(t_r, 9),
+        park is None,
+        _hold_key(state.holding[name]),
+        tuple((n, _hold_key(state.holding[n])) for n in sorted(stay)),
+        tuple((n, r.times_s.tobytes(), r.q.tobytes()) for n, r in sorted(state.released.items())),
+    )
+    outcome = ctx.releases.get(key)
+    if outcome is None:
+        outcome = ctx.releases[key] = _plan_release(ctx, state, name, t_r, q_r, q_hand, park)
+    if isinstance(outcome, PlanningError):
+        tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {outcome.kind.value}")
+        return None
+    return outcome
+
+
+def _hold_key(h: Holding) -> tuple:
+    """What a hold's configurations over time follow from: the contact, when it was
+    taken and the track followed from there."""
+    return (round(h.t_from, 9), h.p.tobytes(), h.n.tobytes(), h.track.q.tobytes())
+
+
+def _plan_release(
+    ctx: PlanContext,
+    state: PlanState,
+    name: str,
+    t_r: float,
+    q_r: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    park: np.ndarray | None,
+) -> Release | PlanningError:
+    """:func:`~.release.plan_release` of ``name`` at ``t_r``, or its failure."""
     p, h = ctx.params, state.holding[name]
     ctx.budget.spend()
     try:
@@ -191,8 +231,7 @@ def _release_at(
             park_s=p.regrasp.duration_s,
         )
     except PlanningError as exc:
-        tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {exc.kind.value}")
-        return None
+        return exc
 
 
 def _apply_release(state: PlanState, name: str, rel: Release, why: str) -> PlanState:
@@ -245,7 +284,7 @@ def _try_handover(
         if t_r + p.release_back_off_s + p.regrasp.duration_s > ctx.scene.motion.t_end - p.dt_s:
             continue  # no time for the other finger to join
         failed: list[str] = []
-        rel = _release_either(ctx, state, name, t_r, q_hand, failed)
+        rel = _release_either(ctx, state, name, t_r, stay, q_hand, failed)
         if rel is None:
             log.debug("%s cannot let go at %s", name, failed)
             continue

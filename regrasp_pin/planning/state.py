@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..exceptions import PlanningError
 from ..grasp.holding import Holding, holding_q, start_holding
 from ..grasp.manifold import Manifold
 from ..model.scene import Scene
@@ -60,7 +61,8 @@ class PlanContext:
     grid of the holds, the parameters, the fingers that take part, the regrasp search,
     its budget, the idle fingers' configuration ``base_q``, the manifolds (an idle
     finger's built when it joins), the options already taken at a state
-    (``tried``) and where let-go fingers park."""
+    (``tried``), where let-go fingers park and the let-go outcomes already planned
+    (``releases``, see :func:`~.letgo.let_go`)."""
 
     scene: Scene
     grid: np.ndarray
@@ -72,6 +74,7 @@ class PlanContext:
     manifolds: dict[str, Manifold]
     tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
     parks: dict[str, np.ndarray] = field(default_factory=dict)  # where let-go fingers go
+    releases: dict[tuple, Release | PlanningError] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
