@@ -94,23 +94,26 @@ class ManifoldClearance:
         self._links = LinkClearance(hand, finger, obj)
         self._tip = LinkClearance(hand, finger, obj, tip_only=True)
         self._n = int(manifold.q.shape[1])
-        self._known: dict[int, tuple[float, float]] = {}
+        self._known = np.zeros(0, np.int64)  # entries measured (row * N + point), sorted
+        self._values = np.zeros((0, 2))  # their (links, tip) distances [m]
 
     def __call__(self, rows: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(links, tip)`` distances ``(M,)`` [m] at the manifold entries
         ``(rows[j], points[j])`` (time indices and sample indices, ``(M,)`` each)."""
-        rows = np.asarray(rows, np.int64).reshape(-1)
-        points = np.asarray(points, np.int64).reshape(-1)
-        keys = (rows * self._n + points).tolist()
-        missing = np.array([j for j, k in enumerate(keys) if k not in self._known], np.int64)
-        if missing.size:
-            r, c = rows[missing], points[missing]
+        keys = np.asarray(rows, np.int64).reshape(-1) * self._n + np.asarray(
+            points, np.int64
+        ).reshape(-1)
+        new = np.setdiff1d(keys, self._known)  # sorted, unique
+        if new.size:
+            r, c = np.divmod(new, self._n)
             full = self.hand.to_full(self.finger, self.manifold.q[r, c])
             T = self.manifold.T_palm_object[r]
-            d, d_tip = self._links(full, T), self._tip(full, T)
-            for j, a, b in zip(missing.tolist(), d.tolist(), d_tip.tolist(), strict=True):
-                self._known[keys[j]] = (a, b)
-        out = np.array([self._known[k] for k in keys], float).reshape(-1, 2)
+            measured = np.stack([self._links(full, T), self._tip(full, T)], axis=1)
+            keys_all = np.concatenate([self._known, new])
+            order = np.argsort(keys_all, kind="stable")
+            self._known = keys_all[order]
+            self._values = np.concatenate([self._values, measured])[order]
+        out = self._values[np.searchsorted(self._known, keys)]
         return out[:, 0], out[:, 1]
 
 
