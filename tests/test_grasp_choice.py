@@ -35,6 +35,7 @@ from regrasp_pin.grasp import screening as screening_module
 from regrasp_pin.grasp.choice import (
     _link_exit,
     _Ranking,
+    _rerank,
     _Screen,
     choose_new_contact,
     exit_times,
@@ -989,3 +990,63 @@ def test_screening_epsilons_are_the_hulls_each_computed_once(monkeypatch):
     assert len(calls) == 5
     eps(p[::-1], n[::-1])
     assert len(calls) == 6
+
+
+def _cut_ranking(seed: int, n: int, tolerance: float) -> tuple[_Ranking, np.ndarray, np.ndarray]:
+    """Random candidates (exit times on a 0.01 s grid up to 3 s) and their cut exit
+    times: each cut to a random earlier grid time or kept, as links and other fingers
+    do (a cut never lengthens a hold)."""
+    rng = np.random.default_rng(seed)
+    t_exit = np.round(rng.uniform(0.1, 3.0, n), 2)
+    cut = np.where(rng.random(n) < 0.6, np.round(t_exit * rng.random(n), 2), t_exit)
+    ranked = _Ranking(
+        t_exit=t_exit,
+        margin=rng.uniform(0.05, 0.3, n),
+        dist=rng.uniform(0.0, 0.05, n),
+        idx=np.arange(n) * 3,
+        exit_tolerance_s=tolerance,
+    )
+    return ranked, cut, np.zeros(n, bool)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_rerank_gives_the_first_candidates_of_the_fully_cut_ranking(seed):
+    """An uncut exit time bounds the cut one from above, so once the first `rerank`
+    candidates are all cut, no other can come before them: the head of the order is the
+    one that cutting every candidate gives (the paper's order), with fewer cut."""
+    ranked, cut, lasts = _cut_ranking(seed, 80, 0.0)
+    asked: list[int] = []
+
+    def cutter(top):
+        asked.extend(top.tolist())
+        return cut[top], np.zeros(top.size, bool)
+
+    got, order = _rerank(ranked, lasts, 12, 80, cutter)
+    full = dataclasses.replace(ranked, t_exit=cut).order(lasts)
+    assert order[:12].tolist() == full[:12].tolist()
+    assert len(set(asked)) == len(asked)  # no candidate cut twice
+    assert set(order[:12].tolist()) <= set(asked)
+    np.testing.assert_array_equal(got.t_exit[asked], cut[asked])
+
+
+def test_rerank_looks_past_the_first_candidates_when_their_holds_are_cut_short():
+    """The first twelve by the manifold are all cut to 0.5 s; the thirteenth holds 2.5 s
+    uncut: it comes first (a fixed re-rank of twelve would have put it after them)."""
+    n = 20
+    t_exit = np.r_[np.full(12, 3.0), 2.5, np.full(7, 1.0)]
+    cut = np.r_[np.full(12, 0.5), 2.5, np.full(7, 1.0)]
+    ranked = _Ranking(t_exit, np.full(n, 0.1), np.zeros(n), np.arange(n), 0.25)
+    asked: list[np.ndarray] = []
+
+    def cutter(top):
+        asked.append(top)
+        return cut[top], top < 0
+
+    got, order = _rerank(ranked, np.zeros(n, bool), 12, 60, cutter)
+    assert order[0] == 12 and got.t_exit[12] == 2.5
+    assert sorted(np.concatenate(asked).tolist()) == list(range(20))  # 12, then the rest
+    # at most twelve cut: the order is by what is known (the others' bounds)
+    asked.clear()
+    got, capped = _rerank(ranked, np.zeros(n, bool), 12, 12, cutter)
+    assert len(asked) == 1 and sorted(asked[0].tolist()) == list(range(12))
+    assert capped[0] == 12 and set(capped[8:].tolist()) == set(range(12))

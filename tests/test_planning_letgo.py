@@ -89,7 +89,7 @@ def test_a_release_is_planned_once_for_a_plan(monkeypatch):
     """Backing up asks for the same release (the finger, the time, its hold and the
     others' motion) again from other branches: it is planned once. A plan that forgets
     the releases it planned asks for some twice, and ends the same way."""
-    name = "five_finger-hexagon--100deg-20dps"
+    name = "five_finger-hexagon--100deg-40dps"
     kept, outcome = _plan_recording_releases(monkeypatch, name, forget=False)
     forgot, outcome_forgot = _plan_recording_releases(monkeypatch, name, forget=True)
     assert kept and len(set(kept)) == len(kept)

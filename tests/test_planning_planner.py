@@ -377,9 +377,9 @@ def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
     lift off before a regrasp of the shortest duration (0.25 s) could land. A faster
     one (as short as rush_duration_s, within the joint velocity limits) lands in time:
     a full plan that passes the independent re-check. Without faster regrasps, every
-    regrasp takes the shortest duration at least (this spec then finds another
-    sequence; before holding fingers stayed where their contacts were lost, it failed
-    finger-busy)."""
+    regrasp takes the shortest duration at least (whether this spec then finds another
+    sequence, as it did before the choice of Q re-ranked past its first candidates,
+    or fails)."""
     scen = build_scenario(generate_specs(82, seed=0)[81])
     result = plan_manipulation(
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
@@ -403,6 +403,13 @@ def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
         assert np.all(speed <= f.velocity_limit * (1 + 1e-6)), speed.max(axis=0)
     check = recheck_plan(plan, max_step_rad=1e-3)
     assert check.ok, check.problems
+    # without faster regrasps (a full plan or not), every regrasp takes D at least
     slow = replace(scen.params, rush_duration_s=None)
-    other = plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=slow)
-    assert all(r.t_end - r.t_start >= D - 1e-9 for r in other.regrasps)
+    try:
+        other = plan_manipulation(
+            scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=slow
+        ).plan
+    except PlanningError as exc:
+        other = exc.partial
+    assert other.regrasps()
+    assert all(r.t_end - r.t_start >= D - 1e-9 for r in other.regrasps())

@@ -18,6 +18,12 @@ that pass, Q is the one after which most other fingers could let go with the res
 force closure (so that a finger that must regrasp later can), then one that keeps the
 quality, then the first; the result says whether the quality was kept.
 
+What the manifold does not model (the finger's other links reaching the object, a
+holding neighbour coming near) only shortens a hold, so the manifold's exit times bound
+the real ones from above: the first candidates' exit times are cut by it and all are
+ranked again, and again while uncut candidates come first (:func:`_rerank`), so that
+the head of the order is the one the real exit times give.
+
 "Distance from P" is the straight-line distance in the object frame (a lower bound of
 the surface distance; it is only a tie-breaker).
 """
@@ -239,18 +245,15 @@ def choose_new_contact(
     lasts = holdable[-1, idx].copy()
     order = ranked.order(lasts)
     if link_check and rerank > 0:
-        # the manifold knows nothing of the finger's other links: the first candidates'
-        # exit times are cut where a link would come within the trigger distance of the
-        # object (Coal, at the manifold's times), and those candidates ranked again
-        top = order[:rerank]
-        t_exit, lasts = ranked.t_exit.copy(), lasts.copy()
-        t_exit[top], last = _link_exit(
-            hand, finger.name, obj, manifold, idx[top], ka, contact, lasting, distances
+        ranked, order = _rerank(
+            ranked,
+            lasts,
+            rerank,
+            max_checks,
+            lambda top: _link_exit(
+                hand, finger.name, obj, manifold, idx[top], ka, contact, lasting, distances
+            ),
         )
-        lasts[top] &= last
-        ranked = replace(ranked, t_exit=t_exit)
-        head = ranked.order(lasts)
-        order = np.concatenate([head[np.isin(head, top)], order[rerank:]])
     screen = _Screen(
         hand,
         finger,
@@ -510,6 +513,38 @@ class _Screen:
             measured=float(rejected[main]),
             required=0.0,
         )
+
+
+def _rerank(
+    ranked: _Ranking,
+    lasts: np.ndarray,
+    rerank: int,
+    most: int,
+    cut: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+) -> tuple[_Ranking, np.ndarray]:
+    """The ranking with the first candidates' exit times cut by what the manifold does
+    not model (``cut``: candidate positions -> exit times, usable to the end), and the
+    order it gives.
+
+    The manifold knows nothing of the finger's other links or of the other fingers:
+    their cuts only shorten a candidate's exit time, so an uncut exit time is an upper
+    bound. The first ``rerank`` candidates are cut and all are ranked again; while the
+    new first ``rerank`` hold candidates not yet cut (which may outlast the ones cut),
+    those are cut too, until the first ``rerank`` are all cut or ``most`` candidates
+    have been.
+    """
+    t_exit, lasts = ranked.t_exit.copy(), lasts.copy()
+    done = np.zeros(t_exit.size, bool)
+    order = ranked.order(lasts)
+    while True:
+        top = order[:rerank][~done[order[:rerank]]]
+        if top.size == 0 or int(done.sum()) >= most:
+            return ranked, order
+        t_exit[top], last = cut(top)
+        lasts[top] &= last
+        done[top] = True
+        ranked = replace(ranked, t_exit=t_exit.copy())
+        order = ranked.order(lasts)
 
 
 def _link_exit(
