@@ -164,6 +164,7 @@ def advance(
         )
     others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
     landed: dict[int, Holding] = {}  # id(verified regrasp) -> the hold after it
+    others_lost = _others_lost_by(ctx, state, name, triggers)
 
     def search(starts: list[float], end_by: float | None) -> Found:
         return ctx.search.find(
@@ -174,7 +175,7 @@ def advance(
             others,
             q_hand_of(ctx, state, stay),
             ctx.budget,
-            end_by_s=end_by,
+            end_by_s=_earliest(end_by, others_lost),  # landing later: a dead end
             exclude=exclude,
             landing_check=lambda res: _check_landing(ctx, name, res, landed, triggers),
             reserved=reserved,
@@ -315,6 +316,33 @@ def _check_landing(
         f"{', '.join(chain.order)} must start (t={chain.latest_start_s:.2f} s, "
         f"{chain.binding}'s hold)",
     )
+
+
+def _others_lost_by(
+    ctx: PlanContext, state: PlanState, name: str, triggers: list[Trigger]
+) -> float | None:
+    """The earliest time [s] at which another finger's hold is lost (not because
+    ``name`` comes near it), or None: a regrasp of ``name`` that lands later leaves that
+    finger no turn to let go (one finger in the air at a time), a dead end whatever
+    follows (a long regrasp, stretched for the joint velocity limits, used to land
+    there and the search went on from a state it could not leave)."""
+    end = ctx.scene.motion.t_end - ctx.params.dt_s - TIME_TOL_S
+    lost = [
+        e.lost_s
+        for e in triggers
+        if e.finger != name
+        and e.finger in state.holding
+        and e.finger not in state.held_to_end
+        and e.lost_near != name
+        and e.lost_s < end
+    ]
+    return min(lost) if lost else None
+
+
+def _earliest(*times_s: float | None) -> float | None:
+    """The earliest of the times given [s] (None: no time), or None."""
+    given = [t for t in times_s if t is not None]
+    return min(given) if given else None
 
 
 def _refuse_dead_end(
