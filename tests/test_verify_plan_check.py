@@ -218,6 +218,54 @@ def test_holding_fingers_that_touch_are_reported(clean):
     assert any(p.startswith("index and middle touch at t=") for p in chk.problems)
 
 
+def test_every_finger_against_the_object_at_every_sample(clean):
+    """The smallest finger-object distance over the plan's samples is Coal's exact
+    minimum over every finger geometry and sample (the holding fingertips touch the
+    object); a holding finger flexed into the object at one sample is reported, with
+    its geometry and time, though no regrasp moves it."""
+    import coal
+    import pinocchio as pin
+
+    plan, hand, _ = clean
+    chk = recheck_plan(plan)
+    model, geom = hand.model, hand.collision_model
+    data, gdata = model.createData(), pin.GeometryData(geom)
+    pts = coal.StdVec_Vec3s()
+    pts.extend([np.asarray(v, float) for v in plan.object["vertices"]])
+    obj = coal.Convex.convexHull(pts, False, None)
+    poses = plan.poses()
+    best = np.inf
+    for k in range(plan.t.size):
+        pin.updateGeometryPlacements(model, data, geom, gdata, plan.q[k])
+        tf = coal.Transform3s(poses[k][:3, :3], poses[k][:3, 3])
+        for g, o in enumerate(geom.geometryObjects):
+            if int(o.parentJoint) == 0:
+                continue  # the palm: checked against the object on its own
+            M = gdata.oMg[g]
+            d = coal.distance(
+                o.geometry,
+                coal.Transform3s(M.rotation, M.translation),
+                obj,
+                tf,
+                coal.DistanceRequest(),
+                coal.DistanceResult(),
+            )
+            best = min(best, d)
+    assert chk.min_object_distance_samples_m == pytest.approx(best, abs=1e-9)
+    assert abs(chk.min_object_distance_samples_m) <= 1e-4  # the fingertips touch
+    f = hand.fingers["middle"]  # it holds throughout
+    q = plan.q.copy()
+    q[40, f.q_indices[1]] += 0.3  # flexed into the object at one sample
+    bad = recheck_plan(_with_q(plan, q))
+    assert not bad.ok and bad.min_object_distance_samples_m < -1e-3
+    assert bad.t_min_object_samples_s == pytest.approx(plan.t[40])
+    assert bad.object_geometry_samples.startswith("middle")
+    assert any(
+        p.startswith(f"the finger geometry {bad.object_geometry_samples!r} enters the object")
+        for p in bad.problems
+    )
+
+
 def test_the_object_against_the_palm(clean):
     """The smallest object-palm distance is Coal's at the plan's own poses (the same as
     palm_clearance's), and an object moved into the palm is reported."""

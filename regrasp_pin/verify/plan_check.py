@@ -18,6 +18,8 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
   different fingers apart (fingers that hold can also collide), and the object out of
   the hand's fixed geometry (the palm, a locked wrist: the geometry no joint moves)
   within ``penetration_tol_m``;
+* at every sample of the plan, every finger's geometries (a holding finger's other
+  links too, and its fingertip link) out of the object within ``penetration_tol_m``;
 * every sample inside the joint limits (linear interpolation between samples inside
   a box stays inside it, so the samples suffice);
 * the fewest fingers holding a contact at any instant (exact: the count is constant
@@ -141,6 +143,11 @@ class PlanCheck:
             palm, a locked wrist) [m]; inf when the hand has none.
         palm_geometry: The fixed geometry of that distance ("" without one).
         t_min_palm_s: When it occurs [s].
+        min_object_distance_samples_m: Smallest signed distance between the fingers'
+            geometries (holding, idle or moving) and the object at the plan's samples
+            [m]; a holding fingertip touches it (about 0); inf without finger geometry.
+        object_geometry_samples: The finger geometry of that distance ("" without one).
+        t_min_object_samples_s: When it occurs [s].
         problems: Every problem found, in plain words.
     """
 
@@ -159,6 +166,9 @@ class PlanCheck:
     min_palm_distance_m: float
     palm_geometry: str
     t_min_palm_s: float
+    min_object_distance_samples_m: float
+    object_geometry_samples: str
+    t_min_object_samples_s: float
     problems: tuple[str, ...]
 
     @property
@@ -256,6 +266,15 @@ def recheck_plan(
             f"(tolerance {pen_tol * 1e3:.3f} mm)"
         )
 
+    # every finger at every sample (a holding finger's other links too; the moves are
+    # checked densely below)
+    d_obj, k_obj, obj_geom = _min_finger_object_distance(scene, R_geom, x_geom)
+    if d_obj < -pen_tol:
+        problems.append(
+            f"the finger geometry {obj_geom!r} enters the object at t={plan.t[k_obj]:.3f} s "
+            f"by {-d_obj * 1e3:.3f} mm (tolerance {pen_tol * 1e3:.3f} mm)"
+        )
+
     checks: list[RegraspCheck] = []
     idle_checks: list[RegraspCheck] = []
     moves: list[RegraspPhase | ReleasePhase | JoinPhase | IdlePhase] = [
@@ -296,6 +315,9 @@ def recheck_plan(
         min_palm_distance_m=d_palm,
         palm_geometry=palm_geom,
         t_min_palm_s=float(plan.t[k_palm]),
+        min_object_distance_samples_m=d_obj,
+        object_geometry_samples=obj_geom,
+        t_min_object_samples_s=float(plan.t[k_obj]),
         problems=tuple(problems),
     )
 
@@ -674,6 +696,40 @@ def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
 
     d, (k, j) = _exact_min(lower, d_fixed)
     return d, k, str(objs[fixed[j]].name)
+
+
+def _min_finger_object_distance(
+    scene: _Scene, R_geom: np.ndarray, x_geom: np.ndarray
+) -> tuple[float, int, str]:
+    """Smallest signed distance [m] between the fingers' geometries (holding, idle or
+    moving) and the object at the plan's samples, its sample index and the geometry's
+    name; ``(inf, 0, "")`` without finger geometry."""
+    import coal
+
+    ids = scene.finger_geoms
+    if not ids:
+        return math.inf, 0, ""
+    objs = scene.geom.geometryObjects
+    R_obj, x_obj = scene.object_poses(scene.plan.t)
+    c_obj = x_obj + R_obj @ scene.obj_center
+    centre = np.array([scene.geom_center[g] for g in ids])
+    c_geom = np.einsum("kgij,gj->kgi", R_geom, centre) + x_geom
+    radius = np.array([scene.geom_radius[g] for g in ids])
+    lower = np.linalg.norm(c_geom - c_obj[:, None], axis=2) - radius[None] - scene.obj_radius
+    req = coal.DistanceRequest()
+
+    def d_geom(k: int, j: int) -> float:
+        return coal.distance(
+            objs[ids[j]].geometry,
+            coal.Transform3s(R_geom[k, j], x_geom[k, j]),
+            scene.obj,
+            coal.Transform3s(R_obj[k], x_obj[k]),
+            req,
+            coal.DistanceResult(),
+        )
+
+    d, (k, j) = _exact_min(lower, d_geom)
+    return d, k, str(objs[ids[j]].name)
 
 
 def _exact_min(lower: np.ndarray, exact: Any) -> tuple[float, tuple[int, int]]:
