@@ -63,8 +63,8 @@ def test_holds_that_do_not_bound_the_landing():
 def test_no_regrasp_of_a_plan_lands_after_another_hold_is_lost(monkeypatch):
     """The Allegro turning the hexagon 180 deg at 40 deg/s: a regrasp of the ring,
     stretched for the velocity limits, used to land at 2.52 s while the middle finger's
-    hold was lost at 2.39 s (its fingertip link sinking in), and the plan went on with
-    the middle holding past its loss. Every regrasp the plan takes (backing up
+    hold was lost at 2.39 s (its fingertip link sinking in), and the search went on
+    from there, the middle holding past its loss. Every regrasp the plan takes (backing up
     included) now lands by the earliest loss of another finger's hold, as the triggers
     of the state it starts from give them."""
     spec = next(s for s in neighbour_specs(("allegro",)) if s.name.endswith("+180deg-40dps"))
