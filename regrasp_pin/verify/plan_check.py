@@ -562,8 +562,6 @@ def _check_regrasp(
     scene: _Scene, phase: RegraspPhase | ReleasePhase | JoinPhase | IdlePhase, max_step: float
 ) -> RegraspCheck:
     """Densify one regrasp; the moving finger against the object, all fingers pairwise."""
-    import coal
-
     plan = scene.plan
     sel = np.flatnonzero(
         (plan.t >= phase.t_start - _TIME_TOL_S) & (plan.t <= phase.t_end + _TIME_TOL_S)
@@ -574,29 +572,9 @@ def _check_regrasp(
     times, q = _densify(plan, sel, max_step)
     R_obj, x_obj = scene.object_poses(times)
     _, R, x = scene.kinematics(q)
-    ids = scene.finger_geoms
-    objs = scene.geom.geometryObjects
-    req = coal.DistanceRequest()
-
     # the moving finger's geometries against the object
-    moving = [i for i, g in enumerate(ids) if scene.geom_finger[g] == phase.finger]
-    c_geom = _centres(scene, R, x)[:, moving]  # (K, M, 3)
-    c_obj = np.einsum("kij,j->ki", R_obj, scene.obj_center) + x_obj  # (K, 3)
-    radius = np.array([scene.geom_radius[ids[i]] for i in moving])
-    lower = np.linalg.norm(c_geom - c_obj[:, None], axis=2) - radius - scene.obj_radius
-
-    def d_object(k: int, j: int) -> float:
-        i = moving[j]
-        return coal.distance(
-            objs[ids[i]].geometry,
-            coal.Transform3s(R[k, i], x[k, i]),
-            scene.obj,
-            coal.Transform3s(R_obj[k], x_obj[k]),
-            req,
-            coal.DistanceResult(),
-        )
-
-    d_obj, (k_obj, _) = _exact_min(lower, d_object)
+    moving = [i for i, g in enumerate(scene.finger_geoms) if scene.geom_finger[g] == phase.finger]
+    d_obj, k_obj, _ = _min_object_distance(scene, R, x, R_obj, x_obj, moving)
     d_ff, k_ff, pair = _min_finger_distance(scene, R, x)
     return RegraspCheck(
         finger=phase.finger,
@@ -698,38 +676,56 @@ def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
     return d, k, str(objs[fixed[j]].name)
 
 
-def _min_finger_object_distance(
-    scene: _Scene, R_geom: np.ndarray, x_geom: np.ndarray
-) -> tuple[float, int, str]:
-    """Smallest signed distance [m] between the fingers' geometries (holding, idle or
-    moving) and the object at the plan's samples, its sample index and the geometry's
-    name; ``(inf, 0, "")`` without finger geometry."""
+def _min_object_distance(
+    scene: _Scene,
+    R: np.ndarray,
+    x: np.ndarray,
+    R_obj: np.ndarray,
+    x_obj: np.ndarray,
+    columns: list[int],
+) -> tuple[float, int, int]:
+    """Smallest signed distance [m] between the object and the finger geometries
+    ``columns`` (indices into :attr:`_Scene.finger_geoms`), placed by ``R, x``
+    ``(K, G, 3, 3), (K, G, 3)`` with the object at ``R_obj, x_obj``; its sample index and
+    column (``(inf, 0, 0)`` without columns)."""
     import coal
 
-    ids = scene.finger_geoms
-    if not ids:
-        return math.inf, 0, ""
-    objs = scene.geom.geometryObjects
-    R_obj, x_obj = scene.object_poses(scene.plan.t)
-    c_obj = x_obj + R_obj @ scene.obj_center
-    centre = np.array([scene.geom_center[g] for g in ids])
-    c_geom = np.einsum("kgij,gj->kgi", R_geom, centre) + x_geom
-    radius = np.array([scene.geom_radius[g] for g in ids])
-    lower = np.linalg.norm(c_geom - c_obj[:, None], axis=2) - radius[None] - scene.obj_radius
+    if not columns:
+        return math.inf, 0, 0
+    ids, objs = scene.finger_geoms, scene.geom.geometryObjects
+    c_geom = _centres(scene, R, x)[:, columns]  # (K, C, 3)
+    c_obj = np.einsum("kij,j->ki", R_obj, scene.obj_center) + x_obj  # (K, 3)
+    radius = np.array([scene.geom_radius[ids[i]] for i in columns])
+    lower = np.linalg.norm(c_geom - c_obj[:, None], axis=2) - radius - scene.obj_radius
     req = coal.DistanceRequest()
 
-    def d_geom(k: int, j: int) -> float:
+    def d_object(k: int, j: int) -> float:
+        i = columns[j]
         return coal.distance(
-            objs[ids[j]].geometry,
-            coal.Transform3s(R_geom[k, j], x_geom[k, j]),
+            objs[ids[i]].geometry,
+            coal.Transform3s(R[k, i], x[k, i]),
             scene.obj,
             coal.Transform3s(R_obj[k], x_obj[k]),
             req,
             coal.DistanceResult(),
         )
 
-    d, (k, j) = _exact_min(lower, d_geom)
-    return d, k, str(objs[ids[j]].name)
+    d, (k, j) = _exact_min(lower, d_object)
+    return d, k, columns[j]
+
+
+def _min_finger_object_distance(
+    scene: _Scene, R_geom: np.ndarray, x_geom: np.ndarray
+) -> tuple[float, int, str]:
+    """Smallest signed distance [m] between the fingers' geometries (holding, idle or
+    moving) and the object at the plan's samples, its sample index and the geometry's
+    name; ``(inf, 0, "")`` without finger geometry."""
+    ids = scene.finger_geoms
+    if not ids:
+        return math.inf, 0, ""
+    R_obj, x_obj = scene.object_poses(scene.plan.t)
+    d, k, i = _min_object_distance(scene, R_geom, x_geom, R_obj, x_obj, list(range(len(ids))))
+    return d, k, str(scene.geom.geometryObjects[ids[i]].name)
 
 
 def _exact_min(lower: np.ndarray, exact: Any) -> tuple[float, tuple[int, int]]:
