@@ -493,9 +493,17 @@ class _CombinationSearch:
         min_gap_m: float,
         max_nodes: int = 2000,
     ):
-        self.per_finger, self.points, self.sep = per_finger, points, sep
+        self.per_finger, self.sep = per_finger, sep
         self.gaps, self.min_gap_m, self.max_nodes = gaps, min_gap_m, max_nodes
         self.refused, self.closest = 0, -np.inf
+        # which candidates are closer than ``sep``: one table over every finger's
+        # candidates (sample index -> row), looked up in the search's inner loops
+        ids = np.unique(np.concatenate([np.asarray(c[0], int) for c in per_finger.values()]))
+        self._row = {int(i): r for r, i in enumerate(ids)}
+        p = np.asarray(points, float)[ids]
+        self._near = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1) < sep
+        # _admissible per (finger, picked): None, or the gaps of its spaced candidates
+        self._known: dict[tuple[str, tuple[tuple[str, int], ...]], list[float] | None] = {}
 
     def complete(self, order: list[str], ranks: Mapping[str, np.ndarray]) -> dict[str, int] | None:
         """Candidate positions ``finger -> c`` (fingers in ``order``, candidates in
@@ -507,7 +515,8 @@ class _CombinationSearch:
     def _gap(self, name: str, i: int, picked: Mapping[str, int]) -> float | None:
         """Smallest finger distance [m] of ``name`` at point ``i`` to the picked fingers;
         None if the contact is closer than ``sep`` to a picked contact."""
-        if any(np.linalg.norm(self.points[i] - self.points[j]) < self.sep for j in picked.values()):
+        near = self._near[self._row[i]]
+        if any(near[self._row[j]] for j in picked.values()):
             return None
         return self.gaps.smallest(name, i, picked)
 
@@ -519,14 +528,24 @@ class _CombinationSearch:
 
     def _admissible(self, name: str, picked: Mapping[str, int]) -> bool:
         """Whether some candidate of ``name`` is spaced from and clear of ``picked``."""
-        too_close = []
-        for i in self.per_finger[name][0]:
-            g = self._gap(name, int(i), picked)
-            if g is not None and g >= self.min_gap_m:
-                return True
-            if g is not None:
-                too_close.append(g)
-        self._dead_end(too_close)
+        key = (name, tuple(sorted(picked.items())))
+        known = self._known.get(key)
+        if known is None:
+            ids = self.per_finger[name][0]
+            rows = np.array([self._row[int(i)] for i in ids], int)
+            taken = [self._row[j] for j in picked.values()]
+            spaced = ~self._near[np.ix_(rows, taken)].any(axis=1) if taken else rows >= 0
+            gaps = []
+            for i in ids[spaced]:
+                g = self.gaps.smallest(name, int(i), picked)
+                if g >= self.min_gap_m:
+                    gaps = None
+                    break
+                gaps.append(g)
+            known = self._known[key] = gaps
+        if known is None:
+            return True
+        self._dead_end(known)
         return False
 
     def _extend(
@@ -575,6 +594,7 @@ class _PairGaps:
         self.hand, self.q = hand, q
         self._checks: dict[tuple[str, str], FingerClearance] = {}
         self._cache: dict[tuple[str, int, str, int], float] = {}
+        self._neutral = hand.neutral()
 
     def pair(self, a: str, ia: int, b: str, ib: int) -> float:
         """Distance [m] between finger ``a`` at candidate ``ia`` and ``b`` at ``ib``."""
@@ -589,7 +609,7 @@ class _PairGaps:
             both[0] = True  # the start always counts
             d = np.inf
             for k in np.flatnonzero(both):
-                q = self.hand.neutral()
+                q = self._neutral.copy()
                 q[self.hand.finger(a).q_indices] = qa[k]
                 q[self.hand.finger(b).q_indices] = qb[k]
                 d = min(d, self._checks[(a, b)](q))
