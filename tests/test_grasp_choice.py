@@ -43,6 +43,7 @@ from regrasp_pin.grasp.choice import (
 from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.initial import (
     _CombinationSearch,
+    _grasp_score,
     _spread_out,
     _start_candidates,
     initial_grasp,
@@ -328,9 +329,21 @@ def test_initial_grasp_is_seeded(five):
 def test_initial_grasp_keeps_the_highest_rank_then_the_best_score(five):
     hand, box, _, sample, manifolds, grasp = five
     kw = dict(mu=MU, min_separation_m=SEP_M, min_finger_gap_m=0.001)
-    # a constant rank leaves the score alone to decide: the same grasp
+    # a constant rank leaves the score alone to decide: the unranked grasp, or one
+    # that the one-finger-at-a-time climb improved to a higher score
     flat = initial_grasp(hand, box, manifolds, sample, rank=lambda pick: (0,), **kw)
-    assert flat.indices == grasp.indices
+    frac = {}
+    for n, m in manifolds.items():
+        idx, fr = _start_candidates(hand, box, m, sample.points, 0, CONTACT, 40)
+        frac[n] = dict(zip(idx.tolist(), fr.tolist(), strict=True))
+
+    def score(g):
+        ii = [g.indices[n] for n in manifolds]
+        fracs = [frac[n][g.indices[n]] for n in manifolds]
+        return _grasp_score(sample.points[ii], sample.normals[ii], fracs, MU, box.radius_m)[0]
+
+    assert score(flat) >= score(grasp)
+    assert flat.indices == grasp.indices or score(flat) > score(grasp)
     seen = {}
 
     def rank(pick):
@@ -496,10 +509,10 @@ def _choose_from_grasp(five, finger, t_arrive, **kwargs):
 
 @pytest.mark.parametrize(
     "finger, t_arrive",
-    [("middle", 1.25), ("little", 1.0), ("thumb", 0.75), ("thumb", 1.15), ("little", 1.4)],
+    [("middle", 1.25), ("little", 1.0), ("thumb", 0.75), ("thumb", 1.15), ("little", 1.15)],
 )
 def test_q_stays_inside_longest_by_brute_force(five, finger, t_arrive):
-    # 1.15 s and 1.4 s fall between manifold times (every 0.25 s): Q must be usable at
+    # 1.15 s falls between manifold times (every 0.25 s): Q must be usable at
     # both neighbours (there, the first choice usable at the later one only is not)
     hand, box, _, sample, manifolds, grasp = five
     m = manifolds[finger]
@@ -898,6 +911,34 @@ def test_a_finger_that_must_hold_starts_where_its_links_last(allegro, finger, k_
     assert all(lasting[i] and clear_through(int(i)) for i in idx)
     start = np.flatnonzero(lasting & m.usable(CONTACT.choice_margin_rad)[0])
     assert not all(clear_through(int(i)) for i in start)
+
+
+@pytest.mark.parametrize("finger", ["index", "thumb"])
+def test_a_finger_with_few_usable_contacts_gets_every_clear_one(five, finger):
+    """A finger whose usable contacts at the start lie in one small patch (here: the
+    manifold cut down to the points within 1.5 tip radii of one of them) gets every
+    one of them whose links clear the object (Pinocchio computeDistances), up to the
+    limit: the spacing passes only order the candidates, they do not thin out a
+    finger that has few (with spacings alone it got two or three)."""
+    hand, box, _, sample, manifolds, _ = five
+    m = manifolds[finger]
+    usable0 = np.flatnonzero(m.usable(CONTACT.choice_margin_rad)[0])
+    centre = sample.points[usable0[usable0.size // 2]]
+    near = np.linalg.norm(sample.points - centre, axis=1) <= 1.5 * hand.finger(finger).tip_radius
+    patch = dataclasses.replace(m, inside=m.inside & near[None, :])
+    start = np.flatnonzero(patch.usable(CONTACT.choice_margin_rad)[0])
+    assert 5 <= start.size < 40
+    T0 = m.T_palm_object[0]
+    clear = [
+        int(i)
+        for i in start
+        if _link_distance(hand, finger, box, m.q[0, i], T0) >= CONTACT.choice_link_clearance_m
+        and _link_distance(hand, finger, box, m.q[0, i], T0, tip=True) >= -CONTACT.tip_penetration_m
+    ]
+    idx, _ = _start_candidates(hand, box, patch, sample.points, 0, CONTACT, 40)
+    assert sorted(idx.tolist()) == clear and len(clear) > 3
+    few, _ = _start_candidates(hand, box, patch, sample.points, 0, CONTACT, 3)
+    assert few.size == 3 and set(few.tolist()) <= set(clear)
 
 
 # ------------------------------------------------------------------ grasp search parts

@@ -203,21 +203,21 @@ def test_a_neighbour_that_cannot_be_planned_ends_typed_with_a_verified_partial_p
 
 def _spec_6():
     """Suite spec 6 (five-finger hand, pentagonal prism, -175 deg about the thumb's
-    contact) with regrasps of at least 0.4 s (none faster: no rush), searched although
+    contact) with regrasps of at least 0.8 s (none faster: no rush), searched although
     it is proven to have no plan (the ring finger cannot let go from 1.8 s on:
     tests/test_grasp_necessity.py has such cases), to test how the search ends."""
     scen = build_scenario(generate_specs(7, seed=0)[6])
-    slow = replace(scen.params.regrasp, duration_s=0.4)
+    slow = replace(scen.params.regrasp, duration_s=0.8)
     params = replace(scen.params, regrasp=slow, prove_infeasible=False, rush_duration_s=None)
     return replace(scen, params=params)
 
 
 def test_a_grasp_that_loses_two_holds_at_once_fails_at_once():
-    """Suite spec 6 with regrasps of at least 0.4 s: the index's and the middle's
-    holds are both lost within the first 0.4 s, less than one regrasp apart. Whichever
-    goes first, the other loses its hold in the meantime: a finger-busy failure at the
-    start that names the hold and the landing, not a search that plans on into a state
-    with a finger already lost."""
+    """Suite spec 6 with regrasps of at least 0.8 s: the index's, middle's and ring's
+    holds are all lost within the first 1.1 s (0.7-1.07 s), less than one regrasp
+    apart. Whichever goes first, another loses its hold in the meantime: a finger-busy
+    failure at the start that names the hold and the landing, not a search that plans
+    on into a state with a finger already lost."""
     scen = _spec_6()
     with pytest.raises(PlanningError) as err:
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)

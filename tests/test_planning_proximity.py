@@ -39,12 +39,23 @@ def _distance(hand, holding, base, a, b, t):
     return min(r.min_distance for r in gdata.distanceResults)
 
 
+def _both_hold(holding, times, *fingers):
+    """The times at which every one of the holding ``fingers`` still holds: up to where
+    its contact is lost (a still finger, not in ``holding``, always counts)."""
+    until = min(
+        (holding[f].track.followed_until_s for f in fingers if f in holding), default=np.inf
+    )
+    return times[times <= until + 1e-9]
+
+
 def _brute_force(hand, holding, base, times):
     """Per finger, its earliest (trigger time, other, lost time) from computeDistances of
-    every pair at every time (ties: the other finger's name)."""
+    every pair at every time at which both hold (ties: the other finger's name)."""
     out = {}
     for a, b in itertools.combinations(sorted(holding), 2):
-        d = np.array([_distance(hand, holding, base, a, b, t) for t in times])
+        d = np.array(
+            [_distance(hand, holding, base, a, b, t) for t in _both_hold(holding, times, a, b)]
+        )
         below = np.flatnonzero(d < TRIGGER_M)
         if below.size == 0:
             continue
@@ -97,7 +108,8 @@ def test_a_holding_finger_near_a_still_one_triggers(holds):
     for me in sorted(rest):
         firsts = []
         for other in sorted(set(rest) - {me}) + [gone, "little"]:
-            d = np.array([_distance(hand, rest, still, me, other, t) for t in times])
+            both = _both_hold(rest, times, me, other)
+            d = np.array([_distance(hand, rest, still, me, other, t) for t in both])
             below = np.flatnonzero(d < TRIGGER_M)
             if below.size:
                 lost = np.flatnonzero(d[below[0] :] < LOST_M)

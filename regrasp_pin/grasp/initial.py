@@ -66,7 +66,9 @@ def _start_candidates(
 ) -> tuple[np.ndarray, np.ndarray]:
     """One finger's candidate contacts at ``t_index`` for :func:`initial_grasp`: their
     sample indices and lasting fractions, the longest-lasting first, spread over the
-    surface (two tip radii apart first, then one), links clear of the object; only
+    surface (two tip radii apart first, then one, then the rest in that order, so that
+    a finger whose usable contacts lie in one small patch is not thinned out to two or
+    three of them), links clear of the object; only
     those that last through ``hold`` (a run from the start in which the finger cannot
     let go) if it is given: inside the joint limits and, held there, with the finger's
     other links clear of the object and its fingertip link not sinking in at every
@@ -110,7 +112,7 @@ def _start_candidates(
     chosen = _spread_out(
         pts[idx],
         order,
-        (2 * finger.tip_radius, finger.tip_radius),
+        (2 * finger.tip_radius, finger.tip_radius, 0.0),
         max_candidates,
         link_clear,
     )
@@ -212,7 +214,8 @@ def initial_grasp(
     Each finger's candidates are its usable points at ``t_index`` (margin >=
     ``contact.limit_margin_rad``, pad facing, links clear), ranked by how long they stay
     usable and then by margin; up to ``candidates_per_finger`` of them are kept, first
-    two tip radii apart (covering the surface), then one radius apart (filling in). Each
+    two tip radii apart (covering the surface), then one radius apart, then any (filling
+    in: a finger whose usable contacts are few keeps all that clear the object). Each
     of ``trials`` seeded trials (the first greedy, the others with the fingers shuffled
     and the rankings perturbed) searches depth first, with forward checking, for a
     combination whose contacts are ``min_separation_m`` apart and whose fingers are
@@ -529,24 +532,28 @@ class _CombinationSearch:
     def _admissible(self, name: str, picked: Mapping[str, int]) -> bool:
         """Whether some candidate of ``name`` is spaced from and clear of ``picked``."""
         key = (name, tuple(sorted(picked.items())))
-        known = self._known.get(key)
-        if known is None:
-            ids = self.per_finger[name][0]
-            rows = np.array([self._row[int(i)] for i in ids], int)
-            taken = [self._row[j] for j in picked.values()]
-            spaced = ~self._near[np.ix_(rows, taken)].any(axis=1) if taken else rows >= 0
-            gaps = []
-            for i in ids[spaced]:
-                g = self.gaps.smallest(name, int(i), picked)
-                if g >= self.min_gap_m:
-                    gaps = None
-                    break
-                gaps.append(g)
-            known = self._known[key] = gaps
-        if known is None:
+        if key not in self._known:
+            self._known[key] = self._too_close(name, picked)
+        gaps = self._known[key]
+        if gaps is None:
             return True
-        self._dead_end(known)
+        self._dead_end(gaps)
         return False
+
+    def _too_close(self, name: str, picked: Mapping[str, int]) -> list[float] | None:
+        """None if some candidate of ``name`` is spaced from and clear of ``picked``;
+        else the finger gaps [m] of its spaced candidates (all too small)."""
+        ids = self.per_finger[name][0]
+        rows = np.array([self._row[int(i)] for i in ids], int)
+        taken = np.array([self._row[j] for j in picked.values()], int)
+        spaced = ~self._near[np.ix_(rows, taken)].any(axis=1)
+        gaps: list[float] = []
+        for i in ids[spaced]:
+            g = self.gaps.smallest(name, int(i), picked)
+            if g >= self.min_gap_m:
+                return None
+            gaps.append(g)
+        return gaps
 
     def _extend(
         self,
