@@ -213,11 +213,12 @@ def _spec_6():
 
 
 def test_a_grasp_that_loses_two_holds_at_once_fails_at_once():
-    """Suite spec 6 with regrasps of at least 0.8 s: the index's, middle's and ring's
-    holds are all lost within the first 1.1 s (0.7-1.07 s), less than one regrasp
-    apart. Whichever goes first, another loses its hold in the meantime: a finger-busy
-    failure at the start that names the hold and the landing, not a search that plans
-    on into a state with a finger already lost."""
+    """Suite spec 6 with regrasps of at least 0.8 s: the fingers' holds end within
+    about a second of the start, closer together than one regrasp, so that whichever
+    finger goes first another loses its hold in the meantime (the ring's at 0.69 s
+    when the index could land at 0.8 s): a finger-busy failure at the start that names
+    the hold and the landing, not a search that plans on into a state with a finger
+    already lost."""
     scen = _spec_6()
     with pytest.raises(PlanningError) as err:
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)

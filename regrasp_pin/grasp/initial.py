@@ -68,11 +68,11 @@ def _start_candidates(
     sample indices and lasting fractions, the longest-lasting first, spread over the
     surface (two tip radii apart first, then one, then the rest in that order, so that
     a finger whose usable contacts lie in one small patch is not thinned out to two or
-    three of them), links clear of the object; only
-    those that last through ``hold`` (a run from the start in which the finger cannot
-    let go) if it is given: inside the joint limits and, held there, with the finger's
-    other links clear of the object and its fingertip link not sinking in at every
-    manifold time of the run (as the tracking will measure; :func:`held_clear`)."""
+    three of them), links clear of the object; only those that last through ``hold``
+    (a run from the start in which the finger cannot let go) if it is given: inside
+    the joint limits and, held there, with the finger's other links clear of the
+    object and its fingertip link not sinking in at every manifold time of the run (as
+    the tracking will measure; :func:`held_clear`)."""
     name = man.finger
     finger = hand.finger(name)
     usable = man.usable(contact.limit_margin_rad)
