@@ -503,6 +503,9 @@ class _CombinationSearch:
         # candidates (sample index -> row), looked up in the search's inner loops
         ids = np.unique(np.concatenate([np.asarray(c[0], int) for c in per_finger.values()]))
         self._row = {int(i): r for r, i in enumerate(ids)}
+        self._rows = {
+            n: np.array([self._row[int(i)] for i in c[0]], int) for n, c in per_finger.items()
+        }
         p = np.asarray(points, float)[ids]
         self._near = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1) < sep
         # _admissible per (finger, picked): None, or the gaps of its spaced candidates
@@ -543,8 +546,7 @@ class _CombinationSearch:
     def _too_close(self, name: str, picked: Mapping[str, int]) -> list[float] | None:
         """None if some candidate of ``name`` is spaced from and clear of ``picked``;
         else the finger gaps [m] of its spaced candidates (all too small)."""
-        ids = self.per_finger[name][0]
-        rows = np.array([self._row[int(i)] for i in ids], int)
+        ids, rows = self.per_finger[name][0], self._rows[name]
         taken = np.array([self._row[j] for j in picked.values()], int)
         spaced = ~self._near[np.ix_(rows, taken)].any(axis=1)
         gaps: list[float] = []

@@ -393,6 +393,8 @@ class _Scene:
             if name not in fingers:
                 raise InputError("plan.phases", f"finger {name!r} is not in plan.hand.fingers")
         self.slerp = Slerp(plan.t, Rotation.from_quat(plan.T_palm_object[:, 3:]))
+        # the object's rotations and positions at the plan's samples, read by three checks
+        self.sample_poses = self.object_poses(plan.t)
 
     def object_poses(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Object rotations ``(K, 3, 3)`` and positions ``(K, 3)`` [m] at ``times`` [s]."""
@@ -520,7 +522,7 @@ def _contact_error(scene: _Scene, tips: np.ndarray) -> tuple[float, str | None, 
     ``tips`` are the fingertip frame origins at the plan's samples ``(S, F, 3)`` [m].
     """
     plan = scene.plan
-    R, x = scene.object_poses(plan.t)
+    R, x = scene.sample_poses
     order = list(scene.tip_frames)
     worst: tuple[float, str | None, float | None] = (0.0, None, None)
     for name, phases in plan.phases.items():
@@ -648,7 +650,7 @@ def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
     fixed = [g for g, o in enumerate(objs) if int(o.parentJoint) == 0]
     if not fixed:
         return math.inf, 0, ""
-    R_obj, x_obj = scene.object_poses(scene.plan.t)
+    R_obj, x_obj = scene.sample_poses
     c_obj = x_obj + R_obj @ scene.obj_center
     place = [objs[g].placement for g in fixed]
     c_fix = np.array(
@@ -723,7 +725,7 @@ def _min_finger_object_distance(
     ids = scene.finger_geoms
     if not ids:
         return math.inf, 0, ""
-    R_obj, x_obj = scene.object_poses(scene.plan.t)
+    R_obj, x_obj = scene.sample_poses
     d, k, i = _min_object_distance(scene, R_geom, x_geom, R_obj, x_obj, list(range(len(ids))))
     return d, k, str(scene.geom.geometryObjects[ids[i]].name)
 
