@@ -325,6 +325,26 @@ def test_a_finger_lets_go_when_no_regrasp_can_land_before_the_end(tmp_path):
     assert Plan.from_dict(plan.to_dict()).to_dict() == plan.to_dict()
 
 
+def test_a_plan_whose_samples_stop_short_of_the_end_is_never_returned(monkeypatch):
+    """The assembled plan must span the motion (its samples and every finger's phases):
+    one that stopped a sample short (as a release sampled short of the end once did)
+    would leave the motion's last step unverified. The planner refuses it."""
+    from regrasp_pin.planning import planner
+
+    assemble = planner.plan_until
+
+    def short(ctx, state, until, *, final=False):
+        plan = assemble(ctx, state, until, final=final)
+        if not final:
+            return plan
+        return replace(plan, t=plan.t[:-1], q=plan.q[:-1], T_palm_object=plan.T_palm_object[:-1])
+
+    monkeypatch.setattr(planner, "plan_until", short)
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
+    with pytest.raises(AssertionError, match="last phase ends at"):
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+
+
 def test_holds_that_end_together_are_regrasped_in_turn(tmp_path):
     """100 deg at 40 deg/s: the holds of the three regrasping fingers end within about
     one second of each other, again and again, so waiting for each finger's own trigger

@@ -110,6 +110,18 @@ def test_the_finger_backs_off_along_the_normal_and_stays(scene):
     assert rel.min_clearance_m > 0.0
 
 
+def test_the_samples_reach_the_end_when_the_back_off_ends_within_a_step_of_it(scene):
+    # the back-off ends 5 ms before the motion (0.3 + 0.495 s of 0.8 s): no still sample
+    # fits after it, and the release must still be sampled to its end (the plan's
+    # phases end there; a plan whose samples stop 5 ms short fails its re-check)
+    scen, _, _, _ = scene
+    rel = _release(scene, back_off_s=0.495)
+    assert rel.t_end == scen.motion.t_end
+    assert rel.times_s[-1] == rel.t_end
+    assert np.all(np.diff(rel.times_s) > 0)
+    assert rel.times_s[-2] == pytest.approx(T_RELEASE_S + 0.495)
+
+
 def test_a_parking_configuration_is_reached(scene):
     scen, _, _, _ = scene
     f = scen.hand.finger("index")

@@ -55,6 +55,7 @@ from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from ..model.scene import Scene
 from ..plan import Plan
+from ..verify.plan_check import phase_gaps
 from .advance import Step, advance, contenders
 from .assembly import plan_until
 from .feasibility import first_infeasibility, must_hold_runs, no_plan_exists
@@ -244,6 +245,16 @@ def plan_manipulation(
 
     t0 = time.perf_counter()
     plan = plan_until(ctx, state, motion.t_end, final=True)
+    uncovered = phase_gaps(plan)
+    ends = (abs(float(plan.t[0]) - motion.t_start), abs(float(plan.t[-1]) - motion.t_end))
+    spans = max(ends) <= 1e-6
+    if uncovered or not spans:
+        # every move was verified on its samples; a plan whose samples or phases do not
+        # span the motion would leave part of it unverified (a bug, not an outcome)
+        raise AssertionError(
+            f"the assembled plan spans {float(plan.t[0]):.4f}-{float(plan.t[-1]):.4f} s of "
+            f"the motion's {motion.t_start:.4f}-{motion.t_end:.4f} s: " + "; ".join(uncovered)
+        )
     stage["assembly"] = time.perf_counter() - t0
     plan.summary.update(
         {

@@ -137,9 +137,9 @@ def plan_release(
     n_move = max(int(np.ceil(d / dt_s * 4)), 2)
     t_move = t_r + d * np.linspace(0.0, 1.0, n_move + 1)
     t_still = np.arange(t_move[-1] + dt_s, t_end + 1e-9, dt_s)
-    if t_still.size and t_still[-1] < t_end - 1e-9:
-        t_still = np.append(t_still, t_end)
     times = np.concatenate([t_move, t_still])
+    if times[-1] < t_end - 1e-9:  # sampled to the end, even when no still step fits
+        times = np.append(times, t_end)
     s = minimum_jerk((times - t_r) / max(d, 1e-9))
     q = q_release[None] + s[:, None] * (q_off - q_release)[None]
     if q_park is not None and t_move[-1] < t_end - 1e-9:

@@ -52,7 +52,7 @@ from ..plan import ContactPhase
 if TYPE_CHECKING:
     from ..plan import IdlePhase, JoinPhase, Plan, RegraspPhase, ReleasePhase
 
-__all__ = ["JointLimitViolation", "PlanCheck", "RegraspCheck", "recheck_plan"]
+__all__ = ["JointLimitViolation", "PlanCheck", "RegraspCheck", "phase_gaps", "recheck_plan"]
 
 _TIME_TOL_S = 1e-9  # a sample within this of a phase's ends belongs to the phase
 _JOINT_TOL_RAD = 1e-9  # accepted excess over a joint limit
@@ -231,7 +231,7 @@ def recheck_plan(
     scene = _Scene(plan)
     problems: list[str] = []
 
-    problems += _phase_gaps(plan)
+    problems += phase_gaps(plan)
     violations = _joint_limits(scene)
     for v in violations:
         problems.append(
@@ -434,8 +434,11 @@ class _Scene:
 
 
 # ---------------------------------------------------------------------- the checks
-def _phase_gaps(plan: Plan) -> list[str]:
-    """Gaps, overlaps or uncovered ends in each finger's phases."""
+def phase_gaps(plan: Plan) -> list[str]:
+    """Gaps, overlaps or uncovered ends in each finger's phases: each finger's phases
+    must follow one another without gaps or overlaps and span the plan's samples, from
+    ``plan.t[0]`` to ``plan.t[-1]`` (1 us tolerance). One line per problem; empty if
+    none."""
     out = []
     t0, t1 = float(plan.t[0]), float(plan.t[-1])
     for name, phases in plan.phases.items():
