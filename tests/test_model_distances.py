@@ -70,6 +70,24 @@ def test_capsule_gap_is_the_pair_by_pair_minimum_bit_for_bit(hand):
     assert 0 < (ref < 0.004).sum() < ref.size  # both sides of the cap occur
 
 
+def test_capsule_gap_places_the_second_geometries_from_their_own_rows_bit_for_bit(hand):
+    # the middle finger takes 7 distinct configurations over 200 rows (as the other
+    # fingers repeat over a regrasp's grid nodes); the index moves in every row
+    q = _random_q(hand, ("index", "middle"), 200, 37)
+    mid = hand.fingers["middle"].q_indices
+    distinct = _random_q(hand, ("middle",), 7, 38)
+    rows = np.random.default_rng(39).integers(0, 7, 200)
+    q[:, mid] = distinct[rows][:, mid]
+    ids_a = list(hand.fingers["index"].geometry_ids)
+    ids_b = list(hand.fingers["middle"].geometry_ids)
+    # the index's joints in `distinct` differ from q's: only the middle's chain counts
+    for cap in (np.inf, 0.004):
+        full = capsule_gap(hand, ids_a, ids_b, q, cap_m=cap)
+        split = capsule_gap(hand, ids_a, ids_b, q, cap_m=cap, q_b=distinct, rows_b=rows)
+        assert split.tobytes() == full.tobytes()
+    assert np.isfinite(full).any() and (full < 0.004).any()
+
+
 def test_capsule_gap_is_a_lower_bound_on_the_coal_distance(hand):
     names = ("ring", "little")
     ids_a, ids_b = (list(hand.fingers[n].geometry_ids) for n in names)

@@ -588,13 +588,25 @@ class PairDistances:
 
 
 def capsule_gap(
-    hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray, *, cap_m: float = np.inf
+    hand: Hand,
+    ids_a: list[int],
+    ids_b: list[int],
+    q: np.ndarray,
+    *,
+    cap_m: float = np.inf,
+    q_b: np.ndarray | None = None,
+    rows_b: np.ndarray | None = None,
 ) -> np.ndarray:
     """Lower bound ``(N,)`` [m] on the distance between geometries ``ids_a`` and ``ids_b``
     of the hand at each configuration row of ``q`` ``(N, nq)``, from capsules that
     contain the geometries (inf when either list is empty); ``min(bound, cap_m)``: pairs
     whose bounding spheres are ``cap_m`` apart are not measured (a bound below ``cap_m``
-    is the same, to the bit, as without the cap)."""
+    is the same, to the bit, as without the cap).
+
+    With ``q_b`` ``(M, nq)`` and ``rows_b`` ``(N,)``, the geometries ``ids_b`` are
+    placed at ``q_b[rows_b[n]]`` for row ``n`` instead (e.g. each distinct configuration
+    of the other fingers once; a geometry's placement depends on its own chain's joints
+    alone, so the bound is the same, to the bit, as with those rows in ``q``)."""
     gap = np.full(q.shape[0], np.inf)
     if not ids_a or not ids_b:
         return gap
@@ -602,7 +614,11 @@ def capsule_gap(
     gb = [_geometry(hand, g) for g in ids_b]
     # capsule segments, (A, N, 3) and (B, N, 3)
     A1, B1 = _segment_ends(ga, q)
-    A2, B2 = _segment_ends(gb, q)
+    if q_b is None or rows_b is None:
+        A2, B2 = _segment_ends(gb, q)
+    else:
+        A2, B2 = _segment_ends(gb, np.asarray(q_b, float))
+        A2, B2 = A2[:, rows_b], B2[:, rows_b]
     rad_a = np.array([g.radius for g in ga])
     rad_b = np.array([h.radius for h in gb])
     # broad phase: the capsules' bounding spheres (centre: the segment's middle)

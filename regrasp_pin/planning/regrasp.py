@@ -616,8 +616,20 @@ def _finger_gap(
     f = hand.finger(finger)
     other_ids = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
     q_full = np.array(q_others, float)
+    # the other fingers are placed once per distinct configuration (bit for bit): over
+    # the grid nodes they repeat (the nodes beyond P or Q share the regrasp's ends)
+    rows = np.ascontiguousarray(q_full).view(np.dtype((np.void, 8 * q_full.shape[1])))[:, 0]
+    _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
     q_full[:, f.q_indices] = q_finger
-    return capsule_gap(hand, list(f.geometry_ids), other_ids, q_full, cap_m=cap_m)
+    return capsule_gap(
+        hand,
+        list(f.geometry_ids),
+        other_ids,
+        q_full,
+        cap_m=cap_m,
+        q_b=np.asarray(q_others, float)[first],
+        rows_b=inverse.reshape(-1),
+    )
 
 
 def _attempt(
