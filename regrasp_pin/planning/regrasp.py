@@ -618,8 +618,9 @@ def _finger_gap(
     q_full = np.array(q_others, float)
     # the other fingers are placed once per distinct configuration (bit for bit): over
     # the grid nodes they repeat (the nodes beyond P or Q share the regrasp's ends)
-    rows = np.ascontiguousarray(q_full).view(np.dtype((np.void, 8 * q_full.shape[1])))[:, 0]
+    rows = q_full.view(np.dtype((np.void, 8 * q_full.shape[1])))[:, 0]
     _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    q_distinct = q_full[first]
     q_full[:, f.q_indices] = q_finger
     return capsule_gap(
         hand,
@@ -627,7 +628,7 @@ def _finger_gap(
         other_ids,
         q_full,
         cap_m=cap_m,
-        q_b=np.asarray(q_others, float)[first],
+        q_b=q_distinct,
         rows_b=inverse.reshape(-1),
     )
 
