@@ -69,6 +69,8 @@ from scipy.spatial.transform import Rotation
 from regrasp_pin import Box, Hand, ObjectMotion, RegraspError
 from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.model.clearance import LinkClearance
+from regrasp_pin.model.ik import IK_BACKENDS, ik_backend, set_ik_backend
+from regrasp_pin.model.ik_numba import available as numba_available
 from regrasp_pin.planning.regrasp import RegraspParams, RegraspResult, minimum_jerk, plan_regrasp
 
 try:
@@ -554,27 +556,69 @@ class OursRuns:
     deterministic: bool
 
 
-def time_ours(scene: Scene, motion: ObjectMotion, pairs: list[Pair], reps: int) -> OursRuns:
-    times: list[float] = []
-    results: list[RegraspResult | None] = []
-    stages: dict[str, list[float]] = {}
-    deterministic = True
-    for pair in pairs:
-        for r in range(reps):
-            t_ms, res, _ = run_ours(scene, motion, pair)
-            times.append(t_ms)
-            if r == 0:
-                results.append(res)
-            else:
-                first = results[-1]
-                if res is None or first is None:
-                    deterministic &= res is None and first is None
-                else:
-                    deterministic &= bool(np.array_equal(res.q, first.q))
-            if res is not None and r == 0:
-                for k, v in res.stage_ms.items():
-                    stages.setdefault(k, []).append(v)
-    return OursRuns(times, results, stages, deterministic)
+def time_ours(
+    scene: Scene, motion: ObjectMotion, pairs: list[Pair], reps: int
+) -> dict[str, OursRuns]:
+    """Our planner on every pair, ``reps`` timed runs, on each IK backend available
+    (numpy, then numba when installed), the backends' runs interleaved run by run so
+    that both see the same machine load."""
+    backends = [b for b in IK_BACKENDS if b == "numpy" or numba_available()]
+    runs = {b: OursRuns([], [], {}, True) for b in backends}
+    previous = ik_backend()
+    try:
+        for pair in pairs:
+            for r in range(reps):
+                for b in backends:
+                    set_ik_backend(b)
+                    t_ms, res, _ = run_ours(scene, motion, pair)
+                    _record(runs[b], r, t_ms, res)
+    finally:
+        set_ik_backend(previous)
+    return runs
+
+
+def _record(runs: OursRuns, r: int, t_ms: float, res: RegraspResult | None) -> None:
+    runs.times_ms.append(t_ms)
+    if r == 0:
+        runs.results.append(res)
+        if res is not None:
+            for k, v in res.stage_ms.items():
+                runs.stages.setdefault(k, []).append(v)
+        return
+    first = runs.results[-1]
+    if res is None or first is None:
+        runs.deterministic &= res is None and first is None
+    else:
+        runs.deterministic &= bool(np.array_equal(res.q, first.q))
+
+
+def backend_rows(all_runs: dict[str, OursRuns], label: str) -> None:
+    """Our time on each backend against the 25 ms target, and how far the numba
+    backend's plans are from numpy's (same pairs, same parameters)."""
+    base = all_runs["numpy"]
+    for b, runs in all_runs.items():
+        line = f"ours, IK on {b:<6} median {med(runs.times_ms):5.1f} ms (target <= 25 ms)"
+        if b != "numpy":
+            both = [
+                (x, y)
+                for x, y in zip(base.results, runs.results, strict=True)
+                if x is not None and y is not None
+            ]
+            same_ok = sum(
+                (x is None) == (y is None) for x, y in zip(base.results, runs.results, strict=True)
+            )
+            dq = [
+                float(np.abs(x.q - y.q).max()) if x.q.shape == y.q.shape else np.inf
+                for x, y in both
+            ]
+            line += (
+                f"; {med(runs.times_ms) / med(base.times_ms):.2f}x numpy's time; "
+                f"same outcome on {same_ok}/{len(base.results)} pairs, joint paths within "
+                f"{max(dq, default=0.0):.1e} rad of numpy's"
+            )
+        print(line)
+    if len(all_runs) == 1:
+        print(f"  ({label}: numba not installed, pip install -e '.[fast]' for its row)")
 
 
 def print_ours_notes(
@@ -598,7 +642,8 @@ def bench_static(
 ) -> list[list[OmplRun]]:
     """Both planners on the static box; returns OMPL's runs (reused by the moving case)."""
     reps, end_zone = args.repeats, 1e-3 * args.end_zone_mm
-    ours = time_ours(scene, scene.static, pairs, reps)
+    all_ours = time_ours(scene, scene.static, pairs, reps)
+    ours = all_ours["numpy"]
     om_runs = [
         [run_ompl(scene, checker.valid_static, pair, args.time_limit) for _ in range(reps)]
         for pair in pairs
@@ -676,6 +721,7 @@ def bench_static(
         f"length {ours_len / om_len:.2f}x (target <= 0.6)"
     )
     print_ours_notes(scene, scene.static, "static box", pairs, ours)
+    backend_rows(all_ours, "static box")
     return om_runs
 
 
@@ -690,7 +736,8 @@ def bench_moving(
     duration = scene.params.duration_s
     rate = np.radians(args.rate_deg_s)
     end_zone = 1e-3 * args.end_zone_mm
-    ours = time_ours(scene, scene.moving, pairs, args.repeats)
+    all_ours = time_ours(scene, scene.moving, pairs, args.repeats)
+    ours = all_ours["numpy"]
     ours_checks = [
         recheck(
             scene,
@@ -728,6 +775,7 @@ def bench_moving(
         )
     )
     print_ours_notes(scene, scene.moving, "moving box", pairs, ours)
+    backend_rows(all_ours, "moving box")
 
 
 def main() -> None:
@@ -772,8 +820,12 @@ def main() -> None:
         f"with the tip > {args.end_zone_mm:g} mm from P and Q; pen = rule broken anywhere"
     )
 
-    # warm-up (caches, first calls), not timed
-    run_ours(scene, scene.static, pairs[0])
+    # warm-up (caches, first calls, numba's compiled kernels), not timed
+    previous = ik_backend()
+    for b in [b for b in IK_BACKENDS if b == "numpy" or numba_available()]:
+        set_ik_backend(b)
+        run_ours(scene, scene.static, pairs[0])
+    set_ik_backend(previous)
     run_ompl(scene, checker.valid_static, pairs[0], args.time_limit)
 
     om_runs = bench_static(scene, checker, pairs, args)
