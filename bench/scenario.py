@@ -28,7 +28,9 @@ import numpy as np
 import regrasp_pin.scenarios as scenarios
 import regrasp_pin.suite.build as suite_build
 from regrasp_pin.exceptions import ContactError
-from regrasp_pin.grasp.manifold import forget_first_times
+from regrasp_pin.grasp.manifold import default_threads, forget_first_times
+from regrasp_pin.model.ik import set_ik_backend
+from regrasp_pin.model.ik_numba import available as numba_available
 from regrasp_pin.scenarios import Scenario
 from regrasp_pin.suite import ScenarioSpec, build_scenario, generate_specs, neighbour_specs
 
@@ -55,8 +57,19 @@ class StageTimer:
         return timed
 
 
-def build(spec: ScenarioSpec, reference: bool) -> tuple[float, dict[str, float], Any]:
-    """Build one spec; its wall time [s], stage times [s] and fingerprint (or the error)."""
+def build(
+    spec: ScenarioSpec, reference: bool, backend: str = "numpy"
+) -> tuple[float, dict[str, float], Any]:
+    """Build one spec with its IK on ``backend``; its wall time [s], stage times [s] and
+    fingerprint (or the error)."""
+    previous = set_ik_backend(backend)
+    try:
+        return _build(spec, reference)
+    finally:
+        set_ik_backend(previous)
+
+
+def _build(spec: ScenarioSpec, reference: bool) -> tuple[float, dict[str, float], Any]:
     timer = StageTimer()
     saved = {
         "build_manifolds": scenarios.build_manifolds,
@@ -120,35 +133,65 @@ def main() -> None:
     args = parser.parse_args()
     specs = neighbour_specs() + ([] if args.neighbours_only else generate_specs(args.random, 0))
     specs = specs[: args.limit]
-    build(specs[0], reference=False)  # per-process caches (hands, workspace covers)
-    rows: dict[str, dict[str, list[Any]]] = {k: defaultdict(list) for k in ("current", "reference")}
-    same = 0
-    print(f"{'spec':58} {'current':>8} {'reference':>9}  same")
+    # the current path on numpy, the reference path, and the current path on numba
+    labels = ["current", "reference"] + (["numba"] if numba_available() else [])
+    for label in labels:  # per-process caches (hands, workspace covers, numba kernels)
+        build(specs[0], reference=label == "reference", backend=_backend(label))
+    rows: dict[str, dict[str, list[Any]]] = {k: defaultdict(list) for k in labels}
+    same = same_grasp = 0
+    print(f"{'spec':58} " + " ".join(f"{k:>9}" for k in labels) + "  same")
     for spec in specs:
         results = {}
-        for label in ("current", "reference"):
-            wall, stages, fp = build(spec, reference=label == "reference")
+        for label in labels:
+            wall, stages, fp = build(spec, label == "reference", _backend(label))
             rows[label]["wall"].append(wall)
             rows[label]["stages"].append(stages)
             results[label] = fp
         ok = results["current"] == results["reference"]
         same += ok
+        if "numba" in results:
+            same_grasp += _contacts(results["numba"]) == _contacts(results["current"])
         print(
-            f"{spec.name[:58]:58} {rows['current']['wall'][-1]:7.2f}s "
-            f"{rows['reference']['wall'][-1]:8.2f}s  {ok}",
+            f"{spec.name[:58]:58} "
+            + " ".join(f"{rows[k]['wall'][-1]:8.2f}s" for k in labels)
+            + f"  {ok}",
             flush=True,
         )
     print()
-    for label in ("current", "reference"):
+    for label in labels:
         print(summary(label, rows[label]["wall"], rows[label]["stages"]))
     n_nb = sum(s in neighbour_specs() for s in specs)
-    for label in ("current", "reference"):
+    for label in labels:
         w = np.array(rows[label]["wall"])
         print(
             f"{label:10} neighbours median {np.median(w[:n_nb]):.2f} s"
             + (f", random median {np.median(w[n_nb:]):.2f} s" if len(w) > n_nb else "")
         )
     print(f"same scenarios (bit for bit): {same} of {len(specs)}   target: median <= 1 s")
+    if "numba" in labels:
+        print(
+            f"numba: the IK on numba, manifolds on {_numba_threads()} thread(s); the same "
+            f"contacts as on numpy in {same_grasp} of {len(specs)} scenarios"
+        )
+    else:
+        print("numba not installed: no numba row (pip install -e '.[fast]')")
+
+
+def _backend(label: str) -> str:
+    return "numba" if label == "numba" else "numpy"
+
+
+def _numba_threads() -> int:
+    previous = set_ik_backend("numba")
+    try:
+        return default_threads()
+    finally:
+        set_ik_backend(previous)
+
+
+def _contacts(fp: Any) -> Any:
+    """The grasp's contacts (sample indices) of a fingerprint, or the error."""
+    return fp if fp and fp[0] == "ContactError" else fp[0]
 
 
 if __name__ == "__main__":
