@@ -184,11 +184,15 @@ def clear_of_fingers(
     qf = np.transpose(q_finger, (1, 0, 2))
     q[..., f.q_indices] = np.where(np.isfinite(qf), qf, f.q_mid)
     rows = q.reshape(C * K, -1)
+    # the other fingers are placed once per time, not once per (candidate, time): row
+    # c K + k holds them at q_hand[k] (the same bounds, bit for bit)
+    at_time = np.tile(np.arange(K), C)
     ok = np.ones((C, K), bool)
     dist = _PairDistance(hand)
     for o in others:
         ids = (list(f.geometry_ids), list(hand.fingers[o].geometry_ids))
-        near = (capsule_gap(hand, *ids, rows, cap_m=limit_m) < limit_m).reshape(C, K)
+        gap = capsule_gap(hand, *ids, rows, cap_m=limit_m, q_b=q_hand, rows_b=at_time)
+        near = (gap < limit_m).reshape(C, K)
         for c in np.flatnonzero(near.any(axis=1)):
             cand = np.flatnonzero(near[c] & ok[c])
             if cand.size == 0:
