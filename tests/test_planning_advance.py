@@ -1,15 +1,18 @@
-"""One step of the plan (regrasp_pin.planning.advance): what a regrasp must land by."""
+"""One step of the plan (regrasp_pin.planning.advance): what a regrasp must land by, and
+when a finger holds on to the end instead."""
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
-from regrasp_pin.exceptions import PlanningError
+from regrasp_pin.exceptions import FailureKind, PlanningError
+from regrasp_pin.grasp.contact import ContactModel
 from regrasp_pin.planning import advance, planner, recovery
-from regrasp_pin.planning.advance import _others_lost_by
-from regrasp_pin.planning.state import Trigger
+from regrasp_pin.planning.advance import _held_to_end, _others_lost_by
+from regrasp_pin.planning.state import PlanState, Trigger
 from regrasp_pin.suite import neighbour_specs
 from regrasp_pin.suite.build import build_scenario
 
@@ -92,3 +95,86 @@ def test_no_regrasp_of_a_plan_lands_after_another_hold_is_lost(monkeypatch):
         pass  # failing or not, no regrasp taken may land late
     assert len(landed) >= 5
     assert late == []
+
+
+# ------------------------------------------------------------ holding to the end
+def _track(t_end, lost_at=None):
+    """A contact track sampled every DT to ``t_end``: reached, inside the limits, pad
+    facing, links clear; from ``lost_at`` on outside a joint limit."""
+    times = np.arange(0.0, t_end + DT / 2, DT)
+    margin = np.full(times.size, 0.01)  # within a trigger margin, not past the limit
+    if lost_at is not None:
+        margin[times >= lost_at - 1e-9] = -0.01
+    return SimpleNamespace(
+        times_s=times,
+        error_m=np.zeros(times.size),
+        margin_rad=margin,
+        pad_cos=np.ones(times.size),
+        link_clearance_m=np.full(times.size, 0.002),
+    )
+
+
+def _holding_ctx():
+    contact = ContactModel()
+    return SimpleNamespace(
+        scene=SimpleNamespace(motion=SimpleNamespace(t_end=T_END)),
+        params=SimpleNamespace(dt_s=DT, contact=contact, regrasp=SimpleNamespace(duration_s=0.25)),
+    )
+
+
+def _holding_state(track):
+    return PlanState(
+        holding={"ring": SimpleNamespace(track=track)},
+        history={},
+        phases={},
+        regrasps=(),
+        now=0.0,
+        held_to_end={},
+    )
+
+
+def test_a_hold_that_lasts_to_the_end_needs_no_regrasp():
+    """A trigger warns before a hold is lost: a finger whose hold is not lost before
+    the motion's last step, and whose contact stays reached, inside its limits, pad
+    facing and clear to the end, may hold on to the end; one whose contact leaves
+    its limits before the end, or whose hold is lost before, may not."""
+    ctx = _holding_ctx()
+    lasting = _holding_state(_track(T_END))
+    held = _held_to_end(ctx, lasting, _trigger("ring", T_END), "why")
+    assert held is not None and held.held_to_end["ring"].endswith(
+        "why; held to the end inside the joint limits"
+    )
+    assert held.holding == lasting.holding and held.now == lasting.now
+    # lost (by the trigger) before the motion's last step
+    assert _held_to_end(ctx, lasting, _trigger("ring", T_END - 3 * DT), "why") is None
+    # the track leaves the joint limits before the end
+    leaving = _holding_state(_track(T_END, lost_at=T_END - 0.5))
+    assert _held_to_end(ctx, leaving, _trigger("ring", T_END), "why") is None
+
+
+@pytest.mark.parametrize("may_hold", [True, False])
+def test_a_finger_that_cannot_regrasp_holds_on_if_its_hold_lasts(monkeypatch, may_hold):
+    """When no regrasp (nor let-go) is found, a finger whose hold lasts to the end holds
+    on instead of failing the plan; not when the regrasp was asked for to move the
+    finger (``may_hold`` False: making room), and not when the hold does not last."""
+    ctx = _holding_ctx()
+    failure = PlanningError("no room", finger="ring", kind=FailureKind.TOO_FEW_FINGERS)
+
+    def fails(*args, **kwargs):
+        raise failure
+
+    monkeypatch.setattr(advance, "_advance", fails)
+    monkeypatch.setattr(
+        advance, "window", lambda ctx, state, trig, triggers: (SimpleNamespace(preferred_s=1.0), "")
+    )
+    state = _holding_state(_track(T_END))
+    trig = _trigger("ring", T_END)
+    if may_hold:
+        after = advance.advance(ctx, state, trig, [trig], [])
+        assert "no regrasp (too-few-fingers)" in after.held_to_end["ring"]
+    else:
+        with pytest.raises(PlanningError) as err:
+            advance.advance(ctx, state, trig, [trig], [], may_hold=False)
+        assert err.value is failure
+    with pytest.raises(PlanningError):
+        advance.advance(ctx, _holding_state(_track(T_END, lost_at=3.0)), trig, [trig], [])

@@ -21,7 +21,7 @@ from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
 from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.planning.planner import PlannerParams
 from regrasp_pin.planning.schedule import held_until
-from regrasp_pin.suite import build_scenario, generate_specs
+from regrasp_pin.suite import build_scenario, generate_specs, neighbour_specs
 from regrasp_pin.verify.plan_check import recheck_plan
 
 # (angle [deg], rate [deg/s]): the demo and neighbours with other angles and rates
@@ -434,3 +434,32 @@ def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
         other = exc.partial
     assert other.regrasps()
     assert all(r.t_end - r.t_start >= D - 1e-9 for r in other.regrasps())
+
+
+def test_a_neighbour_makes_room_for_a_hand_over(tmp_path):
+    """The five-finger hand turning the hexagon -100 deg at 10 deg/s (a neighbour of
+    the demo): the index soon has no contact inside its limits, and with three fingers
+    left to take turns it can only let go if the idle little finger joins in its place;
+    but the ring finger's links fill the room the little finger needs. The ring
+    regrasps first, out of that room, and the hand-over follows. Over the 10 s turn the
+    planner backs up more often than ``max_backtracks`` (each time it gets further it may
+    back up as often again), and near the end the ring, which can no longer regrasp
+    with only two fingers left to hold, holds on to the end inside its limits. A full
+    plan that passes the independent re-check (before: a no-candidate failure at 2.6 s)."""
+    spec = next(s for s in neighbour_specs(("five_finger",)) if s.name.endswith("-100deg-10dps"))
+    scen = build_scenario(spec)
+    result = plan_manipulation(
+        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
+    )
+    plan = Plan.load(result.plan.save(tmp_path / "plan.json"))
+    summary = result.plan.summary
+    made = [r for r in plan.regrasps() if r.reason.startswith("makes room for little to join")]
+    assert made and all(r.finger != "little" for r in made)
+    joined, released = summary["joined"], summary["released"]
+    assert "little" in joined and released["index"] <= joined["little"] + 1e-9
+    assert made[0].t_start < joined["little"]
+    assert summary["backtracks"] > scen.params.max_backtracks
+    assert any("no regrasp" in why for why in summary["held_to_end"].values())
+    check = recheck_plan(plan, max_step_rad=1e-3)
+    assert check.ok, check.problems
+    assert check.min_holding >= 3

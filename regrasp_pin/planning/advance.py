@@ -111,29 +111,49 @@ def advance(
     end_by_s: float | None = None,
     exclude: list[np.ndarray] | None = None,
     reserved: tuple[tuple[np.ndarray, float], ...] = (),
+    may_hold: bool = True,
 ) -> PlanState:
-    """The state after ``trig``: its finger held to the end, or one verified regrasp
-    (landing by ``end_by_s``, away from the ``exclude`` points and out of the
-    ``reserved`` room: see :meth:`RegraspSearch.find`)."""
+    """The state after ``trig``: one verified regrasp (landing by ``end_by_s``, away
+    from the ``exclude`` points and out of the ``reserved`` room: see
+    :meth:`RegraspSearch.find`), a let-go, or its finger held to the end: when it is
+    too late for a regrasp, or (``may_hold``: False for a regrasp whose point is to
+    move the finger) when no regrasp or let-go is found, if its contact lasts to the
+    end (:func:`_held_to_end`; a trigger warns before a hold is lost, and a hold that
+    is not lost needs no regrasp)."""
+    win, _ = window(ctx, state, trig, triggers)
+    if win.preferred_s + ctx.params.regrasp.duration_s > ctx.scene.motion.t_end:
+        held = _held_to_end(ctx, state, trig, "too late for a regrasp")
+        if held is not None:
+            return held
+    try:
+        return _advance(
+            ctx, state, trig, triggers, steps, end_by_s=end_by_s, exclude=exclude, reserved=reserved
+        )
+    except PlanningError as exc:
+        held = _held_to_end(ctx, state, trig, f"no regrasp ({exc.kind.value})")
+        if held is None or not may_hold:
+            raise
+        return held
+
+
+def _advance(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    triggers: list[Trigger],
+    steps: list[Step],
+    *,
+    end_by_s: float | None,
+    exclude: list[np.ndarray] | None,
+    reserved: tuple[tuple[np.ndarray, float], ...],
+) -> PlanState:
+    """:func:`advance` before its last resort (holding to the end)."""
     p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
     D = p.regrasp.duration_s
     name, t_trig, reason = trig.finger, trig.time_s, trig.reason
     h = state.holding[name]
     win, why = window(ctx, state, trig, triggers)
     why = f"{reason} {why}"
-    if (
-        win.preferred_s + D > motion.t_end
-        and trig.lost_s >= motion.t_end - p.dt_s - TIME_TOL_S
-        and holds_to_end(h.track, t_trig, p.contact)
-    ):
-        # too late to regrasp, but the contact stays inside the joint limits (within the
-        # trigger margin only) and feasible until the motion ends: keep holding
-        note = (
-            f"{reason} at t={t_trig:.3f} s, too late for a regrasp; held to the end "
-            "inside the joint limits"
-        )
-        log.info("%s: %s", name, note)
-        return replace(state, held_to_end={**state.held_to_end, name: note})
     rush = _rush(ctx, state, trig, triggers, win)
     if rush is not None:
         # another hold is lost before a regrasp of D could land: a faster one, by then
@@ -221,6 +241,23 @@ def advance(
         )
     steps.append(Step(state, trig, triggers, found.result.Q_object, tuple(exclude or ())))
     return _apply(ctx, state, name, t_trig, why, found, landed.get(id(found.result)))
+
+
+def _held_to_end(ctx: PlanContext, state: PlanState, trig: Trigger, why: str) -> PlanState | None:
+    """The state with ``trig.finger`` holding its contact to the end of the motion when
+    it need not regrasp (``why``: why it does not): its hold is not lost before the
+    motion's last step and the contact stays reached, inside the joint limits (within
+    the trigger margin only), pad facing and its links clear until the end; else
+    None."""
+    p, motion = ctx.params, ctx.scene.motion
+    h = state.holding[trig.finger]
+    if trig.lost_s < motion.t_end - p.dt_s - TIME_TOL_S or not holds_to_end(
+        h.track, trig.time_s, p.contact
+    ):
+        return None
+    note = f"{trig.reason} at t={trig.time_s:.3f} s, {why}; held to the end inside the joint limits"
+    log.info("%s: %s", trig.finger, note)
+    return replace(state, held_to_end={**state.held_to_end, trig.finger: note})
 
 
 def _tip_path_record(res: RegraspResult) -> list:

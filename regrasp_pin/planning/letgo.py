@@ -35,7 +35,7 @@ from .state import (
     q_hand_of,
 )
 
-__all__ = ["let_go"]
+__all__ = ["idle_fingers", "join_origin", "let_go"]
 
 log = logging.getLogger(__name__)
 
@@ -276,7 +276,7 @@ def _try_handover(
     """
     p = ctx.params
     name = trig.finger
-    idle = [n for n in ctx.scene.hand.finger_names if n not in state.phases]
+    idle = idle_fingers(ctx, state)
     if not p.release or not idle or win.empty:
         return None
     q_hand = q_hand_of(ctx, state, stay)
@@ -308,6 +308,32 @@ def _try_handover(
     return None
 
 
+def join_origin(
+    ctx: PlanContext, name: str, t_arrive: float
+) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Where the idle finger ``name`` joins from: its resting configuration ``(k,)``
+    [rad], and the surface sample nearest its resting fingertip at ``t_arrive`` [s]
+    ``(point, normal)`` (object frame [m]), the "P" its new contact is chosen away from.
+    Builds the finger's manifold on the plan's times if the plan has none yet."""
+    f, motion = ctx.scene.hand.finger(name), ctx.scene.motion
+    if name not in ctx.manifolds:
+        m_times = ctx.manifolds[ctx.active[0]].times_s
+        ctx.manifolds[name] = build_manifold(
+            f, ctx.search.sample, motion, m_times, contact=ctx.params.contact
+        )
+    q_from = ctx.base_q[f.q_indices]
+    T = motion.pose(np.array([t_arrive]))[0]
+    tip_obj = T[:3, :3].T @ (f.fk(q_from) - T[:3, 3])  # the resting tip, object frame
+    k0 = int(np.argmin(np.linalg.norm(ctx.search.sample.points - tip_obj, axis=1)))
+    return q_from, (ctx.search.sample.points[k0], ctx.search.sample.normals[k0])
+
+
+def idle_fingers(ctx: PlanContext, state: PlanState) -> list[str]:
+    """The fingers that took no part in the plan so far (they may join), in the hand's
+    order."""
+    return [n for n in ctx.scene.hand.finger_names if n not in state.phases]
+
+
 def _join(
     ctx: PlanContext, state: PlanState, name: str, t0: float, stay: list[str], instead_of: str
 ) -> PlanState | None:
@@ -318,16 +344,7 @@ def _join(
     t_arrive = t0 + p.regrasp.duration_s
     if t_arrive > motion.t_end - p.dt_s:
         return None
-    if name not in ctx.manifolds:
-        m_times = ctx.manifolds[ctx.active[0]].times_s
-        ctx.manifolds[name] = build_manifold(
-            f, ctx.search.sample, motion, m_times, contact=p.contact
-        )
-    q_from = ctx.base_q[f.q_indices]
-    T = motion.pose(np.array([t_arrive]))[0]
-    tip_obj = T[:3, :3].T @ (f.fk(q_from) - T[:3, 3])  # the resting tip, object frame
-    k0 = int(np.argmin(np.linalg.norm(ctx.search.sample.points - tip_obj, axis=1)))
-    P = (ctx.search.sample.points[k0], ctx.search.sample.normals[k0])
+    q_from, P = join_origin(ctx, name, t_arrive)
     others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
     q_hand = q_hand_of(ctx, state, stay)
     excluded: list[np.ndarray] = []

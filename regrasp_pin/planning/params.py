@@ -26,7 +26,10 @@ class PlannerParams:
         candidates: How many new contacts Q to try per lift-off time.
         start_step_s: Spacing of the lift-off times tried in a finger's window [s].
         max_starts: Most lift-off times tried per regrasp.
-        max_backtracks: Most times the planner re-plans an earlier regrasp.
+        max_backtracks: Most times the planner backs up (another finger first, a
+            neighbour making room, an earlier regrasp planned again) before the plan
+            gets further in time than it ever got; each new furthest time gets as
+            many again (``max_steps`` bounds the whole search).
         max_steps: The search budget of the whole call, in steps (a new contact
             chosen, a regrasp planned, a release or a join tried; see
             :class:`~.search.SearchBudget`): once spent, no new attempt starts and the

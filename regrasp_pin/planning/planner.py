@@ -15,8 +15,8 @@ otherwise fall inside the regrasp; other starts are tried earlier and later in t
 For each start the search (:mod:`.planning.search`) tries new contacts Q and durations
 until one regrasp verifies and the contact it lands on is held (followed by IK from the
 landing) at least as long as the shortest regrasp takes, or to the end. When a finger
-finds none, the planner backs up once per failure (at most ``max_backtracks`` times,
-:mod:`.planning.recovery`):
+finds none, the planner backs up once per failure (at most ``max_backtracks`` times
+before the plan gets further than it ever got, :mod:`.planning.recovery`):
 another finger due soon goes first; or a neighbour whose contact takes the room of the
 finger's best new contact regrasps first, out of that room (now, or before one of the
 last regrasps); or the previous regrasp is planned again to land before this finger's
@@ -203,7 +203,10 @@ def plan_manipulation(
         raise no_plan_exists(ctx, infeasible, state)
     t0 = time.perf_counter()
     steps: list[Step] = []
-    backtracks = 0
+    backtracks = 0  # in all (the plan's summary)
+    # backtracks since the plan last got further than ever before: each new furthest
+    # time gets ``max_backtracks`` of them (the budget bounds the whole search)
+    stuck, furthest = 0, state.now
     while True:
         triggers = pending_triggers(ctx, state)
         going = contenders(triggers, ctx)
@@ -214,9 +217,10 @@ def plan_manipulation(
             state = advance(ctx, state, trig, triggers, steps)
         except PlanningError as exc:
             redone = None
-            may_back_up = backtracks < params.max_backtracks
+            may_back_up = stuck < params.max_backtracks
             if may_back_up:
                 backtracks += 1
+                stuck += 1
                 redone = recover(ctx, state, going, triggers, steps, exc)
             if redone is None:
                 stage["regrasps"] = time.perf_counter() - t0
@@ -239,6 +243,8 @@ def plan_manipulation(
                     attempts=exc.attempts,
                 ) from exc
             state = redone
+        if state.now > furthest + TIME_TOL_S:
+            stuck, furthest = 0, state.now
         if progress is not None:
             progress(state.now)
     stage["regrasps"] = time.perf_counter() - t0

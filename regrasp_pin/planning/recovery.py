@@ -3,7 +3,9 @@ the one that failed.
 
 In order: another finger due soon goes first (:func:`_another_first`); a neighbour
 whose contact or links take the room of the finger's best new contact regrasps first,
-out of that room, now or before one of the last regrasps (:func:`_make_room`); an earlier
+out of that room, now or before one of the last regrasps (:func:`_make_room`); where
+the finger can only let go with an idle finger joining in its place, a neighbour that
+takes the joining finger's room regrasps first, out of it (:func:`_make_room_for_join`); an earlier
 regrasp is planned again, to let the finger go before it or to land in time, or, if
 time was not the problem, to land elsewhere (:func:`_backtrack`). An option already
 tried from the same state is not tried again (a retry that repeats what failed is not
@@ -21,6 +23,7 @@ from ..exceptions import ContactError, FailureKind, PlanningError
 from ..grasp.choice import NewContact
 from ..model.clearance import FingerClearance
 from .advance import Step, advance, window
+from .letgo import idle_fingers, join_origin
 from .schedule import TIME_TOL_S, LiftOffWindow
 from .search import LANDING_FINGER_CLEARANCE_M
 from .state import PlanContext, PlanState, Trigger, q_hand_of
@@ -45,6 +48,8 @@ def recover(
     redone = _another_first(ctx, state, contenders, triggers, steps)
     if redone is None:
         redone = _make_room(ctx, state, trig, triggers, steps, failure)
+    if redone is None:
+        redone = _make_room_for_join(ctx, state, trig, triggers, steps, failure)
     if redone is None and steps:
         redone = _backtrack(ctx, steps, failure, state, trig)
     return redone
@@ -114,16 +119,9 @@ def _make_room(
         return None  # a matter of time, not of room
     name, h = trig.finger, state.holding[trig.finger]
     win, _ = window(ctx, state, trig, triggers)
-    D = ctx.params.regrasp.duration_s
     # where to go first from: now, or before one of the last regrasps (the finger
     # holding the same contact), as long as a regrasp lands before its hold is lost
-    bases = [(state, triggers, len(steps))] + [
-        (steps[k].before, steps[k].triggers, k)
-        for k in range(len(steps) - 1, max(len(steps) - _BACKTRACK_DEPTH, 0) - 1, -1)
-        if steps[k].before.holding.get(name) is not None
-        and steps[k].before.holding[name].t_from == h.t_from
-    ]
-    bases = [b for b in bases if b[0].now + D <= win.latest_s - TIME_TOL_S]
+    bases = _room_bases(ctx, state, triggers, steps, name, h.t_from, win.latest_s)
     if not bases:
         return None
     links = failure.kind == FailureKind.FINGER_COLLISION
@@ -148,13 +146,143 @@ def _make_room(
             trial = list(steps[:k])
             try:
                 new_state = advance(
-                    ctx, base, go, base_triggers, trial, end_by_s=win.latest_s, reserved=(wanted,)
+                    ctx,
+                    base,
+                    go,
+                    base_triggers,
+                    trial,
+                    end_by_s=win.latest_s,
+                    reserved=(wanted,),
+                    may_hold=False,
                 )
             except PlanningError:
                 continue
             steps[:] = trial
             return new_state
     return None
+
+
+def _make_room_for_join(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    triggers: list[Trigger],
+    steps: list[Step],
+    failure: PlanningError,
+) -> PlanState | None:
+    """When ``trig.finger`` finds no regrasp and the one way left to go on is a
+    hand-over (:mod:`.letgo`: it lets go, an idle finger joins in its place, because
+    the fingers that stay are too few to take turns), let a holding neighbour whose
+    contact or links take the room of the joining finger's best new contact regrasp
+    first, out of that room (around that contact); None if no neighbour does or can.
+
+    As in :func:`_make_room`, the neighbour goes now, or before one of the last
+    regrasps (the finger holding the same contact), and lands before the finger's
+    lift-off window closes. The joining finger's contact is the one
+    :meth:`RegraspSearch.choose` would give it were the neighbour not there, landing
+    after the neighbour's regrasp, a release's back-off and a join (:func:`_room_taken`
+    decides whether the neighbour takes its room). What follows, the hand-over
+    included, is planned again from the new state."""
+    p = ctx.params
+    if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
+        return None  # a matter of time, not of room
+    name, h = trig.finger, state.holding[trig.finger]
+    stay = [n for n in ctx.scene.hand.finger_names if n != name and n in state.holding]
+    idle = idle_fingers(ctx, state)
+    if not p.release or not idle or len(stay) > p.min_holding:
+        return None  # no hand-over: none allowed, nobody to join, or it may just let go
+    win, _ = window(ctx, state, trig, triggers)
+    D, motion = p.regrasp.duration_s, ctx.scene.motion
+    bases = _room_bases(ctx, state, triggers, steps, name, h.t_from, win.latest_s)
+    for base, base_triggers, k in bases:
+        t_arrive = min(
+            max(win.preferred_s, base.now + D) + p.release_back_off_s + D,
+            motion.t_end - p.dt_s,
+        )
+        lost = {e.finger: e.lost_s for e in base_triggers}
+        near = [n for n in stay if n in base.holding]
+        for joining in [n for n in idle if n not in base.phases]:
+            _, P = join_origin(ctx, joining, t_arrive)
+            sep = 2 * ctx.scene.hand.finger(joining).tip_radius + 0.001
+            for other in sorted(
+                near,
+                key=lambda n: (round(float(np.linalg.norm(base.holding[n].p - P[0])), 9), n),
+            ):
+                if ctx.budget.exhausted:
+                    return None
+                key = (_signature(base), f"{other} makes room for {joining} to join")
+                if key in ctx.tried:
+                    continue
+                ctx.tried.add(key)
+                rest = [n for n in near if n != other]
+                try:
+                    ctx.budget.spend()
+                    wanted = ctx.search.choose(
+                        joining,
+                        P,
+                        t_arrive,
+                        {n: (base.holding[n].p, base.holding[n].n) for n in rest},
+                        q_hand_of(ctx, base, rest),
+                        [],
+                    )
+                except ContactError:
+                    continue  # no room for the joining finger even without this neighbour
+                room = _room_taken(ctx, base, joining, other, wanted, sep)
+                if room is None:
+                    continue
+                go = Trigger(
+                    time_s=max(base.now, base.holding[other].t_from),
+                    finger=other,
+                    reason=f"makes room for {joining} to join in place of {name}",
+                    lost_s=lost.get(other, motion.t_end),
+                )
+                log.info(
+                    "%s failed (%s): %s makes room for %s to join",
+                    name,
+                    failure.kind.value,
+                    other,
+                    joining,
+                )
+                trial = list(steps[:k])
+                try:
+                    new_state = advance(
+                        ctx,
+                        base,
+                        go,
+                        base_triggers,
+                        trial,
+                        end_by_s=win.latest_s,
+                        reserved=((wanted.p_object, room),),
+                        may_hold=False,
+                    )
+                except PlanningError:
+                    continue
+                steps[:] = trial
+                return new_state
+    return None
+
+
+def _room_bases(
+    ctx: PlanContext,
+    state: PlanState,
+    triggers: list[Trigger],
+    steps: list[Step],
+    name: str,
+    t_from: float,
+    latest_s: float,
+) -> list[tuple[PlanState, list[Trigger], int]]:
+    """Where a neighbour may go first from, ``(state, triggers, steps kept)``: now, or
+    before one of the last ``_BACKTRACK_DEPTH`` regrasps at which ``name`` held the
+    contact it holds now (since ``t_from``), latest first; only those from which a
+    regrasp lands by ``latest_s`` [s]."""
+    D = ctx.params.regrasp.duration_s
+    bases = [(state, triggers, len(steps))] + [
+        (steps[k].before, steps[k].triggers, k)
+        for k in range(len(steps) - 1, max(len(steps) - _BACKTRACK_DEPTH, 0) - 1, -1)
+        if steps[k].before.holding.get(name) is not None
+        and steps[k].before.holding[name].t_from == t_from
+    ]
+    return [b for b in bases if b[0].now + D <= latest_s - TIME_TOL_S]
 
 
 def _blockers(
