@@ -15,6 +15,7 @@ a search).
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -200,66 +201,80 @@ def _make_room_for_join(
             motion.t_end - p.dt_s,
         )
         lost = {e.finger: e.lost_s for e in base_triggers}
-        near = [n for n in stay if n in base.holding]
-        for joining in [n for n in idle if n not in base.phases]:
-            _, P = join_origin(ctx, joining, t_arrive)
-            sep = 2 * ctx.scene.hand.finger(joining).tip_radius + 0.001
-            for other in sorted(
-                near,
-                key=lambda n: (round(float(np.linalg.norm(base.holding[n].p - P[0])), 9), n),
-            ):
-                if ctx.budget.exhausted:
-                    return None
-                key = (_signature(base), f"{other} makes room for {joining} to join")
-                if key in ctx.tried:
-                    continue
-                ctx.tried.add(key)
-                rest = [n for n in near if n != other]
-                try:
-                    ctx.budget.spend()
-                    wanted = ctx.search.choose(
-                        joining,
-                        P,
-                        t_arrive,
-                        {n: (base.holding[n].p, base.holding[n].n) for n in rest},
-                        q_hand_of(ctx, base, rest),
-                        [],
-                    )
-                except ContactError:
-                    continue  # no room for the joining finger even without this neighbour
-                room = _room_taken(ctx, base, joining, other, wanted, sep)
-                if room is None:
-                    continue
-                go = Trigger(
-                    time_s=max(base.now, base.holding[other].t_from),
-                    finger=other,
-                    reason=f"makes room for {joining} to join in place of {name}",
-                    lost_s=lost.get(other, motion.t_end),
+        for joining, other, room in _join_blockers(ctx, base, stay, idle, t_arrive):
+            go = Trigger(
+                time_s=max(base.now, base.holding[other].t_from),
+                finger=other,
+                reason=f"makes room for {joining} to join in place of {name}",
+                lost_s=lost.get(other, motion.t_end),
+            )
+            log.info(
+                "%s failed (%s): %s makes room for %s to join",
+                name,
+                failure.kind.value,
+                other,
+                joining,
+            )
+            trial = list(steps[:k])
+            try:
+                new_state = advance(
+                    ctx,
+                    base,
+                    go,
+                    base_triggers,
+                    trial,
+                    end_by_s=win.latest_s,
+                    reserved=(room,),
+                    may_hold=False,
                 )
-                log.info(
-                    "%s failed (%s): %s makes room for %s to join",
-                    name,
-                    failure.kind.value,
-                    other,
-                    joining,
-                )
-                trial = list(steps[:k])
-                try:
-                    new_state = advance(
-                        ctx,
-                        base,
-                        go,
-                        base_triggers,
-                        trial,
-                        end_by_s=win.latest_s,
-                        reserved=((wanted.p_object, room),),
-                        may_hold=False,
-                    )
-                except PlanningError:
-                    continue
-                steps[:] = trial
-                return new_state
+            except PlanningError:
+                continue
+            steps[:] = trial
+            return new_state
     return None
+
+
+def _join_blockers(
+    ctx: PlanContext,
+    base: PlanState,
+    stay: list[str],
+    idle: list[str],
+    t_arrive: float,
+) -> Iterator[tuple[str, str, tuple[np.ndarray, float]]]:
+    """``(joining, neighbour, room)`` for each idle finger of ``base`` that could join
+    at ``t_arrive`` [s] and each of the ``stay`` fingers, nearest its best contact
+    first, that takes that contact's room (:func:`_room_taken`; the room ``(point,
+    radius)``, object frame [m]), each pair not tried before from ``base``; stops when
+    the budget is spent."""
+    near = [n for n in stay if n in base.holding]
+    for joining in [n for n in idle if n not in base.phases]:
+        _, P = join_origin(ctx, joining, t_arrive)
+        sep = 2 * ctx.scene.hand.finger(joining).tip_radius + 0.001
+        for other in sorted(
+            near, key=lambda n: (round(float(np.linalg.norm(base.holding[n].p - P[0])), 9), n)
+        ):
+            if ctx.budget.exhausted:
+                return
+            key = (_signature(base), f"{other} makes room for {joining} to join")
+            if key in ctx.tried:
+                continue
+            ctx.tried.add(key)
+            rest = [n for n in near if n != other]
+            try:
+                ctx.budget.spend()
+                wanted = ctx.search.choose(
+                    joining,
+                    P,
+                    t_arrive,
+                    {n: (base.holding[n].p, base.holding[n].n) for n in rest},
+                    q_hand_of(ctx, base, rest),
+                    [],
+                )
+            except ContactError:
+                continue  # no room for the joining finger even without this neighbour
+            room = _room_taken(ctx, base, joining, other, wanted, sep)
+            if room is not None:
+                yield joining, other, (wanted.p_object, room)
 
 
 def _room_bases(
