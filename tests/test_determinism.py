@@ -17,10 +17,14 @@ import numpy as np
 import pytest
 
 _SCRIPT = r"""
-import json
+import json, sys
 from regrasp_pin import make_scenario, plan_manipulation
 from regrasp_pin.exceptions import PlanningError
-scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=20)
+from regrasp_pin.suite import build_scenario, neighbour_specs
+if sys.argv[1] == "demo":
+    scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=20)
+else:
+    scen = build_scenario(next(s for s in neighbour_specs() if s.name == sys.argv[1]))
 try:
     r = plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
     regrasps, failure = r.regrasps, None
@@ -44,21 +48,33 @@ def _wide_simd() -> list[str]:
     return [f for f in wide if feats.get(f)]
 
 
-def _run(env_extra: dict[str, str]) -> dict:
+def _run(scenario: str, env_extra: dict[str, str]) -> dict:
     env = {**os.environ, **env_extra}
     out = subprocess.run(
-        [sys.executable, "-c", _SCRIPT], env=env, capture_output=True, text=True, timeout=600
+        [sys.executable, "-c", _SCRIPT, scenario],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert out.returncode == 0, out.stderr[-2000:]
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def test_plan_does_not_change_without_the_wide_simd_kernels():
+@pytest.mark.parametrize(
+    "scenario",
+    [
+        "demo",
+        # a 10 s turn with a neighbour making room, a hand-over and a finger held on
+        "five_finger-hexagon--100deg-10dps",
+    ],
+)
+def test_plan_does_not_change_without_the_wide_simd_kernels(scenario):
     wide = _wide_simd()
     if not wide:
         pytest.skip("this CPU has no AVX2/AVX-512 kernels to turn off")
-    a = _run({})
-    b = _run({"NPY_DISABLE_CPU_FEATURES": " ".join(wide)})
+    a = _run(scenario, {})
+    b = _run(scenario, {"NPY_DISABLE_CPU_FEATURES": " ".join(wide)})
     assert a["failure"] == b["failure"]
     for n in a["grasp"]:
         np.testing.assert_allclose(a["grasp"][n], b["grasp"][n], atol=1e-4)
