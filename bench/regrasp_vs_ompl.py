@@ -556,13 +556,18 @@ class OursRuns:
     deterministic: bool
 
 
+def installed_backends() -> list[str]:
+    """The IK backends to time: numpy, and numba when it is installed."""
+    return [b for b in IK_BACKENDS if b == "numpy" or numba_available()]
+
+
 def time_ours(
     scene: Scene, motion: ObjectMotion, pairs: list[Pair], reps: int
 ) -> dict[str, OursRuns]:
     """Our planner on every pair, ``reps`` timed runs, on each IK backend available
     (numpy, then numba when installed), the backends' runs interleaved run by run so
     that both see the same machine load."""
-    backends = [b for b in IK_BACKENDS if b == "numpy" or numba_available()]
+    backends = installed_backends()
     runs = {b: OursRuns([], [], {}, True) for b in backends}
     previous = ik_backend()
     try:
@@ -822,7 +827,7 @@ def main() -> None:
 
     # warm-up (caches, first calls, numba's compiled kernels), not timed
     previous = ik_backend()
-    for b in [b for b in IK_BACKENDS if b == "numpy" or numba_available()]:
+    for b in installed_backends():
         set_ik_backend(b)
         run_ours(scene, scene.static, pairs[0])
     set_ik_backend(previous)

@@ -120,15 +120,13 @@ def advance(
     move the finger) when no regrasp or let-go is found, if its contact lasts to the
     end (:func:`_held_to_end`; a trigger warns before a hold is lost, and a hold that
     is not lost needs no regrasp)."""
-    win, _ = window(ctx, state, trig, triggers)
+    win, why = window(ctx, state, trig, triggers)
     if win.preferred_s + ctx.params.regrasp.duration_s > ctx.scene.motion.t_end:
         held = _held_to_end(ctx, state, trig, "too late for a regrasp")
         if held is not None:
             return held
     try:
-        return _advance(
-            ctx, state, trig, triggers, steps, end_by_s=end_by_s, exclude=exclude, reserved=reserved
-        )
+        return _advance(ctx, state, trig, triggers, steps, (win, why), end_by_s, exclude, reserved)
     except PlanningError as exc:
         held = _held_to_end(ctx, state, trig, f"no regrasp ({exc.kind.value})")
         if held is None or not may_hold:
@@ -142,17 +140,18 @@ def _advance(
     trig: Trigger,
     triggers: list[Trigger],
     steps: list[Step],
-    *,
+    window_why: tuple[LiftOffWindow, str],
     end_by_s: float | None,
     exclude: list[np.ndarray] | None,
     reserved: tuple[tuple[np.ndarray, float], ...],
 ) -> PlanState:
-    """:func:`advance` before its last resort (holding to the end)."""
+    """:func:`advance` before its last resort (holding to the end); ``window_why``:
+    the finger's lift-off window and why (:func:`window`)."""
     p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
     D = p.regrasp.duration_s
     name, t_trig, reason = trig.finger, trig.time_s, trig.reason
     h = state.holding[name]
-    win, why = window(ctx, state, trig, triggers)
+    win, why = window_why
     why = f"{reason} {why}"
     rush = _rush(ctx, state, trig, triggers, win)
     if rush is not None:

@@ -136,31 +136,47 @@ def _make_room(
             if key in ctx.tried:
                 continue
             ctx.tried.add(key)
-            lost = {e.finger: e.lost_s for e in base_triggers}
-            go = Trigger(
-                time_s=max(base.now, base.holding[other].t_from),
-                finger=other,
-                reason=f"makes room for {name} (its {failure.kind.value} failure)",
-                lost_s=lost.get(other, ctx.scene.motion.t_end),
-            )
             log.info("%s failed (%s): %s makes room first", name, failure.kind.value, other)
-            trial = list(steps[:k])
-            try:
-                new_state = advance(
-                    ctx,
-                    base,
-                    go,
-                    base_triggers,
-                    trial,
-                    end_by_s=win.latest_s,
-                    reserved=(wanted,),
-                    may_hold=False,
-                )
-            except PlanningError:
-                continue
-            steps[:] = trial
-            return new_state
+            why = f"makes room for {name} (its {failure.kind.value} failure)"
+            new_state = _neighbour_first(
+                ctx, (base, base_triggers, k), other, why, win.latest_s, wanted, steps
+            )
+            if new_state is not None:
+                return new_state
     return None
+
+
+def _neighbour_first(
+    ctx: PlanContext,
+    base: tuple[PlanState, list[Trigger], int],
+    other: str,
+    why: str,
+    end_by_s: float,
+    room: tuple[np.ndarray, float],
+    steps: list[Step],
+) -> PlanState | None:
+    """The state after the holding finger ``other`` regrasps from ``base`` (a state,
+    its triggers and how many of ``steps`` it keeps, :func:`_room_bases`), landing by
+    ``end_by_s`` [s] out of ``room`` (``(point, radius)``, object frame [m]) and not
+    held on instead (moving it is the point); None if no such regrasp verifies. On
+    success ``steps`` holds the regrasps of the new state."""
+    state, triggers, k = base
+    lost = {e.finger: e.lost_s for e in triggers}
+    go = Trigger(
+        time_s=max(state.now, state.holding[other].t_from),
+        finger=other,
+        reason=why,
+        lost_s=lost.get(other, ctx.scene.motion.t_end),
+    )
+    trial = list(steps[:k])
+    try:
+        new_state = advance(
+            ctx, state, go, triggers, trial, end_by_s=end_by_s, reserved=(room,), may_hold=False
+        )
+    except PlanningError:
+        return None
+    steps[:] = trial
+    return new_state
 
 
 def _make_room_for_join(
@@ -195,19 +211,12 @@ def _make_room_for_join(
     win, _ = window(ctx, state, trig, triggers)
     D, motion = p.regrasp.duration_s, ctx.scene.motion
     bases = _room_bases(ctx, state, triggers, steps, name, h.t_from, win.latest_s)
-    for base, base_triggers, k in bases:
+    for b in bases:
         t_arrive = min(
-            max(win.preferred_s, base.now + D) + p.release_back_off_s + D,
+            max(win.preferred_s, b[0].now + D) + p.release_back_off_s + D,
             motion.t_end - p.dt_s,
         )
-        lost = {e.finger: e.lost_s for e in base_triggers}
-        for joining, other, room in _join_blockers(ctx, base, stay, idle, t_arrive):
-            go = Trigger(
-                time_s=max(base.now, base.holding[other].t_from),
-                finger=other,
-                reason=f"makes room for {joining} to join in place of {name}",
-                lost_s=lost.get(other, motion.t_end),
-            )
+        for joining, other, room in _join_blockers(ctx, b[0], stay, idle, t_arrive):
             log.info(
                 "%s failed (%s): %s makes room for %s to join",
                 name,
@@ -215,22 +224,10 @@ def _make_room_for_join(
                 other,
                 joining,
             )
-            trial = list(steps[:k])
-            try:
-                new_state = advance(
-                    ctx,
-                    base,
-                    go,
-                    base_triggers,
-                    trial,
-                    end_by_s=win.latest_s,
-                    reserved=(room,),
-                    may_hold=False,
-                )
-            except PlanningError:
-                continue
-            steps[:] = trial
-            return new_state
+            why = f"makes room for {joining} to join in place of {name}"
+            new_state = _neighbour_first(ctx, b, other, why, win.latest_s, room, steps)
+            if new_state is not None:
+                return new_state
     return None
 
 
