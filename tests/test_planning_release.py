@@ -122,6 +122,25 @@ def test_the_samples_reach_the_end_when_the_back_off_ends_within_a_step_of_it(sc
     assert rel.times_s[-2] == pytest.approx(T_RELEASE_S + 0.495)
 
 
+def test_a_back_off_lasts_as_long_as_the_joint_velocity_limits_need(scene):
+    """Asked to back off 8 mm in 10 ms, the finger takes the time its joints need: the
+    straight joint-space move's minimum-jerk duration at the velocity limits
+    (``duration_for_move``, path factor 1), its speeds within the limits, then still."""
+    scen, _, _, q_r = scene
+    f = scen.hand.finger("index")
+    rel = _release(scene, clearance_m=0.008, back_off_s=0.01)
+    k = int(np.flatnonzero(np.isclose(rel.times_s, rel.t_backed_off, atol=1e-12))[0])
+    need = duration_for_move(
+        q_r, rel.q[k], f.velocity_limit, minimum_s=0.01, dt_s=0.01, path_factor=1.0
+    )
+    assert need >= 0.05 - 1e-12  # five times what was asked for
+    assert rel.t_backed_off == pytest.approx(T_RELEASE_S + need, abs=1e-12)
+    speed = np.abs(np.diff(rel.q, axis=0)) / np.diff(rel.times_s)[:, None]
+    assert (speed <= f.velocity_limit + 1e-9).all()
+    assert speed.max() > 0.5 * f.velocity_limit.max()  # not slower than it needs either
+    assert_close(rel.q[k:], np.tile(rel.q[k], (rel.q.shape[0] - k, 1)), atol=0, what="still")
+
+
 def test_a_parking_configuration_is_reached(scene):
     scen, _, _, _ = scene
     f = scen.hand.finger("index")

@@ -272,7 +272,8 @@ def _try_handover(
     Only when releases are allowed and such a finger exists. The release times tried
     are the latest in the window first; the joining fingers in the hand's order, each
     with its best new contacts (:meth:`RegraspSearch.choose`, the paper's criterion);
-    the join starts when the release has backed off, the others holding.
+    the join starts when the release has backed off (at least
+    ``release_back_off_s`` after it), the others holding.
     """
     p = ctx.params
     name = trig.finger
@@ -291,7 +292,7 @@ def _try_handover(
         for other in idle:
             note = f"{why}; no verified regrasp: let go, {other} joins in its place"
             after = _apply_release(state, name, rel, note)
-            joined = _join(ctx, after, other, t_r + p.release_back_off_s, stay, name)
+            joined = _join(ctx, after, other, rel.t_backed_off, stay, name)
             if joined is None:
                 continue
             lost = _lost_before_now(ctx, joined)

@@ -57,7 +57,8 @@ class PlannerParams:
             no verified regrasp, if more than ``min_holding`` others remain to take
             turns, or if the others hold in force closure to the end
             (:mod:`.planning.release`).
-        release_back_off_s: Duration of a release's back-off move [s].
+        release_back_off_s: Shortest duration of a release's back-off move [s] (longer
+            when the joint velocity limits need it).
         threads: Threads that build the fingers' manifolds (the same manifolds on any
             number; see :func:`~regrasp_pin.grasp.manifold.build_manifolds`); None:
             its default (one per core with the numba IK backend, else one).

@@ -5,7 +5,8 @@ Near the end of a motion a contact may be lost with no time left for a regrasp
 other fingers hold the object in force closure to the end, the finger can simply let
 go: from the release time ``t_r`` its fingertip backs off along the contact normal
 (fixed in the palm frame: ``clearance`` from where the pad touched) over a short
-minimum-jerk move; the finger then stays still or, given a parking configuration,
+minimum-jerk move (straight in joint space, as long as the joint velocity limits need:
+near a joint limit, backing off may swing another joint far); the finger then stays still or, given a parking configuration,
 moves there (minimum jerk, joint space, as slowly as its velocity limits need) and
 stays. The joint speeds are checked against the limits and the motion is verified with Coal
 like every regrasp (:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip
@@ -40,6 +41,7 @@ class Release:
     Attributes:
         finger: Finger name.
         t_start: Release time [s] (the pad touches its contact there).
+        t_backed_off: When the back-off ends [s].
         t_end: End of the motion [s].
         P_object: The contact let go, object frame ``(3,)`` [m].
         times_s: ``(S,)`` sample times [s].
@@ -50,6 +52,7 @@ class Release:
 
     finger: str
     t_start: float
+    t_backed_off: float
     t_end: float
     P_object: np.ndarray
     times_s: np.ndarray
@@ -89,7 +92,8 @@ def plan_release(
         q_hand: Maps times ``(S,)`` to hand configurations ``(S, nq)`` with the other
             fingers holding.
         clearance_m: How far the fingertip backs off along the normal [m].
-        back_off_s: Duration of the back-off [s] (shorter if the motion ends first).
+        back_off_s: Shortest duration of the back-off [s] (longer when the joint
+            velocity limits need it; cut short if the motion ends first).
         dt_s: Sampling step after the back-off [s].
         link_clearance_m: Clearance of the finger's other links from the object [m].
         finger_clearance_m: Clearance from the other fingers [m].
@@ -133,7 +137,15 @@ def plan_release(
             required=ik_tol_m,
         )
     q_off = res.q[0]
-    d = min(back_off_s, t_end - t_r)
+    need = duration_for_move(
+        q_release,
+        q_off,
+        f.velocity_limit,
+        minimum_s=dt_s,
+        dt_s=dt_s,
+        path_factor=1.0,  # a straight joint-space move
+    )
+    d = min(max(back_off_s, need), t_end - t_r)
     n_move = max(int(np.ceil(d / dt_s * 4)), 2)
     t_move = t_r + d * np.linspace(0.0, 1.0, n_move + 1)
     t_still = np.arange(t_move[-1] + dt_s, t_end + 1e-9, dt_s)
@@ -175,6 +187,7 @@ def plan_release(
     return Release(
         finger=finger,
         t_start=t_r,
+        t_backed_off=float(t_move[-1]),
         t_end=t_end,
         P_object=p.copy(),
         times_s=times,
