@@ -722,37 +722,3 @@ def test_the_same_call_gives_the_same_trajectory(scenes):
     assert np.array_equal(a.times_s, b.times_s)
     assert np.array_equal(a.waypoints_object, b.waypoints_object)
     assert a.attempts == b.attempts
-
-
-def test_grid_edges_over_an_edge_of_the_object_weigh_the_tip_centres_swing():
-    """``_tip_stretch``: on a 40 x 60 x 40 mm box, a grid over its top face (z = 20 mm)
-    and its +x face, tip centres 12 mm above the nodes. An edge within one face keeps
-    its length (factor 1); an edge across the box's edge between a top node (x_a,
-    y_a) and a side node (y_b, z_b) weighs the straight move of the tip centre from
-    (x_a, y_a, 20 + 12) to (20 + 12, y_b, z_b) mm over its unfolded length
-    ``hypot(20 - x_a + 20 - z_b, y_a - y_b)``: more than 1 near the edge."""
-    from regrasp_pin.planning.regrasp import _tip_stretch
-    from regrasp_pin.surface.grid import build_surface_grid
-
-    box, rho, half = Box(BOX_SIZE), 0.012, 0.02
-    grid = build_surface_grid(
-        box, np.array([0.01, 0.0, half]), np.array([half, 0.0, 0.0]), spacing_m=0.002
-    )
-    tips = grid.points_object + rho * grid.normals_object
-    factor = _tip_stretch(grid, tips)
-    p = grid.points_object
-    top = (p[:, 2] > half - 1e-9) & (p[:, 0] < half - 1e-9)
-    side = (p[:, 0] > half - 1e-9) & (p[:, 2] < half - 1e-9)
-    a, b = grid.edges[:, 0], grid.edges[:, 1]
-    within = (top[a] & top[b]) | (side[a] & side[b])
-    assert within.sum() > 100
-    assert_close(factor[within], 1.0, atol=1e-9, what="within a face")
-    across = (top[a] & side[b]) | (side[a] & top[b])
-    assert across.sum() > 10
-    t, s = np.where(top[a], a, b)[across], np.where(top[a], b, a)[across]
-    centre_t = np.column_stack([p[t, 0], p[t, 1], np.full(t.size, half + rho)])
-    centre_s = np.column_stack([np.full(s.size, half + rho), p[s, 1], p[s, 2]])
-    unfolded = np.hypot(half - p[t, 0] + half - p[s, 2], p[t, 1] - p[s, 1])
-    expected = np.maximum(np.linalg.norm(centre_s - centre_t, axis=1) / unfolded, 1.0)
-    assert_close(factor[across], expected, atol=1e-8, what="across the edge")
-    assert np.all(factor[across] > 1.5)  # nodes within a few mm of the edge

@@ -100,39 +100,3 @@ def test_bad_node_cost_is_refused(top_grid):
     with pytest.raises(InputError) as err:
         shortest_grid_path(top_grid, np.zeros(m), cost_weight=-1.0)
     assert err.value.argument == "cost_weight"
-
-
-def test_edge_factors_multiply_the_weights_and_steer_the_path(top_grid):
-    """Factors on the edges at the wall's nodes (x = -2, 0, 2 mm: a crossing's
-    factored edges span 8 mm): a factor whose extra length there is well above the
-    gap's 4.5 mm detour (x 2: 8 mm) steers the path through the gap, one well below it
-    (x 1.25: 2 mm) is crossed; the cost is the sum of the factored weights."""
-    wall = _wall_cost(top_grid, 1.0) > 0
-    a, b = top_grid.edges[:, 0], top_grid.edges[:, 1]
-    on_wall = wall[a] | wall[b]
-    for factor, length in ((2.0, WALL_GAP_PATH_M), (1.25, 0.05)):
-        s = np.where(on_wall, factor, 1.0)
-        path = shortest_grid_path(top_grid, edge_factor=s)
-        assert_close(path.length_m, length, atol=1e-12, rtol=0.03)
-    rng = np.random.default_rng(6)
-    cost = rng.uniform(0.0, 2.0, size=len(top_grid))
-    s = rng.uniform(1.0, 3.0, size=top_grid.edges.shape[0])
-    weights = edge_weights(top_grid, cost, cost_weight=0.7, edge_factor=s)
-    plain = edge_weights(top_grid, cost, cost_weight=0.7)
-    assert_close(weights, plain * s, atol=1e-15)
-    path = shortest_grid_path(top_grid, cost, cost_weight=0.7, edge_factor=s)
-    pairs = {(int(i), int(j)): k for k, (i, j) in enumerate(top_grid.edges)}
-    used = [pairs.get((i, j), pairs.get((j, i))) for i, j in zip(path.nodes[:-1], path.nodes[1:])]
-    assert_close(path.cost, float(weights[used].sum()), atol=1e-12)
-
-
-def test_bad_edge_factor_is_refused(top_grid):
-    e = top_grid.edges.shape[0]
-    for bad, word in (
-        (np.full(e, 0.5), "below 1"),
-        (np.full(e, np.nan), "finite|NaN"),
-        (np.ones(e + 1), "shape"),
-    ):
-        with pytest.raises(InputError, match=word) as err:
-            shortest_grid_path(top_grid, edge_factor=bad)
-        assert err.value.argument == "edge_factor"

@@ -600,27 +600,11 @@ def _surface_path(task: _Task, p: RegraspParams) -> tuple[GridPath, TipPath]:
     # decisions must not follow last-bit noise: costs on a 1e-9 lattice
     finite = np.isfinite(cost)
     cost[finite] = np.round(cost[finite], 9)
-    gpath = shortest_grid_path(
-        grid, cost, cost_weight=p.limit_weight, edge_factor=_tip_stretch(grid, tips)
-    )
+    gpath = shortest_grid_path(grid, cost, cost_weight=p.limit_weight)
     tip_path = inflate_path(
         task.scene.obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
     )
     return gpath, tip_path
-
-
-def _tip_stretch(grid: SurfaceGrid, tips: np.ndarray) -> np.ndarray:
-    """How much further than the surface the fingertip's centre moves over each grid
-    edge: ``max(1, |c_b - c_a| / L)`` ``(E,)`` (on a 1e-9 lattice) for the centres
-    ``tips`` ``(M, 3)`` above the nodes (object frame) and the edge's unfolded length
-    ``L``. Over an edge of the object the centre turns about it (the offset normal
-    turns from one face's to the next), a move that the unfolded length does not see:
-    a path that crosses onto a neighbouring face and back swings the finger around
-    the edge twice."""
-    a, b = grid.edges[:, 0], grid.edges[:, 1]
-    chord = np.linalg.norm(tips[b] - tips[a], axis=1)
-    ratio = chord / np.maximum(grid.edge_lengths_m, 1e-12)
-    return np.round(np.maximum(ratio, 1.0), 9)
 
 
 def _finger_gap(

@@ -4,12 +4,10 @@
 be traveled and the finger joint angle limitations" (section 2.2). Each grid edge
 ``(a, b)`` of length ``L`` weighs
 
-    w = L * s_ab * (1 + cost_weight * (c_a + c_b) / 2),
+    w = L * (1 + cost_weight * (c_a + c_b) / 2),
 
 where ``c`` is the caller's non-negative node cost (e.g. how close the finger's IK at
-the time of passage comes to a boundary plane; ``inf`` forbids a node) and ``s`` an
-optional edge factor >= 1 (e.g. how much further than ``L`` the fingertip's centre
-moves over the edge, around an edge of the object). The shortest
+the time of passage comes to a boundary plane; ``inf`` forbids a node). The shortest
 path under these weights comes from :func:`scipy.sparse.csgraph.dijkstra`. Build the
 weights with :func:`edge_weights`, or solve directly with :func:`shortest_grid_path`.
 
@@ -67,40 +65,25 @@ class GridPath:
 
 
 def edge_weights(
-    grid: SurfaceGrid,
-    node_cost: np.ndarray | None = None,
-    *,
-    cost_weight: float = 1.0,
-    edge_factor: np.ndarray | None = None,
+    grid: SurfaceGrid, node_cost: np.ndarray | None = None, *, cost_weight: float = 1.0
 ) -> np.ndarray:
-    """Weights of the grid edges: ``L * s * (1 + cost_weight * (c_a + c_b) / 2)``.
+    """Weights of the grid edges: ``L * (1 + cost_weight * (c_a + c_b) / 2)``.
 
     Args:
         grid: The grid.
         node_cost: Non-negative cost of each node, shape (M,); ``inf`` forbids the
             node. Default all zero (shortest path by length).
         cost_weight: Weight of the node costs relative to length, >= 0.
-        edge_factor: Finite factors ``s >= 1`` of the edges, shape (E,) (the order of
-            ``grid.edges``); default all 1.
 
     Returns:
         Edge weights [m], shape (E,) (``inf`` for edges touching a forbidden node).
 
     Raises:
         InputError: if ``node_cost`` has the wrong shape or holds NaN or negative
-            values, ``edge_factor`` the wrong shape or values not finite or below 1,
-            or ``cost_weight`` is negative or not finite.
+            values, or ``cost_weight`` is negative or not finite.
     """
     w = positive(cost_weight, "cost_weight", allow_zero=True)
     length = grid.edge_lengths_m
-    if edge_factor is not None:
-        s = as_array(edge_factor, "edge_factor", (grid.edges.shape[0],))
-        if np.any(s < 1.0):
-            bad = int(np.argmin(s))
-            raise InputError(
-                "edge_factor", f"is below 1 at edge {bad} ({s[bad]:.3g})", "factors >= 1"
-            )
-        length = length * s
     if node_cost is None:
         return length.copy()
     c = as_array(node_cost, "node_cost", (len(grid),), finite=False)
@@ -124,11 +107,7 @@ def edge_weights(
 
 
 def shortest_grid_path(
-    grid: SurfaceGrid,
-    node_cost: np.ndarray | None = None,
-    *,
-    cost_weight: float = 1.0,
-    edge_factor: np.ndarray | None = None,
+    grid: SurfaceGrid, node_cost: np.ndarray | None = None, *, cost_weight: float = 1.0
 ) -> GridPath:
     """Shortest grid path from P to Q under the weights of :func:`edge_weights`.
 
@@ -136,7 +115,6 @@ def shortest_grid_path(
         grid: The grid (from :func:`regrasp_pin.surface.grid.build_surface_grid`).
         node_cost: Non-negative cost of each node, shape (M,); ``inf`` forbids the node.
         cost_weight: Weight of the node costs relative to length, >= 0.
-        edge_factor: Finite factors >= 1 of the edges, shape (E,); default all 1.
 
     Returns:
         The path (see :class:`GridPath`).
@@ -145,7 +123,7 @@ def shortest_grid_path(
         InputError: for a malformed ``node_cost`` or ``cost_weight``.
         PlanningError: if P or Q is forbidden or Q cannot be reached from P.
     """
-    weights = edge_weights(grid, node_cost, cost_weight=cost_weight, edge_factor=edge_factor)
+    weights = edge_weights(grid, node_cost, cost_weight=cost_weight)
     p, q = grid.p_index, grid.q_index
     if node_cost is not None:
         c = np.asarray(node_cost, dtype=float)
