@@ -5,11 +5,12 @@ Near the end of a motion a contact may be lost with no time left for a regrasp
 other fingers hold the object in force closure to the end, the finger can simply let
 go: from the release time ``t_r`` its fingertip backs off along the contact normal
 (fixed in the palm frame: ``clearance`` from where the pad touched) over a short
-minimum-jerk move (straight in joint space, as long as the joint velocity limits need:
-near a joint limit, backing off may swing another joint far); the finger then stays still or, given a parking configuration,
-moves there (minimum jerk, joint space, as slowly as its velocity limits need) and
-stays. The joint speeds are checked against the limits and the motion is verified with Coal
-like every regrasp (:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip
+minimum-jerk move (straight in joint space, as long as the joint velocity limits
+need: near a joint limit, backing off may swing another joint far); the finger then
+stays still or, given a parking configuration, moves there (minimum jerk, joint
+space, as slowly as its velocity limits need) and stays. The joint speeds are checked
+against the limits and the motion is verified with Coal like every regrasp
+(:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip
 clear of the object, allowed to touch only at the release, the other links and the
 other fingers clear, joints within their limits).
 """
