@@ -34,6 +34,7 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
+import regrasp_pin.planning.regrasp as regrasp_module
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, VerificationError
 from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.model.clearance import LinkClearance
@@ -638,6 +639,34 @@ def test_a_failure_before_verification_reports_when_it_happened(scenes):
     assert exc.measured is not None and exc.required is not None
     assert exc.measured > exc.required > 0.0
     assert all(a.kind == FailureKind.VELOCITY for a in exc.attempts)
+
+
+def test_a_regrasp_too_fast_when_paced_by_its_length_passes_paced_by_its_joints(
+    scenes, checker, monkeypatch
+):
+    """At 0.18 s the index outruns a joint's limit when its tip moves along the curve
+    with minimum-jerk progress in length (the joints turn unevenly along it); paced by
+    the joints' motion (:func:`~regrasp_pin.planning.timing.joint_paced`) the same
+    regrasp passes: the independent re-check, the joint velocity limits, and each
+    waypoint still reached at its own time."""
+    scene = scenes["upright-moving"]
+    i_p = scene.contact((0.02, 0.025, -0.019))
+    i_q = scene.contact((0.02, 0.025, -0.003))
+    params = RegraspParams(duration_s=0.18)
+    result = scene.plan(i_p, i_q, params=params, route="surface")
+    recheck(checker, scene, result)  # includes the joint velocity limits
+    t_i = result.waypoint_times_s
+    assert np.all(np.diff(t_i) > 0)
+    q_full = np.tile(scene.hand.neutral(), (len(t_i), 1))
+    q_full[:, checker.finger.q_indices] = interp_q(result, t_i)
+    T = scene.motion.pose(t_i)
+    expected = np.einsum("nij,nj->ni", T[:, :3, :3], result.waypoints_object) + T[:, :3, 3]
+    assert_close(checker.tip_palm(q_full), expected, atol=1e-4, what="tip at T(t_i) waypoint_i")
+
+    monkeypatch.setattr(regrasp_module, "joint_paced", lambda u, q, vlim, progress: u)
+    with pytest.raises(PlanningError) as info:
+        scene.plan(i_p, i_q, params=params, route="surface")
+    assert info.value.kind == FailureKind.VELOCITY
 
 
 # ---------------------------------------------------------------------- 6. minimum jerk

@@ -11,6 +11,7 @@ from regrasp_pin.planning.timing import (
     STRETCH_MARGIN,
     duration_for_move,
     inverse_minimum_jerk,
+    joint_paced,
     minimum_jerk,
     next_duration,
     stretched_duration,
@@ -113,3 +114,38 @@ def test_velocity_blend_is_zero_at_both_ends_with_the_given_end_velocities():
     move = minimum_jerk((times - times[0]) / 0.5)[:, None] * np.ones(3)
     total = move + d
     assert_close((total[1] - total[0]) / h, v_from, rtol=1e-3, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_joint_paced_brings_an_uneven_path_under_its_mean_joint_pace(seed):
+    """Two joints that turn through most of their move over short stretches of a path
+    (tanh steps): paced by their motion, every joint peaks within MJ_PEAK times the
+    path's whole time at full speed over the duration (plus the floor's quarter), far
+    below what pacing by the path's length gives."""
+    rng = np.random.default_rng(seed)
+    centres, widths = rng.uniform(0.2, 0.8, 2), rng.uniform(0.03, 0.08, 2)
+    vlim = rng.uniform(1.0, 3.0, 2)
+
+    def q_of(u: np.ndarray) -> np.ndarray:
+        return np.tanh((u[:, None] - centres) / widths)
+
+    S, D = 801, 1.0
+    t = np.linspace(0.0, D, S)
+    progress = minimum_jerk(t / D)
+    u = progress.copy()  # paced by length: the path parameter is its length
+    paced = joint_paced(u, q_of(u), vlim, progress)
+    assert paced[0] == u[0] and paced[-1] == u[-1]
+    assert np.all(np.diff(paced) > 0.0)
+
+    def peak(uu: np.ndarray) -> float:
+        return float((np.abs(np.diff(q_of(uu), axis=0)) / np.diff(t)[:, None] / vlim).max())
+
+    fine = np.linspace(0.0, 1.0, 200001)
+    full = float(np.sum(np.max(np.abs(np.diff(q_of(fine), axis=0)) / vlim, axis=1)))  # [s]
+    assert peak(paced) <= 1.25 * MJ_PEAK * full / D * 1.02
+    assert peak(u) > 1.5 * peak(paced)
+
+
+def test_joint_paced_keeps_a_path_whose_joints_do_not_move():
+    u = minimum_jerk(np.linspace(0.0, 1.0, 11))
+    np.testing.assert_array_equal(joint_paced(u, np.zeros((11, 3)), np.ones(3), u), u)

@@ -13,7 +13,9 @@ at ``t_start + duration`` while the object keeps moving:
 3. The waypoints are joined by a shape-preserving C1 curve (PCHIP, no overshoot)
    traversed with a minimum-jerk timing, so the tip leaves P and reaches Q at rest
    relative to the object; waypoint i is passed at time t_i, in step with the
-   object's motion (section 2.3). Each sample is moved to the palm frame with
+   object's motion (section 2.3). The progress is spent along the curve's length, or,
+   where that outruns a joint's velocity limit, along the joints' motion
+   (:func:`~.timing.joint_paced`). Each sample is moved to the palm frame with
    ``T_palm_object(t)`` and turned into joint angles by warm-started batched IK.
 4. Coal checks the whole trajectory densely (:mod:`.verify`): the finger against the
    object (no penetration; at least ``clearance_m`` away from the lift-off and
@@ -60,7 +62,7 @@ from ..surface.grid import SurfaceGrid, build_surface_grid
 from ..surface.inflation import TipPath, grid_inflation, inflate_path
 from ..surface.path import GridPath, shortest_grid_path
 from ..verify.finger_motion import VerificationReport, verify_finger_motion
-from .timing import check_joint_speed, inverse_minimum_jerk, minimum_jerk
+from .timing import check_joint_speed, inverse_minimum_jerk, joint_paced, minimum_jerk
 from .transfer import Transfer, plan_transfer
 
 __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
@@ -655,37 +657,28 @@ def _attempt(
     times = t_start + np.linspace(0.0, p.duration_s, n_t)
     progress = minimum_jerk(np.linspace(0.0, 1.0, n_t))
     u = np.interp(progress * arc[-1], arc, u_fine)
-    tip_obj = curve(u)
-    tip_obj[0], tip_obj[-1] = pts[0], pts[-1]
-    # where along the surface path each sample is (for the lift-off/landing zones)
+    # where along the surface path each waypoint is (for the lift-off/landing zones)
     a_way = tip_path.arc_length_m[poly.indices]
-    a_samples = np.interp(u, chord, a_way)
-    taper = tip_path.taper_m
-    in_flight = (a_samples >= taper) & (a_samples <= tip_path.length_m - taper)
-    required = np.where(in_flight, p.clearance_m, 0.0)
-    planned = obj.signed_distance(tip_obj) - f.tip_radius
-    short = planned < required - _PENETRATION_TOL_M
-    if short.any():
-        i = int(np.argmax(required - planned))
-        raise PlanningError(
-            f"the waypoint curve keeps only {1e3 * planned[i]:.2f} mm of the required "
-            f"{1e3 * required[i]:.2f} mm",
-            finger=finger,
-            time_s=float(times[i]),
-            kind=FailureKind.OBJECT_CLEARANCE,
-            measured=float(planned[i]),
-            required=float(required[i]),
-        )
+    samples = _CurveSamples(curve, chord, a_way, tip_path, pts, p)
+    tip_obj, required, in_flight = samples.at(u, obj, f, times)
     waypoint_times = (
         np.interp(np.interp(chord, u_fine, arc) / arc[-1], progress, times - t_start) + t_start
     )
     stages.lap("timing")
 
     T = motion.pose(times)
-    q = _follow(
-        f, times, T, tip_obj, task.q0, np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m), p
-    )
-    check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
+    tol = np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m)
+    q = _follow(f, times, T, tip_obj, task.q0, tol, p)
+    try:
+        check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
+    except PlanningError:
+        # paced along the path by the joints' motion instead of its length
+        u = joint_paced(u, q, f.velocity_limit, progress)
+        tip_obj, required, in_flight = samples.at(u, obj, f, times)
+        tol = np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m)
+        q = _follow(f, times, T, tip_obj, task.q0, tol, p)
+        check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
+        waypoint_times = np.interp(chord, u, times)
     stages.lap("ik")
 
     q_full = np.array(task.q_hand(times), dtype=float)
@@ -744,6 +737,49 @@ def _attempt(
         min_clearance_m=min_clear,
         params=p,
     )
+
+
+@dataclass(frozen=True)
+class _CurveSamples:
+    """The waypoint curve sampled at path parameters: the fingertip centre (object
+    frame) and the clearance it must keep there."""
+
+    curve: PchipInterpolator
+    chord: np.ndarray  # the waypoints' curve parameters (chord length) [m]
+    a_way: np.ndarray  # the waypoints' arc length along the surface path [m]
+    tip_path: TipPath
+    pts: np.ndarray  # the surface path's fingertip centres, object frame [m]
+    p: RegraspParams
+
+    def at(
+        self, u: np.ndarray, obj: ConvexObject, f: Finger, times: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Tip centres ``(S, 3)`` [m], required clearances ``(S,)`` [m] and the in-flight
+        mask ``(S,)`` at curve parameters ``u``; the ends are P's and Q's tip centres.
+
+        Raises:
+            PlanningError: ``object-clearance`` if the curve cuts into the clearance.
+        """
+        tip_obj = self.curve(u)
+        tip_obj[0], tip_obj[-1] = self.pts[0], self.pts[-1]
+        a_samples = np.interp(u, self.chord, self.a_way)
+        taper = self.tip_path.taper_m
+        in_flight = (a_samples >= taper) & (a_samples <= self.tip_path.length_m - taper)
+        required = np.where(in_flight, self.p.clearance_m, 0.0)
+        planned = obj.signed_distance(tip_obj) - f.tip_radius
+        short = planned < required - _PENETRATION_TOL_M
+        if short.any():
+            i = int(np.argmax(required - planned))
+            raise PlanningError(
+                f"the waypoint curve keeps only {1e3 * planned[i]:.2f} mm of the required "
+                f"{1e3 * required[i]:.2f} mm",
+                finger=f.name,
+                time_s=float(times[i]),
+                kind=FailureKind.OBJECT_CLEARANCE,
+                measured=float(planned[i]),
+                required=float(required[i]),
+            )
+        return tip_obj, required, in_flight
 
 
 _IK_CHUNK = 32  # samples solved per IK batch, each warm-started from the previous batch

@@ -24,6 +24,7 @@ __all__ = [
     "duration_for_move",
     "inverse_minimum_jerk",
     "minimum_jerk",
+    "joint_paced",
     "next_duration",
     "stretched_duration",
     "velocity_blend",
@@ -135,6 +136,35 @@ def check_joint_speed(
             measured=float(vel[i, j]),
             required=float(velocity_limit[j]),
         )
+
+
+def joint_paced(
+    u: np.ndarray, q: np.ndarray, velocity_limit: np.ndarray, progress: np.ndarray
+) -> np.ndarray:
+    """Path parameters ``(S,)`` that pace a path by its joints instead of its length.
+
+    A path traversed with the minimum-jerk progress along its length (``u`` ``(S,)``,
+    increasing, at the sample times) moves the joints unevenly: a joint that turns
+    through most of its move over a short stretch of the path (near a singularity or a
+    joint limit) peaks far above ``MJ_PEAK`` times its mean speed. Measured on that
+    trajectory ``q`` ``(S, k)`` [rad], the time each step needs at full speed is
+    ``max_j |dq_j| / velocity_limit_j`` [s]; spending the same ``progress`` ``(S,)``
+    (minimum jerk in time, from 0 to 1) along that cumulative time instead of along
+    the length brings every joint's peak to ``MJ_PEAK`` times the path's mean
+    joint-limited pace (time scaling along the path). Each step counts at least a
+    quarter of its share of the path's mean pace by length, so that the tip keeps
+    moving where the joints barely do. The ends stay where they are.
+    """
+    du = np.diff(u)
+    dt_full = np.max(np.abs(np.diff(q, axis=0)) / np.asarray(velocity_limit, float), axis=1)
+    span = float(u[-1] - u[0])
+    floor = 0.25 * float(dt_full.sum()) * du / span if span > 0.0 else np.zeros_like(du)
+    paced = np.concatenate([[0.0], np.cumsum(np.maximum(dt_full, floor))])
+    if paced[-1] <= 0.0:
+        return np.array(u, float)
+    out = np.interp(progress * paced[-1], paced, u)
+    out[0], out[-1] = u[0], u[-1]
+    return out
 
 
 def velocity_blend(times: np.ndarray, v_from: np.ndarray, v_to: np.ndarray) -> np.ndarray:
