@@ -135,7 +135,7 @@ def test_a_surface_path_too_fast_at_every_duration_falls_back_to_joint_space(pro
             "too fast (test)", finger=FINGER, kind=FailureKind.VELOCITY, measured=2.0, required=1.0
         )
 
-    monkeypatch.setattr(regrasp_module, "_surface_path", too_fast)
+    monkeypatch.setattr(regrasp_module, "surface_path", too_fast)
     try:
         found = problem()
     except PlanningError as exc:

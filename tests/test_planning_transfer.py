@@ -187,7 +187,7 @@ def test_plan_regrasp_falls_back_to_the_transfer_when_no_surface_variant_passes(
             required=0.0,
         )
 
-    monkeypatch.setattr(regrasp_module, "_surface_path", no_surface_path)
+    monkeypatch.setattr(regrasp_module, "surface_path", no_surface_path)
     i_p, i_q = scene.contact(p_object), scene.contact(q_object)
     result = scene.plan(i_p, i_q, q_land=scene.manifold.q[1, i_q])
     assert result.route == "joint-space" and result.grid_path is None
@@ -211,7 +211,7 @@ def test_when_the_transfer_fails_too_the_error_keeps_every_attempt(scenes, monke
             "no surface path (test)", finger=FINGER, kind=FailureKind.FINGER_COLLISION
         )
 
-    monkeypatch.setattr(regrasp_module, "_surface_path", no_surface_path)
+    monkeypatch.setattr(regrasp_module, "surface_path", no_surface_path)
     i_p, i_q = scene.contact(p_object), scene.contact(q_object)
     short = dataclasses.replace(PARAMS, duration_s=0.04)
     with pytest.raises(PlanningError) as info:
@@ -238,14 +238,14 @@ def test_route_selects_the_surface_path_the_fallback_or_both(scenes, monkeypatch
     # the fallback alone, even where the surface path passes
     only = scene.plan(i_p, i_q, q_land=q_land, route="joint-space")
     assert only.route == "joint-space" and not only.attempts
-    monkeypatch.setattr(regrasp_module, "_surface_path", _fails_with(FailureKind.OBJECT_CLEARANCE))
+    monkeypatch.setattr(regrasp_module, "surface_path", _fails_with(FailureKind.OBJECT_CLEARANCE))
     # the surface path alone: its failure, and no transfer tried
     with pytest.raises(PlanningError) as info:
         scene.plan(i_p, i_q, q_land=q_land, route="surface")
     assert info.value.kind == FailureKind.OBJECT_CLEARANCE
     assert all(a.what != "joint-space transfer" for a in info.value.attempts)
     # a surface path too fast for its duration: the caller tries a longer one first
-    monkeypatch.setattr(regrasp_module, "_surface_path", _fails_with(FailureKind.VELOCITY))
+    monkeypatch.setattr(regrasp_module, "surface_path", _fails_with(FailureKind.VELOCITY))
     with pytest.raises(PlanningError) as info:
         scene.plan(i_p, i_q, q_land=q_land)
     assert info.value.kind == FailureKind.VELOCITY

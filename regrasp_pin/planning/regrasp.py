@@ -6,9 +6,9 @@ at ``t_start + duration`` while the object keeps moving:
 1. In the object frame, the surface region holding P and Q is unfolded into a plane
    and gridded (:mod:`.surface_grid`); grid nodes cost more where the finger's IK, at
    the time the tip would pass over them, comes near a boundary plane, and nodes
-   under another fingertip are forbidden. The cheapest grid path (Dijkstra,
-   :mod:`.surface_path`) is lifted onto the virtually inflated surface
-   (:mod:`.inflation`): the fingertip-centre curve.
+   under another fingertip are forbidden. The cheapest grid path (Dijkstra) is lifted
+   onto the virtually inflated surface: the fingertip-centre curve
+   (:mod:`.surface_route`).
 2. The competitive Hopfield network reduces that curve to m waypoints (Eqs. 5-10).
 3. The waypoints are joined by a shape-preserving C1 curve (PCHIP, no overshoot)
    traversed with a minimum-jerk timing, so the tip leaves P and reaches Q at rest
@@ -16,7 +16,8 @@ at ``t_start + duration`` while the object keeps moving:
    object's motion (section 2.3). The progress is spent along the curve's length, or,
    where that outruns a joint's velocity limit, along the joints' motion
    (:func:`~.timing.joint_paced`). Each sample is moved to the palm frame with
-   ``T_palm_object(t)`` and turned into joint angles by warm-started batched IK.
+   ``T_palm_object(t)`` and turned into joint angles by warm-started batched IK
+   (:mod:`.follow`).
 4. Coal checks the whole trajectory densely (:mod:`.verify`): the finger against the
    object (no penetration; at least ``clearance_m`` away from the lift-off and
    landing zones) and against the other fingers, which keep holding and move with
@@ -52,35 +53,27 @@ from scipy.interpolate import PchipInterpolator
 from .._validate import as_array, positive
 from ..exceptions import Attempt, FailureKind, InputError, PlanningError, VerificationError
 from ..model.clearance import LinkClearance
-from ..model.distances import capsule_gap
-from ..model.hand import Finger, Hand
+from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..model.scene import Scene
 from ..polygon.approximate import PolygonResult, approximate_polygon
 from ..surface.grid import SurfaceGrid, build_surface_grid
-from ..surface.inflation import TipPath, grid_inflation, inflate_path
-from ..surface.path import GridPath, shortest_grid_path
+from ..surface.inflation import TipPath
+from ..surface.path import GridPath
 from ..verify.finger_motion import VerificationReport, verify_finger_motion
-from .timing import check_joint_speed, inverse_minimum_jerk, joint_paced, minimum_jerk
+from .follow import CurveSamples, follow_curve
+from .surface_route import RegraspTask, surface_path
+from .timing import check_joint_speed, joint_paced, minimum_jerk
 from .transfer import Transfer, plan_transfer
 
 __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
 
 log = logging.getLogger(__name__)
 
-_UNREACHABLE_COST = 20.0  # node cost where IK cannot reach the inflated point
 #: The grid path's nodes: on paths at most twice as long as the straight unfolded P -> Q
 #: segment plus 1 cm (an ellipse with foci P and Q; see ``build_surface_grid``).
 _DETOUR = (2.0, 0.01)
-#: DLS iterations per pass for the grid nodes' IK (from the contact's configuration).
-#: Reachable nodes converge within 4 (every node of the demo neighbourhood and the
-#: regrasp bench); the cap ends the slow creep of unreachable ones along their limits.
-_NODE_IK_ITERATIONS = 8
-_PENETRATION_TOL_M = 5e-5  # the verifier's tolerance, applied to the planned curve too
-_FINGER_GAP_M = 0.004  # grid nodes whose finger comes closer than this to another cost more
-_FINGER_COST = 10.0  # cost per unit of (gap deficit / _FINGER_GAP_M)
-_FINGER_GAP_SLACK_M = 0.001  # forbidden-gap threshold below the gap that P and Q have
 _OTHERS_TIMES = 21  # the other fingers are placed at this many times over the regrasp
 _MAX_LIMIT_WEIGHT_FACTOR = 16.0  # the joint-limit weight grows up to this x its start
 _MAX_INFLATION_FACTOR = 2.25  # the inflation grows up to this x its start
@@ -335,7 +328,7 @@ def plan_regrasp(
     t_others = float(t_start) + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
     q_others = np.asarray(q_hand(t_others), float)
     stages.lap("others")
-    task = _Task(scene, f, float(t_start), q0, grid, q_hand, others, t_others, q_others)
+    task = RegraspTask(scene, f, float(t_start), q0, grid, q_hand, others, t_others, q_others)
 
     attempts: list[Attempt] = []
     last: PlanningError | None = None
@@ -405,7 +398,7 @@ def plan_regrasp(
 
 
 def _surface_variants(
-    task: _Task, params: RegraspParams, stages: _Stages, attempts: list[Attempt]
+    task: RegraspTask, params: RegraspParams, stages: _Stages, attempts: list[Attempt]
 ) -> RegraspResult | PlanningError:
     """The first surface-path variant that verifies, or the last failure (each failure
     appended to ``attempts``): variants follow the failures' kinds (:func:`_next_variant`)
@@ -419,7 +412,7 @@ def _surface_variants(
         try:
             key = (p_try.inflation_factor, p_try.limit_weight, p_try.finger_gap_m)
             if key not in paths:
-                paths[key] = _surface_path(task, p_try)
+                paths[key] = surface_path(task, p_try)
             gpath, tip_path = paths[key]
             stages.lap("path")
             result = _attempt(task, gpath, tip_path, p_try, stages)
@@ -528,115 +521,8 @@ def _next_variant(p: RegraspParams, kind: FailureKind, base: RegraspParams) -> R
     return None
 
 
-@dataclass(frozen=True)
-class _Task:
-    """One regrasp to plan: what stays the same over its path variants.
-
-    ``q0`` is the finger at lift-off; ``q_hand`` maps times to the hand with the other
-    fingers holding, ``q_others`` ``(T, nq)`` is that hand at times ``t_others``, and
-    ``others_tips`` ``(F, 3)`` are their tip centres in the object frame [m].
-    """
-
-    scene: Scene
-    finger: Finger
-    t_start: float
-    q0: np.ndarray
-    grid: SurfaceGrid
-    q_hand: Callable[[np.ndarray], np.ndarray]
-    others_tips: np.ndarray
-    t_others: np.ndarray
-    q_others: np.ndarray
-
-
-def _surface_path(task: _Task, p: RegraspParams) -> tuple[GridPath, TipPath]:
-    """Grid path weighing distance, joint limits and the other fingers, lifted onto the
-    inflated surface.
-
-    Each node is judged at the time the tip passes over it: its IK margin
-    costs, and where the finger's links (conservative capsules) come within
-    ``p.finger_gap_m`` of another finger the node is forbidden (outside the lift-off
-    and landing zones); nearer than ``_FINGER_GAP_M`` it costs more.
-    """
-    f, grid, t_start = task.finger, task.grid, task.t_start
-    height = p.inflation_factor * p.clearance_m
-    taper = p.taper_m if p.taper_m is not None else height
-    h_nodes = grid_inflation(grid, height, taper)
-    tips = grid.points_object + (f.tip_radius + h_nodes)[:, None] * grid.normals_object
-    # time at which the tip passes over each node: progress along P -> Q (unfolded)
-    uvP, uvQ = grid.uv[grid.p_index], grid.uv[grid.q_index]
-    d = uvQ - uvP
-    s = np.clip((grid.uv - uvP) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
-    t_nodes = t_start + p.duration_s * inverse_minimum_jerk(s)
-    from_p = np.linalg.norm(grid.uv - uvP, axis=1)
-    from_q = np.linalg.norm(grid.uv - uvQ, axis=1)
-    T = task.scene.motion.pose(t_nodes)
-    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tips) + T[:, :3, 3]
-    res = f.ik(targets, task.q0, tol_m=1e-4, max_iter=_NODE_IK_ITERATIONS, restarts=False)
-    margin = f.limit_margin(res.q)
-    cost = np.clip((p.limit_margin_rad - margin) / p.limit_margin_rad, 0.0, 1.0) ** 2
-    cost[~res.success] = _UNREACHABLE_COST
-    t_others, q_others = task.t_others, task.q_others
-    q_nodes = np.stack(
-        [np.interp(t_nodes, t_others, q_others[:, j]) for j in range(q_others.shape[1])],
-        axis=1,
-    )
-    # gaps from this cap on cost nothing and are never forbidden (nor set `allowed`)
-    cap = max(_FINGER_GAP_M, p.finger_gap_m + _FINGER_GAP_SLACK_M)
-    gap = _finger_gap(task.scene.hand, f.name, res.q, q_nodes, cap)
-    cost += _FINGER_COST * np.clip((_FINGER_GAP_M - gap) / _FINGER_GAP_M, 0.0, None)
-    # forbidden: nearer than the gap, but never more than P and Q themselves allow (the
-    # capsules are conservative: a finger that holds P may already be "within" them)
-    ends = [grid.p_index, grid.q_index]
-    allowed = min(p.finger_gap_m, float(gap[ends].min()) - _FINGER_GAP_SLACK_M)
-    in_flight = (from_p > taper) & (from_q > taper)
-    cost[in_flight & (gap < allowed)] = np.inf
-    others_tips = task.others_tips
-    if others_tips.size:
-        # under another fingertip: forbidden, but never more than P and Q themselves are
-        # (a P right beside another finger would otherwise be walled in)
-        dist = np.linalg.norm(tips[:, None, :] - others_tips[None], axis=2).min(axis=1)
-        at_ends = float(dist[[grid.p_index, grid.q_index]].min())
-        keep = min(2 * f.tip_radius + p.contact_keepout_m, at_ends - _FINGER_GAP_SLACK_M)
-        cost[dist < keep] = np.inf
-    cost[[grid.p_index, grid.q_index]] = np.minimum(cost[[grid.p_index, grid.q_index]], 0.0)
-    # decisions must not follow last-bit noise: costs on a 1e-9 lattice
-    finite = np.isfinite(cost)
-    cost[finite] = np.round(cost[finite], 9)
-    gpath = shortest_grid_path(grid, cost, cost_weight=p.limit_weight)
-    tip_path = inflate_path(
-        task.scene.obj, gpath, tip_radius_m=f.tip_radius, clearance_m=height, taper_m=taper
-    )
-    return gpath, tip_path
-
-
-def _finger_gap(
-    hand: Hand, finger: str, q_finger: np.ndarray, q_others: np.ndarray, cap_m: float
-) -> np.ndarray:
-    """Lower bound ``(M,)`` on the distance between the finger (at each ``q_finger`` row)
-    and the other fingers (at the matching ``q_others`` row, ``(M, nq)``), capped at
-    ``cap_m`` (:func:`~regrasp_pin.model.distances.capsule_gap`)."""
-    f = hand.finger(finger)
-    other_ids = [g for n, o in hand.fingers.items() if n != finger for g in o.geometry_ids]
-    q_full = np.array(q_others, float)
-    # the other fingers are placed once per distinct configuration (bit for bit): over
-    # the grid nodes they repeat (the nodes beyond P or Q share the regrasp's ends)
-    rows = q_full.view(np.dtype((np.void, 8 * q_full.shape[1])))[:, 0]
-    _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
-    q_distinct = q_full[first]
-    q_full[:, f.q_indices] = q_finger
-    return capsule_gap(
-        hand,
-        list(f.geometry_ids),
-        other_ids,
-        q_full,
-        cap_m=cap_m,
-        q_b=q_distinct,
-        rows_b=inverse.reshape(-1),
-    )
-
-
 def _attempt(
-    task: _Task, gpath: GridPath, tip_path: TipPath, p: RegraspParams, stages: _Stages
+    task: RegraspTask, gpath: GridPath, tip_path: TipPath, p: RegraspParams, stages: _Stages
 ) -> RegraspResult:
     hand, obj, motion = task.scene.hand, task.scene.obj, task.scene.motion
     f, t_start = task.finger, task.t_start
@@ -659,7 +545,7 @@ def _attempt(
     u = np.interp(progress * arc[-1], arc, u_fine)
     # where along the surface path each waypoint is (for the lift-off/landing zones)
     a_way = tip_path.arc_length_m[poly.indices]
-    samples = _CurveSamples(curve, chord, a_way, tip_path, pts, p)
+    samples = CurveSamples(curve, chord, a_way, tip_path, pts, p.clearance_m)
     tip_obj, required, in_flight = samples.at(u, obj, f, times)
     waypoint_times = (
         np.interp(np.interp(chord, u_fine, arc) / arc[-1], progress, times - t_start) + t_start
@@ -668,7 +554,7 @@ def _attempt(
 
     T = motion.pose(times)
     tol = np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m)
-    q = _follow(f, times, T, tip_obj, task.q0, tol, p)
+    q = follow_curve(f, times, T, tip_obj, task.q0, tol, p.ik_tol_m)
     try:
         check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
     except PlanningError:
@@ -676,7 +562,7 @@ def _attempt(
         u = joint_paced(u, q, f.velocity_limit, progress)
         tip_obj, required, in_flight = samples.at(u, obj, f, times)
         tol = np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m)
-        q = _follow(f, times, T, tip_obj, task.q0, tol, p)
+        q = follow_curve(f, times, T, tip_obj, task.q0, tol, p.ik_tol_m)
         check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
         waypoint_times = np.interp(chord, u, times)
     stages.lap("ik")
@@ -737,84 +623,3 @@ def _attempt(
         min_clearance_m=min_clear,
         params=p,
     )
-
-
-@dataclass(frozen=True)
-class _CurveSamples:
-    """The waypoint curve sampled at path parameters: the fingertip centre (object
-    frame) and the clearance it must keep there."""
-
-    curve: PchipInterpolator
-    chord: np.ndarray  # the waypoints' curve parameters (chord length) [m]
-    a_way: np.ndarray  # the waypoints' arc length along the surface path [m]
-    tip_path: TipPath
-    pts: np.ndarray  # the surface path's fingertip centres, object frame [m]
-    p: RegraspParams
-
-    def at(
-        self, u: np.ndarray, obj: ConvexObject, f: Finger, times: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Tip centres ``(S, 3)`` [m], required clearances ``(S,)`` [m] and the in-flight
-        mask ``(S,)`` at curve parameters ``u``; the ends are P's and Q's tip centres.
-
-        Raises:
-            PlanningError: ``object-clearance`` if the curve cuts into the clearance.
-        """
-        tip_obj = self.curve(u)
-        tip_obj[0], tip_obj[-1] = self.pts[0], self.pts[-1]
-        a_samples = np.interp(u, self.chord, self.a_way)
-        taper = self.tip_path.taper_m
-        in_flight = (a_samples >= taper) & (a_samples <= self.tip_path.length_m - taper)
-        required = np.where(in_flight, self.p.clearance_m, 0.0)
-        planned = obj.signed_distance(tip_obj) - f.tip_radius
-        short = planned < required - _PENETRATION_TOL_M
-        if short.any():
-            i = int(np.argmax(required - planned))
-            raise PlanningError(
-                f"the waypoint curve keeps only {1e3 * planned[i]:.2f} mm of the required "
-                f"{1e3 * required[i]:.2f} mm",
-                finger=f.name,
-                time_s=float(times[i]),
-                kind=FailureKind.OBJECT_CLEARANCE,
-                measured=float(planned[i]),
-                required=float(required[i]),
-            )
-        return tip_obj, required, in_flight
-
-
-_IK_CHUNK = 32  # samples solved per IK batch, each warm-started from the previous batch
-
-
-def _follow(
-    f: Finger,
-    times: np.ndarray,
-    T: np.ndarray,
-    tip_obj: np.ndarray,
-    q0: np.ndarray,
-    tol: np.ndarray,
-    p: RegraspParams,
-) -> np.ndarray:
-    """Joint trajectory ``(S, k)`` whose tip follows ``tip_obj`` (object frame) within
-    ``tol`` ``(S,)`` [m] per sample, by warm-started batched IK in chunks."""
-    targets = np.einsum("nij,nj->ni", T[:, :3, :3], tip_obj) + T[:, :3, 3]
-    q = np.empty((times.size, f.k))
-    prev = q0
-    for s0 in range(0, times.size, _IK_CHUNK):
-        s1 = min(s0 + _IK_CHUNK, times.size)
-        # warm start only: a restart may jump to another IK branch (a joint flip)
-        res = f.ik(targets[s0:s1], prev, tol_m=p.ik_tol_m, restarts=False)
-        bad = res.error_m > tol[s0:s1]
-        if bad.any():
-            i = int(np.argmax(res.error_m - tol[s0:s1]))
-            raise PlanningError(
-                f"IK cannot follow the path (residual {1e3 * res.error_m[i]:.2f} mm, "
-                f"tolerance {1e3 * tol[s0 + i]:.3f} mm)",
-                finger=f.name,
-                time_s=float(times[s0 + i]),
-                kind=FailureKind.IK_UNREACHABLE,
-                measured=float(res.error_m[i]),
-                required=float(tol[s0 + i]),
-            )
-        q[s0:s1] = res.q
-        prev = res.q[-1]
-    return q
