@@ -1091,3 +1091,34 @@ def test_rerank_looks_past_the_first_candidates_when_their_holds_are_cut_short()
     got, capped = _rerank(ranked, np.zeros(n, bool), 12, 12, cutter)
     assert len(asked) == 1 and sorted(asked[0].tolist()) == list(range(12))
     assert capped[0] == 12 and set(capped[8:].tolist()) == set(range(12))
+
+
+def test_q_that_would_land_too_late_is_not_chosen(five):
+    """With ``landing_s`` (here: the largest joint move from P's configuration, a stand-in
+    for a flight's duration), a Q whose landing comes after ``land_by_s`` is passed
+    over for the next one that lands in time; when none does, the error is
+    ``too-late`` with the earliest landing as its measure."""
+    _, _, _, _, manifolds, _ = five
+    m = manifolds["middle"]
+    q_from = np.nanmean(m.q[0], axis=0)
+
+    def landing(q_to: np.ndarray) -> np.ndarray:
+        return np.abs(q_to - q_from).max(axis=1)
+
+    free = _choose_from_grasp(five, "middle", 1.25, max_checks=10_000)
+    same = _choose_from_grasp(
+        five, "middle", 1.25, max_checks=10_000, landing_s=landing, land_by_s=np.inf
+    )
+    assert same.index == free.index
+    late = float(landing(free.q_arrive[None])[0])
+    sooner = _choose_from_grasp(
+        five, "middle", 1.25, max_checks=10_000, landing_s=landing, land_by_s=late - 1e-6
+    )
+    assert sooner.index != free.index
+    assert landing(sooner.q_arrive[None])[0] <= late - 1e-6
+    with pytest.raises(ContactError) as info:
+        _choose_from_grasp(
+            five, "middle", 1.25, max_checks=10_000, landing_s=landing, land_by_s=-1.0
+        )
+    assert info.value.kind == FailureKind.TOO_LATE
+    assert info.value.required == -1.0 and info.value.measured >= 0.0

@@ -190,3 +190,18 @@ def test_a_regrasp_that_failed_is_not_planned_again(problem, monkeypatch):
     assert len(set(planned)) == len(planned)
     recorded = [a.what for a in err.value.attempts if a.kind == FailureKind.VELOCITY]
     assert len(recorded) == len(planned) and len(set(recorded)) == len(recorded)
+
+
+def test_a_q_that_cannot_land_in_time_is_not_chosen(problem):
+    """The demo's first index regrasp lands 0.25 s after lift-off; allowed 0.12 s (and
+    regrasps as short as 0.1 s), the Q's whose move needs longer within the joint
+    velocity limits are passed over when Q is chosen, instead of being chosen, found
+    too late and excluded with their neighbourhood one by one (which used up the
+    candidates of this lift-off: a too-late failure). A regrasp that lands in time is
+    found, and no attempt was a Q too late to land."""
+    first = problem()
+    start = first.result.t_start
+    found = problem(end_by_s=start + 0.12, shortest_s=0.1)
+    assert found.result.report.ok
+    assert found.result.t_end <= start + 0.12 + 1e-9
+    assert all(a.kind != FailureKind.TOO_LATE for a in found.attempts)

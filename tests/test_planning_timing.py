@@ -10,6 +10,7 @@ from regrasp_pin.planning.timing import (
     PATH_FACTOR,
     STRETCH_MARGIN,
     duration_for_move,
+    durations_for_moves,
     inverse_minimum_jerk,
     joint_paced,
     minimum_jerk,
@@ -149,3 +150,17 @@ def test_joint_paced_brings_an_uneven_path_under_its_mean_joint_pace(seed):
 def test_joint_paced_keeps_a_path_whose_joints_do_not_move():
     u = minimum_jerk(np.linspace(0.0, 1.0, 11))
     np.testing.assert_array_equal(joint_paced(u, np.zeros((11, 3)), np.ones(3), u), u)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_durations_for_moves_keeps_each_path_factor_longer_move_under_the_limits(seed):
+    rng = np.random.default_rng(seed)
+    q_from, q_to = rng.uniform(-1, 1, 4), rng.uniform(-1, 1, (6, 4))
+    vmax = rng.uniform(1.0, 3.0, 4)
+    batch = durations_for_moves(q_from, q_to, vmax, minimum_s=0.2, dt_s=0.01)
+    for D, q in zip(batch, q_to, strict=True):
+        dq = q - q_from
+        assert D >= 0.2 and abs(D / 0.01 - round(D / 0.01)) < 1e-9
+        assert np.all(_peak_speed(PATH_FACTOR * dq, D) <= vmax * (1 + 1e-6))
+        if D > 0.2 + 1e-9:  # one step shorter would not do
+            assert np.any(_peak_speed(PATH_FACTOR * dq, D - 0.01) > vmax)

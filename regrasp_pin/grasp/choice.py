@@ -30,6 +30,7 @@ the surface distance; it is only a tie-breaker).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -144,6 +145,8 @@ def choose_new_contact(
     reserved: Sequence[tuple[np.ndarray, float]] = (),
     distances: ManifoldClearance | None = None,
     epsilons: ScreeningEpsilons | None = None,
+    landing_s: Callable[[np.ndarray], np.ndarray] | None = None,
+    land_by_s: float = math.inf,
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -193,13 +196,18 @@ def choose_new_contact(
             measured afresh. The same choice either way.
         epsilons: The screening epsilons of contact sets, kept between calls (with
             ``mu`` and the object's radius as torque scale); None: computed afresh.
+        landing_s: Optional ``(C, k) -> (C,)``: the earliest time [s] the finger can
+            land at each arrival configuration (e.g. from the joint velocity limits);
+            candidates that would land after ``land_by_s`` [s] are not chosen.
+        land_by_s: See ``landing_s`` [s].
 
     Returns:
         The :class:`NewContact`.
 
     Raises:
         ContactError: no candidate satisfies condition (a), or none keeps the other
-            fingers' grasp in force closure; the message says which finger, when, why.
+            fingers' grasp in force closure, or every one would land too late
+            (``too-late``); the message says which finger, when, why.
         InputError: ``t_arrive_s`` is NaN or outside the manifold's times.
     """
     contact = contact or ContactModel()
@@ -232,6 +240,8 @@ def choose_new_contact(
             measured=float(usable[ka].sum()),
             required=1.0,
         )
+    if landing_s is not None:
+        idx = _landing_in_time(idx, manifold, ka, landing_s, land_by_s, finger.name)
     # condition (b) read from the contacts the finger can hold: inside the limits and,
     # as far as the fingertip link's shape tells, without it sinking into the face
     holdable = manifold.holdable(contact.limit_margin_rad)
@@ -271,6 +281,32 @@ def choose_new_contact(
         epsilons,
     )
     return screen.first(order, ranked, P_object, n_P_object, max_checks)
+
+
+def _landing_in_time(
+    idx: np.ndarray,
+    manifold: Manifold,
+    ka: int,
+    landing_s: Callable[[np.ndarray], np.ndarray],
+    land_by_s: float,
+    finger: str,
+) -> np.ndarray:
+    """The candidates of ``idx`` whose earliest landing (``landing_s`` of their arrival
+    configurations) is by ``land_by_s`` [s]; ContactError (``too-late``) if none is."""
+    landing = np.asarray(landing_s(manifold.q[ka, idx]), float)
+    keep = landing <= land_by_s
+    if not keep.any():
+        earliest = float(landing.min())
+        raise ContactError(
+            f"every candidate would land after t={land_by_s:.3f} s within the joint "
+            f"velocity limits (the earliest at t={earliest:.3f} s)",
+            finger=finger,
+            time_s=float(manifold.times_s[ka]),
+            kind=FailureKind.TOO_LATE,
+            measured=earliest,
+            required=float(land_by_s),
+        )
+    return idx[keep]
 
 
 def _arrival_clearance(

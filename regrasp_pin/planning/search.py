@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -47,7 +48,7 @@ from .outcomes import dominant_kind, failure_summary
 from .proximity import clear_of_fingers
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import TIME_TOL_S
-from .timing import duration_for_move, next_duration
+from .timing import duration_for_move, durations_for_moves, next_duration
 
 #: A new contact Q must keep the finger this far from the other fingers at landing [m].
 LANDING_FINGER_CLEARANCE_M = 0.001
@@ -248,17 +249,32 @@ class RegraspSearch:
         q_hand: Callable[[np.ndarray], np.ndarray],
         excluded: list[np.ndarray],
         reserved: Sequence[tuple[np.ndarray, float]] = (),
+        flight: tuple[np.ndarray, float, float, float] | None = None,
     ) -> NewContact:
         """The best new contact Q for ``finger`` landing at ``t_arrive`` [s]
         (:func:`~regrasp_pin.grasp.choice.choose_new_contact`: the paper's criterion, Q
         clear of the ``others`` and, while it is held, of their fingers under
         ``q_hand``), away from ``P``, from the ``excluded`` points (object frame) and
-        out of the ``reserved`` room.
+        out of the ``reserved`` room. With ``flight`` ``(q_from, start, shortest,
+        end_by)``: only a Q whose regrasp from ``q_from`` [rad] lifting off at
+        ``start`` [s] can land by ``end_by`` [s] within the joint velocity limits
+        (:func:`~.timing.duration_for_move`, at least ``shortest`` [s]), as the search
+        would find after choosing it.
 
         Raises:
-            ContactError: no candidate.
+            ContactError: no candidate (``too-late``: none that lands in time).
         """
         f = self.scene.hand.finger(finger)
+        landing_s, land_by_s = None, math.inf
+        if flight is not None:
+            q_from, start, shortest, end_by = flight
+            land_by_s = end_by + TIME_TOL_S
+
+            def landing_s(q_to: np.ndarray) -> np.ndarray:
+                return start + durations_for_moves(
+                    q_from, q_to, f.velocity_limit, minimum_s=shortest, dt_s=self.dt_s
+                )
+
         return choose_new_contact(
             self.scene.hand,
             self.scene.obj,
@@ -280,6 +296,8 @@ class RegraspSearch:
             reserved=reserved,
             distances=self._distances_of(finger),
             epsilons=self._screening_epsilons(),
+            landing_s=landing_s,
+            land_by_s=land_by_s,
         )
 
     # ------------------------------------------------------------------ internals
@@ -369,7 +387,10 @@ class RegraspSearch:
         where = f"start {start:.2f} s"
         try:
             budget.spend()
-            choice = self.choose(finger, P, start + d_min, others, q_hand, excluded, reserved)
+            flight = (q0, start, d_min, end_by)
+            choice = self.choose(
+                finger, P, start + d_min, others, q_hand, excluded, reserved, flight
+            )
         except ContactError as exc:
             attempts.append(exc.as_attempt(where))
             return None
@@ -401,7 +422,7 @@ class RegraspSearch:
                 try:
                     budget.spend()
                     again = self.choose(
-                        finger, P, start + duration, others, q_hand, excluded, reserved
+                        finger, P, start + duration, others, q_hand, excluded, reserved, flight
                     )
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))

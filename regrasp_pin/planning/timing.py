@@ -22,6 +22,7 @@ __all__ = [
     "PATH_FACTOR",
     "check_joint_speed",
     "duration_for_move",
+    "durations_for_moves",
     "inverse_minimum_jerk",
     "minimum_jerk",
     "joint_paced",
@@ -73,9 +74,35 @@ def duration_for_move(
             allows for a regrasp's detour around the object; 1 for a straight
             joint-space move (minimum jerk along the segment).
     """
-    dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))
-    needed = MJ_PEAK * path_factor * float(np.max(dq / np.asarray(velocity_limit, float)))
-    return _round_up(max(needed, minimum_s), dt_s)
+    q_to = np.asarray(q_to, float)
+    return float(
+        durations_for_moves(
+            q_from,
+            q_to[None],
+            velocity_limit,
+            minimum_s=minimum_s,
+            dt_s=dt_s,
+            path_factor=path_factor,
+        )[0]
+    )
+
+
+def durations_for_moves(
+    q_from: np.ndarray,
+    q_to: np.ndarray,
+    velocity_limit: np.ndarray,
+    *,
+    minimum_s: float,
+    dt_s: float,
+    path_factor: float = PATH_FACTOR,
+) -> np.ndarray:
+    """:func:`duration_for_move` [s] from ``q_from`` ``(k,)`` to each row of ``q_to``
+    ``(C, k)`` [rad]: ``(C,)``, each a whole number of steps ``dt_s``."""
+    dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float)[None])
+    ratio = np.max(dq / np.asarray(velocity_limit, float)[None], axis=1)
+    needed = np.maximum(MJ_PEAK * path_factor * ratio, minimum_s)
+    # a duration is a whole number of steps; 1e-9 keeps 0.4 / 0.01 from becoming 41 steps
+    return np.ceil(needed / dt_s - 1e-9) * dt_s
 
 
 def stretched_duration(duration_s: float, speed_ratio: float, *, dt_s: float) -> float:
