@@ -16,7 +16,8 @@ from regrasp_pin.grasp.choice import choose_new_contact
 from regrasp_pin.grasp.holding import holding_q, rest_configuration
 from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.model.motion import ObjectMotion
-from regrasp_pin.planning.join import join_duration, plan_join
+from regrasp_pin.planning.join import join_duration, join_durations, plan_join
+from regrasp_pin.planning.timing import MJ_PEAK, PATH_FACTOR
 
 T0_S = 0.3
 APPROACH_S = 0.1
@@ -144,3 +145,23 @@ def test_failures_are_typed(scene):
     assert info.value.kind == FailureKind.TOO_LATE
     with pytest.raises(InputError, match="approach_s"):
         _join(scene, approach_s=duration)
+
+
+def test_join_durations_leave_the_approach_and_keep_the_transfer_under_the_limits():
+    """Each join duration: the approach, plus a whole number of steps in which the
+    transfer's largest joint move, allowed PATH_FACTOR for its detour, peaks at most at
+    its limit (minimum jerk: MJ_PEAK times the mean speed), and one step less would not
+    do unless the minimum decided."""
+    rng = np.random.default_rng(5)
+    q_from, q_land = rng.uniform(-1, 1, 4), rng.uniform(-1, 1, (8, 4))
+    vmax = rng.uniform(1.0, 3.0, 4)
+    approach, dt, minimum = 0.1, 0.01, 0.35
+    D = join_durations(q_from, q_land, vmax, minimum_s=minimum, approach_s=approach, dt_s=dt)
+    need = MJ_PEAK * PATH_FACTOR * np.max(np.abs(q_land - q_from) / vmax, axis=1)
+    transfer = D - approach
+    assert np.all(D >= minimum - 1e-12)
+    assert np.all(transfer >= need - 1e-12)
+    assert np.all((transfer - dt < need) | (transfer <= minimum - approach + 1e-9))
+    assert join_duration(
+        q_from, q_land[3], vmax, minimum_s=minimum, approach_s=approach, dt_s=dt
+    ) == pytest.approx(D[3], abs=0.0)

@@ -25,9 +25,9 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from .release import verify_or_raise
-from .timing import check_joint_speed, duration_for_move, minimum_jerk
+from .timing import check_joint_speed, durations_for_moves, minimum_jerk
 
-__all__ = ["Join", "join_duration", "plan_join"]
+__all__ = ["Join", "join_duration", "join_durations", "plan_join"]
 
 
 @dataclass(frozen=True)
@@ -194,7 +194,30 @@ def join_duration(
     """The duration [s] of a join from ``q_from`` to about ``q_land`` [rad]: a transfer
     that keeps the joints under ``velocity_limit`` [rad/s]
     (:func:`~.timing.duration_for_move`), then the approach, at least ``minimum_s``."""
-    transfer = duration_for_move(
+    q_land = np.asarray(q_land, float)
+    return float(
+        join_durations(
+            q_from,
+            q_land[None],
+            velocity_limit,
+            minimum_s=minimum_s,
+            approach_s=approach_s,
+            dt_s=dt_s,
+        )[0]
+    )
+
+
+def join_durations(
+    q_from: np.ndarray,
+    q_land: np.ndarray,
+    velocity_limit: np.ndarray,
+    *,
+    minimum_s: float,
+    approach_s: float,
+    dt_s: float,
+) -> np.ndarray:
+    """:func:`join_duration` [s] to each row of ``q_land`` ``(C, k)`` [rad]: ``(C,)``."""
+    transfer = durations_for_moves(
         q_from, q_land, velocity_limit, minimum_s=max(minimum_s - approach_s, dt_s), dt_s=dt_s
     )
     return transfer + approach_s

@@ -249,32 +249,21 @@ class RegraspSearch:
         q_hand: Callable[[np.ndarray], np.ndarray],
         excluded: list[np.ndarray],
         reserved: Sequence[tuple[np.ndarray, float]] = (),
-        flight: tuple[np.ndarray, float, float, float] | None = None,
+        landing: tuple[Callable[[np.ndarray], np.ndarray], float] | None = None,
     ) -> NewContact:
         """The best new contact Q for ``finger`` landing at ``t_arrive`` [s]
         (:func:`~regrasp_pin.grasp.choice.choose_new_contact`: the paper's criterion, Q
         clear of the ``others`` and, while it is held, of their fingers under
         ``q_hand``), away from ``P``, from the ``excluded`` points (object frame) and
-        out of the ``reserved`` room. With ``flight`` ``(q_from, start, shortest,
-        end_by)``: only a Q whose regrasp from ``q_from`` [rad] lifting off at
-        ``start`` [s] can land by ``end_by`` [s] within the joint velocity limits
-        (:func:`~.timing.duration_for_move`, at least ``shortest`` [s]), as the search
-        would find after choosing it.
+        out of the ``reserved`` room. With ``landing`` ``(landing_s, land_by_s)``: only
+        a Q whose earliest landing (``landing_s`` of its arrival configurations, e.g.
+        :meth:`flight_landing`) is by ``land_by_s`` [s].
 
         Raises:
             ContactError: no candidate (``too-late``: none that lands in time).
         """
         f = self.scene.hand.finger(finger)
-        landing_s, land_by_s = None, math.inf
-        if flight is not None:
-            q_from, start, shortest, end_by = flight
-            land_by_s = end_by + TIME_TOL_S
-
-            def landing_s(q_to: np.ndarray) -> np.ndarray:
-                return start + durations_for_moves(
-                    q_from, q_to, f.velocity_limit, minimum_s=shortest, dt_s=self.dt_s
-                )
-
+        landing_s, land_by_s = landing if landing is not None else (None, math.inf)
         return choose_new_contact(
             self.scene.hand,
             self.scene.obj,
@@ -299,6 +288,23 @@ class RegraspSearch:
             landing_s=landing_s,
             land_by_s=land_by_s,
         )
+
+    def flight_landing(
+        self, finger: str, q_from: np.ndarray, start: float, shortest: float, end_by: float
+    ) -> tuple[Callable[[np.ndarray], np.ndarray], float]:
+        """``landing`` for :meth:`choose`: a regrasp of ``finger`` from ``q_from`` [rad]
+        lifting off at ``start`` [s] lands no sooner than its duration within the joint
+        velocity limits allows (:func:`~.timing.duration_for_move`, at least
+        ``shortest`` [s]), and must land by ``end_by`` [s], as the search checks after
+        choosing."""
+        vlim = self.scene.hand.finger(finger).velocity_limit
+
+        def landing_s(q_to: np.ndarray) -> np.ndarray:
+            return start + durations_for_moves(
+                q_from, q_to, vlim, minimum_s=shortest, dt_s=self.dt_s
+            )
+
+        return landing_s, end_by + TIME_TOL_S
 
     # ------------------------------------------------------------------ internals
     def _clear_of_others(
@@ -387,9 +393,9 @@ class RegraspSearch:
         where = f"start {start:.2f} s"
         try:
             budget.spend()
-            flight = (q0, start, d_min, end_by)
+            landing = self.flight_landing(finger, q0, start, d_min, end_by)
             choice = self.choose(
-                finger, P, start + d_min, others, q_hand, excluded, reserved, flight
+                finger, P, start + d_min, others, q_hand, excluded, reserved, landing
             )
         except ContactError as exc:
             attempts.append(exc.as_attempt(where))
@@ -422,7 +428,7 @@ class RegraspSearch:
                 try:
                     budget.spend()
                     again = self.choose(
-                        finger, P, start + duration, others, q_hand, excluded, reserved, flight
+                        finger, P, start + duration, others, q_hand, excluded, reserved, landing
                     )
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))
