@@ -1122,3 +1122,7 @@ def test_q_that_would_land_too_late_is_not_chosen(five):
         )
     assert info.value.kind == FailureKind.TOO_LATE
     assert info.value.required == -1.0 and info.value.measured >= 0.0
+    # one finite landing time per candidate, or an error that names the argument
+    for bad in (lambda q: 0.5, lambda q: np.full(len(q), np.nan)):
+        with pytest.raises(InputError, match="landing_s"):
+            _choose_from_grasp(five, "middle", 1.25, landing_s=bad, land_by_s=1.0)

@@ -14,11 +14,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import held_grasp
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Plan, make_scenario, plan_manipulation
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
 from regrasp_pin.grasp.tracking import track_contact
+from regrasp_pin.plan import ContactPhase
 from regrasp_pin.planning.planner import PlannerParams
 from regrasp_pin.planning.schedule import held_until
 from regrasp_pin.suite import build_scenario, generate_specs, neighbour_specs
@@ -413,8 +415,21 @@ def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
     fast = [r for r in plan.regrasps() if r.t_end - r.t_start < D - 1e-9]
     assert fast, [(r.finger, r.t_end - r.t_start) for r in plan.regrasps()]
     t, q = np.asarray(plan.t), np.asarray(plan.q)
+    _, _, first_holds = held_grasp(scen)
     for r in fast:
         assert "a faster regrasp" in r.reason
+        # a finger that has held its first contact since t=0 loses it after this
+        # regrasp lands, and before one of the shortest duration could have landed
+        pinned = [
+            n
+            for n, phases in plan.phases.items()
+            if n != r.finger
+            and isinstance(phases[0], ContactPhase)
+            and phases[0].t_start <= 1e-9
+            and phases[0].t_end >= r.t_end - 1e-9
+        ]
+        lost = min(held_until(first_holds[n].track, scen.params.contact) for n in pinned)
+        assert r.t_end - 1e-9 <= lost < r.t_start + D - 1e-9, (r.finger, r.t_end, lost)
         assert r.t_end - r.t_start >= scen.params.rush_duration_s - 1e-9
         # within the joint velocity limits (finite differences of the plan's samples)
         f = scen.hand.finger(r.finger)

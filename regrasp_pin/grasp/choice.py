@@ -294,6 +294,12 @@ def _landing_in_time(
     """The candidates of ``idx`` whose earliest landing (``landing_s`` of their arrival
     configurations) is by ``land_by_s`` [s]; ContactError (``too-late``) if none is."""
     landing = np.asarray(landing_s(manifold.q[ka, idx]), float)
+    if landing.shape != idx.shape or not np.isfinite(landing).all():
+        raise InputError(
+            "landing_s",
+            f"returned {landing.shape} values, finite: {bool(np.isfinite(landing).all())}",
+            f"a finite landing time [s] for each of the {idx.size} candidates",
+        )
     keep = landing <= land_by_s
     if not keep.any():
         earliest = float(landing.min())

@@ -4,7 +4,7 @@ Sections 2.1-2.3 of the paper. The finger lets go of P at ``t_start`` and lands 
 at ``t_start + duration`` while the object keeps moving:
 
 1. In the object frame, the surface region holding P and Q is unfolded into a plane
-   and gridded (:mod:`.surface_grid`); grid nodes cost more where the finger's IK, at
+   and gridded (:mod:`regrasp_pin.surface.grid`); grid nodes cost more where the finger's IK, at
    the time the tip would pass over them, comes near a boundary plane, and nodes
    under another fingertip are forbidden. The cheapest grid path (Dijkstra) is lifted
    onto the virtually inflated surface: the fingertip-centre curve
@@ -557,12 +557,16 @@ def _attempt(
     q = follow_curve(f, times, T, tip_obj, task.q0, tol, p.ik_tol_m)
     try:
         check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
-    except PlanningError:
-        # paced along the path by the joints' motion instead of its length
+    except PlanningError as too_fast:
+        # paced along the path by the joints' motion instead of its length; if that
+        # fails for another reason, the velocity failure stands (a longer duration)
         u = joint_paced(u, q, f.velocity_limit, progress)
-        tip_obj, required, in_flight = samples.at(u, obj, f, times)
-        tol = np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m)
-        q = follow_curve(f, times, T, tip_obj, task.q0, tol, p.ik_tol_m)
+        try:
+            tip_obj, required, in_flight = samples.at(u, obj, f, times)
+            tol = np.where(in_flight, p.flight_ik_tol_m, p.ik_tol_m)
+            q = follow_curve(f, times, T, tip_obj, task.q0, tol, p.ik_tol_m)
+        except PlanningError as exc:
+            raise too_fast from exc
         check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
         waypoint_times = np.interp(chord, u, times)
     stages.lap("ik")

@@ -24,8 +24,8 @@ __all__ = [
     "duration_for_move",
     "durations_for_moves",
     "inverse_minimum_jerk",
-    "minimum_jerk",
     "joint_paced",
+    "minimum_jerk",
     "next_duration",
     "stretched_duration",
     "velocity_blend",
@@ -177,10 +177,12 @@ def joint_paced(
     trajectory ``q`` ``(S, k)`` [rad], the time each step needs at full speed is
     ``max_j |dq_j| / velocity_limit_j`` [s]; spending the same ``progress`` ``(S,)``
     (minimum jerk in time, from 0 to 1) along that cumulative time instead of along
-    the length brings every joint's peak to ``MJ_PEAK`` times the path's mean
-    joint-limited pace (time scaling along the path). Each step counts at least a
-    quarter of its share of the path's mean pace by length, so that the tip keeps
-    moving where the joints barely do. The ends stay where they are.
+    the length brings every joint's peak to about ``MJ_PEAK`` times the path's mean
+    joint-limited pace (time scaling along the path). About: ``q`` also holds the
+    joints' motion that follows the moving object, which the new pacing does not
+    rescale, so the trajectory solved at the new parameters is checked again. Each step
+    counts at least a quarter of its share of the path's mean pace by length, so that
+    the tip keeps moving where the joints barely do. The ends stay where they are.
     """
     du = np.diff(u)
     dt_full = np.max(np.abs(np.diff(q, axis=0)) / np.asarray(velocity_limit, float), axis=1)
