@@ -10,7 +10,6 @@ trajectory that was actually solved still moves a joint too fast.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -48,9 +47,9 @@ def inverse_minimum_jerk(s: np.ndarray) -> np.ndarray:
     return np.interp(s, minimum_jerk(_TABLE_TAU), _TABLE_TAU)
 
 
-def _round_up(duration_s: float, dt_s: float) -> float:
+def _round_up(duration_s: float | np.ndarray, dt_s: float) -> np.ndarray:
     # a duration is a whole number of steps; 1e-9 keeps 0.4 / 0.01 from becoming 41 steps
-    return float(math.ceil(duration_s / dt_s - 1e-9) * dt_s)
+    return np.ceil(np.asarray(duration_s, float) / dt_s - 1e-9) * dt_s
 
 
 def duration_for_move(
@@ -100,15 +99,13 @@ def durations_for_moves(
     ``(C, k)`` [rad]: ``(C,)``, each a whole number of steps ``dt_s``."""
     dq = np.abs(np.asarray(q_to, float) - np.asarray(q_from, float)[None])
     ratio = np.max(dq / np.asarray(velocity_limit, float)[None], axis=1)
-    needed = np.maximum(MJ_PEAK * path_factor * ratio, minimum_s)
-    # a duration is a whole number of steps; 1e-9 keeps 0.4 / 0.01 from becoming 41 steps
-    return np.ceil(needed / dt_s - 1e-9) * dt_s
+    return _round_up(np.maximum(MJ_PEAK * path_factor * ratio, minimum_s), dt_s)
 
 
 def stretched_duration(duration_s: float, speed_ratio: float, *, dt_s: float) -> float:
     """The duration [s] after which a trajectory that reached ``speed_ratio`` times a
     joint's velocity limit stays under it (time scaling: speeds fall as 1 / duration)."""
-    return _round_up(duration_s * max(speed_ratio, 1.0) * STRETCH_MARGIN, dt_s)
+    return float(_round_up(duration_s * max(speed_ratio, 1.0) * STRETCH_MARGIN, dt_s))
 
 
 def next_duration(tried: Sequence[tuple[float, float]], *, dt_s: float) -> float | None:
@@ -137,7 +134,7 @@ def next_duration(tried: Sequence[tuple[float, float]], *, dt_s: float) -> float
         return scaled  # not slower when shorter: no trend to follow
     if b >= goal:
         return None
-    return max(scaled, _round_up(a / (goal - b), dt_s))
+    return max(scaled, float(_round_up(a / (goal - b), dt_s)))
 
 
 def check_joint_speed(
