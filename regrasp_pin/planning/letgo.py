@@ -22,7 +22,7 @@ from ..exceptions import ContactError, PlanningError
 from ..grasp.holding import Holding, holding_q, rest_configuration
 from ..grasp.manifold import build_manifold
 from ..plan import JoinPhase, ReleasePhase
-from .join import join_duration, join_durations, plan_join
+from .join import join_durations, plan_join
 from .release import Release, plan_release
 from .schedule import TIME_TOL_S, LiftOffWindow, held_until
 from .state import (
@@ -350,8 +350,8 @@ def _join(
     q_hand = q_hand_of(ctx, state, stay)
     excluded: list[np.ndarray] = []
 
-    def join_landing(q_land: np.ndarray) -> np.ndarray:
-        return t0 + join_durations(
+    def durations(q_land: np.ndarray) -> np.ndarray:
+        return join_durations(
             q_from,
             q_land,
             f.velocity_limit,
@@ -361,23 +361,14 @@ def _join(
         )
 
     # a Q whose join would land with no time left to hold it is not a candidate
-    landing = (join_landing, motion.t_end - p.dt_s)
+    landing = (lambda q_land: t0 + durations(q_land), motion.t_end - p.dt_s)
     for _ in range(_JOIN_CANDIDATES):
         if ctx.budget.exhausted:
             return None
         ctx.budget.spend(2)  # the choice of Q and the join
         try:
             choice = ctx.search.choose(name, P, t_arrive, others, q_hand, excluded, landing=landing)
-            duration = join_duration(
-                q_from,
-                choice.q_arrive,
-                f.velocity_limit,
-                minimum_s=p.regrasp.duration_s,
-                approach_s=_JOIN_APPROACH_S,
-                dt_s=p.dt_s,
-            )
-            if t0 + duration > motion.t_end - p.dt_s:
-                return None  # no time left to hold Q
+            duration = float(durations(choice.q_arrive[None])[0])
             if t0 + duration > t_arrive + TIME_TOL_S:  # chosen for an earlier arrival
                 choice = ctx.search.choose(
                     name, P, t0 + duration, others, q_hand, excluded, landing=landing
