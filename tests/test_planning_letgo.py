@@ -96,3 +96,39 @@ def test_a_release_is_planned_once_for_a_plan(monkeypatch):
     assert len(set(forgot)) < len(forgot)  # the repeats the plan no longer makes
     assert set(forgot) == set(kept)
     assert outcome == outcome_forgot
+
+
+def _landing_by_choice(landings):
+    """A choice is the arrival time it was made for; its landing is read from a table."""
+    made = []
+
+    def choose(t):
+        made.append(t)
+        return t
+
+    return made, choose, lambda c: landings[c]
+
+
+def test_arrival_choice_lands_at_the_first_arrival_when_that_is_reachable():
+    made, choose, landing = _landing_by_choice({1.0: 0.9})
+    choice, t_chosen, t_needed = letgo.arrival_choice(choose, landing, 1.0)
+    assert made == [1.0] and (choice, t_chosen, t_needed) == (1.0, 1.0, 0.9)
+
+
+def test_arrival_choice_chooses_again_for_the_later_landing_it_needs():
+    # the first Q needs until 1.3 s; the Q chosen for 1.3 s needs only 1.2 s, so the
+    # join lands at 1.3 s, the time that Q was chosen for, not at the first Q's 1.3 s
+    # with the first Q's joint target
+    made, choose, landing = _landing_by_choice({1.0: 1.3, 1.3: 1.2})
+    choice, t_chosen, t_needed = letgo.arrival_choice(choose, landing, 1.0)
+    assert made == [1.0, 1.3]
+    assert (choice, t_chosen, t_needed) == (1.3, 1.3, 1.2)
+
+
+def test_arrival_choice_reports_a_choice_that_never_settles():
+    # every later arrival needs later still: after the rounds, the last choice's
+    # landing is later than its arrival and the caller must not land it
+    made, choose, landing = _landing_by_choice({1.0: 1.5, 1.5: 2.0, 2.0: 2.5})
+    choice, t_chosen, t_needed = letgo.arrival_choice(choose, landing, 1.0)
+    assert made == [1.0, 1.5, 2.0]
+    assert choice == t_chosen == 2.0 and t_needed == 2.5

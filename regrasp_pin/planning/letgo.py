@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterator
 from dataclasses import replace
+from typing import TypeVar
 
 import numpy as np
 
@@ -38,6 +39,8 @@ from .state import (
 __all__ = ["idle_fingers", "join_origin", "let_go"]
 
 log = logging.getLogger(__name__)
+
+_C = TypeVar("_C")
 
 
 def let_go(
@@ -335,6 +338,36 @@ def idle_fingers(ctx: PlanContext, state: PlanState) -> list[str]:
     return [n for n in ctx.scene.hand.finger_names if n not in state.phases]
 
 
+_ARRIVAL_ROUNDS = 3
+
+
+def arrival_choice(
+    choose: Callable[[float], _C], landing_time: Callable[[_C], float], t_arrive: float
+) -> tuple[_C, float, float]:
+    """A choice made for the time it can land at, by fixed-point iteration.
+
+    ``choose(t)`` chooses a new contact for an arrival at ``t`` [s]; ``landing_time(c)``
+    is the earliest time [s] a join can land on choice ``c`` (its velocity limits). A
+    choice whose landing comes later than the arrival it was chosen for is chosen again
+    for that later arrival, at most ``_ARRIVAL_ROUNDS`` times in all.
+
+    Returns:
+        ``(choice, t_chosen, t_needed)``: the last choice, the arrival it was chosen
+        for and its earliest landing; the join lands at ``t_chosen`` when ``t_needed``
+        is not later (within :data:`TIME_TOL_S`), otherwise no choice settled.
+    """
+    t_chosen = t_arrive
+    choice = choose(t_chosen)
+    t_needed = landing_time(choice)
+    for _ in range(_ARRIVAL_ROUNDS - 1):
+        if t_needed <= t_chosen + TIME_TOL_S:
+            break
+        t_chosen = t_needed
+        choice = choose(t_chosen)
+        t_needed = landing_time(choice)
+    return choice, t_chosen, t_needed
+
+
 def _join(
     ctx: PlanContext, state: PlanState, name: str, t0: float, stay: list[str], instead_of: str
 ) -> PlanState | None:
@@ -367,16 +400,19 @@ def _join(
             return None
         ctx.budget.spend(2)  # the choice of Q and the join
         try:
-            choice = ctx.search.choose(name, P, t_arrive, others, q_hand, excluded, landing=landing)
-            duration = float(durations(choice.q_arrive[None])[0])
-            if t0 + duration > t_arrive + TIME_TOL_S:  # chosen for an earlier arrival
-                choice = ctx.search.choose(
-                    name, P, t0 + duration, others, q_hand, excluded, landing=landing
-                )
+            choice, t_chosen, t_needed = arrival_choice(
+                lambda t: ctx.search.choose(name, P, t, others, q_hand, excluded, landing=landing),
+                lambda c: t0 + float(durations(c.q_arrive[None])[0]),
+                t_arrive,
+            )
         except ContactError as exc:
             log.debug("%s cannot join: %s", name, exc)
             return None
         excluded.append(choice.p_object)
+        if t_needed > t_chosen + TIME_TOL_S:
+            log.debug("%s cannot join: Q needs until t=%.3f s to reach", name, t_needed)
+            continue
+        duration = t_chosen - t0
         try:
             join = plan_join(
                 hand,
