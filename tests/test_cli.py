@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+from pathlib import Path
 
 import pytest
 
@@ -64,6 +65,28 @@ def test_demo_json_writes_plan_and_figures(tmp_path, capsys):
     assert [(r["finger"], r["t_s"]) for r in doc["releases"]] == [
         (p.finger, p.t_start) for p in plan.releases()
     ]
+    _check_readme_table(doc["rows"], capsys)
+
+
+def _check_readme_table(rows, capsys):
+    """The README's demo table is what the demo prints with the default (numpy) IK: every
+    column but the planning time, the one that depends on the machine. The numba backend
+    stops its IK within the same tolerance at other iterates, so its paths may differ."""
+    from regrasp_pin.commands.summary import print_table
+    from regrasp_pin.model.ik import ik_backend
+
+    if ik_backend() != "numpy":
+        return  # the README documents the default backend's plan
+    empty = {"fingers_regrasped": ["-"], "all_verified": True, "releases": [], "joins": []}
+    print_table(rows, {**empty, "stage_s": {}, "total_s": 0.0, "plan": "", "figures": []})
+    printed = capsys.readouterr().out.splitlines()
+    readme = (Path(__file__).parents[1] / "README.md").read_text().splitlines()
+    start = readme.index(next(line for line in readme if line.startswith("finger   trigger")))
+    documented = readme[start + 3 : start + 3 + len(rows)]
+    first = printed.index(next(line for line in printed if line.startswith("finger ")))
+    shown = printed[first + 3 : first + 3 + len(rows)]
+    assert [line[:-8] for line in documented] == [line[:-8] for line in shown]
+    assert readme[start + 3 + len(rows)].startswith("---")  # and no more rows
 
 
 def test_bad_arguments_are_reported(capsys):
