@@ -152,3 +152,38 @@ def test_group_relocations_reach_the_optimum(monkeypatch):
     without = competitive_hopfield(H, 30, closed=True, points=P)
     assert without.energy > 1.05 * best, "the case no longer needs the group relocations"
     assert grouped.energy <= best * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+@pytest.mark.parametrize("closed", [True, False])
+def test_the_optimum_as_lower_bound_stops_the_search_at_the_same_answer(deviation, closed):
+    """With the exact optimum as ``lower_bound`` the search stops once it reaches it, with
+    the state and energy it gives without the bound (no later state could be kept), and
+    never more sweeps; where the network reaches the optimum early, far fewer."""
+    fewer = 0
+    for seed in range(4):
+        P = pixel_curve(50 + 10 * seed, seed)
+        H = deviation_matrix(P, deviation, closed=closed)
+        m = 6 + seed
+        optimum = exact_polygon(H, m, closed=closed).energy
+        free = competitive_hopfield(H, m, closed=closed, points=P, seed=seed)
+        bounded = competitive_hopfield(
+            H, m, closed=closed, points=P, seed=seed, lower_bound=optimum
+        )
+        assert np.array_equal(bounded.indices, free.indices)
+        assert bounded.energy == free.energy
+        assert bounded.sweeps <= free.sweeps
+        fewer += bounded.sweeps < free.sweeps
+    assert fewer >= 1  # the bound saved work on some curve
+
+
+def test_a_bound_the_plain_network_meets_ends_the_search_at_once():
+    """A bound at the plain network's energy: nothing may be kept after it, so the
+    search runs no restart and returns the plain network's state."""
+    P = pixel_curve(60, 1)
+    H = deviation_matrix(P, "ise", closed=False)
+    free = competitive_hopfield(H, 8, closed=False, points=P)
+    assert free.sweeps > free.plain_sweeps  # without a bound the search goes on
+    bounded = competitive_hopfield(H, 8, closed=False, points=P, lower_bound=free.plain_energy)
+    assert bounded.sweeps == bounded.plain_sweeps
+    assert np.array_equal(bounded.indices, bounded.plain_indices)

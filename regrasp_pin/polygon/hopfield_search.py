@@ -16,8 +16,9 @@ The network itself (states, input, energy, sweeps) is :mod:`regrasp_pin.polygon.
 
 from __future__ import annotations
 
+import itertools
 import logging
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -442,6 +443,36 @@ def _perturbed(
     return _insert_greedy(H, HT, np.delete(s, drop), closed, k)
 
 
+def _later_starts(
+    H: np.ndarray,
+    HT: np.ndarray,
+    best: Callable[[], tuple[np.ndarray, float]],
+    closed: bool,
+    rng: np.random.Generator,
+    *,
+    restarts: int,
+    turns: bool,
+    anneals: int,
+) -> Iterator[np.ndarray | None]:
+    """The initial states made from the best state so far (``best()`` when each is
+    needed): ``restarts`` perturbations, then, with ``turns``, that state turned by a
+    quarter, a half and three quarters of the curve, then ``anneals`` annealed runs."""
+    n = H.shape[0]
+    m = best()[0].shape[0]
+    free = np.arange(m) if closed else np.arange(1, m - 1)
+    for _ in range(restarts):
+        if free.size == 0 or not np.isfinite(best()[1]):
+            break
+        yield _perturbed(H, HT, best()[0], closed, rng, free)
+    for j in range(1, _TURNS if turns else 1):
+        yield np.sort((best()[0] + (j * n) // _TURNS) % n)
+    for _ in range(anneals if np.isfinite(best()[1]) else 0):
+        s, e = best()
+        t0 = _ANNEAL_T0 * e / m  # a typical chord's share of the energy
+        temps = np.geomspace(max(t0, 1e-300), max(t0 * _ANNEAL_T1, 1e-300), _ANNEAL_SWEEPS)
+        yield annealed_sweeps(H, HT, s, closed, rng, temps)
+
+
 def default_block(n: int, m: int, closed: bool = True) -> int:
     """Block size of the block winner-take-all for ``n`` points and ``m`` vertices.
 
@@ -467,6 +498,7 @@ def competitive_hopfield(
     trials: int = 2,
     block: int | None = None,
     anneals: int = 0,
+    lower_bound: float | None = None,
 ) -> HopfieldResult:
     """Polygonal approximation with the competitive Hopfield network, plus restarts.
 
@@ -509,6 +541,11 @@ def competitive_hopfield(
             :func:`default_block`.
         anneals: Annealed runs from the best state (40 sweeps each, the temperature
             falling from the mean chord energy to 1/1000 of it).
+        lower_bound: An energy no state on ``H`` goes below (the optimum of
+            :func:`~regrasp_pin.polygon.exact.exact_polygon`). The search stops once its
+            best state is within the tie tolerance of it: no later state could be kept
+            (:func:`~regrasp_pin.polygon.hopfield.improves`), so the result is the same,
+            with fewer sweeps and a shorter energy record.
 
     Returns:
         The best state, the plain network's result and the sweep/energy record.
@@ -554,21 +591,19 @@ def competitive_hopfield(
                 best_s, best_e = s2, e2
         history.append(best_e)
 
-    for start in _starts(H, HT, plain.indices, pts, closed, trials, block, memo):
-        consider(start)
+    def best() -> tuple[np.ndarray, float]:
+        return best_s, best_e
+
     rng = np.random.default_rng(seed)
-    free = np.arange(m) if closed else np.arange(1, m - 1)
-    for _ in range(restarts):
-        if free.size == 0 or not np.isfinite(best_e):
-            break
-        consider(_perturbed(H, HT, best_s, closed, rng, free))
-    turns = range(1, _TURNS if closed and block > 1 else 1)
-    for j in turns:  # the best state turned by a quarter of the curve, 3 times
-        consider(np.sort((best_s + (j * n) // _TURNS) % n))
-    for _ in range(anneals if np.isfinite(best_e) else 0):
-        t0 = _ANNEAL_T0 * best_e / m  # a typical chord's share of the energy
-        temps = np.geomspace(max(t0, 1e-300), max(t0 * _ANNEAL_T1, 1e-300), _ANNEAL_SWEEPS)
-        consider(annealed_sweeps(H, HT, best_s, closed, rng, temps))
+    later = _later_starts(
+        H, HT, best, closed, rng, restarts=restarts, turns=closed and block > 1, anneals=anneals
+    )
+    for start in itertools.chain(
+        _starts(H, HT, plain.indices, pts, closed, trials, block, memo), later
+    ):
+        if lower_bound is not None and not improves(lower_bound, best_e):
+            break  # no state can be kept any more: the search is over
+        consider(start)
     logger.debug("hopfield: plain %.6g -> best %.6g (%d sweeps)", plain.energy, best_e, sweeps)
     return HopfieldResult(
         indices=np.asarray(best_s),
