@@ -87,6 +87,22 @@ def test_banded_pipeline_matches_the_full_matrix(caplog):
     assert full.energy <= full.plain_energy * (1 + TIE_RTOL)
 
 
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+def test_stopping_at_the_optimum_gives_the_same_polygon_in_fewer_sweeps(deviation):
+    """Open 3-D paths like the planner's (n 40-120, m 7-13): the same vertices and energy
+    with and without the exact optimum as the search's stop, never more sweeps."""
+    rng = np.random.default_rng(5)
+    fewer = 0
+    for n, m in ((40, 7), (80, 9), (120, 13)):
+        P = np.cumsum(rng.normal(0.0, 1e-3, (n, 3)), axis=0)
+        full = approximate_polygon(P, m, deviation=deviation)
+        short = approximate_polygon(P, m, deviation=deviation, stop_at_optimum=True)
+        assert np.array_equal(short.indices, full.indices) and short.energy == full.energy
+        assert short.sweeps <= full.sweeps
+        fewer += short.sweeps < full.sweeps
+    assert fewer >= 1
+
+
 def test_straight_path_and_pixels():
     line = np.c_[np.arange(30.0), np.zeros(30)]
     res = approximate_polygon(line, 4, deviation="max")

@@ -529,7 +529,9 @@ def _attempt(
     finger = f.name
     pts = tip_path.points_object
     m = min(p.m, len(tip_path))
-    poly = approximate_polygon(pts, m, closed=False, deviation=p.deviation, method=p.method)
+    poly = approximate_polygon(
+        pts, m, closed=False, deviation=p.deviation, method=p.method, stop_at_optimum=True
+    )
     W = poly.vertices
     stages.lap("hopfield")
 
