@@ -98,37 +98,45 @@ def test_a_release_is_planned_once_for_a_plan(monkeypatch):
     assert outcome == outcome_forgot
 
 
-def _landing_by_choice(landings):
-    """A choice is the arrival time it was made for; its landing is read from a table."""
+def _landing_by_choice(needs):
+    """A choice is the duration it was made for; the duration it needs is read from a
+    table."""
     made = []
 
-    def choose(t):
-        made.append(t)
-        return t
+    def choose(d):
+        made.append(d)
+        return d
 
-    return made, choose, lambda c: landings[c]
-
-
-def test_arrival_choice_lands_at_the_first_arrival_when_that_is_reachable():
-    made, choose, landing = _landing_by_choice({1.0: 0.9})
-    choice, t_chosen, t_needed = letgo.arrival_choice(choose, landing, 1.0)
-    assert made == [1.0] and (choice, t_chosen, t_needed) == (1.0, 1.0, 0.9)
+    return made, choose, lambda c: needs[c]
 
 
-def test_arrival_choice_chooses_again_for_the_later_landing_it_needs():
-    # the first Q needs until 1.3 s; the Q chosen for 1.3 s needs only 1.2 s, so the
-    # join lands at 1.3 s, the time that Q was chosen for, not at the first Q's 1.3 s
-    # with the first Q's joint target
-    made, choose, landing = _landing_by_choice({1.0: 1.3, 1.3: 1.2})
-    choice, t_chosen, t_needed = letgo.arrival_choice(choose, landing, 1.0)
-    assert made == [1.0, 1.3]
-    assert (choice, t_chosen, t_needed) == (1.3, 1.3, 1.2)
+def test_arrival_choice_lands_the_first_choice_when_it_needs_no_longer():
+    made, choose, need = _landing_by_choice({0.25: 0.25})
+    choice, chosen_s, needed_s = letgo.arrival_choice(choose, need, 0.25)
+    assert made == [0.25] and (choice, chosen_s, needed_s) == (0.25, 0.25, 0.25)
+    assert letgo.join_duration_of(chosen_s, needed_s) == 0.25
+
+
+def test_arrival_choice_chooses_again_for_the_longer_duration_it_needs():
+    # the first Q needs 0.55 s; the Q chosen for 0.55 s needs only 0.4 s, so the join
+    # takes 0.55 s, the duration that Q was chosen for (the object's pose at landing)
+    made, choose, need = _landing_by_choice({0.25: 0.55, 0.55: 0.4})
+    choice, chosen_s, needed_s = letgo.arrival_choice(choose, need, 0.25)
+    assert made == [0.25, 0.55]
+    assert (choice, chosen_s, needed_s) == (0.55, 0.55, 0.4)
+    assert letgo.join_duration_of(chosen_s, needed_s) == 0.55
+
+
+def test_a_settled_join_takes_the_duration_its_choice_needs_not_a_time_difference():
+    # within the tolerance the needed value (whole steps) is kept as it is
+    assert letgo.join_duration_of(0.25, 0.25 + 1e-12) == 0.25 + 1e-12
+    assert letgo.join_duration_of(0.25, 0.25 - 1e-12) == 0.25 - 1e-12
 
 
 def test_arrival_choice_reports_a_choice_that_never_settles():
-    # every later arrival needs later still: after the rounds, the last choice's
-    # landing is later than its arrival and the caller must not land it
-    made, choose, landing = _landing_by_choice({1.0: 1.5, 1.5: 2.0, 2.0: 2.5})
-    choice, t_chosen, t_needed = letgo.arrival_choice(choose, landing, 1.0)
-    assert made == [1.0, 1.5, 2.0]
-    assert choice == t_chosen == 2.0 and t_needed == 2.5
+    # every longer duration needs longer still: after the rounds, the last choice needs
+    # more than it was chosen for and the caller must not land it
+    made, choose, need = _landing_by_choice({0.25: 0.5, 0.5: 0.75, 0.75: 1.0})
+    choice, chosen_s, needed_s = letgo.arrival_choice(choose, need, 0.25)
+    assert made == [0.25, 0.5, 0.75]
+    assert choice == chosen_s == 0.75 and needed_s == 1.0

@@ -342,30 +342,39 @@ _ARRIVAL_ROUNDS = 3
 
 
 def arrival_choice(
-    choose: Callable[[float], _C], landing_time: Callable[[_C], float], t_arrive: float
+    choose: Callable[[float], _C], duration_of: Callable[[_C], float], first_s: float
 ) -> tuple[_C, float, float]:
-    """A choice made for the time it can land at, by fixed-point iteration.
+    """A choice made for the duration it needs, by fixed-point iteration.
 
-    ``choose(t)`` chooses a new contact for an arrival at ``t`` [s]; ``landing_time(c)``
-    is the earliest time [s] a join can land on choice ``c`` (its velocity limits). A
-    choice whose landing comes later than the arrival it was chosen for is chosen again
-    for that later arrival, at most ``_ARRIVAL_ROUNDS`` times in all.
+    ``choose(d)`` chooses a new contact for a landing ``d`` [s] after the join's start;
+    ``duration_of(c)`` is the shortest duration [s] a join to choice ``c`` takes (its
+    velocity limits). A choice that needs longer than the duration it was chosen for is
+    chosen again for the duration it needs, at most ``_ARRIVAL_ROUNDS`` times in all.
 
     Returns:
-        ``(choice, t_chosen, t_needed)``: the last choice, the arrival it was chosen
-        for and its earliest landing; the join lands at ``t_chosen`` when ``t_needed``
-        is not later (within :data:`TIME_TOL_S`), otherwise no choice settled.
+        ``(choice, chosen_s, needed_s)``: the last choice, the duration it was chosen for
+        and the duration it needs; when ``needed_s`` is not longer (within
+        :data:`TIME_TOL_S`) the join lands after :func:`join_duration_of` these,
+        otherwise no choice settled.
     """
-    t_chosen = t_arrive
-    choice = choose(t_chosen)
-    t_needed = landing_time(choice)
+    chosen_s = first_s
+    choice = choose(chosen_s)
+    needed_s = duration_of(choice)
     for _ in range(_ARRIVAL_ROUNDS - 1):
-        if t_needed <= t_chosen + TIME_TOL_S:
+        if needed_s <= chosen_s + TIME_TOL_S:
             break
-        t_chosen = t_needed
-        choice = choose(t_chosen)
-        t_needed = landing_time(choice)
-    return choice, t_chosen, t_needed
+        chosen_s = needed_s
+        choice = choose(chosen_s)
+        needed_s = duration_of(choice)
+    return choice, chosen_s, needed_s
+
+
+def join_duration_of(chosen_s: float, needed_s: float) -> float:
+    """The duration [s] of a settled join (:func:`arrival_choice`): the one its choice
+    needs when that is the one it was chosen for (within :data:`TIME_TOL_S`; the value
+    rounded to whole steps, not a difference of times), else the longer one it was
+    chosen for (the object's pose at landing is the one the choice was made at)."""
+    return needed_s if abs(needed_s - chosen_s) <= TIME_TOL_S else chosen_s
 
 
 def _join(
@@ -375,7 +384,8 @@ def _join(
     holding; None if no new contact verifies or holds long enough."""
     p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
     f = hand.finger(name)
-    t_arrive = t0 + p.regrasp.duration_s
+    first_s = p.regrasp.duration_s
+    t_arrive = t0 + first_s
     if t_arrive > motion.t_end - p.dt_s:
         return None
     q_from, P = join_origin(ctx, name, t_arrive)
@@ -400,19 +410,21 @@ def _join(
             return None
         ctx.budget.spend(2)  # the choice of Q and the join
         try:
-            choice, t_chosen, t_needed = arrival_choice(
-                lambda t: ctx.search.choose(name, P, t, others, q_hand, excluded, landing=landing),
-                lambda c: t0 + float(durations(c.q_arrive[None])[0]),
-                t_arrive,
+            choice, chosen_s, needed_s = arrival_choice(
+                lambda d: ctx.search.choose(
+                    name, P, t0 + d, others, q_hand, excluded, landing=landing
+                ),
+                lambda c: float(durations(c.q_arrive[None])[0]),
+                first_s,
             )
         except ContactError as exc:
             log.debug("%s cannot join: %s", name, exc)
             return None
         excluded.append(choice.p_object)
-        if t_needed > t_chosen + TIME_TOL_S:
-            log.debug("%s cannot join: Q needs until t=%.3f s to reach", name, t_needed)
+        if needed_s > chosen_s + TIME_TOL_S:
+            log.debug("%s cannot join: Q needs %.3f s to reach", name, needed_s)
             continue
-        duration = t_chosen - t0
+        duration = join_duration_of(chosen_s, needed_s)
         try:
             join = plan_join(
                 hand,
