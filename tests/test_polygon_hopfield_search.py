@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from regrasp_pin.exceptions import InputError
 from regrasp_pin.polygon import hopfield_search
 from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
 from regrasp_pin.polygon.exact import exact_polygon
@@ -187,3 +188,11 @@ def test_a_bound_the_plain_network_meets_ends_the_search_at_once():
     bounded = competitive_hopfield(H, 8, closed=False, points=P, lower_bound=free.plain_energy)
     assert bounded.sweeps == bounded.plain_sweeps
     assert np.array_equal(bounded.indices, bounded.plain_indices)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_lower_bound_that_is_not_finite_is_refused(bad):
+    P = pixel_curve(40, 0)
+    H = deviation_matrix(P, "ise", closed=False)
+    with pytest.raises(InputError, match="lower_bound"):
+        competitive_hopfield(H, 6, closed=False, points=P, lower_bound=bad)

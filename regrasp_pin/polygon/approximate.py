@@ -163,7 +163,7 @@ def approximate_polygon(
             optimum: the same result with fewer sweeps. It pays on short paths (the
             planner's, n = 40-150 and m = 7-13: the search about halves), not on long
             ones (n = 500, m = 20: the dynamic programme alone costs more than the
-            network). Ignored on closed curves.
+            network). Ignored on closed curves and with ``method="exact"``.
 
     Returns:
         The vertices, their indices and energy, and the network record.
@@ -219,7 +219,11 @@ def approximate_polygon(
         restarts=restarts,
         seed=seed,
         plain=plain,
-        lower_bound=_optimum(H, m, plain) if stop_at_optimum and not closed else None,
+        lower_bound=(
+            _optimum(H, m, plain)
+            if stop_at_optimum and not closed and method == "hopfield"
+            else None
+        ),
     )
     t_net += clock() - t0
     timings = {"H": t_h * 1e3, "network": t_net * 1e3}

@@ -443,6 +443,17 @@ def _perturbed(
     return _insert_greedy(H, HT, np.delete(s, drop), closed, k)
 
 
+def _lower_bound(value: float | None) -> float | None:
+    """``lower_bound`` checked (finite or None) and lowered by a few ulps, so that an
+    optimum whose energy was summed in another order than the network's never stops
+    the search above a state it could still keep."""
+    if value is None:
+        return None
+    if not np.isfinite(value):
+        raise InputError("lower_bound", f"{value!r} is not finite", "a finite energy or None")
+    return float(value) - 8.0 * np.finfo(float).eps * abs(float(value))
+
+
 def _later_starts(
     H: np.ndarray,
     HT: np.ndarray,
@@ -545,14 +556,14 @@ def competitive_hopfield(
             :func:`~regrasp_pin.polygon.exact.exact_polygon`). The search stops once its
             best state is within the tie tolerance of it: no later state could be kept
             (:func:`~regrasp_pin.polygon.hopfield.improves`), so the result is the same,
-            with fewer sweeps and a shorter energy record.
+            with fewer sweeps and a shorter energy record. Finite (or None).
 
     Returns:
         The best state, the plain network's result and the sweep/energy record.
 
     Raises:
         InputError: invalid ``H``, ``m``, ``initial``, ``restarts``, ``trials``,
-            ``block`` or ``anneals``.
+            ``block``, ``anneals`` or ``lower_bound``.
     """
     H = check_deviation_matrix(H)
     n = H.shape[0]
@@ -563,6 +574,7 @@ def competitive_hopfield(
     trials = positive_int(trials, "trials", 0)
     block = positive_int(default_block(n, m, closed) if block is None else block, "block", 0)
     anneals = positive_int(anneals, "anneals", 0)
+    bound = _lower_bound(lower_bound)
     pts = (
         np.arange(n, dtype=float)[:, None] * np.array([[1.0, 0.0]])
         if points is None
@@ -598,12 +610,15 @@ def competitive_hopfield(
     later = _later_starts(
         H, HT, best, closed, rng, restarts=restarts, turns=closed and block > 1, anneals=anneals
     )
-    for start in itertools.chain(
-        _starts(H, HT, plain.indices, pts, closed, trials, block, memo), later
-    ):
-        if lower_bound is not None and not improves(lower_bound, best_e):
-            break  # no state can be kept any more: the search is over
+
+    def unbeatable() -> bool:  # no state can be kept any more: the search is over
+        return bound is not None and not improves(bound, best_e)
+
+    starts = itertools.chain(_starts(H, HT, plain.indices, pts, closed, trials, block, memo), later)
+    for start in () if unbeatable() else starts:
         consider(start)
+        if unbeatable():
+            break  # before the next start is made
     logger.debug("hopfield: plain %.6g -> best %.6g (%d sweeps)", plain.energy, best_e, sweeps)
     return HopfieldResult(
         indices=np.asarray(best_s),
