@@ -31,6 +31,9 @@ MAX_MINIMUM_QUERIES = 256
 #: The mandatory queries measure every this-many-th sample of a column first; the sweep
 #: bound from those values spares the samples it lifts above their requirement.
 QUERY_STRIDE = 8
+#: A sample is spared only when the sweep bound lifts it this far above its requirement:
+#: Coal's own tolerances (GJK 1e-9 m, EPA 1e-6 m) on the values the bound comes from [m].
+_LIFT_MARGIN_M = 2e-6
 
 _MAX_DEPTH_M = 1.0  # a Coal distance below -this is an EPA failure, not a depth
 TIP, LINK, FF = 0, 1, 2  # kinds of check (columns)
@@ -461,9 +464,12 @@ class PairDistances:
     def _mandatory_queries(self) -> None:
         """Every (sample, column) whose bound is below its requirement, settled: first
         every :data:`QUERY_STRIDE`-th such sample of each column is measured, then only
-        those that the sweep bound from these exact values does not lift above the
-        requirement. A distance below its requirement is never lifted by a lower bound,
-        so every failing sample is measured either way (the same failures and values)."""
+        those that the sweep bound from these Coal values does not lift above the
+        requirement by :data:`_LIFT_MARGIN_M`. A distance below its requirement is
+        never lifted by a lower bound, so every failing sample is measured either way
+        (the same failures and values), up to one case: a sample where Coal's EPA fails
+        keeps the broad-phase bound as its value, which measuring it would report as a
+        failure, while the sweep bound from its neighbours may spare it."""
         cols, rows = np.nonzero((self.lb < self.required).T)  # column by column, in time
         if QUERY_STRIDE > 1 and rows.size:
             starts = np.flatnonzero(np.r_[True, cols[1:] != cols[:-1]])
@@ -471,7 +477,7 @@ class PairDistances:
             first = rank % QUERY_STRIDE == 0
             self._query(rows[first], cols[first])
             self._update_sweep(np.unique(cols[first]))
-            lifted = self.swept[rows, cols] >= self.required[rows, cols]
+            lifted = self.swept[rows, cols] >= self.required[rows, cols] + _LIFT_MARGIN_M
             rows, cols = rows[~lifted], cols[~lifted]
         self._query(rows, cols)
         self._update_sweep(np.unique(cols))

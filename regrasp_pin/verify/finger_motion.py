@@ -28,9 +28,12 @@ and spheres). Lower bounds on the signed distance:
   separating-axis bound ``u . (c1 - c2) - h1(u) - h2(u)`` along the direction ``u``
   joining the capsules' nearest points.
 
-Both stay valid under penetration (they bound minus the penetration depth). Coal is
-called wherever a bound is below the requirement, so every pass/fail decision near a
-threshold is an exact Coal distance. Without exact minima (``exact_minima=False``, the
+Both stay valid under penetration (they bound minus the penetration depth). Wherever a
+bound is below the requirement the sample is settled by Coal: every
+:data:`~regrasp_pin.model.distances.QUERY_STRIDE`-th such sample is measured first, and
+then every one that the sweep bound (below) from those values does not lift clear of
+the requirement, so every pass/fail decision near a threshold is an exact Coal
+distance. Without exact minima (``exact_minima=False``, the
 planner's check) the bounds are evaluated coarse to fine: at every
 :data:`COARSE_STRIDE`-th sample, and between two of them from theirs less the sweep
 bound (below); a sample's own bound is evaluated only where that is below the
