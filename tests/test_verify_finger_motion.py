@@ -210,24 +210,31 @@ def test_lower_bounds_never_exceed_coal_distances(hand_name):
             assert np.mean(checker.lb > 0) > 0.3  # and they are not trivial
 
 
-@pytest.mark.parametrize("stride", [4, 8, 32])
-@pytest.mark.parametrize("case", range(4))
-def test_coarse_bounds_are_sound_and_query_the_same_samples(five, allegro, case, stride):
-    """Bounds evaluated coarse to fine (a smooth dense motion, the object near the
-    finger) stay below Coal's distances, and are below the requirement exactly where
-    every bound evaluated is: the same mandatory queries."""
+def _dense_motion_near_object(five, allegro, case: int, seed: int) -> tuple:
+    """:class:`PairDistances` arguments for a smooth dense motion of ``CASES[case]``'s
+    finger (four random configurations about the middle of its limits) with the object
+    near it, held still at one random pose; tip and link clearance 2 mm, fingers 4 mm."""
     hand_name, finger, obj, centre, _ = CASES[case]
     hand = five if hand_name == "five_finger" else allegro
     f = hand.finger(finger)
-    rng = np.random.default_rng(7 + case)
+    rng = np.random.default_rng(seed)
     n = 4
     t = np.arange(n, dtype=float)
     q_f = f.q_mid + rng.uniform(-0.3, 0.3, (n, f.k)) * (f.upper - f.lower)
     q = hand.to_full(finger, q_f, np.tile(hand.neutral(), (n, 1)))
     T = np.stack([pose(np.asarray(centre) + rng.normal(0, 0.01, 3), rng.normal(0, 0.2, 3))] * n)
     _, q_d, T_d = densify(t, q, T, 0.005)
-    D = q_d.shape[0]
-    args = (hand, obj, f, q_d, T_d, np.full(D, 0.002), 0.002, 0.004)
+    return (hand, obj, f, q_d, T_d, np.full(q_d.shape[0], 0.002), 0.002, 0.004)
+
+
+@pytest.mark.parametrize("stride", [4, 8, 32])
+@pytest.mark.parametrize("case", range(4))
+def test_coarse_bounds_are_sound_and_query_the_same_samples(five, allegro, case, stride):
+    """Bounds evaluated coarse to fine (a smooth dense motion, the object near the
+    finger) stay below Coal's distances, and are below the requirement exactly where
+    every bound evaluated is: the same mandatory queries."""
+    args = _dense_motion_near_object(five, allegro, case, seed=7 + case)
+    D = args[3].shape[0]
     every = PairDistances(*args)
     coarse = PairDistances(*args, coarse_stride=stride)
     assert D > 4 * stride
@@ -242,19 +249,8 @@ def test_strided_queries_find_every_failing_sample_with_fewer_queries(five, alle
     the samples the sweep bound leaves below their requirement: the same failing
     samples with the same Coal values as measuring every one, in fewer queries."""
     spared = failing = 0
-    for case, (hand_name, finger, obj, centre, _) in enumerate(CASES):
-        hand = five if hand_name == "five_finger" else allegro
-        f = hand.finger(finger)
-        rng = np.random.default_rng(11 + case)
-        n = 4
-        t = np.arange(n, dtype=float)
-        q_f = f.q_mid + rng.uniform(-0.3, 0.3, (n, f.k)) * (f.upper - f.lower)
-        q = hand.to_full(finger, q_f, np.tile(hand.neutral(), (n, 1)))
-        centre_n = np.asarray(centre) + rng.normal(0, 0.01, 3)
-        T = np.stack([pose(centre_n, rng.normal(0, 0.2, 3))] * n)
-        _, q_d, T_d = densify(t, q, T, 0.005)
-        D = q_d.shape[0]
-        args = (hand, obj, f, q_d, T_d, np.full(D, 0.002), 0.002, 0.004)
+    for case in range(len(CASES)):
+        args = _dense_motion_near_object(five, allegro, case, seed=11 + case)
         runs = {}
         for stride in (1, distances.QUERY_STRIDE):
             monkeypatch.setattr(distances, "QUERY_STRIDE", stride)
