@@ -14,7 +14,7 @@ weights with :func:`edge_weights`, or solve directly with :func:`shortest_grid_p
 The search runs on the weights rounded to whole multiples of :data:`WEIGHT_QUANTUM_M`
 (exact integers in double precision): every path's sum is then exact, so two routes of
 equal weight tie exactly, and the winner of a tie is the same on every machine,
-instead of following the rounding of sums (a near-tie of 1e-11 m once picked a route
+instead of following the rounding of sums (a near-tie of 4e-11 m once picked a route
 4 mm away on another IK backend).
 
 Costs are sampled at the nodes: an edge between two allowed nodes (a knight move is
