@@ -830,6 +830,48 @@ def test_link_exit_measures_only_until_each_point_leaves(five, finger, t_arrive)
         assert lasts[c] == (first_bad is None)
 
 
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 0.5), ("thumb", 0.75)])
+def test_link_exit_reads_lasting_only_until_the_links_end_a_hold(five, finger, t_arrive):
+    """``lasting`` gets each point's horizon: the times before its links or its limits
+    end it (what comes after cannot move the first False). Two ``lasting`` that differ
+    only from the horizon on give the same exit times; one that is False from a
+    point's middle time on cuts that point there."""
+    hand, box, _, _, manifolds, _ = five
+    m = manifolds[finger]
+    ka = m.time_index(t_arrive)
+    pool = np.flatnonzero(m.usable(CONTACT.limit_margin_rad)[ka])
+    points = np.random.default_rng(11).choice(pool, size=min(12, pool.size), replace=False)
+    K = m.times_s.size - ka
+    base, _ = _link_exit(hand, finger, box, m, points, ka, CONTACT)
+    seen = []
+
+    def after(value, cut_at=None):
+        def lasting(pts, k, horizon):
+            assert k == ka and np.array_equal(pts, points)
+            seen.append(np.asarray(horizon).copy())
+            out = np.ones((K, pts.size), bool)
+            for c, h in enumerate(horizon):
+                out[h:, c] = value
+                if cut_at is not None and h > 1:
+                    out[h // 2 :, c] = False
+            return out
+
+        return lasting
+
+    t_true, last_true = _link_exit(hand, finger, box, m, points, ka, CONTACT, after(True))
+    t_false, last_false = _link_exit(hand, finger, box, m, points, ka, CONTACT, after(False))
+    np.testing.assert_array_equal(t_true, base)
+    np.testing.assert_array_equal(t_false, base)
+    np.testing.assert_array_equal(last_true, last_false)
+    # the horizon is where the unconstrained exit falls (the whole tail if none)
+    exits = np.searchsorted(m.times_s[ka:], base - 1e-9)
+    h = seen[0]
+    np.testing.assert_array_equal(h, np.where(last_true, K, exits))
+    assert (h > 1).any()
+    t_cut, _ = _link_exit(hand, finger, box, m, points, ka, CONTACT, after(True, cut_at=True))
+    np.testing.assert_array_equal(t_cut, np.where(h > 1, m.times_s[ka + h // 2], base))
+
+
 def test_kept_distances_equal_pinocchio_and_are_measured_once(five, monkeypatch):
     """ManifoldClearance gives each entry's link and fingertip distances as Pinocchio
     computeDistances does, and a second question about known entries measures nothing:

@@ -14,6 +14,7 @@ from regrasp_pin.model.distances import (
     _segment_distance,
     _segment_ends,
     capsule_gap,
+    capsule_gaps,
     capsule_pair_gaps,
 )
 
@@ -86,6 +87,25 @@ def test_capsule_gap_places_the_second_geometries_from_their_own_rows_bit_for_bi
         split = capsule_gap(hand, ids_a, ids_b, q, cap_m=cap, q_b=distinct, rows_b=rows)
         assert split.tobytes() == full.tobytes()
     assert np.isfinite(full).any() and (full < 0.004).any()
+
+
+def test_capsule_gaps_by_group_are_each_groups_own_bits(hand):
+    """One finger against each other finger at once: every group's row is the bits of
+    capsule_gap against that group alone (placed from its own rows, capped or not)."""
+    q = _random_q(hand, ("index", "middle", "ring", "thumb"), 150, 41)
+    distinct = _random_q(hand, ("middle", "ring", "thumb"), 9, 42)
+    rows = np.random.default_rng(43).integers(0, 9, 150)
+    ids_a = list(hand.fingers["index"].geometry_ids)
+    groups = [list(hand.fingers[n].geometry_ids) for n in ("middle", "ring", "thumb")]
+    for cap in (np.inf, 0.004):
+        for kwargs in ({}, {"q_b": distinct, "rows_b": rows}):
+            both = capsule_gaps(hand, ids_a, groups, q, cap_m=cap, **kwargs)
+            assert both.shape == (3, 150)
+            for g, ids_b in enumerate(groups):
+                alone = capsule_gap(hand, ids_a, ids_b, q, cap_m=cap, **kwargs)
+                assert both[g].tobytes() == alone.tobytes()
+    assert (both < 0.004).any() and (both == 0.004).any()  # both sides of the cap
+    assert np.all(np.isinf(capsule_gaps(hand, ids_a, [[], []], q)))
 
 
 def test_capsule_gap_is_a_lower_bound_on_the_coal_distance(hand):

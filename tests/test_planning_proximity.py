@@ -148,6 +148,7 @@ def test_candidates_stay_clear_until_a_finger_comes_near(holds):
     others = ["index", "ring"]
     ok = clear_of_fingers(hand, "middle", q_finger, q_hand, others, TRIGGER_M)
     assert ok.shape == (times.size, 4)
+    firsts = []
     for c in range(4):
         per_time = []
         for k in range(times.size):
@@ -164,6 +165,13 @@ def test_candidates_stay_clear_until_a_finger_comes_near(holds):
             per_time.append(min(r.min_distance for r in gdata.distanceResults))
         below = np.flatnonzero(np.array(per_time) < TRIGGER_M)
         first = below[0] if below.size else times.size
+        firsts.append(first)
         assert np.all(ok[:first, c]) and not np.any(ok[first:, c]), (c, first)
     # some of the perturbed candidates come near the index or ring finger
     assert not ok.all()
+    # with a horizon per candidate, only its first times are measured: the same mask
+    # there (the first time below the limit when it falls within), True after it
+    horizon = np.array([times.size, 0, *[max(fc - 1, 1) for fc in firsts[2:]]])
+    part = clear_of_fingers(hand, "middle", q_finger, q_hand, others, TRIGGER_M, horizon=horizon)
+    for c, h in enumerate(horizon):
+        assert np.array_equal(part[:h, c], ok[:h, c]) and part[h:, c].all(), (c, h)

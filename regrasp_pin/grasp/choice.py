@@ -141,7 +141,7 @@ def choose_new_contact(
     finger_clearance_m: float = 0.002,
     exit_tolerance_s: float = 0.0,
     rerank: int = 12,
-    lasting: Callable[[np.ndarray, int], np.ndarray] | None = None,
+    lasting: Callable[[np.ndarray, int, np.ndarray], np.ndarray] | None = None,
     reserved: Sequence[tuple[np.ndarray, float]] = (),
     distances: ManifoldClearance | None = None,
     epsilons: ScreeningEpsilons | None = None,
@@ -185,9 +185,11 @@ def choose_new_contact(
         rerank: How many of the first candidates get their exit times cut by what the
             manifold does not model (the finger's other links, ``lasting``) and are
             ranked again.
-        lasting: Optional ``(points (C,), ka) -> (K, C)`` bool over the manifold's times
-            from index ``ka`` on: False where something else ends the contact (e.g.
-            another holding finger comes too near); applied in the re-rank.
+        lasting: Optional ``(points (C,), ka, horizon (C,)) -> (K, C)`` bool over the
+            manifold's times from index ``ka`` on: False where something else ends the
+            contact (e.g. another holding finger comes too near); applied in the
+            re-rank, where only each point's first ``horizon`` times are read (the
+            times before its links or its limits end it; the rest may be anything).
         reserved: ``(point, radius)`` pairs, object frame [m]: room kept free for
             another finger's landing; candidates closer than the radius to the point
             are ignored.
@@ -597,7 +599,7 @@ def _link_exit(
     points: np.ndarray,
     ka: int,
     contact: ContactModel,
-    lasting: Callable[[np.ndarray, int], np.ndarray] | None = None,
+    lasting: Callable[[np.ndarray, int, np.ndarray], np.ndarray] | None = None,
     distances: ManifoldClearance | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exit times ``(C,)`` [s] of the manifold points ``points`` from grid index ``ka``,
@@ -607,5 +609,6 @@ def _link_exit(
     usable to the end."""
     ok = held_clear(hand, finger, obj, manifold, points, ka, contact, distances)
     if lasting is not None:
-        ok &= lasting(points, ka)
+        # ok is False from a column's first failure on: only the times before it count
+        ok &= lasting(points, ka, ok.sum(axis=0))
     return exit_times(ok, manifold.times_s[ka:], 0), np.asarray(ok.all(axis=0))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -632,9 +633,27 @@ def capsule_gap(
     placed at ``q_b[rows_b[n]]`` for row ``n`` instead (e.g. each distinct configuration
     of the other fingers once; a geometry's placement depends on its own chain's joints
     alone, so the bound is the same, to the bit, as with those rows in ``q``)."""
-    gap = np.full(q.shape[0], np.inf)
+    return capsule_gaps(hand, ids_a, [ids_b], q, cap_m=cap_m, q_b=q_b, rows_b=rows_b)[0]
+
+
+def capsule_gaps(
+    hand: Hand,
+    ids_a: list[int],
+    groups_b: Sequence[Sequence[int]],
+    q: np.ndarray,
+    *,
+    cap_m: float = np.inf,
+    q_b: np.ndarray | None = None,
+    rows_b: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`capsule_gap` of ``ids_a`` against each group of ``groups_b`` (e.g. each
+    other finger's geometries), ``(G, N)`` [m]: the same bits as one call per group,
+    with ``ids_a`` placed once for all groups."""
+    gap = np.full((len(groups_b), q.shape[0]), np.inf)
+    ids_b = [g for group in groups_b for g in group]
     if not ids_a or not ids_b:
         return gap
+    group_of = np.repeat(np.arange(len(groups_b)), [len(group) for group in groups_b])
     ga = [_geometry(hand, g) for g in ids_a]
     gb = [_geometry(hand, g) for g in ids_b]
     # capsule segments, (A, N, 3) and (B, N, 3)
@@ -662,7 +681,7 @@ def capsule_gap(
     j, n = j0[k], n0[k]
     if i.size:  # each pair's distances as computed alone (elementwise)
         d, _ = _segment_distance(A1[i, n], B1[i, n], A2[j, n], B2[j, n])
-        np.minimum.at(gap, n, d - rad_a[i] - rad_b[j])
+        np.minimum.at(gap, (group_of[j], n), d - rad_a[i] - rad_b[j])
     return np.minimum(gap, cap_m)
 
 

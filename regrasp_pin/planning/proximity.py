@@ -24,7 +24,7 @@ import numpy as np
 
 from ..grasp.holding import Holding
 from ..model.clearance import FingerClearance
-from ..model.distances import capsule_gap
+from ..model.distances import capsule_gap, capsule_gaps
 from ..model.hand import Hand
 
 __all__ = ["Proximity", "clear_of_fingers", "holding_proximity"]
@@ -162,6 +162,7 @@ def clear_of_fingers(
     q_hand: np.ndarray,
     others: list[str],
     limit_m: float,
+    horizon: np.ndarray | None = None,
 ) -> np.ndarray:
     """Where a finger's candidate contacts stay clear of the other fingers over time.
 
@@ -173,26 +174,39 @@ def clear_of_fingers(
         q_hand: ``(K, nq)`` the hand at those times (the others holding).
         others: The fingers to keep clear of.
         limit_m: Smallest distance [m].
+        horizon: Optional ``(C,)`` how many of the first times to check per candidate
+            (the caller reads nothing later); the times from there on are not
+            measured and come out True. None: all ``K``.
 
     Returns:
         ``(K, C)`` bool: False from the first time (per candidate) at which the finger
         comes closer than ``limit_m`` to one of ``others`` (capsule screen, then Coal).
     """
     K, C, _ = q_finger.shape
+    h = np.full(C, K) if horizon is None else np.clip(np.asarray(horizon, int), 0, K)
     f = hand.fingers[finger]
     q = np.repeat(q_hand[None], C, axis=0)  # (C, K, nq)
     qf = np.transpose(q_finger, (1, 0, 2))
     q[..., f.q_indices] = np.where(np.isfinite(qf), qf, f.q_mid)
-    rows = q.reshape(C * K, -1)
-    # the other fingers are placed once per time, not once per (candidate, time): row
-    # c K + k holds them at q_hand[k] (the same bounds, bit for bit)
-    at_time = np.tile(np.arange(K), C)
+    # the (candidate, time) rows to measure: each candidate's first h[c] times
+    c_of = np.repeat(np.arange(C), h)
+    k_of = np.arange(c_of.size) - np.repeat(np.cumsum(h) - h, h)
+    # the finger is placed once for all the others, and the other fingers once per
+    # time, not once per (candidate, time) (the same bounds, bit for bit)
+    gaps = capsule_gaps(
+        hand,
+        list(f.geometry_ids),
+        [list(hand.fingers[o].geometry_ids) for o in others],
+        q[c_of, k_of],
+        cap_m=limit_m,
+        q_b=q_hand,
+        rows_b=k_of,
+    )
     ok = np.ones((C, K), bool)
     dist = _PairDistance(hand)
-    for o in others:
-        ids = (list(f.geometry_ids), list(hand.fingers[o].geometry_ids))
-        gap = capsule_gap(hand, *ids, rows, cap_m=limit_m, q_b=q_hand, rows_b=at_time)
-        near = (gap < limit_m).reshape(C, K)
+    for o, gap in zip(others, gaps, strict=True):
+        near = np.zeros((C, K), bool)
+        near[c_of, k_of] = gap < limit_m
         for c in np.flatnonzero(near.any(axis=1)):
             cand = np.flatnonzero(near[c] & ok[c])
             if cand.size == 0:

@@ -144,7 +144,7 @@ class RegraspSearch:
     _distances: dict[str, ManifoldClearance] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
-    _lasting: tuple[tuple, dict[int, np.ndarray]] | None = field(
+    _lasting: tuple[tuple, dict[int, tuple[int, np.ndarray]]] | None = field(
         default=None, init=False, repr=False, compare=False
     )
     _epsilons: ScreeningEpsilons | None = field(default=None, init=False, repr=False, compare=False)
@@ -314,21 +314,26 @@ class RegraspSearch:
         q_hand: Callable[[np.ndarray], np.ndarray],
         points: np.ndarray,
         ka: int,
+        horizon: np.ndarray,
     ) -> np.ndarray:
         """``(K, C)``: the candidates ``points`` stay clear of the holding fingers (by
-        the trigger distance) at the manifold's times from index ``ka`` on.
+        the trigger distance) at the manifold's times from index ``ka`` on, measured
+        over the first ``horizon[c]`` times of each (True after them).
 
         A candidate's column depends on it alone; the columns of the last ``(finger,
-        others, q_hand, ka)`` asked are kept (the candidates of one lift-off time are
-        ranked again after each failed attempt)."""
+        others, q_hand, ka)`` asked are kept with the horizon they were measured over
+        (the candidates of one lift-off time are ranked again after each failed
+        attempt)."""
         key = (finger, tuple(others), q_hand, ka)
         if self._lasting is None or self._lasting[0] != key:
             self._lasting = (key, {})
         known = self._lasting[1]
         wanted = [int(i) for i in np.asarray(points).reshape(-1)]
-        missing = sorted({i for i in wanted if i not in known})
+        until = dict(zip(wanted, np.asarray(horizon, int).reshape(-1).tolist(), strict=True))
+        missing = sorted({i for i in wanted if i not in known or known[i][0] < until[i]})
         if missing:
             m = self.manifolds[finger]
+            reach = np.array([until[i] for i in missing])
             ok = clear_of_fingers(
                 self.scene.hand,
                 finger,
@@ -336,10 +341,11 @@ class RegraspSearch:
                 q_hand(m.times_s[ka:]),
                 others,
                 self.contact.finger_trigger_m,
+                horizon=reach,
             )
-            known.update(zip(missing, ok.T, strict=True))
+            known.update(zip(missing, zip(reach.tolist(), ok.T, strict=True), strict=True))
         K = self.manifolds[finger].times_s.size - ka
-        return np.stack([known[i] for i in wanted], axis=1) if wanted else np.ones((K, 0), bool)
+        return np.stack([known[i][1] for i in wanted], axis=1) if wanted else np.ones((K, 0), bool)
 
     def _screening_epsilons(self) -> ScreeningEpsilons:
         """The screening epsilons of contact sets, kept for the whole plan."""
