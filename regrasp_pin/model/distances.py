@@ -20,7 +20,7 @@ import coal
 import numpy as np
 
 from .hand import Finger, Hand
-from .kinematics import FingerChain, attached_placements, attached_points
+from .kinematics import FingerChain, attached_placements, attached_points_soa
 from .objects import ConvexObject
 from .support import support, support_parameters
 
@@ -146,10 +146,21 @@ def _place(R: np.ndarray, p: np.ndarray, local: np.ndarray) -> np.ndarray:
 def _segment_ends(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The capsule segments' ends of the geometries in the palm frame, ``(G, D, 3)``
     each."""
+    a, b = _segment_ends_soa(geoms, q)
+    return np.moveaxis(a, 0, -1), np.moveaxis(b, 0, -1)
+
+
+def _segment_ends_soa(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_segment_ends` coordinate first, ``(3, G, D)`` each (the same bits)."""
     ends = [g.p_frame_geom + g.R_frame_geom @ g.seg_a for g in geoms]
     ends += [g.p_frame_geom + g.R_frame_geom @ g.seg_b for g in geoms]
-    p = attached_points([g.chain for g in geoms] * 2, np.array(ends), q).transpose(1, 0, 2)
-    return p[: len(geoms)], p[len(geoms) :]
+    p = attached_points_soa([g.chain for g in geoms] * 2, np.array(ends), q)
+    return p[:, : len(geoms)], p[:, len(geoms) :]
+
+
+def _norm3(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms of the vectors ``v`` ``(3, ...)``, coordinate first, written out."""
+    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
 # ---------------------------------------------------------------------- lower bounds
@@ -165,7 +176,16 @@ def _segment_distance(
     Closed form of Ericson, *Real-Time Collision Detection*, 5.1.9 (degenerate
     segments included), vectorized.
     """
-    d1, d2, r = (b1 - a1).T, (b2 - a2).T, (a1 - a2).T  # (3, N) rows for speed
+    d, diff = _segment_distance_soa(a1.T, b1.T, a2.T, b2.T)
+    return d, diff.T
+
+
+def _segment_distance_soa(
+    a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_segment_distance` coordinate first: ends ``(3, N)``, the distances
+    ``(N,)`` and the vectors ``(3, N)`` (the same bits)."""
+    d1, d2, r = b1 - a1, b2 - a2, a1 - a2  # (3, N) rows for speed
 
     def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
@@ -186,7 +206,7 @@ def _segment_distance(
     t = np.clip(t, 0.0, 1.0)
     s = np.where(redo, np.where(a_ok, np.clip((t * b - c) / a_safe, 0.0, 1.0), 0.0), s)
     diff = r + s * d1 - t * d2
-    return np.sqrt(dot(diff, diff)), diff.T
+    return np.sqrt(dot(diff, diff)), diff
 
 
 def _object_lower_bound(
@@ -649,38 +669,40 @@ def capsule_gaps(
     """:func:`capsule_gap` of ``ids_a`` against each group of ``groups_b`` (e.g. each
     other finger's geometries), ``(G, N)`` [m]: the same bits as one call per group,
     with ``ids_a`` placed once for all groups."""
-    gap = np.full((len(groups_b), q.shape[0]), np.inf)
+    n_rows = q.shape[0]
+    gap = np.full((len(groups_b), n_rows), np.inf)
     ids_b = [g for group in groups_b for g in group]
     if not ids_a or not ids_b:
         return gap
     group_of = np.repeat(np.arange(len(groups_b)), [len(group) for group in groups_b])
     ga = [_geometry(hand, g) for g in ids_a]
     gb = [_geometry(hand, g) for g in ids_b]
-    # capsule segments, (A, N, 3) and (B, N, 3)
-    A1, B1 = _segment_ends(ga, q)
+    # capsule segments' ends, coordinate first: (3, A, N) and (3, B, M), ids_b's at
+    # their own M rows (row n reads row rows_b[n])
+    A1, B1 = _segment_ends_soa(ga, q)
     if q_b is None or rows_b is None:
-        A2, B2 = _segment_ends(gb, q)
+        A2, B2 = _segment_ends_soa(gb, q)
+        rows_b = np.arange(n_rows)
     else:
-        A2, B2 = _segment_ends(gb, np.asarray(q_b, float))
-        A2, B2 = A2[:, rows_b], B2[:, rows_b]
+        A2, B2 = _segment_ends_soa(gb, np.asarray(q_b, float))
+        rows_b = np.asarray(rows_b, dtype=np.intp)
+    n_b_rows = A2.shape[2]
     rad_a = np.array([g.radius for g in ga])
     rad_b = np.array([h.radius for h in gb])
-    # broad phase: the capsules' bounding spheres (centre: the segment's middle)
+    # broad phase: the capsules' bounding spheres (centre: the segment's middle); every
+    # test keeps 1 nm to spare over rounding, so that it keeps every (a, b, row) whose
+    # capsule bound can be below the cap
     reach_a = np.array([0.5 * np.linalg.norm(g.seg_b - g.seg_a) for g in ga]) + rad_a
     reach_b = np.array([0.5 * np.linalg.norm(h.seg_b - h.seg_a) for h in gb]) + rad_b
     mid_a, mid_b = 0.5 * (A1 + B1), 0.5 * (A2 + B2)
-    # first the sphere holding all of ids_a's spheres (1 nm to spare over rounding: it
-    # keeps every (b, row) that a pair's own test below could keep)
-    centre = mid_a.mean(axis=0)  # (N, 3)
-    whole = np.max(np.linalg.norm(mid_a - centre, axis=2) + reach_a[:, None], axis=0)
-    to_b = np.linalg.norm(mid_b - centre, axis=2)  # (B, N)
-    j0, n0 = np.nonzero(to_b - whole - reach_b[:, None] < cap_m + 1e-9)
-    diff = mid_a[:, n0] - mid_b[j0, n0]  # (A, K, 3): every a against each kept (b, row)
-    far = np.sqrt(np.einsum("aki,aki->ak", diff, diff))
-    i, k = np.nonzero(far - reach_a[:, None] - reach_b[j0] < cap_m)
-    j, n = j0[k], n0[k]
+    # every (a, b, row) at once, (A, B, N)
+    far = _norm3(mid_a[:, :, None] - mid_b[:, None][..., rows_b])
+    i, j, n = np.nonzero(far - reach_a[:, None, None] - reach_b[:, None] < cap_m + 1e-9)
     if i.size:  # each pair's distances as computed alone (elementwise)
-        d, _ = _segment_distance(A1[i, n], B1[i, n], A2[j, n], B2[j, n])
+        ia, ib = i * n_rows + n, j * n_b_rows + rows_b[n]
+        ends = [e.reshape(3, -1)[:, ia] for e in (A1, B1)]
+        ends += [e.reshape(3, -1)[:, ib] for e in (A2, B2)]
+        d, _ = _segment_distance_soa(*ends)
         np.minimum.at(gap, (group_of[j], n), d - rad_a[i] - rad_b[j])
     return np.minimum(gap, cap_m)
 

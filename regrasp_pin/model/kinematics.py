@@ -38,7 +38,7 @@ import pinocchio as pin
 
 from ..exceptions import InputError
 
-__all__ = ["FingerChain", "attached_placements", "attached_points"]
+__all__ = ["FingerChain", "attached_placements", "attached_points", "attached_points_soa"]
 
 _FEW_POINTS = 256  # up to this many points, the Jacobian in one batch over the joints
 
@@ -507,8 +507,14 @@ def attached_points(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray)
     """Palm-frame positions ``(N, G, 3)`` [m] of points fixed to chains' tip frames,
     ``p_off`` ``(G, 3)`` [m] in the tip frames, at full model configurations ``q`` ``(N,
     nq)``: :func:`attached_placements` without the rotations."""
+    return np.moveaxis(attached_points_soa(chains, p_off, q), 0, -1).swapaxes(0, 1)
+
+
+def attached_points_soa(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """:func:`attached_points` laid out coordinate first, ``(3, G, N)`` [m] (the same
+    bits): each coordinate of each point a contiguous row, for batched arithmetic."""
     n, g = q.shape[0], len(chains)
-    p = np.empty((n, g, 3))
+    p = np.empty((3, g, n))
     for j, o, cols in _kernel_states(chains, q):
-        chains[j]._attached(o, cols, None, p_off[j], None, p[:, j])
+        chains[j]._attached(o, cols, None, p_off[j], None, p[:, j].T)
     return p

@@ -8,8 +8,10 @@ shortest P -> Q route (:func:`choose_region`).
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -22,6 +24,12 @@ from .unfolding import FaceUnfolding, polygons_overlap, segments_inside, unfold_
 __all__ = ["ON_SURFACE_TOL_M", "Region", "choose_region"]
 
 ON_SURFACE_TOL_M = 1e-6  # P and Q must lie this close to the surface [m]
+
+#: Per object, its unfolded chains and single faces with their neighbours: they depend on
+#: the object and the faces alone, and every regrasp on the object asks for a few of them.
+_UNFOLDED: weakref.WeakKeyDictionary[ConvexObject, dict[Any, tuple[FaceUnfolding, ...]]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 @dataclass(frozen=True)
@@ -57,7 +65,7 @@ def choose_region(
     # Candidates by their straight unfolded distance, a lower bound of their route.
     candidates = []
     for chain in _chains(obj, p_faces, q_faces, max_faces):  # few chains of few faces
-        pieces = unfold_faces(obj, chain)
+        pieces = _unfolded(obj, chain)
         p_uv = _face_uv(obj, chain[0], p)
         q_uv = pieces[-1].to_unfolded(_face_uv(obj, chain[-1], q)[None])[0]
         bound = float(np.linalg.norm(q_uv - p_uv))
@@ -168,10 +176,30 @@ def _face_uv(obj: ConvexObject, fid: int, p: np.ndarray) -> np.ndarray:
     return _clamp_into(face.to_uv(p[None]), face.polygon_uv).reshape(2)
 
 
+def _unfolded(obj: ConvexObject, chain: tuple[int, ...]) -> tuple[FaceUnfolding, ...]:
+    """:func:`~.unfolding.unfold_faces` of a chain, remembered per object."""
+    known = _UNFOLDED.setdefault(obj, {})
+    if chain not in known:
+        known[chain] = unfold_faces(obj, chain)
+    return known[chain]
+
+
 def _with_neighbours(
     obj: ConvexObject, pieces: tuple[FaceUnfolding, ...]
 ) -> tuple[FaceUnfolding, ...]:
-    """Add the faces adjacent to the single root face that do not overlap the others."""
+    """Add the faces adjacent to the single root face that do not overlap the others
+    (remembered per object and root face: the root's unfolding is the identity)."""
+    known = _UNFOLDED.setdefault(obj, {})
+    key = ("with neighbours", pieces[0].face_id)
+    if key not in known:
+        known[key] = _add_neighbours(obj, pieces)
+    return known[key]
+
+
+def _add_neighbours(
+    obj: ConvexObject, pieces: tuple[FaceUnfolding, ...]
+) -> tuple[FaceUnfolding, ...]:
+    """:func:`_with_neighbours` computed."""
     root = pieces[0].face_id
     others = sorted(
         a.face_b if a.face_a == root else a.face_a

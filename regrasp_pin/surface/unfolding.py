@@ -10,7 +10,9 @@ the plane; :func:`lift` maps unfolded points back onto the surface (object frame
 
 from __future__ import annotations
 
+import collections
 import math
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -214,8 +216,35 @@ def _hinge_map(
     return rot, hinge[0] - rot @ c[0], hinge
 
 
+#: The last regions' padded half-planes, keyed by their pieces' identities (each entry
+#: holds its pieces, so an identity cannot be reused while the entry lives).
+_HALFPLANES: collections.OrderedDict[
+    tuple[int, ...], tuple[tuple[FaceUnfolding, ...], np.ndarray, np.ndarray]
+] = collections.OrderedDict()
+_HALFPLANES_KEEP = 8
+_HALFPLANES_LOCK = threading.Lock()
+
+
 def _halfplanes(pieces: Sequence[FaceUnfolding]) -> tuple[np.ndarray, np.ndarray]:
-    """Inward unit edge normals (F, k, 2) and biases (F, k), padded by repeating edge 0."""
+    """Inward unit edge normals (F, k, 2) and biases (F, k), padded by repeating edge 0
+    (read-only; remembered for the last few regions: a grid's construction and its
+    queries ask for the same pieces many times)."""
+    key = tuple(id(p) for p in pieces)
+    with _HALFPLANES_LOCK:
+        hit = _HALFPLANES.get(key)
+        if hit is None:
+            normals, bias = _pad_halfplanes(pieces)
+            normals.flags.writeable = bias.flags.writeable = False
+            hit = _HALFPLANES[key] = (tuple(pieces), normals, bias)
+            while len(_HALFPLANES) > _HALFPLANES_KEEP:
+                _HALFPLANES.popitem(last=False)
+        else:
+            _HALFPLANES.move_to_end(key)
+    return hit[1], hit[2]
+
+
+def _pad_halfplanes(pieces: Sequence[FaceUnfolding]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_halfplanes` computed."""
     k = max(p.polygon_uv.shape[0] for p in pieces)
     normals = np.empty((len(pieces), k, 2))
     bias = np.empty((len(pieces), k))
