@@ -19,7 +19,9 @@ from typing import Any
 import coal
 import numpy as np
 
+from . import capsules_numba
 from .hand import Finger, Hand
+from .ik import ik_backend
 from .kinematics import FingerChain, attached_placements, attached_points_soa
 from .objects import ConvexObject
 from .support import support, support_parameters
@@ -473,7 +475,9 @@ class PairDistances:
             The minima ``{"tip", "link", "ff", "margin"}`` [m] and whether all are exact.
         """
         self._mandatory_queries()
-        minimum = self._minimum if exact_minima else self._lowest
+        if not exact_minima:
+            return self._lowest_all()
+        minimum = self._minimum
         out, exact = {}, True
         zero = np.zeros(self.lb.shape)
         for key, kind in (("tip", TIP), ("link", LINK), ("ff", FF)):
@@ -503,18 +507,26 @@ class PairDistances:
         self._query(rows, cols)
         self._update_sweep(np.unique(cols))
 
-    def _lowest(self, offset: np.ndarray, columns: np.ndarray) -> tuple[float, bool]:
-        """A lower bound on ``min(distance + offset)`` over the given columns, without
-        further queries, and whether it is exact (an exact distance no bound is below)."""
-        cols = np.nonzero(columns)[0]
-        if cols.size == 0:
-            return math.inf, True
-        ex = self.exact[:, cols] + offset[:, cols]
-        done = ~np.isnan(ex)
-        best = float(np.min(ex[done])) if done.any() else math.inf
-        bound = np.where(done, np.inf, np.maximum(self.lb[:, cols], self.swept[:, cols]))
-        low = float(np.min(bound + offset[:, cols]))
-        return min(best, low), best <= low
+    def _lowest_all(self) -> tuple[dict[str, float], bool]:
+        """:meth:`run`'s minima without further queries: of each kind, and of the
+        distances less their requirements, the smallest of the exact distances and of
+        the bounds (broad phase or sweep) of the samples not queried; exact where no
+        such bound is below the smallest exact distance."""
+        done = ~np.isnan(self.exact)
+        ex = np.where(done, self.exact, np.inf)
+        bound = np.where(done, np.inf, np.maximum(self.lb, self.swept))
+        ex_col, bound_col = ex.min(axis=0, initial=np.inf), bound.min(axis=0, initial=np.inf)
+        out, exact = {}, True
+        for key, kind in (("tip", TIP), ("link", LINK), ("ff", FF)):
+            cols = self.kind == kind
+            best = float(ex_col[cols].min(initial=np.inf))
+            low = float(bound_col[cols].min(initial=np.inf))
+            out[key] = min(best, low)
+            exact &= best <= low
+        best = float((ex - self.required).min(initial=np.inf))
+        low = float((bound - self.required).min(initial=np.inf))
+        out["margin"] = min(best, low)
+        return out, exact and best <= low
 
     def _minimum(self, offset: np.ndarray, columns: np.ndarray) -> tuple[float, bool]:
         """``min(distance + offset)`` over the given columns, by branch and bound.
@@ -694,6 +706,11 @@ def capsule_gaps(
     # capsule bound can be below the cap
     reach_a = np.array([0.5 * np.linalg.norm(g.seg_b - g.seg_a) for g in ga]) + rad_a
     reach_b = np.array([0.5 * np.linalg.norm(h.seg_b - h.seg_a) for h in gb]) + rad_b
+    if ik_backend() == "numba":  # the same loop compiled, the same bits
+        capsules_numba.gaps(
+            A1, B1, A2, B2, rows_b, rad_a, rad_b, reach_a, reach_b, group_of, gap, cap_m
+        )
+        return np.minimum(gap, cap_m)
     mid_a, mid_b = 0.5 * (A1 + B1), 0.5 * (A2 + B2)
     # every (a, b, row) at once, (A, B, N)
     far = _norm3(mid_a[:, :, None] - mid_b[:, None][..., rows_b])
