@@ -17,6 +17,7 @@ import numpy as np
 
 from ..exceptions import ContactError, FailureKind
 from ..model.clearance import FingerClearance
+from ..model.distances import capsule_gap
 from ..model.hand import Hand
 from ..model.objects import ConvexObject, SurfaceSample
 from .choice import exit_times
@@ -33,6 +34,9 @@ __all__ = ["GAP_HORIZON_S", "Grasp", "initial_grasp"]
 SCORE_RTOL = 1e-9
 #: initial_grasp measures finger gaps over the first this many seconds [s]
 GAP_HORIZON_S = 1.0
+#: A finger pair whose capsule bound is this far above the finger-gap threshold is not
+#: measured by Coal: more than Coal's tolerance on the distances the bound may exceed [m].
+_CLEAR_SLACK_M = 1e-5
 
 
 @dataclass(frozen=True)
@@ -256,7 +260,6 @@ def initial_grasp(
         (times >= times[t_index] - 1e-9) & (times <= times[t_index] + gap_horizon_s + 1e-9)
     )
     ks = soon[:: max(1, -(-soon.size // 5))]
-    gap = _PairGaps(hand, {n: manifolds[n].q[ks] for n in names})
     pts, nrm = sample.points, sample.normals
     hold = {r.finger: r for r in must_hold if r.k_from <= t_index <= r.k_to}
     per_finger = {
@@ -274,6 +277,12 @@ def initial_grasp(
     ranks_known: dict[tuple[int, ...], tuple[int, ...]] = {}
     if min_finger_gap_m is None:
         min_finger_gap_m = contact.finger_trigger_m + 0.0005
+    gap = _PairGaps(
+        hand,
+        {n: manifolds[n].q[ks] for n in names},
+        {n: per_finger[n][0] for n in names},
+        min_finger_gap_m,
+    )
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
     epsilons = ScreeningEpsilons(mu, obj.radius_m)  # each contact set's hull once
     for trial in range(trials):
@@ -549,6 +558,8 @@ class _CombinationSearch:
         ids, rows = self.per_finger[name][0], self._rows[name]
         taken = np.array([self._row[j] for j in picked.values()], int)
         spaced = ~self._near[np.ix_(rows, taken)].any(axis=1)
+        if (spaced & self.gaps.clear_of(name, picked)).any():
+            return None  # a spaced candidate is clear by its capsule bounds alone
         gaps: list[float] = []
         for i in ids[spaced]:
             g = self.gaps.smallest(name, int(i), picked)
@@ -591,19 +602,35 @@ class _CombinationSearch:
 
 
 class _PairGaps:
-    """Coal distances [m] between two grasping fingers at their candidate contacts.
+    """Coal distances [m] between two grasping fingers at their candidate contacts, exact
+    wherever they are below ``exact_below_m``.
 
     Each finger's configurations at candidate ``i`` are ``q[finger][:, i]`` (a few
     times); a pair's distance is the smallest over the times where both reach their
-    contacts. The others sit at neutral (only the pair is measured). Distances are
-    cached per pair of candidates.
+    contacts. The others sit at neutral (only the pair is measured). The search only
+    compares these distances with ``exact_below_m`` and reports the ones below it, so
+    a pair is first bounded from below by capsules, every candidate of both fingers in
+    one batch (:func:`~regrasp_pin.model.distances.capsule_gap`, whose bound exceeds
+    Coal's distance by at most Coal's tolerance), and measured by Coal only when that
+    bound is not above the threshold by :data:`_CLEAR_SLACK_M`. Distances are cached
+    per pair of candidates.
     """
 
-    def __init__(self, hand: Hand, q: Mapping[str, np.ndarray]):
+    def __init__(
+        self,
+        hand: Hand,
+        q: Mapping[str, np.ndarray],
+        candidates: Mapping[str, np.ndarray],
+        exact_below_m: float,
+    ):
         self.hand, self.q = hand, q
         self._checks: dict[tuple[str, str], FingerClearance] = {}
         self._cache: dict[tuple[str, int, str, int], float] = {}
         self._neutral = hand.neutral()
+        self._cand = {n: np.asarray(c, dtype=np.int64) for n, c in candidates.items()}
+        self._row = {n: {int(i): r for r, i in enumerate(c)} for n, c in self._cand.items()}
+        self._clear = float(exact_below_m) + _CLEAR_SLACK_M
+        self._bounds: dict[tuple[str, str], np.ndarray] = {}
 
     def pair(self, a: str, ia: int, b: str, ib: int) -> float:
         """Distance [m] between finger ``a`` at candidate ``ia`` and ``b`` at ``ib``."""
@@ -625,6 +652,58 @@ class _PairGaps:
             self._cache[key] = d
         return self._cache[key]
 
+    def bounds(self, a: str, b: str) -> np.ndarray:
+        """Capsule lower bounds ``(n_a, n_b)`` [m] on :meth:`pair` for every candidate
+        of ``a`` (rows, in candidate order) against every candidate of ``b``, capped
+        just above the threshold (the cap is all the search reads of larger ones)."""
+        if (a, b) not in self._bounds:
+            if (b, a) in self._bounds:
+                return self._bounds[(b, a)].T
+            self._bounds[(a, b)] = self._capsule_bounds(a, b)
+        return self._bounds[(a, b)]
+
+    def _capsule_bounds(self, a: str, b: str) -> np.ndarray:
+        fa, fb = self.hand.finger(a), self.hand.finger(b)
+        qa, qb = self.q[a][:, self._cand[a]], self.q[b][:, self._cand[b]]  # (T, n, k)
+        n_t, n_a, n_b = qa.shape[0], qa.shape[1], qb.shape[1]
+        reached_a, reached_b = np.isfinite(qa).all(axis=2), np.isfinite(qb).all(axis=2)
+        reached_a[0] = reached_b[0] = True  # the start always counts
+        # rows (time, candidate of a, candidate of b); b placed once per (time, candidate)
+        q_rows = np.tile(self._neutral, (n_t * n_a * n_b, 1))
+        q_rows[:, fa.q_indices] = np.repeat(np.nan_to_num(qa), n_b, axis=1).reshape(-1, fa.k)
+        q_b = np.tile(self._neutral, (n_t * n_b, 1))
+        q_b[:, fb.q_indices] = np.nan_to_num(qb).reshape(-1, fb.k)
+        rows_b = (np.arange(n_t)[:, None, None] * n_b + np.arange(n_b)[None, None, :]).repeat(
+            n_a, axis=1
+        )
+        lb = capsule_gap(
+            self.hand,
+            list(fa.geometry_ids),
+            [g for g in fb.geometry_ids if g not in set(fa.geometry_ids)],
+            q_rows,
+            cap_m=self._clear,
+            q_b=q_b,
+            rows_b=rows_b.reshape(-1),
+        ).reshape(n_t, n_a, n_b)
+        both = reached_a[:, :, None] & reached_b[:, None, :]
+        return np.where(both, lb, np.inf).min(axis=0)
+
+    def _bound(self, a: str, ia: int, b: str, ib: int) -> float:
+        return float(self.bounds(a, b)[self._row[a][ia], self._row[b][ib]])
+
     def smallest(self, finger: str, i: int, picked: Mapping[str, int]) -> float:
-        """Smallest distance [m] from ``finger`` at ``i`` to the picked fingers (inf: none)."""
-        return min((self.pair(finger, i, o, j) for o, j in picked.items()), default=np.inf)
+        """Smallest distance [m] from ``finger`` at ``i`` to the picked fingers (inf:
+        none): exact when below the threshold, else a value at or above it."""
+        out = np.inf
+        for o, j in picked.items():
+            lb = self._bound(finger, i, o, j)
+            out = min(out, lb if lb >= self._clear else self.pair(finger, i, o, j))
+        return out
+
+    def clear_of(self, finger: str, picked: Mapping[str, int]) -> np.ndarray:
+        """``(n,)`` whether each candidate of ``finger`` (in candidate order) is, by the
+        capsule bounds alone, clear of every picked finger above the threshold."""
+        clear = np.ones(self._cand[finger].size, bool)
+        for o, j in picked.items():
+            clear &= self.bounds(finger, o)[:, self._row[o][j]] >= self._clear
+        return clear
