@@ -69,3 +69,16 @@ def exits(spec: ScenarioSpec, **_: object) -> ScenarioResult:
 def raises(spec: ScenarioSpec, **_: object) -> ScenarioResult:
     """Raise instead of returning a result."""
     raise RuntimeError(f"no result for {spec.name}")
+
+
+def caches(spec: ScenarioSpec, **_: object) -> ScenarioResult:
+    """What this scenario process found built when it started: ``measured`` is the
+    number of hands built (``suite.build._hand``), ``required`` the number of workspace
+    covers cached (``grasp.manifold.workspace_voxels``)."""
+    from regrasp_pin.grasp.manifold import workspace_voxels
+    from regrasp_pin.suite.build import _hand
+
+    r = outcome_template(spec)
+    r.measured = float(_hand.cache_info().currsize)
+    r.required = float(workspace_voxels.cache_info().currsize)
+    return r

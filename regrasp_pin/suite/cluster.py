@@ -255,7 +255,8 @@ def run_suite(
     try:
         with _client(workers, scheduler) as client:
             run.workers = max(sum(client.nthreads().values()), 1)
-            client.run(warm_up)  # each worker's forkserver, before the clock of a task
+            # each worker's forkserver, with the hands of the run, before a task's clock
+            client.run(warm_up, sorted({spec.hand for spec in specs}))
             run.startup_s = time.perf_counter() - t_start
             pending: dict[Any, tuple[int, float]] = {}
             todo = iter(ledger.todo())

@@ -16,6 +16,7 @@ end into a :class:`~.run.ScenarioResult`:
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import multiprocessing.connection
 import multiprocessing.forkserver
@@ -23,12 +24,13 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from .._validate import positive
 from .run import ScenarioResult, outcome_template
 from .specs import ScenarioSpec
+from .warm import HANDS_ENV
 
 __all__ = ["CRASH", "TIMEOUT", "Task", "run_isolated", "warm_up"]
 
@@ -38,13 +40,14 @@ CRASH = "crash"  #: ScenarioResult.failure_kind of a scenario whose process died
 #: A task: ``task(spec, **kwargs) -> ScenarioResult`` (a module-level function).
 Task = Callable[..., ScenarioResult]
 
-_PRELOAD = ["regrasp_pin.suite.run"]
+_PRELOAD = ["regrasp_pin.suite.run", "regrasp_pin.suite.warm"]
 _MALLOC_TRIM = "MALLOC_TRIM_THRESHOLD_"
 _context: Any = None
 
 
-def _forkserver() -> Any:
-    """The forkserver context, with the planner imported in the server (once per process).
+def _forkserver(hands: Sequence[str] = ()) -> Any:
+    """The forkserver context, with the planner imported in the server and ``hands``
+    warmed there (:mod:`.warm`), once per process (later calls return the running one).
 
     The server is started without ``MALLOC_TRIM_THRESHOLD_`` in its environment: Dask's
     nanny sets it to 64 KiB in every worker, which makes glibc hand memory back to the
@@ -55,20 +58,24 @@ def _forkserver() -> Any:
     if _context is None:
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(_PRELOAD)
-        saved = os.environ.pop(_MALLOC_TRIM, None)
+        saved = {key: os.environ.pop(key, None) for key in (_MALLOC_TRIM, HANDS_ENV)}
+        if hands:
+            os.environ[HANDS_ENV] = json.dumps(list(hands))
         try:
             multiprocessing.forkserver.ensure_running()
         finally:
-            if saved is not None:
-                os.environ[_MALLOC_TRIM] = saved
+            os.environ.pop(HANDS_ENV, None)
+            os.environ.update({key: value for key, value in saved.items() if value is not None})
         _context = ctx
     return _context
 
 
-def warm_up() -> None:
-    """Start this process's forkserver (the planner imported in it) ahead of the first
-    scenario, so that the first one does not pay for it."""
-    ctx = _forkserver()
+def warm_up(hands: Sequence[str] = ()) -> None:
+    """Start this process's forkserver ahead of the first scenario, with the planner
+    imported in it and the named hands built and their caches filled
+    (:func:`~.warm.warm_hands`), so that no scenario pays for them. Only the first
+    call of a process starts it: call this before any scenario runs."""
+    ctx = _forkserver(tuple(hands))
     proc = ctx.Process(target=_noop)
     proc.start()
     proc.join()
