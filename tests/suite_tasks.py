@@ -73,12 +73,12 @@ def raises(spec: ScenarioSpec, **_: object) -> ScenarioResult:
 
 def caches(spec: ScenarioSpec, **_: object) -> ScenarioResult:
     """What this scenario process found built when it started: ``measured`` is the
-    number of hands built (``suite.build._hand``), ``required`` the number of workspace
+    number of hands built (``suite.build.suite_hand``), ``required`` the number of workspace
     covers cached (``grasp.manifold.workspace_voxels``)."""
     from regrasp_pin.grasp.manifold import workspace_voxels
-    from regrasp_pin.suite.build import _hand
+    from regrasp_pin.suite.build import suite_hand
 
     r = outcome_template(spec)
-    r.measured = float(_hand.cache_info().currsize)
+    r.measured = float(suite_hand.cache_info().currsize)
     r.required = float(workspace_voxels.cache_info().currsize)
     return r

@@ -11,12 +11,12 @@ import numpy as np
 from regrasp_pin.grasp.manifold import build_manifold, workspace_voxels
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
-from regrasp_pin.suite.build import _hand
+from regrasp_pin.suite.build import suite_hand
 from regrasp_pin.suite.warm import warm_hands
 
 
 def test_warming_fills_the_caches_a_manifold_reads_and_changes_no_number():
-    hand = _hand("five_finger")
+    hand = suite_hand("five_finger")
     f = hand.finger("index")
     T = np.eye(4)
     T[:3, 3] = f.fk(f.q_mid[None])[0] + [0.0, 0.0, -0.02]
@@ -26,7 +26,7 @@ def test_warming_fills_the_caches_a_manifold_reads_and_changes_no_number():
     workspace_voxels.cache_clear()
     cold = build_manifold(f, sample, motion, times)
     warm_hands(["five_finger"])
-    assert _hand("five_finger") is hand  # one hand per process
+    assert suite_hand("five_finger") is hand  # one hand per process
     hits = workspace_voxels.cache_info().hits
     warm = build_manifold(f, sample, motion, times)
     assert workspace_voxels.cache_info().hits == hits + 1  # the cover was there

@@ -32,14 +32,17 @@ from ..scenarios import (
 )
 from .specs import MAX_DRAWS_PER_SCENARIO, ScenarioSpec, generate_specs
 
-__all__ = ["MAX_DRAWS_PER_SCENARIO", "build_scenario", "suite_scenarios"]
+__all__ = ["MAX_DRAWS_PER_SCENARIO", "build_scenario", "suite_hand", "suite_scenarios"]
 
 log = logging.getLogger(__name__)
 
 
 @functools.cache
-def _hand(name: str) -> Hand:
-    """One hand per name and process (its workspace covers are cached per finger)."""
+def suite_hand(name: str) -> Hand:
+    """The hand of a spec (:func:`~regrasp_pin.scenarios.hand_model`), built once per
+    name and process: its fingers' caches (workspace covers, pad directions) then serve
+    every scenario of the process (and of the processes forked from it, see
+    :mod:`.warm`)."""
     return hand_model(name)
 
 
@@ -82,7 +85,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     Raises:
         ContactError: no initial force-closure grasp.
     """
-    h = _hand(spec.hand)
+    h = suite_hand(spec.hand)
     o = spec.object.build()
     m = spec.motion
     T0 = setup_pose(spec.hand) if spec.base_pose is None else np.reshape(spec.base_pose, (4, 4))

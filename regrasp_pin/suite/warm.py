@@ -26,7 +26,7 @@ from ..grasp.manifold import build_manifold
 from ..model.distances import capsule_gaps
 from ..model.motion import ObjectMotion
 from ..model.objects import Box
-from .build import _hand
+from .build import suite_hand
 
 __all__ = ["HANDS_ENV", "warm_hands"]
 
@@ -38,11 +38,11 @@ log = logging.getLogger(__name__)
 
 
 def warm_hands(names: Iterable[str]) -> None:
-    """Build each named hand (:func:`~.build._hand`, once per process) and run, on one
-    thread, what fills its caches: a small manifold per finger (two times, a 20 mm box
+    """Build each named hand (:func:`~.build.suite_hand`, once per process) and run, on
+    one thread, what fills its caches: a small manifold per finger (two times, a 20 mm box
     at the finger's mid-range tip) and the fingers' capsule gaps."""
     for name in names:
-        hand = _hand(name)
+        hand = suite_hand(name)
         for finger in hand.fingers.values():
             tip = finger.fk(finger.q_mid[None])[0]
             T = np.eye(4)
