@@ -676,10 +676,11 @@ class _PairGaps:
         rows_b = (np.arange(n_t)[:, None, None] * n_b + np.arange(n_b)[None, None, :]).repeat(
             n_a, axis=1
         )
+        own = set(fa.geometry_ids)
         lb = capsule_gap(
             self.hand,
             list(fa.geometry_ids),
-            [g for g in fb.geometry_ids if g not in set(fa.geometry_ids)],
+            [g for g in fb.geometry_ids if g not in own],
             q_rows,
             cap_m=self._clear,
             q_b=q_b,

@@ -13,11 +13,12 @@ bit for bit. The function is plain Python too, which lets the tests run it uncom
 from __future__ import annotations
 
 import math
-import types
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+
+from .numba_jit import compile_together
 
 __all__ = ["available", "gaps", "gaps_python"]
 
@@ -100,19 +101,11 @@ def _compile() -> Callable[..., Any] | None:
     """The compiled :func:`gaps_python` (cached on disk), or None without numba."""
     global _compiled, _failed
     if _compiled is None and not _failed:
-        try:
-            import numba
-        except ImportError:
+        compiled = compile_together((_clip01, _segment_distance), (gaps_python,))
+        if compiled is None:
             _failed = True
             return None
-        glb = dict(gaps_python.__globals__)
-        for f in (_clip01, _segment_distance, gaps_python):
-            if f is gaps_python:
-                jit = numba.njit(cache=True, nogil=True, inline="never")
-            else:
-                jit = numba.njit(cache=True, nogil=True, inline="always")
-            glb[f.__name__] = jit(types.FunctionType(f.__code__, glb, f.__name__))
-        _compiled = glb["gaps_python"]
+        _compiled = compiled["gaps_python"]
     return _compiled
 
 

@@ -16,11 +16,12 @@ tests run the same code uncompiled on a few points.
 from __future__ import annotations
 
 import math
-import types
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+
+from .numba_jit import compile_together
 
 __all__ = ["available", "iterate", "iterate_python", "residuals", "residuals_python"]
 
@@ -210,22 +211,14 @@ def _compile() -> Callable[..., Any] | None:
     """The compiled :func:`iterate_python` (cached on disk), or None without numba."""
     global _compiled, _failed
     if _compiled is None and not _failed:
-        try:
-            import numba
-        except ImportError:
+        compiled = compile_together(
+            (_cos_sin, _jacobian, _fk_jacobian, _dls_step), (iterate_python, residuals_python)
+        )
+        if compiled is None:
             _failed = True
             return None
-        # the same functions, each calling the compiled versions of the others (inlined)
-        glb = dict(iterate_python.__globals__)
-        kernels = (iterate_python, residuals_python)
-        for f in (_cos_sin, _jacobian, _fk_jacobian, _dls_step, *kernels):
-            if f in kernels:
-                jit = numba.njit(cache=True, nogil=True, inline="never")
-            else:
-                jit = numba.njit(cache=True, nogil=True, inline="always")
-            glb[f.__name__] = jit(types.FunctionType(f.__code__, glb, f.__name__))
-        _compiled = glb["iterate_python"]
-        _compiled_residuals.append(glb["residuals_python"])
+        _compiled = compiled["iterate_python"]
+        _compiled_residuals.append(compiled["residuals_python"])
     return _compiled
 
 

@@ -41,15 +41,15 @@ def warm_hands(names: Iterable[str]) -> None:
     """Build each named hand (:func:`~.build.suite_hand`, once per process) and run, on
     one thread, what fills its caches: a small manifold per finger (two times, a 20 mm box
     at the finger's mid-range tip) and the fingers' capsule gaps."""
+    sample = Box((0.02, 0.02, 0.02)).sample_surface(0.005)
+    times = np.array([0.0, 0.1])
     for name in names:
         hand = suite_hand(name)
         for finger in hand.fingers.values():
-            tip = finger.fk(finger.q_mid[None])[0]
             T = np.eye(4)
-            T[:3, 3] = tip + np.array([0.0, 0.0, -0.01 - finger.tip_radius])
-            box = Box((0.02, 0.02, 0.02))
-            motion = ObjectMotion.from_poses(np.array([0.0, 0.1]), np.stack([T, T]))
-            build_manifold(finger, box.sample_surface(0.005), motion, np.array([0.0, 0.1]))
+            T[:3, 3] = finger.fk(finger.q_mid[None])[0] - [0.0, 0.0, 0.01 + finger.tip_radius]
+            motion = ObjectMotion.from_poses(times, np.stack([T, T]))
+            build_manifold(finger, sample, motion, times)
         names_f = list(hand.fingers)
         q = hand.neutral()[None]
         for a in names_f:

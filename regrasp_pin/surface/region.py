@@ -9,7 +9,7 @@ shortest P -> Q route (:func:`choose_region`).
 from __future__ import annotations
 
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -176,12 +176,19 @@ def _face_uv(obj: ConvexObject, fid: int, p: np.ndarray) -> np.ndarray:
     return _clamp_into(face.to_uv(p[None]), face.polygon_uv).reshape(2)
 
 
+def _remembered(
+    obj: ConvexObject, key: Any, compute: Callable[[], tuple[FaceUnfolding, ...]]
+) -> tuple[FaceUnfolding, ...]:
+    """``compute()``, remembered per object under ``key``."""
+    known = _UNFOLDED.setdefault(obj, {})
+    if key not in known:
+        known[key] = compute()
+    return known[key]
+
+
 def _unfolded(obj: ConvexObject, chain: tuple[int, ...]) -> tuple[FaceUnfolding, ...]:
     """:func:`~.unfolding.unfold_faces` of a chain, remembered per object."""
-    known = _UNFOLDED.setdefault(obj, {})
-    if chain not in known:
-        known[chain] = unfold_faces(obj, chain)
-    return known[chain]
+    return _remembered(obj, chain, lambda: unfold_faces(obj, chain))
 
 
 def _with_neighbours(
@@ -189,11 +196,8 @@ def _with_neighbours(
 ) -> tuple[FaceUnfolding, ...]:
     """Add the faces adjacent to the single root face that do not overlap the others
     (remembered per object and root face: the root's unfolding is the identity)."""
-    known = _UNFOLDED.setdefault(obj, {})
     key = ("with neighbours", pieces[0].face_id)
-    if key not in known:
-        known[key] = _add_neighbours(obj, pieces)
-    return known[key]
+    return _remembered(obj, key, lambda: _add_neighbours(obj, pieces))
 
 
 def _add_neighbours(
