@@ -182,18 +182,27 @@ def closure_possible_without(
     usable = np.logical_or.reduce(others)
     corners, normals, present = _face_corners(obj, sample, usable)
     mu_out = mu / np.cos(np.pi / CONE_EDGES)
-    memo: dict[bytes, bool] = {}
+    ks = np.flatnonzero(enough & present.any(axis=1))
     out = np.zeros(usable.shape[0], bool)
-    for k in np.flatnonzero(enough):
-        faces = np.flatnonzero(present[k])
-        if faces.size == 0:
-            continue
-        p = corners[k, faces].reshape(-1, 3)
-        n = np.repeat(normals[faces], 4, axis=0)
-        key = faces.tobytes() + p.tobytes()
+    if ks.size == 0:
+        return out
+    # the cone edges at every (time, face) corner in one call, row for row what one
+    # call per time gives; a time's rows are contiguous (faces in ascending order)
+    kk, ff = np.nonzero(present[ks])
+    wrenches = contact_wrenches(
+        corners[ks[kk], ff].reshape(-1, 3),
+        np.repeat(normals[ff], 4, axis=0),
+        mu_out,
+        n_edges=CONE_EDGES,
+        torque_scale_m=obj.radius_m,
+    ).reshape(kk.size, -1, 6)
+    bounds = np.searchsorted(kk, np.arange(ks.size + 1))
+    memo: dict[bytes, bool] = {}
+    for row, k in enumerate(ks):
+        faces = ff[bounds[row] : bounds[row + 1]]
+        key = faces.tobytes() + corners[k, faces].tobytes()
         if key not in memo:
-            w = contact_wrenches(p, n, mu_out, n_edges=CONE_EDGES, torque_scale_m=obj.radius_m)
-            memo[key] = _positively_spanning(w)
+            memo[key] = _positively_spanning(wrenches[bounds[row] : bounds[row + 1]].reshape(-1, 6))
         out[k] = memo[key]
     return out
 

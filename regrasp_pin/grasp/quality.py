@@ -31,6 +31,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from .._validate import as_array, positive, positive_int
 from ..exceptions import InputError
+from ..model._polyhedra import cross
 
 __all__ = ["contact_wrenches", "ferrari_canny_epsilon", "is_force_closure", "kept_quality"]
 
@@ -81,7 +82,7 @@ def contact_wrenches(
     f = -n[:, None, :] + mu * (
         np.cos(phi)[None, :, None] * t1[:, None, :] + np.sin(phi)[None, :, None] * t2[:, None, :]
     )  # (k, m, 3)
-    tau = np.cross(p[:, None, :], f)  # (k, m, 3) about the centre of mass
+    tau = cross(p[:, None, :], f)  # (k, m, 3) about the centre of mass
     if torsion > 0.0:
         spin = torsion * n[:, None, None, :] * np.array([1.0, -1.0])[None, None, :, None]
         f = np.repeat(f[:, :, None, :], 2, axis=2)
@@ -209,9 +210,9 @@ def _check(
 def _tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents per normal, ``t1 x t2 = n``, shape (k, 3) each."""
     axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
-    t1 = np.cross(n, axis)
+    t1 = cross(n, axis)
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    return t1, np.cross(n, t1)
+    return t1, cross(n, t1)
 
 
 def kept_quality(epsilon: float, epsilon_before: float) -> bool:
