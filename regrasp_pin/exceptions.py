@@ -126,7 +126,8 @@ ADVICE = {
     FailureKind.VELOCITY: "turn the object more slowly (or raise the joint velocity limits)",
     FailureKind.JOINT_LIMIT: "place the object where the fingers have more joint range",
     FailureKind.FINGER_COLLISION: "use fingers that are further apart, or fewer fingers",
-    FailureKind.OBJECT_CLEARANCE: "lower RegraspParams.clearance_m or use a larger object",
+    FailureKind.OBJECT_CLEARANCE: "lower RegraspParams.clearance_m (flights) or "
+    "ContactModel.choice_link_clearance_m (new contacts), or use a larger object",
     FailureKind.GRID_UNREACHABLE: "lower RegraspParams.grid_spacing_m or the contact keep-out",
     FailureKind.NO_CANDIDATE: "lower ContactModel.choice_margin_rad or turn more slowly",
     FailureKind.FORCE_CLOSURE: "use more fingers or a higher friction coefficient mu",

@@ -59,10 +59,13 @@ from regrasp_pin.grasp.quality import (
 from regrasp_pin.grasp.screening import (
     SCREEN_EDGES,
     ManifoldClearance,
+    ObjectClearance,
     ScreeningEpsilons,
+    closest_object_miss,
     held_clear,
+    passes_object_clearance,
 )
-from regrasp_pin.model.clearance import LinkClearance
+from regrasp_pin.model.clearance import FingerClearance, LinkClearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
@@ -599,7 +602,7 @@ def test_q_lets_more_fingers_go_among_the_first_that_pass():
         upper=finger.upper,
         T_palm_object=np.tile(np.eye(4), (n_t, 1, 1)),
     )
-    screen = _Screen(hand, finger, box, manifold, sample, 0, others, MU, None, None, 0.0)
+    screen = _Screen(hand, finger, box, manifold, sample, 0, others, MU, None, CONTACT, None, 0.0)
     idx = np.array([low, high])
     ranked = _Ranking(np.ones(2), np.full(2, 0.2), np.zeros(2), idx, 0.0)
     P = np.array([0.0, 0.0, 0.02])  # the contact let go, on the top face
@@ -750,13 +753,20 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     monkeypatch.setattr(
         screening_module, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
     )
+    seen = []
+    real_gap = FingerClearance.__call__
+    monkeypatch.setattr(
+        FingerClearance, "__call__", lambda self, q: seen.append(real_gap(self, q)) or seen[-1]
+    )
     # 1 m from every other finger: nothing passes, and only P's epsilon is computed
     with pytest.raises(ContactError) as e:
         choose_new_contact(
             hand, box, manifolds["middle"], sample, 1.5, q_hand_arrive=q_hand,
             finger_clearance_m=1.0, **kw,
         )  # fmt: skip
-    assert e.value.kind == FailureKind.FINGER_COLLISION and e.value.measured >= 1
+    # the numbers are those of the candidate nearest to passing: the largest distance
+    assert e.value.kind == FailureKind.FINGER_COLLISION and e.value.required == 1.0
+    assert e.value.measured == max(seen) and 0.0 < e.value.measured < 1.0
     assert len(calls) == 1
     free = choose_new_contact(
         hand, box, manifolds["middle"], sample, 1.5, q_hand_arrive=q_hand,
@@ -764,6 +774,38 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     )  # fmt: skip
     alone = choose_new_contact(hand, box, manifolds["middle"], sample, 1.5, **kw)
     assert (free.index, free.rank, free.epsilon) == (alone.index, alone.rank, alone.epsilon)
+
+
+def test_an_object_clearance_failure_gives_the_nearest_candidate_in_metres(five, monkeypatch):
+    """Every candidate refused for its links (1 m asked of them): the error's numbers
+    are the largest links' distance measured (Coal) and the 1 m asked, not a count."""
+    hand, box, _, sample, manifolds, grasp = five
+    seen = []
+    real = ObjectClearance.distances
+    monkeypatch.setattr(
+        ObjectClearance, "distances", lambda self, *a: seen.append(real(self, *a)) or seen[-1]
+    )
+    far = dataclasses.replace(CONTACT, choice_link_clearance_m=1.0)
+    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in ("thumb", "ring")}
+    with pytest.raises(ContactError, match="link clearance") as e:
+        choose_new_contact(
+            hand, box, manifolds["index"], sample, 0.5, contact=far, mu=MU, others=others,
+            P_object=grasp.points_object["index"], n_P_object=grasp.normals_object["index"],
+        )  # fmt: skip
+    links = np.concatenate([d for d, _ in seen])
+    assert e.value.kind == FailureKind.OBJECT_CLEARANCE and e.value.required == 1.0
+    assert e.value.measured == links.max() < 1.0
+
+
+def test_closest_object_miss_is_the_requirement_missed_by_the_least():
+    c = ContactModel(choice_link_clearance_m=0.003, tip_penetration_m=5e-5)
+    links = np.array([0.004, 0.001, 0.0025, 0.010])
+    tip = np.array([0.0, 0.0, 0.0, -0.0009])
+    # misses: 2 mm (links), 0.5 mm (links), 0.85 mm (tip): the second link one
+    assert closest_object_miss(links, tip, c) == (0.0025, 0.003)
+    assert closest_object_miss(links[[1, 3]], tip[[1, 3]], c) == (-0.0009, -5e-5)
+    assert closest_object_miss(links[:1], tip[:1], c) is None
+    assert passes_object_clearance(links, tip, c).tolist() == [True, False, False, False]
 
 
 @pytest.mark.parametrize("t_arrive", [np.nan, -0.5, 3.5])

@@ -4,8 +4,20 @@ from __future__ import annotations
 
 import json
 
-from regrasp_pin.exceptions import ADVICE, Attempt, ContactError, FailureKind, PlanningError
-from regrasp_pin.planning.outcomes import dominant_kind, failure_summary
+from regrasp_pin.exceptions import (
+    ADVICE,
+    Attempt,
+    ContactError,
+    FailureKind,
+    PlanningError,
+)
+from regrasp_pin.planning.outcomes import (
+    INSIDE,
+    SINKS_IN,
+    dominant_kind,
+    failure_summary,
+    nearest_miss,
+)
 
 K = FailureKind
 
@@ -28,6 +40,34 @@ def test_failure_summary_counts_and_advises():
     text = failure_summary(a, K.BUDGET)
     assert "3 attempts failed" in text and "2 ik-unreachable" in text
     assert ADVICE[K.IK_UNREACHABLE] in text
+
+
+def test_failure_summary_gives_the_nearest_miss_and_advice_by_its_sign():
+    """Distances: the attempt nearest to passing (largest measured - required) is
+    quoted; a fingertip link sinking in (a negative requirement) is told the penetration
+    setting, a link inside the object (negative, with a clearance required) that no
+    setting helps, one short of the clearance the clearance settings."""
+    short = [
+        Attempt(K.OBJECT_CLEARANCE, measured=0.0010, required=0.003),
+        Attempt(K.OBJECT_CLEARANCE, measured=0.0025, required=0.003),
+        Attempt(K.VELOCITY, measured=9.0, required=7.0),
+    ]
+    assert nearest_miss(short, K.OBJECT_CLEARANCE) is short[1]
+    assert nearest_miss(short, K.VELOCITY) is None  # not a distance
+    text = failure_summary(short, K.BUDGET)
+    assert "the nearest 2.50 mm, need 3.00 mm" in text and ADVICE[K.OBJECT_CLEARANCE] in text
+    inside = [
+        Attempt(K.OBJECT_CLEARANCE, measured=-0.0133, required=0.003),
+        Attempt(K.OBJECT_CLEARANCE),  # no numbers: ignored
+    ]
+    text = failure_summary(inside, K.BUDGET)
+    assert "the nearest -13.30 mm, need 3.00 mm" in text and text.endswith(INSIDE)
+    sinks = [*inside, Attempt(K.OBJECT_CLEARANCE, measured=-0.0008, required=-5e-5)]
+    text = failure_summary(sinks, K.BUDGET)
+    assert "the nearest -0.80 mm, need -0.05 mm" in text and text.endswith(SINKS_IN)
+    assert failure_summary([Attempt(K.OBJECT_CLEARANCE)], K.BUDGET).endswith(
+        ADVICE[K.OBJECT_CLEARANCE]
+    )
 
 
 def test_errors_carry_kind_numbers_and_json_attempts():

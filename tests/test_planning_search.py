@@ -127,6 +127,25 @@ def test_every_landing_rejected_ends_typed_with_every_attempt(problem):
     assert exc.required == pytest.approx(0.4)
 
 
+def test_a_distance_failure_reports_the_attempt_nearest_to_passing(problem):
+    """Every landing refused for its distance to the object, by varying amounts: the
+    error's numbers are those of the refusal nearest to passing, as its message says."""
+    count = iter(range(10**6))
+
+    def too_close(result):
+        k = next(count)
+        miss = -0.001 * (1 + (7 * k) % 5)  # -1 .. -5 mm, in a scrambled order
+        return Attempt(FailureKind.OBJECT_CLEARANCE, FINGER, result.t_start, miss, 0.002)
+
+    with pytest.raises(PlanningError) as err:
+        problem(landing_check=too_close)
+    exc = err.value
+    mine = [a for a in exc.attempts if a.kind == FailureKind.OBJECT_CLEARANCE]
+    assert exc.kind == FailureKind.OBJECT_CLEARANCE and len(mine) >= 2
+    assert exc.measured == max(a.measured for a in mine) and exc.required == 0.002
+    assert f"the nearest {exc.measured * 1e3:.2f} mm, need 2.00 mm" in str(exc)
+
+
 def test_a_surface_path_too_fast_at_every_duration_falls_back_to_joint_space(problem, monkeypatch):
     import regrasp_pin.planning.regrasp as regrasp_module
 

@@ -276,6 +276,23 @@ def test_summary_counts():
     assert "proven to have no plan (kind infeasible): 1; full plans of the others: 2/5" in text
 
 
+def test_summary_gives_how_far_distance_failures_missed():
+    """required - measured of each distance failure [mm]: 0.1, 0.5 and 9 -> min, median,
+    max; another kind's numbers (a velocity) are not distances and get none."""
+    results = []
+    for name, measured, required in [("a", -1e-4, 0.0), ("b", -5.5e-4, -5e-5), ("c", -6e-3, 3e-3)]:
+        r = _result(name, "allegro", "box", "object-axis", False, "object-clearance", "plan")
+        r.measured, r.required = measured, required
+        results.append(r)
+    fast = _result("d", "allegro", "box", "object-axis", False, "velocity", "plan")
+    fast.measured, fast.required = 9.0, 7.0
+    none = _result("e", "allegro", "box", "object-axis", False, "object-clearance", "plan")
+    text = summarize([*results, fast, none])
+    rows = {ln.split()[0]: ln for ln in text.splitlines() if ln.startswith("  ")}
+    assert "missed by 0.10-9.00 mm, median 0.50 mm" in rows["object-clearance"]
+    assert "missed by" not in rows["velocity"]
+
+
 def test_results_round_trip_through_json():
     r = _result("a", "allegro", "box", "object-axis", False, "velocity", "plan", [1.5])
     r.time_s, r.min_clearance_m = 2.5, float("inf")

@@ -47,8 +47,10 @@ from .screening import (
     ManifoldClearance,
     ObjectClearance,
     ScreeningEpsilons,
+    closest_object_miss,
     held_clear,
     leave_one_out,
+    passes_object_clearance,
 )
 
 __all__ = [
@@ -278,6 +280,7 @@ def choose_new_contact(
         _arrival_clearance(hand, finger.name, obj, manifold, ka, contact, distances)
         if link_check
         else None,
+        contact,
         q_hand_arrive,
         finger_clearance_m,
         epsilons,
@@ -325,21 +328,17 @@ def _arrival_clearance(
     ka: int,
     contact: ContactModel,
     distances: ManifoldClearance | None,
-) -> Callable[[np.ndarray], np.ndarray]:
-    """``points (C,) -> (C,)`` bool: held at the sample ``points`` at the manifold time
-    ``ka``, the finger clears the object (:class:`ObjectClearance`'s test, on the kept
+) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """``points (C,) -> (links, tip)``: held at the sample ``points`` at the manifold
+    time ``ka``, the Coal distances ``(C,)`` [m] of the finger's other links and of its
+    fingertip link to the object (:meth:`ObjectClearance.distances`; from the kept
     ``distances`` if given)."""
     if distances is None:
         clear = ObjectClearance(hand, finger, obj, contact)
-        return lambda points: clear(
+        return lambda points: clear.distances(
             hand.to_full(finger, manifold.q[ka, points]), manifold.T_palm_object[ka]
         )
-
-    def kept(points: np.ndarray) -> np.ndarray:
-        d, d_tip = distances(np.full(points.size, ka), points)
-        return (d >= contact.choice_link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
-
-    return kept
+    return lambda points: distances(np.full(points.size, ka), points)
 
 
 def _arrival_indices(manifold: Manifold, t_arrive_s: float) -> tuple[int, int]:
@@ -409,7 +408,8 @@ class _Screen:
         ka: int,
         others: Mapping[str, tuple[np.ndarray, np.ndarray]],
         mu: float,
-        link_clear: Callable[[np.ndarray], np.ndarray] | None,
+        link_clear: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None,
+        contact: ContactModel,
         q_hand_arrive: np.ndarray | None,
         finger_clearance_m: float,
         epsilons: ScreeningEpsilons | None = None,
@@ -428,39 +428,57 @@ class _Screen:
                 f"mu={mu} and the object's radius {obj.radius_m} m",
             )
         self.epsilons = epsilons
-        self.link_clear = link_clear
+        self.link_clear, self.contact = link_clear, contact
         self.q_hand_arrive = q_hand_arrive
         self.finger_clear = (
             FingerClearance(hand, finger.name) if q_hand_arrive is not None else None
         )
         self.finger_clearance_m = finger_clearance_m
         self.rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}
+        # per reason, the rejected candidate nearest to passing: (measured, required)
+        self.closest: dict[str, tuple[float, float]] = {}
         self.window = _REMOVABLE_WINDOW
 
     def eps(self, p: np.ndarray, n: np.ndarray) -> float:
         """Ferrari-Canny epsilon of the other contacts and ``(p, n)``."""
         return self.epsilons(np.vstack([self.other_p, p[None]]), np.vstack([self.other_n, n[None]]))
 
-    def links_clear(self, points: np.ndarray) -> np.ndarray:
+    def links_clear(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(C,)`` bool: the finger at the sample ``points`` keeps its links clear of the
-        object at arrival (all True without the test)."""
+        object at arrival (all True without the test); and the Coal distances ``(links,
+        tip)`` [m] behind it (NaN without the test)."""
         if self.link_clear is None:
-            return np.ones(points.size, bool)
-        return self.link_clear(points)
+            nan = np.full(points.size, np.nan)
+            return np.ones(points.size, bool), nan, nan
+        links, tip = self.link_clear(points)
+        return passes_object_clearance(links, tip, self.contact), links, tip
+
+    def _reject(self, why: str, measured: float, required: float) -> None:
+        """Count a rejection and keep the one nearest to passing (the largest
+        ``measured - required``; the first of equals)."""
+        self.rejected[why] += 1
+        best = self.closest.get(why)
+        if best is None or measured - required > best[0] - best[1]:
+            self.closest[why] = (measured, required)
 
     def rejection(self, i: int, p: np.ndarray, n: np.ndarray) -> tuple[str | None, float]:
         """Why sample point ``i`` at ``(p, n)`` (its links already clear of the object)
         is refused, or None, and its epsilon with the other contacts (NaN when not
-        computed). The finger clearance is tested first: one Coal pass, where the
-        epsilon is a 6-D hull; a candidate that fails both counts as a finger-clearance
-        rejection."""
+        computed); a refusal is counted (:attr:`rejected`, :attr:`closest`). The finger
+        clearance is tested first: one Coal pass, where the epsilon is a 6-D hull; a
+        candidate that fails both counts as a finger-clearance rejection."""
         if self.finger_clear is not None:
             q_all = np.array(self.q_hand_arrive, float)
             q_all[self.finger.q_indices] = self.manifold.q[self.ka, i]
-            if self.finger_clear(q_all) < self.finger_clearance_m:
+            d = self.finger_clear(q_all)
+            if d < self.finger_clearance_m:
+                self._reject("finger clearance", d, self.finger_clearance_m)
                 return "finger clearance", float("nan")
         e = self.eps(p, n)
-        return ("force closure" if e <= FORCE_CLOSURE_TOL else None), e
+        if e <= FORCE_CLOSURE_TOL:
+            self._reject("force closure", e, FORCE_CLOSURE_TOL)
+            return "force closure", e
+        return None, e
 
     def removable(self, p: np.ndarray, n: np.ndarray) -> int:
         """How many of the other contacts could let go, with ``(p, n)`` landed, the rest
@@ -499,21 +517,22 @@ class _Screen:
         passing: list[tuple[int, bool, int, NewContact]] = []
         best_removable = self.other_p.shape[0] if self.other_p.shape[0] >= 3 else 0
         clear = np.zeros(order.size, bool)
+        links, tip = np.zeros(order.size), np.zeros(order.size)  # [m]
         screened = 0
         for position, j in enumerate(order):
             if screened >= max_checks:
                 break
             if position % _LINK_BATCH == 0:
-                batch = order[position : position + _LINK_BATCH]
-                clear[position : position + batch.size] = self.links_clear(idx[batch])
+                batch = slice(position, position + _LINK_BATCH)
+                clear[batch], links[batch], tip[batch] = self.links_clear(idx[order[batch]])
             if not clear[position]:
-                self.rejected["link clearance"] += 1
+                miss = closest_object_miss(links[position], tip[position], self.contact)
+                self._reject("link clearance", *(miss or (np.nan, np.nan)))
                 continue
             screened += 1
             i = int(idx[j])
             why, e = self.rejection(i, pts[i], normals[i])
             if why is not None:
-                self.rejected[why] += 1
                 continue
             result = NewContact(
                 finger=self.finger.name,
@@ -540,13 +559,24 @@ class _Screen:
         raise self.failure(screened + self.rejected["link clearance"], idx.size)
 
     def failure(self, checked: int, n_candidates: int) -> ContactError:
-        """The error when none of ``checked`` candidates passes."""
+        """The error when none of ``checked`` candidates passes: the most frequent
+        rejection, with the numbers of the candidate that came nearest to passing it
+        (a distance [m] and its requirement, or an epsilon and the force-closure
+        tolerance)."""
         rejected = self.rejected
         why = ", ".join(f"{n} {k}" for k, n in rejected.items() if n)
         main = max(rejected, key=lambda k: rejected[k])  # dict order breaks ties
+        measured, required = self.closest.get(main, (None, None))
+        nearest = ""
+        if measured is not None and required is not None:
+            scale, unit = (1.0, "") if main == "force closure" else (1e3, " mm")
+            nearest = (
+                f"; the nearest to passing the {main}: {measured * scale:.3g}{unit}, "
+                f"need {required * scale:.3g}{unit}"
+            )
         return ContactError(
             f"none of the {checked} best candidates (of {n_candidates}) passes "
-            f"(rejected for: {why})",
+            f"(rejected for: {why}{nearest})",
             finger=self.finger.name,
             time_s=float(self.manifold.times_s[self.ka]),
             kind={
@@ -554,8 +584,8 @@ class _Screen:
                 "link clearance": FailureKind.OBJECT_CLEARANCE,
                 "finger clearance": FailureKind.FINGER_COLLISION,
             }[main],
-            measured=float(rejected[main]),
-            required=0.0,
+            measured=measured,
+            required=required,
         )
 
 

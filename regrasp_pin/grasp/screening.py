@@ -29,8 +29,10 @@ __all__ = [
     "ManifoldClearance",
     "ObjectClearance",
     "ScreeningEpsilons",
+    "closest_object_miss",
     "held_clear",
     "leave_one_out",
+    "passes_object_clearance",
 ]
 
 SCREEN_EDGES = 6  # friction-cone edges used when screening candidates
@@ -129,10 +131,43 @@ class ObjectClearance:
 
     def __call__(self, q_full: np.ndarray, T_palm_object: np.ndarray) -> np.ndarray:
         """``(N,)`` bool for the ``(N, nq)`` configurations at the object pose(s)."""
-        c = self.contact
-        return (self.links(q_full, T_palm_object) >= c.choice_link_clearance_m) & (
-            self.tip(q_full, T_palm_object) >= -c.tip_penetration_m
-        )
+        return passes_object_clearance(*self.distances(q_full, T_palm_object), self.contact)
+
+    def distances(
+        self, q_full: np.ndarray, T_palm_object: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(links, tip)`` Coal distances ``(N,)`` [m] to the object (negative when
+        inside) of the ``(N, nq)`` configurations at the object pose(s)."""
+        return self.links(q_full, T_palm_object), self.tip(q_full, T_palm_object)
+
+
+def passes_object_clearance(
+    links: np.ndarray, tip: np.ndarray, contact: ContactModel
+) -> np.ndarray:
+    """``(N,)`` bool: a finger at a candidate contact whose other links are ``links`` and
+    whose fingertip link is ``tip`` [m] from the object (:meth:`ObjectClearance.distances`)
+    clears it: ``contact.choice_link_clearance_m`` and ``contact.tip_penetration_m``."""
+    return (links >= contact.choice_link_clearance_m) & (tip >= -contact.tip_penetration_m)
+
+
+def closest_object_miss(
+    links: np.ndarray, tip: np.ndarray, contact: ContactModel
+) -> tuple[float, float] | None:
+    """Of the candidates that do not pass :func:`passes_object_clearance`, the one
+    nearest to passing: ``(measured, required)`` [m] of the requirement it misses by the
+    least (its links' distance and ``choice_link_clearance_m``, or its fingertip link's
+    and ``-tip_penetration_m``; negative: inside the object); None if all pass."""
+    links, tip = np.atleast_1d(np.asarray(links, float)), np.atleast_1d(np.asarray(tip, float))
+    short_links = contact.choice_link_clearance_m - links  # > 0: missed by that much
+    short_tip = -contact.tip_penetration_m - tip
+    worse = np.maximum(short_links, short_tip)
+    miss = np.flatnonzero(worse > 0.0)
+    if miss.size == 0:
+        return None
+    j = int(miss[np.argmin(worse[miss])])  # the first of equals
+    if short_links[j] >= short_tip[j]:
+        return float(links[j]), float(contact.choice_link_clearance_m)
+    return float(tip[j]), float(-contact.tip_penetration_m)
 
 
 def held_clear(

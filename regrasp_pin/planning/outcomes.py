@@ -2,14 +2,36 @@
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Sequence
 
 from ..exceptions import ADVICE, Attempt, FailureKind
 
-__all__ = ["dominant_kind", "failure_summary"]
+__all__ = [
+    "DISTANCE_KINDS",
+    "INSIDE",
+    "SINKS_IN",
+    "dominant_kind",
+    "failure_summary",
+    "nearest_miss",
+]
 
 _ORDER = {k: i for i, k in enumerate(FailureKind)}
+#: kinds whose measured and required numbers are distances [m], failed below
+DISTANCE_KINDS = (FailureKind.OBJECT_CLEARANCE, FailureKind.FINGER_COLLISION)
+# what to change for an object-clearance failure by what was missed: a penetration
+# allowed (a negative requirement: the fingertip link pressing into a face), or a
+# clearance with the finger inside the object (which no clearance setting meets)
+SINKS_IN = (
+    "the fingertip link sinks into the face the tip rests on: raise "
+    "ContactModel.tip_penetration_m if the fingertip is soft, or place the object where "
+    "the finger meets its faces squarely"
+)
+INSIDE = (
+    "every contact or path tried puts a link of the finger into the object: place the "
+    "object where the finger reaches it from outside, or turn it less"
+)
 
 
 def dominant_kind(attempts: Sequence[Attempt], default: FailureKind) -> FailureKind:
@@ -20,12 +42,47 @@ def dominant_kind(attempts: Sequence[Attempt], default: FailureKind) -> FailureK
     return min(counts, key=lambda k: (-counts[k], _ORDER[k]))
 
 
+def nearest_miss(attempts: Sequence[Attempt], kind: FailureKind) -> Attempt | None:
+    """Of the ``kind`` attempts whose numbers are distances (object clearance, finger
+    collision: failed when ``measured < required`` [m]), the one nearest to passing
+    (the largest ``measured - required``; the first of equals); None for other kinds
+    or when none has both numbers."""
+    if kind not in DISTANCE_KINDS:
+        return None
+    margins = [
+        (a.measured - a.required, a)
+        for a in attempts
+        if a.kind == kind and a.measured is not None and a.required is not None
+    ]
+    known = [(m, a) for m, a in margins if math.isfinite(m)]
+    return max(known, key=lambda ma: ma[0])[1] if known else None  # the first of equals
+
+
 def failure_summary(attempts: Sequence[Attempt], default: FailureKind) -> str:
-    """One sentence: how many attempts failed, the dominant cause and what to change."""
+    """One sentence: how many attempts failed, the dominant cause (for distances, with
+    the attempt nearest to passing) and what to change."""
     kind = dominant_kind(attempts, default)
     counts = Counter(a.kind for a in attempts)
     parts = ", ".join(
         f"{n} {k.value}" for k, n in sorted(counts.items(), key=lambda kv: _ORDER[kv[0]])
     )
     head = f"{len(attempts)} attempts failed ({parts}); " if attempts else ""
-    return f"{head}mostly {kind.value}: {ADVICE[kind]}"
+    near = nearest_miss(attempts, kind)
+    if near is None:
+        return f"{head}mostly {kind.value}: {ADVICE[kind]}"
+    return f"{head}mostly {kind.value}{_numbers(near)}: {_advice(near)}"
+
+
+def _numbers(near: Attempt) -> str:
+    assert near.measured is not None and near.required is not None
+    return f" (the nearest {near.measured * 1e3:.2f} mm, need {near.required * 1e3:.2f} mm)"
+
+
+def _advice(near: Attempt) -> str:
+    """What to change, by the numbers of the attempt nearest to passing."""
+    assert near.measured is not None and near.required is not None
+    if near.kind == FailureKind.OBJECT_CLEARANCE and near.required < 0.0:
+        return SINKS_IN
+    if near.kind == FailureKind.OBJECT_CLEARANCE and near.measured < 0.0:
+        return INSIDE
+    return ADVICE[near.kind]

@@ -44,7 +44,7 @@ from ..grasp.manifold import Manifold
 from ..grasp.screening import ManifoldClearance, ScreeningEpsilons
 from ..model.objects import SurfaceSample
 from ..model.scene import Scene
-from .outcomes import dominant_kind, failure_summary
+from .outcomes import dominant_kind, failure_summary, nearest_miss
 from .proximity import clear_of_fingers
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import TIME_TOL_S
@@ -546,7 +546,11 @@ class RegraspSearch:
         self, finger: str, starts: list[float], attempts: list[Attempt], *, budget: bool
     ) -> Found:
         kind = FailureKind.BUDGET if budget else dominant_kind(attempts, FailureKind.NO_CANDIDATE)
-        last = next((a for a in reversed(attempts) if a.kind == kind), None)
+        # the numbers: for distances the attempt nearest to passing (the message's),
+        # else the last attempt of that kind
+        last = nearest_miss(attempts, kind) or next(
+            (a for a in reversed(attempts) if a.kind == kind), None
+        )
         when = starts[0] if starts else None
         span = (
             f"lift-off {starts[0]:.2f}-{max(starts):.2f} s" if starts else "no lift-off time left"

@@ -8,6 +8,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from ..exceptions import FailureKind
+from ..planning.outcomes import DISTANCE_KINDS
 from ..scenarios import HANDS
 from .run import ScenarioResult
 from .specs import MOTION_KINDS, OBJECT_KINDS
@@ -28,6 +29,22 @@ def _stats(values: Iterable[float | None], unit: str, scale: float = 1.0) -> str
         return "n/a"
     med, p95 = np.percentile(v, [50, 95])
     return f"median {med:.3g} {unit}, p95 {p95:.3g} {unit}, max {v.max():.3g} {unit} (n={v.size})"
+
+
+def _missed_by(kind: str | None, group: Sequence[ScenarioResult]) -> str:
+    """For a kind whose numbers are distances, how far its failures missed [mm]
+    (required - measured: the attempt nearest to passing of each); else ""."""
+    if kind not in {k.value for k in DISTANCE_KINDS}:
+        return ""
+    short = [
+        (r.required - r.measured) * 1e3
+        for r in group
+        if r.measured is not None and r.required is not None
+    ]
+    if not short:
+        return ""
+    lo, mid, hi = np.min(short), np.median(short), np.max(short)
+    return f"; missed by {lo:.2f}-{hi:.2f} mm, median {mid:.2f} mm"
 
 
 def summarize(results: Sequence[ScenarioResult]) -> str:
@@ -84,6 +101,7 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
         detail = ", ".join(f"{s} {c}" for s, c in sorted(stages.items(), key=str))
         if fingers:
             detail += "; " + ", ".join(f"{f} {c}" for f, c in fingers.most_common())
+        detail += _missed_by(kind, group)
         lines.append(f"  {kind!s:24}{count:4d}   ({detail})")
     in_plan = [r for r in failed if r.failed_stage == "plan"]
     if in_plan:
