@@ -1057,6 +1057,7 @@ class _TableGaps:
         self.slack = {key: rng.uniform(0.0, 0.002) for key in sorted(table)}
 
     def smallest(self, finger, i, picked):
+        self.calls = getattr(self, "calls", 0) + 1
         return min((self.table[finger, i, o, j] for o, j in picked.items()), default=np.inf)
 
     def clear_of(self, finger, picked):
@@ -1104,6 +1105,51 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
         assert admissible([int(ids[f][found[f]]) for f in names])
     else:
         assert search.refused > 0 and search.closest < gap_m
+
+
+class _Forgetful(dict):
+    """A memo that remembers nothing."""
+
+    def __setitem__(self, key, value):
+        pass
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_combination_search_remembering_dead_subtrees_changes_nothing(seed):
+    """Trials in other finger orders and candidate ranks, some with budgets that cut
+    them short: the search that skips subtrees it searched to the end without a
+    combination gives, trial by trial, the same combination, dead ends and closest gap
+    as one that searches every subtree again."""
+    rng = np.random.default_rng(100 + seed)
+    names = ["a", "b", "c", "d"]
+    n = 7
+    ids = {f: np.arange(k * n, (k + 1) * n) for k, f in enumerate(names)}
+    per_finger = {f: (ids[f], np.ones(n)) for f in names}
+    pts = rng.uniform(-0.04, 0.04, (4 * n, 3))
+    table = {}
+    for f, g in itertools.permutations(names, 2):
+        for i in ids[f]:
+            for j in ids[g]:
+                table[f, i, g, j] = table.get((g, j, f, i), rng.uniform(-0.004, 0.002))
+    searches = []
+    for remember in (True, False):
+        gaps = _TableGaps(table, ids, 0.001, seed)
+        search = _CombinationSearch(per_finger, pts, 0.02, gaps, 0.001, max_nodes=10**6)
+        if not remember:
+            search._failed = _Forgetful()
+        searches.append(search)
+    trial_rng = np.random.default_rng(seed)
+    for trial in range(40):
+        order = list(trial_rng.permutation(names))
+        ranks = {f: trial_rng.permutation(n) for f in names}
+        budget = int(trial_rng.choice([10**6, int(trial_rng.integers(1, 300))]))
+        out = []
+        for search in searches:
+            search.max_nodes = budget
+            out.append((search.complete(order, ranks), search.refused, search.closest))
+        assert out[0] == out[1], trial
+    # the memo was used: fewer candidates measured
+    assert searches[0].gaps.calls < searches[1].gaps.calls
 
 
 def test_screening_epsilons_are_the_hulls_each_computed_once(monkeypatch):

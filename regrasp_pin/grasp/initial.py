@@ -519,6 +519,12 @@ class _CombinationSearch:
         self._near = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1) < sep
         # _admissible per (finger, picked): None, or the gaps of its spaced candidates
         self._known: dict[tuple[str, tuple[tuple[str, int], ...]], list[float] | None] = {}
+        # subtrees searched to the end without a combination, per (picked, fingers still
+        # to pick in their order): (candidates it took, dead ends, closest gap)
+        self._failed: dict[
+            tuple[tuple[tuple[str, int], ...], tuple[str, ...]], tuple[int, int, float]
+        ] = {}
+        self._cuts = 0  # searches cut short by the node budget
 
     def complete(self, order: list[str], ranks: Mapping[str, np.ndarray]) -> dict[str, int] | None:
         """Candidate positions ``finger -> c`` (fingers in ``order``, candidates in
@@ -578,11 +584,41 @@ class _CombinationSearch:
     ) -> dict[str, int] | None:
         if len(chosen) == len(order):
             return dict(chosen)
+        # a subtree without a combination has none in any candidate order: every node in
+        # it tries all its candidates, so it takes the same candidates and finds the same
+        # dead ends whatever the ranks; a later trial that reaches it again is told so
+        # (when the budget would not have cut it short)
+        key = (tuple(sorted(picked.items())), tuple(order[len(chosen) :]))
+        known = self._failed.get(key)
+        if known is not None and budget[0] >= known[0]:
+            budget[0] -= known[0]
+            self.refused += known[1]
+            self.closest = max(self.closest, known[2])
+            return None
+        start = (budget[0], self.refused, self.closest, self._cuts)
+        self.closest = -np.inf  # this subtree's own, merged on the way out
+        found = self._search(order, ranks, chosen, picked, budget)
+        mine = self.closest
+        self.closest = max(start[2], mine)
+        if found is None and self._cuts == start[3]:
+            self._failed[key] = (start[0] - budget[0], self.refused - start[1], mine)
+        return found
+
+    def _search(
+        self,
+        order: list[str],
+        ranks: Mapping[str, np.ndarray],
+        chosen: dict[str, int],
+        picked: dict[str, int],
+        budget: list[int],
+    ) -> dict[str, int] | None:
+        """:meth:`_extend` at one node: its finger's candidates in rank order."""
         name = order[len(chosen)]
         ids = self.per_finger[name][0]
         too_close = []
         for c in ranks[name]:
             if budget[0] <= 0:
+                self._cuts += 1
                 return None
             budget[0] -= 1
             i = int(ids[c])
