@@ -163,6 +163,39 @@ def _cannot_hold(
     )
 
 
+def _trial_ranks(
+    per_finger: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    order: list[str],
+    trial: int,
+    rng: np.random.Generator,
+) -> dict[str, np.ndarray]:
+    """Each finger's candidate order in a trial of the grasp search: the lasting order
+    in trial 0 (greedy), later perturbed, still favouring the long-lasting contacts."""
+    if trial == 0:
+        return {n: np.arange(per_finger[n][0].size) for n in order}
+    return {
+        n: np.argsort(
+            np.arange(per_finger[n][0].size) + rng.uniform(0.0, 4.0, per_finger[n][0].size),
+            kind="stable",
+        )
+        for n in order
+    }
+
+
+def _rank_of(
+    pick: Mapping[str, int],
+    names: list[str],
+    rank: Callable[[Mapping[str, int]], tuple[int, ...]] | None,
+    known: dict[tuple[int, ...], tuple[int, ...]],
+) -> tuple[int, ...]:
+    """The rank of the grasp ``pick`` (``()`` without ``rank``), each grasp ranked once
+    (``known``, keyed by its contacts in the order ``names``)."""
+    key = tuple(pick[n] for n in names)
+    if rank is not None and key not in known:
+        known[key] = tuple(int(v) for v in rank(pick))
+    return known.get(key, ())
+
+
 def _grasp_score(
     p: np.ndarray,
     n: np.ndarray,
@@ -289,29 +322,21 @@ def initial_grasp(
         # trial 0 is greedy; later trials shuffle the fingers and perturb each finger's
         # ranking, still favouring the long-lasting contacts
         order_f = list(rng.permutation(names)) if trial else names
-        ranks = {
-            n: np.arange(per_finger[n][0].size)
-            if trial == 0
-            else np.argsort(
-                np.arange(per_finger[n][0].size) + rng.uniform(0.0, 4.0, per_finger[n][0].size),
-                kind="stable",
-            )
-            for n in order_f
-        }
-        chosen_c = search.complete(order_f, ranks)
+        chosen_c = search.complete(order_f, _trial_ranks(per_finger, order_f, trial, rng))
         if chosen_c is None:
             continue
         pick = {n: int(per_finger[n][0][c]) for n, c in chosen_c.items()}
         fracs = [float(per_finger[n][1][c]) for n, c in chosen_c.items()]
         ii = np.array([pick[n] for n in names])
+        if epsilons(pts[ii], nrm[ii]) <= FORCE_CLOSURE_TOL:
+            continue  # not in force closure (one hull; _grasp_score's first)
+        r = _rank_of(pick, names, rank, ranks_known)
+        if best is not None and r < best_rank:
+            continue  # a lower rank loses whatever the score: no leave-one-out hulls
         scored = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m, epsilons)
         if scored is None:
             continue
         score, e = scored
-        key = tuple(pick[n] for n in names)
-        if rank is not None and key not in ranks_known:
-            ranks_known[key] = tuple(int(v) for v in rank(pick))
-        r = ranks_known.get(key, ())
         if (
             best is None
             or r > best_rank
@@ -437,16 +462,19 @@ class _RankClimb:
         pick = {n: int(current[n]) for n in names}
         pick[name] = i
         ii = np.array([pick[n] for n in names])
+        # force closure (one hull), then the rank: a lower rank loses whatever the
+        # score, so its leave-one-out hulls are not needed
+        if self.epsilons(self.pts[ii], self.nrm[ii]) <= FORCE_CLOSURE_TOL:
+            return None
+        r = _rank_of(pick, names, rank, self.ranks_known)
+        if r < best_rank:
+            return None
         fracs = [self._frac(n, pick[n]) for n in names]
         scored = _grasp_score(
             self.pts[ii], self.nrm[ii], fracs, self.mu, self.scale_m, self.epsilons
         )
         if scored is None:
             return None
-        key = tuple(int(v) for v in ii)
-        if key not in self.ranks_known:
-            self.ranks_known[key] = tuple(int(v) for v in rank(pick))
-        r = self.ranks_known[key]
         score, e = scored
         if r > best_rank or (
             r == best_rank and score > best_score + SCORE_RTOL * max(1.0, abs(best_score))
