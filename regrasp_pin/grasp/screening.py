@@ -3,7 +3,9 @@
 - :class:`ScreeningEpsilons`: the Ferrari-Canny epsilon of contact sets with
   :data:`SCREEN_EDGES` cone edges and a fixed torque scale, each set computed once;
   :func:`leave_one_out`: the epsilons with each contact left out in turn.
-- :class:`ObjectClearance`: a finger at a candidate contact clears the object (Coal).
+- :class:`ObjectClearance`: a finger at a candidate contact clears the object (Coal);
+  :func:`passes_object_clearance` and :func:`closest_object_miss`: that test on its
+  distances, and of the candidates that fail it the one nearest to passing.
 - :func:`held_clear`: held at a contact, the finger stays clear of the object over the
   manifold's times, as the tracking measures it (Coal).
 - :class:`ManifoldClearance`: those Coal distances at a manifold's (time, point)
