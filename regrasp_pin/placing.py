@@ -54,7 +54,7 @@ from .grasp.contact import ContactModel
 from .grasp.manifold import Manifold, build_manifold
 from .grasp.screening import ObjectClearance
 from .model.clearance import palm_clearance
-from .model.distances import capsule_pair_gaps
+from .model.distances import capsule_ends, capsule_pair_gaps
 from .model.hand import Hand
 from .model.motion import ObjectMotion
 from .model.objects import ConvexObject, SurfaceSample
@@ -321,6 +321,8 @@ class RegraspRoom:
         self.clearance = float(clearance_m)
         self._usable: dict[tuple[str, int], np.ndarray] = {}
         self._clear: dict[tuple[str, int, str, int], np.ndarray] = {}
+        # the capsule ends of a finger at its usable contacts, per (finger, time index)
+        self._ends: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
         self._data = hand.model.createData()
         self._gdata = pin.GeometryData(hand.collision_model)
         self._req, self._res = coal.DistanceRequest(), coal.DistanceResult()
@@ -381,8 +383,17 @@ class RegraspRoom:
             rows = np.repeat(hand.neutral()[None], cand.size, axis=0)
             rows[:, g.q_indices] = q_held[reached[-1]]
             rows[:, f.q_indices] = self.manifolds[name].q[k, cand]
-            # geometry pairs whose capsules come within the clearance, and where
-            close = capsule_pair_gaps(hand, list(f.geometry_ids), list(g.geometry_ids), rows)
+            # geometry pairs whose capsules come within the clearance, and where: the
+            # finger's capsules once per time, the other's at its one configuration
+            if (name, k) not in self._ends:
+                self._ends[(name, k)] = capsule_ends(hand, list(f.geometry_ids), rows)
+            close = capsule_pair_gaps(
+                hand,
+                list(f.geometry_ids),
+                list(g.geometry_ids),
+                ends_a=self._ends[(name, k)],
+                ends_b=capsule_ends(hand, list(g.geometry_ids), rows[:1]),
+            )
             close = close < self.clearance
             near = [
                 (a, b, close[ia, ib])

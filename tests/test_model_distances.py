@@ -8,11 +8,13 @@ import pytest
 from conftest import assert_close
 
 from regrasp_pin import Hand
+from regrasp_pin.exceptions import InputError
 from regrasp_pin.model.distances import (
     _geometry,
     _placements,
     _segment_distance,
     _segment_ends,
+    capsule_ends,
     capsule_gap,
     capsule_gaps,
     capsule_pair_gaps,
@@ -61,6 +63,20 @@ def test_capsule_gap_is_the_pair_by_pair_minimum_bit_for_bit(hand):
             d = _segment_distance(A1[i], B1[i], A2[j], B2[j])[0] - g.radius - h.radius
             assert pairs[i, j].tobytes() == d.tobytes()
     assert pairs.min(axis=(0, 1)).tobytes() == ref.tobytes()
+    # from ends known before: the same bits; ids_b held still at one configuration
+    # (its ends at one row) is the same as that configuration in every row
+    known = capsule_pair_gaps(
+        hand, ids_a, ids_b, ends_a=capsule_ends(hand, ids_a, q), ends_b=(A2, B2)
+    )
+    assert known.tobytes() == pairs.tobytes()
+    still = q.copy()
+    still[:, hand.fingers["middle"].q_indices] = q[7, hand.fingers["middle"].q_indices]
+    one = capsule_pair_gaps(
+        hand, ids_a, ids_b, ends_a=(A1, B1), ends_b=capsule_ends(hand, ids_b, q[7:8])
+    )
+    assert one.tobytes() == capsule_pair_gaps(hand, ids_a, ids_b, still).tobytes()
+    with pytest.raises(InputError, match="q"):
+        capsule_pair_gaps(hand, ids_a, ids_b, ends_a=(A1, B1))
     assert np.all(np.isinf(capsule_pair_gaps(hand, ids_a, [], q)))
     assert np.all(np.isinf(capsule_gap(hand, [], ids_b, q)))
     # with a cap, the pairs whose bounding spheres are that far apart are skipped: the

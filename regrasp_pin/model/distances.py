@@ -14,11 +14,12 @@ import math
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import coal
 import numpy as np
 
+from ..exceptions import InputError
 from . import capsules_numba
 from .hand import Finger, Hand
 from .ik import ik_backend
@@ -724,18 +725,41 @@ def capsule_gaps(
     return np.minimum(gap, cap_m)
 
 
-def capsule_pair_gaps(hand: Hand, ids_a: list[int], ids_b: list[int], q: np.ndarray) -> np.ndarray:
+def capsule_ends(hand: Hand, ids: list[int], q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ends of the capsule segments of the geometries ``ids`` (the capsules that
+    :func:`capsule_pair_gaps` bounds them with) at configurations ``q`` ``(N, nq)``,
+    palm frame: ``(G, N, 3)`` each [m]. A geometry's ends depend on its own chain's
+    joints alone, row by row."""
+    return _segment_ends([_geometry(hand, g) for g in ids], np.asarray(q, float))
+
+
+def capsule_pair_gaps(
+    hand: Hand,
+    ids_a: list[int],
+    ids_b: list[int],
+    q: np.ndarray | None = None,
+    *,
+    ends_a: tuple[np.ndarray, np.ndarray] | None = None,
+    ends_b: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Lower bounds ``(A, B, N)`` [m] on the distance between each geometry of ``ids_a``
     and each of ``ids_b`` at each configuration row of ``q`` ``(N, nq)``, from capsules
     that contain the geometries: :func:`capsule_gap`'s pairs one by one (its bound is their
-    minimum, to the bit), for a caller that measures the close pairs exactly."""
+    minimum, to the bit), for a caller that measures the close pairs exactly.
+
+    ``ends_a``, ``ends_b``: the geometries' :func:`capsule_ends`, if known, instead of
+    ``q`` (the same bits); ``ends_b`` may hold one row, for ``ids_b`` held still at
+    every row."""
     ga = [_geometry(hand, g) for g in ids_a]
     gb = [_geometry(hand, g) for g in ids_b]
-    shape = (len(ga), len(gb), q.shape[0])
+    rows = None if q is None else np.asarray(q, float)
+    if rows is None and (ends_a is None or ends_b is None):
+        raise InputError("q", "is None and ends_a or ends_b not given", "(N, nq) rows")
+    A1, B1 = ends_a if ends_a is not None else _segment_ends(ga, cast(np.ndarray, rows))
+    A2, B2 = ends_b if ends_b is not None else _segment_ends(gb, cast(np.ndarray, rows))
+    shape = (len(ga), len(gb), A1.shape[1])  # the rows are ids_a's
     if not ga or not gb:
         return np.full(shape, np.inf)
-    A1, B1 = _segment_ends(ga, q)
-    A2, B2 = _segment_ends(gb, q)
     # every (pair, row) in one batch: each computed elementwise, as alone
     ends = [np.broadcast_to(e, (*shape, 3)).reshape(-1, 3) for e in (A1[:, None], B1[:, None])]
     ends += [np.broadcast_to(e, (*shape, 3)).reshape(-1, 3) for e in (A2[None], B2[None])]
