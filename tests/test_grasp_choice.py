@@ -1073,11 +1073,10 @@ class _TableGaps:
         )
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
-    rng = np.random.default_rng(seed)
+def _table_problem(rng, n, high_m):
+    """Four fingers of ``n`` candidates each, random contact points, and a symmetric table
+    of finger distances uniform in [-4 mm, ``high_m``)."""
     names = ["a", "b", "c", "d"]
-    n = 6
     ids = {f: np.arange(k * n, (k + 1) * n) for k, f in enumerate(names)}
     per_finger = {f: (ids[f], np.ones(n)) for f in names}
     pts = rng.uniform(-0.04, 0.04, (4 * n, 3))
@@ -1085,8 +1084,14 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
     for f, g in itertools.permutations(names, 2):
         for i in ids[f]:
             for j in ids[g]:
-                v = table.get((g, j, f, i), rng.uniform(-0.004, 0.003))
-                table[f, i, g, j] = v
+                table[f, i, g, j] = table.get((g, j, f, i), rng.uniform(-0.004, high_m))
+    return names, ids, per_finger, pts, table
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
+    names, ids, per_finger, pts, table = _table_problem(np.random.default_rng(seed), 6, 0.003)
+    n = 6
     gap_m, sep = 0.001, 0.02
 
     def admissible(combo):
@@ -1120,17 +1125,8 @@ def test_combination_search_remembering_dead_subtrees_changes_nothing(seed):
     them short: the search that skips subtrees it searched to the end without a
     combination gives, trial by trial, the same combination, dead ends and closest gap
     as one that searches every subtree again."""
-    rng = np.random.default_rng(100 + seed)
-    names = ["a", "b", "c", "d"]
     n = 7
-    ids = {f: np.arange(k * n, (k + 1) * n) for k, f in enumerate(names)}
-    per_finger = {f: (ids[f], np.ones(n)) for f in names}
-    pts = rng.uniform(-0.04, 0.04, (4 * n, 3))
-    table = {}
-    for f, g in itertools.permutations(names, 2):
-        for i in ids[f]:
-            for j in ids[g]:
-                table[f, i, g, j] = table.get((g, j, f, i), rng.uniform(-0.004, 0.002))
+    names, ids, per_finger, pts, table = _table_problem(np.random.default_rng(100 + seed), n, 0.002)
     searches = []
     for remember in (True, False):
         gaps = _TableGaps(table, ids, 0.001, seed)

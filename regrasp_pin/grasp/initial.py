@@ -205,26 +205,33 @@ def _grasp_score(
     epsilons: ScreeningEpsilons | None = None,
 ) -> tuple[float, float] | None:
     """``(score, epsilon)`` of a combination of contacts ``p``, ``n`` ``(F, 3)`` whose
-    lasting fractions are ``fracs``; None if it is not in force closure. The score
-    counts first the fingers that can let go with the rest still in force closure (so
-    that fingers can regrasp later, with four fingers or more), then the smallest of
-    those leave-one-out epsilons, twice the shortest lasting fraction, the mean one and
-    the epsilon. Epsilons come from ``epsilons`` if given (the same values)."""
+    lasting fractions are ``fracs``; None if it is not in force closure
+    (:func:`_closure_score`). Epsilons come from ``epsilons`` if given (the same
+    values)."""
     eps = epsilons or ScreeningEpsilons(mu, scale_m)
     e = eps(p, n)
     if e <= FORCE_CLOSURE_TOL:
         return None
+    return _closure_score(p, n, fracs, e, eps), e
+
+
+def _closure_score(
+    p: np.ndarray, n: np.ndarray, fracs: list[float], e: float, epsilons: ScreeningEpsilons
+) -> float:
+    """The score of a combination in force closure with epsilon ``e``: first the fingers
+    that can let go with the rest still in force closure (so that fingers can regrasp
+    later, with four fingers or more), then the smallest of those leave-one-out
+    epsilons, twice the shortest lasting fraction, the mean one and the epsilon."""
     F = p.shape[0]
-    loo = leave_one_out(p, n, mu, scale_m, range(F), eps) if F > 3 else []
+    loo = leave_one_out(p, n, epsilons.mu, epsilons.scale_m, range(F), epsilons) if F > 3 else []
     removable = [x for x in loo if x > FORCE_CLOSURE_TOL]
-    score = (
+    return (
         len(removable)
         + (min(removable) / (min(removable) + 0.05) if removable else 0.0)
         + 2.0 * min(fracs)
         + sum(fracs) / F
         + e / (e + 0.05)
     )
-    return score, e
 
 
 def initial_grasp(
@@ -328,15 +335,13 @@ def initial_grasp(
         pick = {n: int(per_finger[n][0][c]) for n, c in chosen_c.items()}
         fracs = [float(per_finger[n][1][c]) for n, c in chosen_c.items()]
         ii = np.array([pick[n] for n in names])
-        if epsilons(pts[ii], nrm[ii]) <= FORCE_CLOSURE_TOL:
-            continue  # not in force closure (one hull; _grasp_score's first)
+        e = epsilons(pts[ii], nrm[ii])
+        if e <= FORCE_CLOSURE_TOL:
+            continue  # not in force closure
         r = _rank_of(pick, names, rank, ranks_known)
         if best is not None and r < best_rank:
             continue  # a lower rank loses whatever the score: no leave-one-out hulls
-        scored = _grasp_score(pts[ii], nrm[ii], fracs, mu, obj.radius_m, epsilons)
-        if scored is None:
-            continue
-        score, e = scored
+        score = _closure_score(pts[ii], nrm[ii], fracs, e, epsilons)
         if (
             best is None
             or r > best_rank
@@ -348,7 +353,7 @@ def initial_grasp(
                 continue
             best_score, best_rank, best = score, r, (dict(pick), e, q_pick)
     if rank is not None and best is not None:
-        climb = _RankClimb(per_finger, pts, nrm, search, mu, obj.radius_m, epsilons, ranks_known)
+        climb = _RankClimb(per_finger, pts, nrm, search, epsilons, ranks_known)
         best, best_rank, best_score = climb.run(
             best, best_rank, best_score, rank, manifolds, t_index, finger_clearance
         )
@@ -399,14 +404,12 @@ class _RankClimb:
         pts: np.ndarray,
         nrm: np.ndarray,
         search: _CombinationSearch,
-        mu: float,
-        scale_m: float,
         epsilons: ScreeningEpsilons,
         ranks_known: dict[tuple[int, ...], tuple[int, ...]],
         max_passes: int = 4,
     ) -> None:
         self.per_finger, self.pts, self.nrm, self.search = per_finger, pts, nrm, search
-        self.mu, self.scale_m, self.epsilons = mu, scale_m, epsilons
+        self.epsilons = epsilons
         self.ranks_known, self.max_passes = ranks_known, max_passes
 
     def _frac(self, name: str, i: int) -> float:
@@ -464,18 +467,14 @@ class _RankClimb:
         ii = np.array([pick[n] for n in names])
         # force closure (one hull), then the rank: a lower rank loses whatever the
         # score, so its leave-one-out hulls are not needed
-        if self.epsilons(self.pts[ii], self.nrm[ii]) <= FORCE_CLOSURE_TOL:
+        e = self.epsilons(self.pts[ii], self.nrm[ii])
+        if e <= FORCE_CLOSURE_TOL:
             return None
         r = _rank_of(pick, names, rank, self.ranks_known)
         if r < best_rank:
             return None
         fracs = [self._frac(n, pick[n]) for n in names]
-        scored = _grasp_score(
-            self.pts[ii], self.nrm[ii], fracs, self.mu, self.scale_m, self.epsilons
-        )
-        if scored is None:
-            return None
-        score, e = scored
+        score = _closure_score(self.pts[ii], self.nrm[ii], fracs, e, self.epsilons)
         if r > best_rank or (
             r == best_rank and score > best_score + SCORE_RTOL * max(1.0, abs(best_score))
         ):
