@@ -189,34 +189,55 @@ class WorkspaceVoxels:
 
 @functools.lru_cache(maxsize=64)
 def workspace_voxels(
-    finger: Finger, extend_rad: float = 0.0, voxel_m: float = 0.004, max_samples: int = 60_000
+    finger: Finger, extend_rad: float = 0.0, voxel_m: float = 0.003, max_samples: int = 120_000
 ) -> WorkspaceVoxels:
     """Voxels that hold every tip-centre position reachable in the (extended) joint box.
 
-    The joint box is sampled on a regular grid of step ``h`` [rad]; any configuration
-    is within ``h / 2`` per joint of a grid sample, so its tip is within
-    ``L = max|J|_2 * h * sqrt(k) / 2`` of that sample's tip. Every voxel within ``L`` of
-    a sampled tip is marked, which makes the cover conservative.
+    Joint ``j`` is sampled on a regular grid of step ``h_j`` [rad]; any configuration is
+    within ``h_j / 2`` of a grid sample in each joint, so its tip is within
+    ``L = sum_j c_j h_j / 2`` of that sample's tip, where ``c_j`` [m/rad] bounds the norm
+    of the Jacobian's column ``j`` at every configuration (:func:`_column_norm_bounds`).
+    The steps make the ``c_j h_j`` equal (a joint that swings the tip far is sampled
+    densest), which minimises ``L`` for ``max_samples`` samples. A voxel is marked when
+    its centre lies within ``L + sqrt(3) voxel_m`` of the centre of a voxel that holds a
+    sampled tip (a Euclidean distance transform): a reachable tip and its nearest
+    sample each lie within half a voxel diagonal of their voxels' centres, which makes
+    the cover conservative.
     """
     lo, hi = finger.lower - extend_rad, finger.upper + extend_rad
-    k = finger.k
-    h = float((np.prod(hi - lo) / max_samples) ** (1.0 / k))
-    axes = [np.arange(a, b + h, h) for a, b in zip(lo, hi, strict=True)]
-    q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, k)
-    q = np.minimum(q, hi)
-    p, J = finger.chain.positions_jacobians(q)
-    reach = float(np.linalg.norm(J, axis=(1, 2)).max()) * h * np.sqrt(k) / 2
-    pad = int(np.ceil(reach / voxel_m)) + 1
+    span = hi - lo
+    c = _column_norm_bounds(finger)
+    c_pos = np.maximum(c, 1e-3 * c.max() + 1e-9)  # a joint that barely moves the tip
+    step = float(np.prod(span * c_pos) / max_samples) ** (1.0 / finger.k) / c_pos
+    counts = np.ceil(span / np.maximum(step, 1e-12)).astype(np.int64) + 1
+    axes = [np.linspace(a, b, int(n)) for a, b, n in zip(lo, hi, counts, strict=True)]
+    h = np.where(counts > 1, span / np.maximum(counts - 1, 1), 0.0)
+    q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, finger.k)
+    p = finger.fk(q)
+    radius = float(c @ h) / 2 + np.sqrt(3.0) * voxel_m
+    pad = int(np.ceil(radius / voxel_m)) + 1
     origin = p.min(0) - (pad + 1) * voxel_m
     idx = np.floor((p - origin) / voxel_m).astype(np.int64)
-    shape = idx.max(0) + pad + 2
-    occ = np.zeros(tuple(shape), bool)
+    occ = np.zeros(tuple(idx.max(0) + pad + 2), bool)
     occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    if pad:
-        from scipy.ndimage import binary_dilation
+    from scipy.ndimage import distance_transform_edt
 
-        occ = binary_dilation(occ, np.ones((3, 3, 3), bool), iterations=pad)
-    return WorkspaceVoxels(origin=origin, voxel_m=voxel_m, occupied=occ)
+    near = distance_transform_edt(~occ, sampling=voxel_m) <= radius + 1e-9
+    return WorkspaceVoxels(origin=origin, voxel_m=voxel_m, occupied=near)
+
+
+def _column_norm_bounds(finger: Finger) -> np.ndarray:
+    """``(k,)`` bounds on the norm of each column of the tip's position Jacobian
+    [m/rad], for every configuration: a unit turn of a joint moves the tip by at most
+    its distance from the joint's origin, at most the lengths of the links after it
+    (the chain's offsets, :meth:`~regrasp_pin.model.kinematics.FingerChain.packed`),
+    times the joint's mimic scaling, summed over the joints it drives."""
+    _, t, column, scaling, _, tip_t = finger.chain.packed()
+    links = np.linalg.norm(t, axis=1)
+    after = np.cumsum(links[::-1])[::-1] - links + float(np.linalg.norm(tip_t))
+    bound = np.zeros(finger.k)
+    np.add.at(bound, column, np.abs(scaling) * after)
+    return bound
 
 
 @functools.lru_cache(maxsize=64)
