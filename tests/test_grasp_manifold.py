@@ -379,6 +379,20 @@ def test_workspace_voxels_are_a_tight_cover(hand_name):
         assert d.max() * 1e3 <= far_mm, (name, d.max())
 
 
+def test_workspace_voxels_of_a_joint_whose_limits_coincide(scene):
+    """A joint with one value (lower == upper) is sampled once, the others as usual:
+    the cover stays small and holds every reachable tip."""
+    hand = scene[0]
+    f = hand.finger("index")
+    upper = f.upper.copy()
+    upper[1] = f.lower[1]
+    fixed = dataclasses.replace(f, upper=upper)
+    vox = manifold_module.workspace_voxels.__wrapped__(fixed, 0.0)
+    q = np.random.default_rng(15).uniform(fixed.lower, fixed.upper, (5_000, fixed.k))
+    assert vox.contains(fixed.fk(q)).all()
+    assert vox.occupied.sum() < workspace_voxels(f, 0.0).occupied.sum()
+
+
 def test_pad_direction_samples_bound_every_configuration(scene):
     """``max(P @ -n) + slack >= cos(cone)`` whenever some configuration faces n.
 

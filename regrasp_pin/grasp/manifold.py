@@ -208,8 +208,12 @@ def workspace_voxels(
     span = hi - lo
     c = _column_norm_bounds(finger)
     c_pos = np.maximum(c, 1e-3 * c.max() + 1e-9)  # a joint that barely moves the tip
-    step = float(np.prod(span * c_pos) / max_samples) ** (1.0 / finger.k) / c_pos
-    counts = np.ceil(span / np.maximum(step, 1e-12)).astype(np.int64) + 1
+    moves = span > 0.0  # a joint whose limits coincide takes one value
+    counts = np.ones(finger.k, np.int64)
+    if moves.any():
+        size = float(np.prod(span[moves] * c_pos[moves]) / max_samples)
+        step = size ** (1.0 / int(moves.sum())) / c_pos[moves]
+        counts[moves] = np.ceil(span[moves] / step).astype(np.int64) + 1
     axes = [np.linspace(a, b, int(n)) for a, b, n in zip(lo, hi, counts, strict=True)]
     h = np.where(counts > 1, span / np.maximum(counts - 1, 1), 0.0)
     q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, finger.k)
