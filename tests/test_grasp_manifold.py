@@ -374,22 +374,61 @@ def test_workspace_voxels_are_a_tight_cover(hand_name):
         q = rng.uniform(f.lower - EXTEND_RAD, f.upper + EXTEND_RAD, (300_000, f.k))
         tips = f.fk(q)
         assert vox.contains(tips).all(), name
+        # the centres of the sampling grid's cells, the farthest from the samples
+        axes, _ = manifold_module._cover_grid(f, EXTEND_RAD, 120_000)
+        mids = [0.5 * (a[:-1] + a[1:]) for a in axes]
+        centres = np.stack(np.meshgrid(*mids, indexing="ij"), -1).reshape(-1, f.k)
+        assert vox.contains(f.fk(centres)).all(), name
         centres = vox.origin + (np.argwhere(vox.occupied) + 0.5) * vox.voxel_m
         d, _ = cKDTree(tips).query(centres, distance_upper_bound=0.05)
         assert d.max() * 1e3 <= far_mm, (name, d.max())
 
 
-def test_workspace_voxels_of_a_joint_whose_limits_coincide(scene):
-    """A joint with one value (lower == upper) is sampled once, the others as usual:
-    the cover stays small and holds every reachable tip."""
+@pytest.mark.parametrize("hand_name", ["five_finger", "allegro"])
+def test_cover_grid_puts_every_tip_within_its_bound_of_the_nearest_sample(hand_name):
+    """``_cover_grid``'s ``L``: the tip of any configuration, random or at the centre of
+    a grid cell (the farthest from the samples), lies within ``L`` of the tip of the
+    sample nearest to it joint by joint; and ``L`` is not loose by more than 4x."""
+    hand = getattr(Hand, hand_name)()
+    rng = np.random.default_rng(16)
+    for name in hand.finger_names:
+        f = hand.finger(name)
+        axes, reach = manifold_module._cover_grid(f, EXTEND_RAD, 120_000)
+        q = rng.uniform(f.lower - EXTEND_RAD, f.upper + EXTEND_RAD, (20_000, f.k))
+        picks = [rng.integers(0, max(len(a) - 1, 1), 2_000) for a in axes]
+        centres = np.stack(
+            [
+                0.5 * (a[i] + a[np.minimum(i + 1, len(a) - 1)])
+                for a, i in zip(axes, picks, strict=True)
+            ],
+            axis=1,
+        )
+        q = np.vstack([q, centres])
+        nearest = np.stack(
+            [a[np.abs(q[:, j, None] - a[None]).argmin(axis=1)] for j, a in enumerate(axes)],
+            axis=1,
+        )
+        gap = np.linalg.norm(f.fk(q) - f.fk(nearest), axis=1)
+        assert gap.max() <= reach, (name, gap.max(), reach)
+        assert gap.max() >= reach / 4, (name, gap.max(), reach)
+
+
+@pytest.mark.parametrize("width", [0.0, 1e-5])
+def test_workspace_voxels_of_a_locked_or_nearly_locked_joint(scene, width):
+    """A joint whose range is narrower than its step takes one value, the middle, and
+    leaves the samples to the others (a nearly locked joint once asked for 6e7 samples):
+    the grid stays near its budget and the cover holds every reachable tip."""
     hand = scene[0]
     f = hand.finger("index")
     upper = f.upper.copy()
-    upper[1] = f.lower[1]
-    fixed = dataclasses.replace(f, upper=upper)
-    vox = manifold_module.workspace_voxels.__wrapped__(fixed, 0.0)
-    q = np.random.default_rng(15).uniform(fixed.lower, fixed.upper, (5_000, fixed.k))
-    assert vox.contains(fixed.fk(q)).all()
+    upper[1] = f.lower[1] + width
+    locked = dataclasses.replace(f, upper=upper)
+    axes, _ = manifold_module._cover_grid(locked, 0.0, 120_000)
+    assert len(axes[1]) == 1
+    assert np.prod([len(a) for a in axes]) <= 2 * 120_000
+    vox = manifold_module.workspace_voxels.__wrapped__(locked, 0.0)
+    q = np.random.default_rng(15).uniform(locked.lower, locked.upper, (5_000, locked.k))
+    assert vox.contains(locked.fk(q)).all()
     assert vox.occupied.sum() < workspace_voxels(f, 0.0).occupied.sum()
 
 

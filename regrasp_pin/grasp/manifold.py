@@ -198,27 +198,17 @@ def workspace_voxels(
     ``L = sum_j c_j h_j / 2`` of that sample's tip, where ``c_j`` [m/rad] bounds the norm
     of the Jacobian's column ``j`` at every configuration (:func:`_column_norm_bounds`).
     The steps make the ``c_j h_j`` equal (a joint that swings the tip far is sampled
-    densest), which minimises ``L`` for ``max_samples`` samples. A voxel is marked when
+    densest), which minimises ``L`` for about ``max_samples`` samples (at least: each
+    joint's count rounds up; :func:`_cover_grid`). A voxel is marked when
     its centre lies within ``L + sqrt(3) voxel_m`` of the centre of a voxel that holds a
     sampled tip (a Euclidean distance transform): a reachable tip and its nearest
     sample each lie within half a voxel diagonal of their voxels' centres, which makes
     the cover conservative.
     """
-    lo, hi = finger.lower - extend_rad, finger.upper + extend_rad
-    span = hi - lo
-    c = _column_norm_bounds(finger)
-    c_pos = np.maximum(c, 1e-3 * c.max() + 1e-9)  # a joint that barely moves the tip
-    moves = span > 0.0  # a joint whose limits coincide takes one value
-    counts = np.ones(finger.k, np.int64)
-    if moves.any():
-        size = float(np.prod(span[moves] * c_pos[moves]) / max_samples)
-        step = size ** (1.0 / int(moves.sum())) / c_pos[moves]
-        counts[moves] = np.ceil(span[moves] / step).astype(np.int64) + 1
-    axes = [np.linspace(a, b, int(n)) for a, b, n in zip(lo, hi, counts, strict=True)]
-    h = np.where(counts > 1, span / np.maximum(counts - 1, 1), 0.0)
+    axes, reach = _cover_grid(finger, extend_rad, max_samples)
     q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, finger.k)
     p = finger.fk(q)
-    radius = float(c @ h) / 2 + np.sqrt(3.0) * voxel_m
+    radius = reach + np.sqrt(3.0) * voxel_m
     pad = int(np.ceil(radius / voxel_m)) + 1
     origin = p.min(0) - (pad + 1) * voxel_m
     idx = np.floor((p - origin) / voxel_m).astype(np.int64)
@@ -228,6 +218,41 @@ def workspace_voxels(
 
     near = distance_transform_edt(~occ, sampling=voxel_m) <= radius + 1e-9
     return WorkspaceVoxels(origin=origin, voxel_m=voxel_m, occupied=near)
+
+
+def _cover_grid(
+    finger: Finger, extend_rad: float, max_samples: int
+) -> tuple[list[np.ndarray], float]:
+    """The joint values that :func:`workspace_voxels` samples, per joint, and ``L`` [m]:
+    every configuration of the (extended) box has its tip within ``L`` of the tip of the
+    grid sample nearest to it in every joint.
+
+    A joint on the grid of ``n`` values spaced ``h`` is within ``h / 2`` of one; a joint
+    whose range is no wider than its step would be (a locked or nearly locked joint,
+    or one that barely moves the tip) takes only the middle of its range, within half
+    its range, and leaves the samples to the others (found again until none is).
+    """
+    lo, hi = finger.lower - extend_rad, finger.upper + extend_rad
+    span = hi - lo
+    c = _column_norm_bounds(finger)
+    c_pos = np.maximum(c, 1e-3 * c.max() + 1e-9)  # a joint that barely moves the tip
+    grid = span > 0.0
+    step = np.full(finger.k, np.inf)
+    while grid.any():
+        size = float(np.prod(span[grid] * c_pos[grid]) / max_samples)
+        step[:] = np.inf
+        step[grid] = size ** (1.0 / int(grid.sum())) / c_pos[grid]
+        thin = grid & (span <= step)
+        if not thin.any():
+            break
+        grid &= ~thin
+    counts = np.where(grid, np.ceil(span / np.where(grid, step, 1.0)), 0.0).astype(np.int64) + 1
+    axes = [
+        np.linspace(a, b, int(n)) if g else np.array([0.5 * (a + b)])
+        for a, b, n, g in zip(lo, hi, counts, grid, strict=True)
+    ]
+    h = np.where(grid, span / np.maximum(counts - 1, 1), span)
+    return axes, float(c @ h) / 2
 
 
 def _column_norm_bounds(finger: Finger) -> np.ndarray:
