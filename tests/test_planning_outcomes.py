@@ -12,6 +12,7 @@ from regrasp_pin.exceptions import (
     PlanningError,
 )
 from regrasp_pin.planning.outcomes import (
+    CROSSES,
     INSIDE,
     SINKS_IN,
     dominant_kind,
@@ -68,6 +69,22 @@ def test_failure_summary_gives_the_nearest_miss_and_advice_by_its_sign():
     assert failure_summary([Attempt(K.OBJECT_CLEARANCE)], K.BUDGET).endswith(
         ADVICE[K.OBJECT_CLEARANCE]
     )
+
+
+def test_finger_collision_advice_tells_crossing_fingers_from_near_misses():
+    """A finger-collision failure whose nearest attempt has the finger inside another
+    (a negative distance) is told that the fingers cross; one that only came too near
+    keeps the clearance advice."""
+    crossing = [
+        Attempt(K.FINGER_COLLISION, measured=-0.0046, required=0.001),
+        Attempt(K.FINGER_COLLISION, measured=-0.0009, required=0.001),
+    ]
+    text = failure_summary(crossing, K.BUDGET)
+    assert "the nearest -0.90 mm, need 1.00 mm" in text and text.endswith(CROSSES)
+    near = [*crossing, Attempt(K.FINGER_COLLISION, measured=0.0006, required=0.001)]
+    text = failure_summary(near, K.BUDGET)
+    assert "the nearest 0.60 mm, need 1.00 mm" in text
+    assert text.endswith(ADVICE[K.FINGER_COLLISION])
 
 
 def test_errors_carry_kind_numbers_and_json_attempts():

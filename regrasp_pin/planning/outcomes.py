@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from ..exceptions import ADVICE, Attempt, FailureKind
 
 __all__ = [
+    "CROSSES",
     "DISTANCE_KINDS",
     "INSIDE",
     "SINKS_IN",
@@ -31,6 +32,13 @@ SINKS_IN = (
 INSIDE = (
     "every contact or path tried puts a link of the finger into the object: place the "
     "object where the finger reaches it from outside, or turn it less"
+)
+# a finger-collision failure whose nearest attempt still has the finger inside another
+# (a negative distance): the fingers cross, which no clearance setting mends
+CROSSES = (
+    "every contact or path tried puts the finger into another finger (they cross, not "
+    "just come near): start from a grasp whose fingers stand further apart (the grasp "
+    "search's finger_clearance), or plan with fewer fingers"
 )
 
 
@@ -85,4 +93,6 @@ def _advice(near: Attempt) -> str:
         return SINKS_IN
     if near.kind == FailureKind.OBJECT_CLEARANCE and near.measured < 0.0:
         return INSIDE
+    if near.kind == FailureKind.FINGER_COLLISION and near.measured < 0.0:
+        return CROSSES
     return ADVICE[near.kind]
