@@ -199,11 +199,11 @@ def workspace_voxels(
     of the Jacobian's column ``j`` at every configuration (:func:`_column_norm_bounds`).
     The steps make the ``c_j h_j`` equal (a joint that swings the tip far is sampled
     densest), which minimises ``L`` for about ``max_samples`` samples (at least: each
-    joint's count rounds up; :func:`_cover_grid`). A voxel is marked when
-    its centre lies within ``L + sqrt(3) voxel_m`` of the centre of a voxel that holds a
-    sampled tip (a Euclidean distance transform): a reachable tip and its nearest
-    sample each lie within half a voxel diagonal of their voxels' centres, which makes
-    the cover conservative.
+    joint's count rounds up; :func:`_cover_grid`). A voxel is marked when its centre
+    lies within ``L + sqrt(3) voxel_m`` of the centre of a voxel that holds a sampled tip
+    (a Euclidean distance transform): a reachable tip and its nearest sample each lie
+    within half a voxel diagonal of their voxels' centres, which makes the cover
+    conservative.
     """
     axes, reach = _cover_grid(finger, extend_rad, max_samples)
     q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, finger.k)
@@ -237,16 +237,16 @@ def _cover_grid(
     c = _column_norm_bounds(finger)
     c_pos = np.maximum(c, 1e-3 * c.max() + 1e-9)  # a joint that barely moves the tip
     grid = span > 0.0
-    step = np.full(finger.k, np.inf)
     while grid.any():
         size = float(np.prod(span[grid] * c_pos[grid]) / max_samples)
-        step[:] = np.inf
-        step[grid] = size ** (1.0 / int(grid.sum())) / c_pos[grid]
-        thin = grid & (span <= step)
+        step = size ** (1.0 / int(grid.sum())) / c_pos[grid]
+        thin = span[grid] <= step
         if not thin.any():
             break
-        grid &= ~thin
-    counts = np.where(grid, np.ceil(span / np.where(grid, step, 1.0)), 0.0).astype(np.int64) + 1
+        grid[np.flatnonzero(grid)[thin]] = False
+    counts = np.ones(finger.k, np.int64)
+    if grid.any():
+        counts[grid] = np.ceil(span[grid] / step).astype(np.int64) + 1
     axes = [
         np.linspace(a, b, int(n)) if g else np.array([0.5 * (a + b)])
         for a, b, n, g in zip(lo, hi, counts, grid, strict=True)
