@@ -1176,6 +1176,46 @@ def test_screening_epsilons_are_the_hulls_each_computed_once(monkeypatch):
     assert len(calls) == 6
 
 
+def test_screening_closes_without_gives_the_hulls_answers_mostly_without_hulls(monkeypatch):
+    # which fingers could let go (choice.removable): leave_one_out's epsilons > tol, from
+    # the NNLS certificate where it decides; every answer is the hull's
+    import regrasp_pin.grasp.screening as screening
+    from regrasp_pin.grasp.quality import FORCE_CLOSURE_TOL
+
+    real = screening.ferrari_canny_epsilon
+    calls = []
+    monkeypatch.setattr(
+        screening, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
+    )
+    rng = np.random.default_rng(27)
+    n_sets = closing = 0
+    for _ in range(40):
+        k = int(rng.integers(4, 7))
+        p = rng.normal(0.0, 0.02, (k, 3))
+        n = p / np.linalg.norm(p, axis=1, keepdims=True)  # outward, as on a round object
+        n += rng.normal(0.0, 0.3, (k, 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        eps = screening.ScreeningEpsilons(MU, 0.03)
+        got = screening.closes_without(p, n, range(k), eps)
+        want = [
+            real(
+                np.delete(p, j, 0),
+                np.delete(n, j, 0),
+                MU,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=0.03,
+            )
+            > FORCE_CLOSURE_TOL
+            for j in range(k)
+        ]
+        assert got == want
+        assert eps.closes(p, n) == (eps(p, n) > FORCE_CLOSURE_TOL)  # after the hull: its answer
+        n_sets += k
+        closing += sum(want)
+    assert closing >= 20 and n_sets - closing >= 20, (closing, n_sets)
+    assert len(calls) - 40 <= n_sets // 10  # the 40 full sets' hulls, few of the rest
+
+
 def _cut_ranking(seed: int, n: int, tolerance: float) -> tuple[_Ranking, np.ndarray, np.ndarray]:
     """Random candidates (exit times on a 0.01 s grid up to 3 s) and their cut exit
     times: each cut to a random earlier grid time or kept, as links and other fingers

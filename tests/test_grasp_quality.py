@@ -9,7 +9,13 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 
 from regrasp_pin.exceptions import InputError
-from regrasp_pin.grasp.quality import contact_wrenches, ferrari_canny_epsilon, is_force_closure
+from regrasp_pin.grasp.quality import (
+    FORCE_CLOSURE_TOL,
+    closure_certificate,
+    contact_wrenches,
+    ferrari_canny_epsilon,
+    is_force_closure,
+)
 from regrasp_pin.model.objects import Box
 
 MU = 0.5
@@ -187,3 +193,64 @@ def test_kept_quality_counts_equal_epsilons_as_kept_whatever_their_last_bits():
     assert kept_quality(a * 1.01, a)
     # at zero quality (a grasp not in force closure) only a non-negative one keeps it
     assert kept_quality(0.0, 0.0) and not kept_quality(-1e-6, 0.0)
+
+
+def _random_grasps(rng: np.random.Generator, n: int) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Contacts on the box's faces (2-6 of them, any faces, friction 0-1): some in force
+    closure, some barely, many not."""
+    out = []
+    half = np.array([0.03, 0.02, 0.02])  # BOX's half sides
+    for _ in range(n):
+        k = int(rng.integers(2, 7))
+        axis = rng.integers(0, 3, size=k)
+        sign = rng.choice([-1.0, 1.0], size=k)
+        p = rng.uniform(-1.0, 1.0, size=(k, 3)) * half
+        p[np.arange(k), axis] = sign * half[axis]
+        nrm = np.zeros((k, 3))
+        nrm[np.arange(k), axis] = sign
+        out.append((p, nrm, float(rng.choice([0.0, 0.2, 0.5, 1.0]))))
+    return out
+
+
+def test_closure_certificate_agrees_with_the_hull_where_it_decides():
+    """The certificate (NNLS, no hull) gives the hull's answer, epsilon > tol, and decides
+    most sets by itself: in force closure with a margin, or a direction outside the
+    wrenches' cone."""
+    rng = np.random.default_rng(7)
+    decided = {True: 0, False: 0}
+    for p, n, mu in _random_grasps(rng, 300):
+        w = contact_wrenches(p, n, mu, n_edges=6, torque_scale_m=SCALE_M)
+        eps = ferrari_canny_epsilon(p, n, mu, n_edges=6, torque_scale_m=SCALE_M)
+        certain = closure_certificate(w)
+        if certain is not None:
+            assert certain == (eps > FORCE_CLOSURE_TOL), (p, n, mu, eps)
+            decided[certain] += 1
+        assert is_force_closure(p, n, mu, n_edges=6, torque_scale_m=SCALE_M) == (
+            eps > FORCE_CLOSURE_TOL
+        )
+    assert decided[True] >= 30 and decided[False] >= 100, decided
+    assert sum(decided.values()) >= 0.95 * 300, decided
+
+
+def test_closure_certificate_bound_holds_on_known_grasps():
+    """On the tripod and the crossed quad (epsilon known from the hull), a tolerance just
+    below epsilon is certified or left to the hull, never refused; one above epsilon
+    is never certified."""
+    for p, n in ((TRIPOD_P, TRIPOD_N), (QUAD_P, QUAD_N)):
+        w = contact_wrenches(p, n, MU, torque_scale_m=SCALE_M)
+        eps = ferrari_canny_epsilon(p, n, MU, torque_scale_m=SCALE_M)
+        assert closure_certificate(w) is True
+        assert closure_certificate(w, tol=0.999 * eps) in (True, None)
+        assert closure_certificate(w, tol=eps / 1e3 * 1.001) is None  # the bound's margin
+        assert closure_certificate(w, tol=1.001 * eps) is None
+
+
+def test_closure_certificate_refuses_what_cannot_close():
+    pinch = contact_wrenches(PINCH_P, PINCH_N, MU)  # 5-D span
+    assert closure_certificate(pinch) is False
+    assert closure_certificate(contact_wrenches(QUAD_P, QUAD_N, 0.0)) is False  # frictionless
+    assert closure_certificate(contact_wrenches(PINCH_P[:1], PINCH_N[:1], MU, n_edges=6)) is False
+    with pytest.raises(InputError, match="wrenches"):
+        closure_certificate(np.zeros((8, 5)))
+    with pytest.raises(InputError, match="tol"):
+        closure_certificate(pinch, tol=-1.0)

@@ -47,9 +47,9 @@ from .screening import (
     ManifoldClearance,
     ObjectClearance,
     ScreeningEpsilons,
+    closes_without,
     closest_object_miss,
     held_clear,
-    leave_one_out,
     passes_object_clearance,
 )
 
@@ -486,15 +486,13 @@ class _Screen:
         k = self.other_p.shape[0]
         if k < 3:
             return 0
-        loo = leave_one_out(
+        closes = closes_without(
             np.vstack([self.other_p, p[None]]),
             np.vstack([self.other_n, n[None]]),
-            self.mu,
-            self.scale,
             range(k),
             self.epsilons,
         )
-        return sum(e > FORCE_CLOSURE_TOL for e in loo)
+        return sum(closes)
 
     def first(
         self,
