@@ -82,3 +82,11 @@ def caches(spec: ScenarioSpec, **_: object) -> ScenarioResult:
     r.measured = float(suite_hand.cache_info().currsize)
     r.required = float(workspace_voxels.cache_info().currsize)
     return r
+
+
+def threads(spec: ScenarioSpec, *, out_dir: str | None = None, **_: object) -> ScenarioResult:
+    """:func:`quick`, with the manifold threads the scenario's process is given
+    (``REGRASP_PIN_THREADS``, -1 if unset) as its number of regrasps."""
+    r = quick(spec, out_dir=out_dir)
+    r.n_regrasps = int(os.environ.get("REGRASP_PIN_THREADS", "-1"))
+    return r

@@ -19,7 +19,13 @@ from conftest import assert_close
 from regrasp_pin.exceptions import InputError, MissingExtraError
 from regrasp_pin.plan import Plan
 from regrasp_pin.suite import neighbour_specs, run_scenario
-from regrasp_pin.suite.cluster import WORKER_DIED, load_run, require_scale, run_suite
+from regrasp_pin.suite.cluster import (
+    WORKER_DIED,
+    load_run,
+    manifold_threads,
+    require_scale,
+    run_suite,
+)
 from regrasp_pin.suite.isolate import CRASH, TIMEOUT
 
 pytest.importorskip("distributed", reason="the scale extra (dask, distributed) is not installed")
@@ -129,6 +135,21 @@ def test_an_existing_cluster_by_its_scheduler_address(tmp_path):
         assert done.workers == 2
         assert len(cluster.scheduler.workers) == 2  # the run left the cluster up
     assert [r.name for r in done.results] == list("abcd") and all(r.ok for r in done.results)
+
+
+def test_manifold_threads_share_out_the_idle_cores():
+    assert [manifold_threads(w, 2, "numba") for w in (1, 2, 3)] == [2, 1, 1]
+    assert [manifold_threads(w, 8, "numba") for w in (1, 2, 3, 8)] == [8, 4, 2, 1]
+    assert manifold_threads(1, 8, "numpy") == 1  # numpy's threads contend for the GIL
+
+
+def test_scenarios_get_the_cores_their_workers_leave_idle(tmp_path, monkeypatch):
+    from regrasp_pin.model.ik import ik_backend
+
+    monkeypatch.delenv("REGRASP_PIN_THREADS", raising=False)
+    done = run_suite(_named("a", "b"), out=tmp_path, workers=1, task=suite_tasks.threads)
+    want = manifold_threads(1, os.cpu_count() or 1, ik_backend())
+    assert [r.n_regrasps for r in done.results] == [want, want]
 
 
 def test_specs_without_a_grasp_do_not_count(tmp_path):

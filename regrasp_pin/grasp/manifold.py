@@ -530,9 +530,9 @@ def build_manifolds(
     number of threads. Threads pay off with the numba IK backend, whose kernels release
     the GIL (about 1.6x on two cores); with numpy's they contend for it (small arrays),
     so ``threads=None`` means: the environment variable ``REGRASP_PIN_THREADS`` if set
-    (the scenario suite's workers set it to 1: they already run one scenario per
-    core), else one thread per core with numba and one with numpy (at most one per
-    finger either way).
+    (the scenario suite's local workers set it to the cores their scenarios leave
+    idle: :func:`~regrasp_pin.suite.cluster.manifold_threads`), else one thread per
+    core with numba and one with numpy (at most one per finger either way).
 
     Args:
         hand: The hand.

@@ -38,11 +38,19 @@ import numpy as np
 from .._validate import positive, positive_int
 from ..exceptions import InputError, MissingExtraError
 from ..grasp.manifold import THREADS_ENV
+from ..model.ik import ik_backend
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
 from .specs import ScenarioSpec
 
-__all__ = ["WORKER_DIED", "SuiteRun", "load_run", "require_scale", "run_suite"]
+__all__ = [
+    "WORKER_DIED",
+    "SuiteRun",
+    "load_run",
+    "manifold_threads",
+    "require_scale",
+    "run_suite",
+]
 
 log = logging.getLogger(__name__)
 
@@ -141,6 +149,14 @@ def _write_sorted(path: Path, results: list[ScenarioResult]) -> None:
     os.replace(tmp, path)  # never a half-written file
 
 
+def manifold_threads(workers: int, cores: int, backend: str) -> int:
+    """Threads per scenario for the manifolds (``REGRASP_PIN_THREADS``) when ``workers``
+    single-threaded workers share ``cores`` cores: with the numba IK backend, whose
+    kernels release the GIL, the cores that one scenario per worker leaves idle, shared
+    out; with numpy's (threads contend for the GIL), 1."""
+    return max(1, cores // max(workers, 1)) if backend == "numba" else 1
+
+
 @contextmanager
 def _client(workers: int | None, scheduler: str | None) -> Any:
     """A Dask client: on a LocalCluster of ``workers`` single-threaded processes
@@ -153,7 +169,12 @@ def _client(workers: int | None, scheduler: str | None) -> Any:
     # isolate._forkserver: it slows the planner down by ~1.6x)
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
-    environ[THREADS_ENV] = "1"  # one scenario per core already: no manifold threads
+    n = workers or os.cpu_count() or 1
+    # the cores the scenarios leave idle go to the manifolds' threads (the same
+    # manifolds bit for bit); a remote cluster's workers: one each
+    local = scheduler is None
+    threads = manifold_threads(n, os.cpu_count() or 1, ik_backend()) if local else 1
+    environ[THREADS_ENV] = str(threads)
     settings = {
         "distributed.scheduler.allowed-failures": 0,
         "distributed.worker.daemon": False,
@@ -167,7 +188,6 @@ def _client(workers: int | None, scheduler: str | None) -> Any:
             finally:
                 client.close()
             return
-        n = workers or os.cpu_count() or 1
         cluster = distributed.LocalCluster(
             n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None
         )
