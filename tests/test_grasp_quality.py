@@ -254,3 +254,20 @@ def test_closure_certificate_refuses_what_cannot_close():
         closure_certificate(np.zeros((8, 5)))
     with pytest.raises(InputError, match="tol"):
         closure_certificate(pinch, tol=-1.0)
+
+
+def test_closure_certificate_proves_nothing_from_an_unfinished_nnls(monkeypatch):
+    """An NNLS stopped short of its optimum (a large residual that is not the distance
+    to the cone) proves nothing: the hull decides."""
+    import regrasp_pin.grasp.quality as quality
+
+    monkeypatch.setattr(quality, "nnls", lambda A, d: (np.zeros(A.shape[1]), 1.0))
+    w = contact_wrenches(TRIPOD_P, TRIPOD_N, MU, torque_scale_m=SCALE_M)
+    assert closure_certificate(w) is None
+    assert is_force_closure(TRIPOD_P, TRIPOD_N, MU, torque_scale_m=SCALE_M)
+
+    def stops(A, d):
+        raise RuntimeError("Maximum number of iterations reached.")
+
+    monkeypatch.setattr(quality, "nnls", stops)
+    assert closure_certificate(w) is None

@@ -64,6 +64,9 @@ _NORMAL_TOL = 1e-3  # accepted deviation of |n| from 1
 #: positively span (NNLS residuals of directions inside are ~1e-15; wrenches have
 #: norms of about 1)
 _OUTSIDE_CONE = 1e-6
+#: an NNLS solution is optimal when no wrench has a component towards the residual
+#: above this (it is ~1e-15 at the optimum)
+_KKT_TOL = 1e-9
 #: the certificate's lower bound of epsilon must exceed the tolerance this many times
 _CERTIFY_FACTOR = 1e3
 _DIRECTIONS = np.vstack([np.eye(6), -np.eye(6)])  # +-e_i
@@ -199,7 +202,10 @@ def closure_certificate(wrenches: np.ndarray, tol: float = FORCE_CLOSURE_TOL) ->
         except RuntimeError:  # no convergence within its iterations
             return None
         if residual > _OUTSIDE_CONE:
-            return False
+            # a proof only at the optimum (KKT: no wrench points back towards d),
+            # whatever the NNLS implementation did at its iteration limit
+            optimal = float(np.max(A.T @ (d - A @ lam))) <= _KKT_TOL
+            return False if optimal else None
         total = float(lam.sum())
         largest_sum = max(largest_sum, total)
         slack = max(slack, float(np.linalg.norm(A @ lam - d)) / total)
