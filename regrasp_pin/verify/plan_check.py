@@ -624,19 +624,14 @@ def _min_finger_distance(
         - radius[pairs[:, 0]]
         - radius[pairs[:, 1]]
     )
-    objs = scene.geom.geometryObjects
-    req = coal.DistanceRequest()
+    shapes = [scene.geom.geometryObjects[g].geometry for g in ids]
+    ends = pairs.tolist()
+    place, req, res = _Transforms(R, x), coal.DistanceRequest(), coal.DistanceResult()
 
     def d_pair(k: int, j: int) -> float:
-        a, b = pairs[j]
-        return coal.distance(
-            objs[ids[a]].geometry,
-            coal.Transform3s(R[k, a], x[k, a]),
-            objs[ids[b]].geometry,
-            coal.Transform3s(R[k, b], x[k, b]),
-            req,
-            coal.DistanceResult(),
-        )
+        a, b = ends[j]
+        res.clear()
+        return coal.distance(shapes[a], place(k, a), shapes[b], place(k, b), req, res)
 
     d, (k, j) = _exact_min(lower, d_pair)
     a, b = pairs[j]
@@ -664,18 +659,14 @@ def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
     )
     r_fix = np.array([scene.geom_radius[g] for g in fixed])
     lower = np.linalg.norm(c_obj[:, None] - c_fix[None], axis=2) - r_fix[None] - scene.obj_radius
-    req = coal.DistanceRequest()
+    shapes = [objs[g].geometry for g in fixed]
+    fixed_at = [coal.Transform3s(M.rotation, M.translation) for M in place]
+    obj_at = _Transforms(R_obj[:, None], x_obj[:, None])
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
 
     def d_fixed(k: int, j: int) -> float:
-        M = place[j]
-        return coal.distance(
-            objs[fixed[j]].geometry,
-            coal.Transform3s(M.rotation, M.translation),
-            scene.obj,
-            coal.Transform3s(R_obj[k], x_obj[k]),
-            req,
-            coal.DistanceResult(),
-        )
+        res.clear()
+        return coal.distance(shapes[j], fixed_at[j], scene.obj, obj_at(k, 0), req, res)
 
     d, (k, j) = _exact_min(lower, d_fixed)
     return d, k, str(objs[fixed[j]].name)
@@ -702,18 +693,13 @@ def _min_object_distance(
     c_obj = np.einsum("kij,j->ki", R_obj, scene.obj_center) + x_obj  # (K, 3)
     radius = np.array([scene.geom_radius[ids[i]] for i in columns])
     lower = np.linalg.norm(c_geom - c_obj[:, None], axis=2) - radius - scene.obj_radius
-    req = coal.DistanceRequest()
+    shapes = [objs[ids[i]].geometry for i in columns]
+    place, obj_at = _Transforms(R, x), _Transforms(R_obj[:, None], x_obj[:, None])
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
 
     def d_object(k: int, j: int) -> float:
-        i = columns[j]
-        return coal.distance(
-            objs[ids[i]].geometry,
-            coal.Transform3s(R[k, i], x[k, i]),
-            scene.obj,
-            coal.Transform3s(R_obj[k], x_obj[k]),
-            req,
-            coal.DistanceResult(),
-        )
+        res.clear()
+        return coal.distance(shapes[j], place(k, columns[j]), scene.obj, obj_at(k, 0), req, res)
 
     d, (k, j) = _exact_min(lower, d_object)
     return d, k, columns[j]
@@ -731,6 +717,26 @@ def _min_finger_object_distance(
     R_obj, x_obj = scene.sample_poses
     d, k, i = _min_object_distance(scene, R_geom, x_geom, R_obj, x_obj, list(range(len(ids))))
     return d, k, str(scene.geom.geometryObjects[ids[i]].name)
+
+
+class _Transforms:
+    """Coal transforms of placements ``R`` ``(K, G, 3, 3)``, ``x`` ``(K, G, 3)`` [m], each
+    built when first asked for and kept (a body's placement at a sample is read by
+    every pair it is in)."""
+
+    def __init__(self, R: np.ndarray, x: np.ndarray) -> None:
+        import coal
+
+        self._make = coal.Transform3s
+        self._R, self._x = R, x
+        self._known: dict[tuple[int, int], Any] = {}
+
+    def __call__(self, k: int, g: int) -> Any:
+        """The transform of body ``g`` at sample ``k``."""
+        tf = self._known.get((k, g))
+        if tf is None:
+            tf = self._known[(k, g)] = self._make(self._R[k, g], self._x[k, g])
+        return tf
 
 
 def _exact_min(lower: np.ndarray, exact: Any) -> tuple[float, tuple[int, int]]:
