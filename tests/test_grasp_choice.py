@@ -1209,7 +1209,9 @@ def test_screening_closes_without_gives_the_hulls_answers_mostly_without_hulls(m
             for j in range(k)
         ]
         assert got == want
-        assert eps.closes(p, n) == (eps(p, n) > FORCE_CLOSURE_TOL)  # after the hull: its answer
+        before = eps.closes(p, n)  # the certificate's answer (or the hull's)
+        hull = eps(p, n) > FORCE_CLOSURE_TOL
+        assert before == hull and eps.closes(p, n) == hull  # then read from the hull
         n_sets += k
         closing += sum(want)
     assert closing >= 20 and n_sets - closing >= 20, (closing, n_sets)

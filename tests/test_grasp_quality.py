@@ -233,16 +233,15 @@ def test_closure_certificate_agrees_with_the_hull_where_it_decides():
 
 
 def test_closure_certificate_bound_holds_on_known_grasps():
-    """On the tripod and the crossed quad (epsilon known from the hull), a tolerance just
-    below epsilon is certified or left to the hull, never refused; one above epsilon
-    is never certified."""
+    """On the tripod and the crossed quad (epsilon known from the hull) the certificate
+    proves force closure, but never for a tolerance whose 1000 times exceeds epsilon
+    (its lower bound never exceeds epsilon), nor refuses it below epsilon."""
     for p, n in ((TRIPOD_P, TRIPOD_N), (QUAD_P, QUAD_N)):
         w = contact_wrenches(p, n, MU, torque_scale_m=SCALE_M)
         eps = ferrari_canny_epsilon(p, n, MU, torque_scale_m=SCALE_M)
-        assert closure_certificate(w) is True
-        assert closure_certificate(w, tol=0.999 * eps) in (True, None)
-        assert closure_certificate(w, tol=eps / 1e3 * 1.001) is None  # the bound's margin
-        assert closure_certificate(w, tol=1.001 * eps) is None
+        assert closure_certificate(w) is True and closure_certificate(w, tol=0.0) is True
+        assert closure_certificate(w, tol=eps / 1e3 * 1.001) is None
+        assert closure_certificate(w, tol=0.999 * eps) is None  # not refused either
 
 
 def test_closure_certificate_refuses_what_cannot_close():
@@ -271,3 +270,55 @@ def test_closure_certificate_proves_nothing_from_an_unfinished_nnls(monkeypatch)
 
     monkeypatch.setattr(quality, "nnls", stops)
     assert closure_certificate(w) is None
+
+
+def test_closure_certificate_refuses_only_with_an_upper_bound_below_the_tolerance(monkeypatch):
+    """An NNLS that stops at a valid but not optimal point, leaving a residual ``y`` of
+    5e-5 along the hull's nearest facet normal, must not refuse a grasp in force
+    closure: the wrenches reach ``epsilon`` along ``y``, far above the tolerance."""
+    from scipy.optimize import nnls as real_nnls
+
+    import regrasp_pin.grasp.quality as quality
+
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(5, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    n, p = p.copy(), 0.03 * p
+    w = contact_wrenches(p, n, MU, n_edges=6, torque_scale_m=100.0)
+    eps = ferrari_canny_epsilon(p, n, MU, n_edges=6, torque_scale_m=100.0)
+    hull = ConvexHull(w)
+    y = 0.99e-9 / eps * hull.equations[np.argmin(-hull.equations[:, -1]), :6]
+    assert np.linalg.norm(y) > 1e-6 and eps > 1e-6
+
+    def short_of_the_optimum(A, d):
+        lam, _ = real_nnls(A, d - y)  # A lam = d - y: lam >= 0 but not optimal
+        return lam, float(np.linalg.norm(A @ lam - d))
+
+    monkeypatch.setattr(quality, "nnls", short_of_the_optimum)
+    assert closure_certificate(w) is None
+    assert is_force_closure(p, n, MU, n_edges=6, torque_scale_m=100.0)
+
+
+def test_closure_certificate_at_a_zero_tolerance_keeps_the_hulls_answer():
+    """With ``tol=0`` and torques scaled almost away (the hull's rank test zeroes such
+    sets), the certificate still gives only the hull's answer."""
+    decided = 0
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        k = int(rng.integers(4, 7))
+        p = rng.normal(size=(k, 3))
+        p /= np.linalg.norm(p, axis=1, keepdims=True)
+        n = p + rng.normal(0.0, 0.3, (k, 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        p *= 0.03
+        for scale in (1.0, 1e3, 1e9, 1e11, 1e12, 1e13):
+            w = contact_wrenches(p, n, 1.0, n_edges=6, torque_scale_m=scale)
+            eps = ferrari_canny_epsilon(p, n, 1.0, n_edges=6, torque_scale_m=scale)
+            certain = closure_certificate(w, tol=0.0)
+            if certain is not None:
+                assert certain == (eps > 0.0), (seed, scale, eps)
+                decided += 1
+            assert is_force_closure(p, n, 1.0, n_edges=6, torque_scale_m=scale, tol=0.0) == (
+                eps > 0.0
+            )
+    assert decided >= 10

@@ -22,6 +22,7 @@ from regrasp_pin.suite import neighbour_specs, run_scenario
 from regrasp_pin.suite.cluster import (
     WORKER_DIED,
     load_run,
+    local_manifold_threads,
     manifold_threads,
     require_scale,
     run_suite,
@@ -143,12 +144,22 @@ def test_manifold_threads_share_out_the_idle_cores():
     assert manifold_threads(1, 8, "numpy") == 1  # numpy's threads contend for the GIL
 
 
-def test_scenarios_get_the_cores_their_workers_leave_idle(tmp_path, monkeypatch):
-    from regrasp_pin.model.ik import ik_backend
+def test_a_local_cluster_reads_the_workers_backend_from_the_environment(monkeypatch):
+    import regrasp_pin.suite.cluster as cluster
 
-    monkeypatch.delenv("REGRASP_PIN_THREADS", raising=False)
+    monkeypatch.setattr(cluster.os, "cpu_count", lambda: 4)
+    monkeypatch.setenv("REGRASP_PIN_IK_BACKEND", "numba")
+    assert [local_manifold_threads(w) for w in (1, 2, 4)] == [4, 2, 1]
+    monkeypatch.setenv("REGRASP_PIN_IK_BACKEND", "numpy")
+    assert local_manifold_threads(1) == 1
+    monkeypatch.delenv("REGRASP_PIN_IK_BACKEND")
+    assert local_manifold_threads(1) == 1  # numpy, the default
+
+
+def test_scenarios_are_given_their_manifold_threads(tmp_path):
+    # what the scenario's own process sees (-1: not set)
     done = run_suite(_named("a", "b"), out=tmp_path, workers=1, task=suite_tasks.threads)
-    want = manifold_threads(1, os.cpu_count() or 1, ik_backend())
+    want = local_manifold_threads(1)
     assert [r.n_regrasps for r in done.results] == [want, want]
 
 

@@ -28,8 +28,11 @@ n_edges`` wrenches in 6-D has a thousand facets or more (about 2.5 ms for five
 contacts), but where only *whether* ``epsilon > FORCE_CLOSURE_TOL`` matters, twelve
 non-negative least-squares problems usually settle it. The directions ``+-e_i`` all
 lie in the cone of the wrenches exactly when the wrenches positively span R^6 (the
-origin inside their hull), so a direction that NNLS leaves outside the cone by more
-than rounding proves epsilon = 0. Otherwise each solution ``lambda_k >= 0``, ``W^T
+origin inside their hull). Where NNLS leaves a direction outside the cone, what it
+misses, ``y = d - W^T lambda``, bounds epsilon from above: the hull reaches no farther
+along ``y`` than its farthest wrench, ``max_i(w_i . y) / |y|`` (<= 0 at the NNLS
+optimum), and a bound below the tolerance proves it not in force closure, whatever
+NNLS did. Otherwise each solution ``lambda_k >= 0``, ``W^T
 lambda_k = d_k + r_k``, puts the point ``(d_k + r_k) / s_k`` (``s_k = sum(lambda_k)``)
 in the hull; the hull then holds the cross-polytope through these twelve points and
 the ball it contains, of radius at least ``min_k(1 / s_k) / sqrt(6) - max_k |r_k| /
@@ -60,14 +63,10 @@ FORCE_CLOSURE_TOL = 1e-9  # epsilon above this counts as force closure
 #: contacts comes out 1-2 ulp apart when its wrenches were rounded differently
 EPSILON_RTOL = 1e-9
 _NORMAL_TOL = 1e-3  # accepted deviation of |n| from 1
-#: a direction farther than this from the wrenches' cone proves that they do not
-#: positively span (NNLS residuals of directions inside are ~1e-15; wrenches have
-#: norms of about 1)
+#: an NNLS residual above this is read as a direction outside the wrenches' cone
+#: (residuals of directions inside are ~1e-15; wrenches have norms of about 1)
 _OUTSIDE_CONE = 1e-6
-#: an NNLS solution is optimal when no wrench has a component towards the residual
-#: above this (it is ~1e-15 at the optimum)
-_KKT_TOL = 1e-9
-#: the certificate's lower bound of epsilon must exceed the tolerance this many times
+#: the certificate's bounds of epsilon must clear the tolerance by this factor
 _CERTIFY_FACTOR = 1e3
 _DIRECTIONS = np.vstack([np.eye(6), -np.eye(6)])  # +-e_i
 
@@ -158,6 +157,11 @@ def ferrari_canny_epsilon(
         torque_scale_m=torque_scale_m,
         torsion_m=torsion_m,
     )
+    return _hull_epsilon(w)
+
+
+def _hull_epsilon(w: np.ndarray) -> float:
+    """:func:`ferrari_canny_epsilon` of the primitive wrenches ``w`` ``(M, 6)``."""
     if w.shape[0] < 7:
         return 0.0
     try:
@@ -182,10 +186,12 @@ def closure_certificate(wrenches: np.ndarray, tol: float = FORCE_CLOSURE_TOL) ->
         tol: The threshold on epsilon, >= 0.
 
     Returns:
-        True: a lower bound of epsilon exceeds ``1000 tol`` (and 0); False: a direction
-        lies outside the wrenches' cone (epsilon is 0), or fewer than 7 wrenches; None:
-        undecided, :func:`ferrari_canny_epsilon` decides. Where it decides, the answer
-        is the hull's ``epsilon > tol``.
+        True: a lower bound of epsilon exceeds ``1000 max(tol, FORCE_CLOSURE_TOL)``
+        (above the hull's own rank tolerance); False: a direction outside the
+        wrenches' cone bounds epsilon from above by at most ``tol / 1000`` (no wrench
+        reaches farther towards it), or fewer than 7 wrenches; None: undecided,
+        :func:`ferrari_canny_epsilon` decides. Where it decides, the answer is the
+        hull's ``epsilon > tol``.
 
     Raises:
         InputError: wrenches not ``(M, 6)`` or not finite, a negative ``tol``.
@@ -198,19 +204,21 @@ def closure_certificate(wrenches: np.ndarray, tol: float = FORCE_CLOSURE_TOL) ->
     largest_sum, slack = 0.0, 0.0
     for d in _DIRECTIONS:
         try:
-            lam, residual = nnls(A, d)
+            lam, _ = nnls(A, d)
         except RuntimeError:  # no convergence within its iterations
             return None
-        if residual > _OUTSIDE_CONE:
-            # a proof only at the optimum (KKT: no wrench points back towards d),
-            # whatever the NNLS implementation did at its iteration limit
-            optimal = float(np.max(A.T @ (d - A @ lam))) <= _KKT_TOL
-            return False if optimal else None
+        y = d - A @ lam  # what the cone misses of d
+        miss = float(np.linalg.norm(y))
+        if miss > _OUTSIDE_CONE:
+            # no wrench reaches farther than max(w . y) / |y| along y, so neither does
+            # the hull's ball: an upper bound of epsilon, whatever NNLS did
+            upper = float(np.max(w @ y)) / miss
+            return False if upper <= tol / _CERTIFY_FACTOR else None
         total = float(lam.sum())
         largest_sum = max(largest_sum, total)
-        slack = max(slack, float(np.linalg.norm(A @ lam - d)) / total)
+        slack = max(slack, miss / total)
     bound = 1.0 / (largest_sum * np.sqrt(6.0)) - slack
-    return True if bound > max(_CERTIFY_FACTOR * tol, 0.0) else None
+    return True if bound > _CERTIFY_FACTOR * max(tol, FORCE_CLOSURE_TOL) else None
 
 
 def is_force_closure(
@@ -237,20 +245,7 @@ def is_force_closure(
         InputError: for invalid arguments.
     """
     tol = positive(tol, "tol", allow_zero=True)
-    certain = closure_certificate(
-        contact_wrenches(
-            points_object,
-            normals_object,
-            mu,
-            n_edges=n_edges,
-            torque_scale_m=torque_scale_m,
-            torsion_m=torsion_m,
-        ),
-        tol,
-    )
-    if certain is not None:
-        return certain
-    eps = ferrari_canny_epsilon(
+    w = contact_wrenches(
         points_object,
         normals_object,
         mu,
@@ -258,7 +253,8 @@ def is_force_closure(
         torque_scale_m=torque_scale_m,
         torsion_m=torsion_m,
     )
-    return eps > tol
+    certain = closure_certificate(w, tol)
+    return _hull_epsilon(w) > tol if certain is None else certain
 
 
 def _check(

@@ -42,9 +42,18 @@ from ..exceptions import InputError
 from . import ik_numba
 from .kinematics import FingerChain
 
-__all__ = ["IK_BACKENDS", "IKResult", "ik_backend", "set_ik_backend", "solve_position_ik"]
+__all__ = [
+    "IK_BACKENDS",
+    "IK_BACKEND_ENV",
+    "IKResult",
+    "ik_backend",
+    "set_ik_backend",
+    "solve_position_ik",
+]
 
 IK_BACKENDS = ("numpy", "numba")
+#: the environment variable that chooses the backend of a new process
+IK_BACKEND_ENV = "REGRASP_PIN_IK_BACKEND"
 
 _LAMBDA0_SQ = 1e-8  # [m^2]
 _LAMBDA_ERR = 1e-2  # [-], weight of |e|^2 in lambda^2
@@ -66,12 +75,12 @@ def ik_backend() -> str:
         InputError: the variable names no backend, or numba without numba installed.
     """
     if not _backend:
-        want = os.environ.get("REGRASP_PIN_IK_BACKEND", "numpy")
+        want = os.environ.get(IK_BACKEND_ENV, "numpy")
         if want not in IK_BACKENDS:
-            raise InputError("REGRASP_PIN_IK_BACKEND", f"is {want!r}", f"one of {IK_BACKENDS}")
+            raise InputError(IK_BACKEND_ENV, f"is {want!r}", f"one of {IK_BACKENDS}")
         if want == "numba" and not ik_numba.available():
             raise InputError(
-                "REGRASP_PIN_IK_BACKEND",
+                IK_BACKEND_ENV,
                 "is 'numba' but numba is not installed",
                 "numpy, or pip install 'regrasp-pin[fast]'",
             )

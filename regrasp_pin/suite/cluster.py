@@ -38,7 +38,7 @@ import numpy as np
 from .._validate import positive, positive_int
 from ..exceptions import InputError, MissingExtraError
 from ..grasp.manifold import THREADS_ENV
-from ..model.ik import ik_backend
+from ..model.ik import IK_BACKEND_ENV
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
 from .specs import ScenarioSpec
@@ -47,6 +47,7 @@ __all__ = [
     "WORKER_DIED",
     "SuiteRun",
     "load_run",
+    "local_manifold_threads",
     "manifold_threads",
     "require_scale",
     "run_suite",
@@ -157,6 +158,14 @@ def manifold_threads(workers: int, cores: int, backend: str) -> int:
     return max(1, cores // max(workers, 1)) if backend == "numba" else 1
 
 
+def local_manifold_threads(workers: int) -> int:
+    """:func:`manifold_threads` for a local cluster of ``workers`` on this machine's
+    cores, by the IK backend its workers will read from the environment
+    (``REGRASP_PIN_IK_BACKEND``; a backend set in code here does not reach them)."""
+    backend = os.environ.get(IK_BACKEND_ENV, "numpy")
+    return manifold_threads(workers, os.cpu_count() or 1, backend)
+
+
 @contextmanager
 def _client(workers: int | None, scheduler: str | None) -> Any:
     """A Dask client: on a LocalCluster of ``workers`` single-threaded processes
@@ -170,11 +179,8 @@ def _client(workers: int | None, scheduler: str | None) -> Any:
     environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
     environ.pop("MALLOC_TRIM_THRESHOLD_", None)
     n = workers or os.cpu_count() or 1
-    # the cores the scenarios leave idle go to the manifolds' threads (the same
-    # manifolds bit for bit); a remote cluster's workers: one each
-    local = scheduler is None
-    threads = manifold_threads(n, os.cpu_count() or 1, ik_backend()) if local else 1
-    environ[THREADS_ENV] = str(threads)
+    # a remote cluster's workers read their own environment (docs/suite.md)
+    environ[THREADS_ENV] = str(local_manifold_threads(n))
     settings = {
         "distributed.scheduler.allowed-failures": 0,
         "distributed.worker.daemon": False,
