@@ -73,6 +73,7 @@ __all__ = [
     "build_manifolds",
     "default_threads",
     "forget_first_times",
+    "manifold_threads",
     "workspace_voxels",
 ]
 
@@ -510,7 +511,15 @@ def default_threads() -> int:
         if n < 1:
             raise InputError(THREADS_ENV, f"is {text!r}", "a whole number >= 1")
         return n
-    return (os.cpu_count() or 1) if ik_backend() == "numba" else 1
+    return manifold_threads(1, os.cpu_count() or 1, ik_backend())
+
+
+def manifold_threads(workers: int, cores: int, backend: str) -> int:
+    """Threads per scenario for the manifolds when ``workers`` single-threaded workers
+    share ``cores`` cores: with the numba IK backend, whose kernels release the GIL,
+    the cores that one scenario per worker leaves idle, shared out; with numpy's
+    (threads contend for the GIL), 1."""
+    return max(1, cores // max(workers, 1)) if backend == "numba" else 1
 
 
 def build_manifolds(
@@ -531,7 +540,7 @@ def build_manifolds(
     the GIL (about 1.6x on two cores); with numpy's they contend for it (small arrays),
     so ``threads=None`` means: the environment variable ``REGRASP_PIN_THREADS`` if set
     (the scenario suite's local workers set it to the cores their scenarios leave
-    idle: :func:`~regrasp_pin.suite.cluster.manifold_threads`), else one thread per
+    idle: :func:`manifold_threads`), else one thread per
     core with numba and one with numpy (at most one per finger either way).
 
     Args:

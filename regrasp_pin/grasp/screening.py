@@ -71,13 +71,14 @@ class ScreeningEpsilons:
         decided without the hull where :func:`~.quality.closure_certificate` can (about
         a seventh of its time)."""
         key = _key(p, n)
-        if key in self._known:
-            return self._known[key] > FORCE_CLOSURE_TOL
-        if key not in self._closes:
+        if key not in self._known and key not in self._closes:
             w = contact_wrenches(p, n, self.mu, n_edges=SCREEN_EDGES, torque_scale_m=self.scale_m)
             certain = closure_certificate(w, FORCE_CLOSURE_TOL)
-            self._closes[key] = self(p, n) > FORCE_CLOSURE_TOL if certain is None else certain
-        return self._closes[key]
+            if certain is not None:
+                self._closes[key] = certain
+        if key in self._closes:
+            return self._closes[key]
+        return self(p, n) > FORCE_CLOSURE_TOL  # the hull, kept by __call__
 
 
 def _key(p: np.ndarray, n: np.ndarray) -> tuple[bytes, bytes]:

@@ -37,7 +37,7 @@ import numpy as np
 
 from .._validate import positive, positive_int
 from ..exceptions import InputError, MissingExtraError
-from ..grasp.manifold import THREADS_ENV
+from ..grasp.manifold import THREADS_ENV, manifold_threads
 from ..model.ik import IK_BACKEND_ENV
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
@@ -148,14 +148,6 @@ def _write_sorted(path: Path, results: list[ScenarioResult]) -> None:
     tmp = path.with_suffix(".tmp")
     tmp.write_text("".join(json.dumps(r.to_dict()) + "\n" for r in results))
     os.replace(tmp, path)  # never a half-written file
-
-
-def manifold_threads(workers: int, cores: int, backend: str) -> int:
-    """Threads per scenario for the manifolds (``REGRASP_PIN_THREADS``) when ``workers``
-    single-threaded workers share ``cores`` cores: with the numba IK backend, whose
-    kernels release the GIL, the cores that one scenario per worker leaves idle, shared
-    out; with numpy's (threads contend for the GIL), 1."""
-    return max(1, cores // max(workers, 1)) if backend == "numba" else 1
 
 
 def local_manifold_threads(workers: int) -> int:
