@@ -76,7 +76,7 @@ def loop_manifold(finger, targets, normals_palm, contact, restarts):
             q = res.q[0]
             if res.success[0]:
                 cos = pad_cosines(finger, res.q, normals_palm[t, i][None])[0]
-                feasible[t, i] = cos >= contact.cos_cone
+                feasible[t, i] = cos >= contact.cos_cone_of(finger)
     return feasible
 
 

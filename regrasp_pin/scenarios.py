@@ -115,6 +115,7 @@ def make_scenario(
     rate_deg_s: float = 20.0,
     dt_s: float = 0.01,
     seed: int = 0,
+    contact: ContactModel | None = None,
 ) -> Scenario:
     """Build the canonical scenario (see the module docstring).
 
@@ -131,6 +132,8 @@ def make_scenario(
         rate_deg_s: Turning speed [deg/s] (> 0).
         dt_s: Sampling step of the motion [s].
         seed: Seed of the initial-grasp search.
+        contact: The contact model of the grasp search and the planner (default
+            ``ContactModel()``: each finger's own pad cone).
 
     Returns:
         The :class:`Scenario`.
@@ -155,6 +158,7 @@ def make_scenario(
             rate_deg_s=rate_deg_s,
             dt_s=dt_s,
             seed=seed,
+            contact=contact,
         )
     assert isinstance(hand, str) and isinstance(obj, str)
     choice(hand, "hand", HANDS)
@@ -165,7 +169,7 @@ def make_scenario(
     o = _SETUP[hand]["objects"][obj]()
     T0 = setup_pose(hand)
     fingers = setup_fingers(hand)
-    contact = ContactModel()
+    contact = contact or ContactModel()
     # 1) grasp chosen for the turn about the object's own axis (its z axis)
     axis0, turn0 = _own_axis_turn(T0, rate_rad, duration, dt_s)
     grasp = grasp_for_motion(h, o, turn0, fingers, contact=contact, grasp_dt_s=0.05, seed=seed)

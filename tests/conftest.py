@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from regrasp_pin.grasp.contact import ContactModel
+
 
 def assert_close(actual, expected, *, atol: float, rtol: float = 0.0, what: str = "") -> None:
     """Assert ``|actual - expected| <= atol + rtol * |expected|`` elementwise, with context."""
@@ -61,6 +63,12 @@ def face_with_normal(obj, normal) -> int:
 
 
 #: The Shadow Hand's hand file; its URDF lives outside the repository (../shared/hands).
+#: Every finger's pad cone at 60 deg: the contact model that the scenarios of some
+#: planner tests were found with (before the bundled fingers' own cone became their tip
+#: sphere's front hemisphere, 90 deg); with it each still shows its mechanism (a
+#: neighbour making room, a faster regrasp, holds that end together, ...).
+CONE_60 = ContactModel(cone_deg=60.0)
+
 SHADOW_HAND_FILE = Path(__file__).resolve().parents[1] / "examples" / "hands" / "shadow_hand.json"
 
 

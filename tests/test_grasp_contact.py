@@ -12,6 +12,7 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
+from regrasp_pin.exceptions import InputError
 from regrasp_pin.grasp.contact import (
     ContactModel,
     pad_cosines,
@@ -42,11 +43,28 @@ def _random_poses(rng: np.random.Generator, n: int) -> np.ndarray:
 
 def test_contact_model_defaults_are_consistent():
     cm = ContactModel()
-    assert_close(cm.cos_cone, 0.5, atol=1e-15, what="cos 60 deg")
+    assert cm.cone_deg is None  # each finger's own pad cone
     # a new contact must start farther from the limits than the trigger margin, or it
     # would be let go at once
     assert cm.choice_margin_rad > cm.limit_margin_rad
     assert cm.choice_link_clearance_m >= cm.link_clearance_m
+
+
+def test_the_pad_cone_is_the_fingers_own_unless_the_model_sets_one(hand):
+    f = hand.finger("index")
+    assert ContactModel().cone_deg_of(f) == f.pad_cone_deg == 90.0  # the tip sphere
+    assert_close(ContactModel().cos_cone_of(f), 0.0, atol=1e-15, what="cos 90 deg")
+    assert ContactModel(cone_deg=60.0).cone_deg_of(f) == 60.0
+    assert_close(ContactModel(cone_deg=60.0).cos_cone_of(f), 0.5, atol=1e-15, what="cos 60")
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("cone_deg", 0.0), ("cone_deg", 181.0), ("ik_tol_m", np.nan), ("limit_margin_rad", -0.01)],
+)
+def test_contact_model_refuses_bad_values_by_name(field, value):
+    with pytest.raises(InputError, match=f"ContactModel.{field}"):
+        ContactModel(**{field: value})
 
 
 def test_tip_targets_are_the_sphere_centres_in_the_palm_frame(hand, box):

@@ -124,7 +124,7 @@ def test_inside_margin_and_pad_follow_from_the_coordinates(scene):
         assert np.array_equal(m.inside[r], within), name
         assert not m.inside[~r].any()
         cos = _pad_cos(f, q, _normals_palm(sample, m)[r])
-        assert np.array_equal(m.pad_ok[r], cos >= CONTACT.cos_cone), name
+        assert np.array_equal(m.pad_ok[r], cos >= CONTACT.cos_cone_of(f)), name
         assert not m.pad_ok[~r].any()
         assert np.array_equal(m.feasible, m.inside & m.pad_ok)
         for margin in (0.0, 0.05, 0.2):
@@ -181,12 +181,16 @@ def test_feasible_entries_equal_per_point_ik(scene):
         other_branch = 0
         for t in range(times.size):
             res = f.ik(targets[t], tol_m=CONTACT.ik_tol_m)
-            ref = res.success & (_pad_cos(f, res.q, normals[t]) >= CONTACT.cos_cone)
+            ref = res.success & (_pad_cos(f, res.q, normals[t]) >= CONTACT.cos_cone_of(f))
             n_ref += int(ref.sum())
             missing = np.flatnonzero(ref & ~m.feasible[t])
             for i in missing:
                 assert m.reachable[t, i], (name, t, i)
-                assert np.abs(m.q[t, i] - res.q[i]).max() > 0.05, (name, t, i)
+                # another branch, or the same one just past a limit where per-point IK
+                # (clamped to the limits) stops on it within the tolerance
+                past = np.maximum(f.lower - m.q[t, i], m.q[t, i] - f.upper).max()
+                other = np.abs(m.q[t, i] - res.q[i]).max() > 0.05
+                assert other or 0.0 < past < 1e-3, (name, t, i)
             other_branch += missing.size
         assert m.feasible.sum() <= n_ref
         assert other_branch <= 0.02 * n_ref, (name, other_branch, n_ref)
@@ -310,10 +314,12 @@ def test_skipped_points_are_infeasible(scene, name):
     for j in pick:
         t, i = skipped_t[j], skipped_i[j]
         near = np.linalg.norm(p_grid - targets[t, i], axis=1) <= Lp
-        facing = pads[near] @ -normals[t, i] >= CONTACT.cos_cone - La
+        facing = pads[near] @ -normals[t, i] >= CONTACT.cos_cone_of(f) - La
         assert not facing.any(), (name, t, i)
         res = f.ik(targets[t, i])
-        assert not res.success[0] or _pad_cos(f, res.q, normals[t, i][None])[0] < CONTACT.cos_cone
+        assert not res.success[0] or _pad_cos(f, res.q, normals[t, i][None])[
+            0
+        ] < CONTACT.cos_cone_of(f)
 
 
 @pytest.mark.parametrize("extend", [0.0, EXTEND_RAD])
@@ -450,10 +456,10 @@ def test_pad_direction_samples_bound_every_configuration(scene):
         # a unit vector at the cone's angle from d, in a random direction around it
         perp = np.cross(d, rng.normal(size=(500, 3)))
         perp /= np.linalg.norm(perp, axis=1, keepdims=True)
-        a = np.radians(CONTACT.cone_deg)
+        a = np.radians(CONTACT.cone_deg_of(f))
         inward = np.cos(a) * d + np.sin(a) * perp  # = -n
         best = (inward @ pads.T).max(axis=1)
-        assert np.all(best + slack >= CONTACT.cos_cone), name
+        assert np.all(best + slack >= CONTACT.cos_cone_of(f)), name
 
 
 def test_time_index_is_the_first_grid_time_at_or_after(scene):

@@ -30,7 +30,10 @@ from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
 
-CONTACT = ContactModel()
+#: A 60 deg pad cone (the bundled fingers' own is 90 deg, the front hemisphere): with it
+#: every finger's best contact of the scene is let go within the turn, each for its own
+#: reason, which the trigger tests need.
+CONTACT = ContactModel(cone_deg=60.0)
 TIMES = np.linspace(0.0, 3.0, 61)
 
 
@@ -51,7 +54,9 @@ def scene():
     sample = box.sample_surface(0.004)
     contacts = {}
     for name in hand.finger_names:
-        m = build_manifold(hand.finger(name), sample, motion, np.linspace(0.0, 3.0, 13))
+        m = build_manifold(
+            hand.finger(name), sample, motion, np.linspace(0.0, 3.0, 13), contact=CONTACT
+        )
         idx = np.flatnonzero(m.usable(CONTACT.choice_margin_rad)[0])
         last = exit_times(m.usable(CONTACT.limit_margin_rad)[:, idx], m.times_s, 0)
         lc = LinkClearance(hand, name, box)
@@ -105,7 +110,7 @@ def _direct(hand, finger, box, motion, times, p, n, q_start, contact=CONTACT, li
             kind = "IK"
         elif margin < contact.limit_margin_rad:
             kind = "joint"
-        elif cos < contact.cos_cone:
+        elif cos < contact.cos_cone_of(f):
             kind = "pad"
         elif links and _link_distance(hand, finger, box, hand.to_full(finger, q), T) < (
             contact.link_clearance_m
@@ -130,11 +135,25 @@ _REASON_WORDS = {
 }
 
 
+def test_by_default_a_finger_holds_within_its_own_pad_cone(scene):
+    # the index's contact is let go when its pad turns 60 deg from the normal; the
+    # finger's own cone (the tip sphere's front hemisphere) holds it longer
+    hand, box, motion, contacts = scene
+    p, n, q0 = contacts["index"]
+    narrow = track_contact(hand, "index", box, motion, TIMES, p, n, q0, contact=CONTACT)
+    own = track_contact(hand, "index", box, motion, TIMES, p, n, q0)
+    assert own.cos_cone == pytest.approx(0.0, abs=1e-15)
+    assert "pad turned" in narrow.trigger()[1]
+    k = narrow.n_followed
+    assert k < TIMES.size and own.followed_until_s > narrow.followed_until_s
+    assert_close(own.q[:k], narrow.q[:k], atol=0.0, what="the same IK until the 60 deg cone")
+
+
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "little"])
 def test_trigger_agrees_with_a_direct_per_step_check(scene, finger):
     hand, box, motion, contacts = scene
     p, n, q0 = contacts[finger]
-    track = track_contact(hand, finger, box, motion, TIMES, p, n, q0)
+    track = track_contact(hand, finger, box, motion, TIMES, p, n, q0, contact=CONTACT)
     direct = _direct(hand, finger, box, motion, TIMES, p, n, q0)
     kinds = [k for k, _ in direct]
     first = next((i for i, k in enumerate(kinds) if k), None)
@@ -154,7 +173,7 @@ def test_track_records_what_it_checks(scene, finger):
     hand, box, motion, contacts = scene
     f = hand.finger(finger)
     p, n, q0 = contacts[finger]
-    track = track_contact(hand, finger, box, motion, TIMES, p, n, q0)
+    track = track_contact(hand, finger, box, motion, TIMES, p, n, q0, contact=CONTACT)
     assert track.finger == finger
     assert_close(track.p_object, p, atol=0.0, what="P")
     # q always within the limits; holdable times reach the target
@@ -170,7 +189,7 @@ def test_track_records_what_it_checks(scene, finger):
         assert (
             err[last] > CONTACT.ik_tol_m
             or track.margin_rad[last] < 0.0
-            or track.pad_cos[last] < CONTACT.cos_cone
+            or track.pad_cos[last] < CONTACT.cos_cone_of(f)
         ), "a track stops only where the contact is lost"
         assert np.all(track.q[k:] == track.q[last]) and np.all(track.error_m[k:] == np.inf)
         assert np.all(track.margin_rad[k:] == -np.inf) and np.all(track.pad_cos[k:] == -np.inf)
@@ -180,7 +199,8 @@ def test_track_records_what_it_checks(scene, finger):
     assert np.all(err[hold] <= CONTACT.ik_tol_m)
     assert_close(track.margin_rad[:k], f.limit_margin(track.q[:k]), atol=1e-15, what="margins")
     assert np.all(track.margin_rad[hold] >= CONTACT.limit_margin_rad)
-    assert np.all(track.pad_cos[hold] >= CONTACT.cos_cone)
+    assert track.cos_cone == CONTACT.cos_cone_of(f)
+    assert np.all(track.pad_cos[hold] >= CONTACT.cos_cone_of(f))
     assert np.all(track.link_clearance_m[hold] >= CONTACT.link_clearance_m)
     assert np.all(track.tip_clearance_m[hold] >= -CONTACT.tip_penetration_m)
     # the numbers in the reasons are the recorded values
@@ -197,7 +217,9 @@ def test_a_larger_margin_triggers_earlier_at_a_boundary_plane(scene):
     hand, box, motion, contacts = scene
     p, n, q0 = contacts["index"]
     f = hand.finger("index")
-    base = track_contact(hand, "index", box, motion, TIMES, p, n, q0, check_links=False)
+    base = track_contact(
+        hand, "index", box, motion, TIMES, p, n, q0, check_links=False, contact=CONTACT
+    )
     wide = dataclasses.replace(CONTACT, limit_margin_rad=0.25)
     track = track_contact(
         hand, "index", box, motion, TIMES, p, n, q0, contact=wide, check_links=False
@@ -220,7 +242,7 @@ def test_a_still_object_never_triggers(scene):
     p, n, q0 = contacts["middle"]
     T = motion.pose(0.0)
     still = ObjectMotion.from_poses([0.0, 3.0], [T, T])
-    track = track_contact(hand, "middle", box, still, TIMES, p, n, q0)
+    track = track_contact(hand, "middle", box, still, TIMES, p, n, q0, contact=CONTACT)
     assert track.trigger() == (None, "")
     assert track.holdable.all()
     assert_close(
@@ -232,7 +254,7 @@ def test_an_unreachable_contact_triggers_at_once(scene):
     hand, box, motion, contacts = scene
     p, n, q0 = contacts["index"]
     far = p + np.array([0.0, 0.0, 1.0])  # one metre away
-    track = track_contact(hand, "index", box, motion, TIMES[:5], far, n, q0)
+    track = track_contact(hand, "index", box, motion, TIMES[:5], far, n, q0, contact=CONTACT)
     assert track.trigger_index() == 0
     assert "IK cannot reach" in track.reasons[0]
 

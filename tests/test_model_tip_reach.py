@@ -9,7 +9,13 @@ import pinocchio as pin
 import pytest
 from conftest import SHADOW_HAND_FILE, assert_close, shadow_urdf
 
-from regrasp_pin.model.hand import Hand
+from regrasp_pin.model.hand import (
+    FIVE_FINGER_TIPS,
+    PAD_CONE_SPHERE_DEG,
+    PAD_CONE_STAND_IN_DEG,
+    Hand,
+    five_finger_urdf_path,
+)
 from regrasp_pin.model.tip_reach import TipReach
 
 
@@ -65,6 +71,43 @@ def test_the_pad_facing_the_surface_does_not_overshoot(hand):
         assert f.tip_reach.overshoot(f.pad_axis_tip[None])[0] <= 1e-9
 
 
+def test_the_bundled_fingertips_carry_the_tip_sphere_itself(hand):
+    # each fingertip link has a collision sphere of the tip radius on the tip frame:
+    # every direction of the contact sphere's front hemisphere is the finger's surface
+    for name in hand.finger_names:
+        f = hand.finger(name)
+        assert f.tip_reach.has_tip_sphere(), name
+        assert f.pad_cone_deg == PAD_CONE_SPHERE_DEG, name
+        # the sphere's support is the tip radius in every direction
+        u = np.random.default_rng(5).normal(size=(50, 3))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        assert np.all(f.tip_reach.overshoot(u) >= -1e-12), name
+
+
+@pytest.mark.parametrize(
+    ("centre", "params", "expected"),
+    [
+        ((0.0, 0.0, 0.0), (0, 0, 0, 0, 0, 0.01), True),
+        ((0.0, 0.0, 0.0), (0, 0, 0, 0, 0, 0.0105), False),  # another radius
+        ((0.0, 0.0, 0.002), (0, 0, 0, 0, 0, 0.01), False),  # off the tip frame
+        ((0.0, 0.0, 0.0), (0, 0, 0, 0.002, 0, 0.01), False),  # a capsule
+        ((0.0, 0.0, 0.0), (0.01, 0.01, 0.01, 0, 0, 0), False),  # a box
+    ],
+)
+def test_only_a_sphere_of_the_tip_radius_on_the_tip_frame_is_the_tip_sphere(
+    centre, params, expected
+):
+    reach = TipReach(0.01, np.array([centre]), np.eye(3)[None], np.array([params], float))
+    assert reach.has_tip_sphere() is expected
+
+
+def test_a_tip_radius_other_than_the_sphere_makes_it_a_stand_in():
+    hand = Hand.from_urdf(five_finger_urdf_path(), FIVE_FINGER_TIPS, tip_radius=0.009)
+    for name in hand.finger_names:
+        assert not hand.finger(name).tip_reach.has_tip_sphere()
+        assert hand.finger(name).pad_cone_deg == PAD_CONE_STAND_IN_DEG
+
+
 def test_no_geometry_no_bound():
     empty = TipReach(0.01, np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 6)))
     assert np.all(empty.overshoot(np.eye(3)) == -np.inf)
@@ -82,3 +125,6 @@ def test_a_mesh_fingertip_bounds_nothing_here():
         assert f.tip_reach.names == ()
         assert len(f.tip_reach.skipped) == len(f.tip_geometry_ids) > 0
         assert np.all(f.tip_reach.overshoot(np.eye(3)) == -np.inf)
+        # the 7.5-9 mm sphere stands in for a mesh pad: trusted near the pad only
+        assert not f.tip_reach.has_tip_sphere()
+        assert f.pad_cone_deg == PAD_CONE_STAND_IN_DEG

@@ -110,6 +110,7 @@ def _track(t_end, lost_at=None):
         error_m=np.zeros(times.size),
         margin_rad=margin,
         pad_cos=np.ones(times.size),
+        cos_cone=0.5,
         link_clearance_m=np.full(times.size, 0.002),
     )
 

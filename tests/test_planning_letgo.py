@@ -48,7 +48,7 @@ def test_a_let_go_leaves_every_other_hold_unlost(monkeypatch):
             # of a limit, is not a loss), as its track measured it
             tr = h.track
             upto = (tr.times_s >= h.t_from - 1e-9) & (tr.times_s <= after.now + 1e-9)
-            held = (tr.error_m <= c.ik_tol_m) & (tr.margin_rad >= 0.0) & (tr.pad_cos >= c.cos_cone)
+            held = (tr.error_m <= c.ik_tol_m) & (tr.margin_rad >= 0.0) & (tr.pad_cos >= tr.cos_cone)
             assert np.all(held[upto]), (name, after.now)
 
 

@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import held_grasp
+from conftest import CONE_60, held_grasp
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Plan, make_scenario, plan_manipulation
@@ -188,7 +188,7 @@ def test_a_neighbour_that_cannot_be_planned_ends_typed_with_a_verified_partial_p
     """Turned the other way (-100 deg), the fingers cannot follow the whole turn (the
     index soon has no contact inside its limits): a typed failure within the budget,
     and what was planned before it passes the independent re-check."""
-    scen = make_scenario("five_finger", "hexagon", angle_deg=-100, rate_deg_s=20)
+    scen = make_scenario("five_finger", "hexagon", angle_deg=-100, rate_deg_s=20, contact=CONE_60)
     with pytest.raises(PlanningError) as err:
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
     exc = err.value
@@ -208,7 +208,7 @@ def _spec_6():
     contact) with regrasps of at least 0.8 s (none faster: no rush), searched although
     it is proven to have no plan (the ring finger cannot let go from 1.8 s on:
     tests/test_grasp_necessity.py has such cases), to test how the search ends."""
-    scen = build_scenario(generate_specs(7, seed=0)[6])
+    scen = build_scenario(generate_specs(7, seed=0)[6], contact=CONE_60)
     slow = replace(scen.params.regrasp, duration_s=0.8)
     params = replace(scen.params, regrasp=slow, prove_infeasible=False, rush_duration_s=None)
     return replace(scen, params=params)
@@ -353,7 +353,7 @@ def test_holds_that_end_together_are_regrasped_in_turn(tmp_path):
     leaves the last one no time (a finger-busy failure before the chain rule). The
     first finger of the chain goes early enough for every one to follow in turn: a full
     plan, one finger in the air at a time, that passes the independent re-check."""
-    scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=40)
+    scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=40, contact=CONE_60)
     result = plan_manipulation(
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
     )
@@ -374,7 +374,7 @@ def test_a_neighbour_makes_room_for_a_crowded_finger(tmp_path):
     clearance). The middle regrasps first, out of that room, and the ring then lands
     where the middle was: a full plan that passes the independent re-check."""
     spec = generate_specs(81, seed=0)[80]
-    scen = build_scenario(spec)
+    scen = build_scenario(spec, contact=CONE_60)
     result = plan_manipulation(
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
     )
@@ -403,7 +403,7 @@ def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
     the independent re-check. Without faster regrasps, every regrasp takes the
     shortest duration at least. (Spec 81 showed this until regrasps were paced by
     their joints: its plan no longer needs a faster regrasp.)"""
-    scen = build_scenario(generate_specs(55, seed=0)[54])
+    scen = build_scenario(generate_specs(55, seed=0)[54], contact=CONE_60)
     try:
         planned = plan_manipulation(
             scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
@@ -461,7 +461,7 @@ def test_a_neighbour_makes_room_for_a_hand_over(tmp_path):
     with only two fingers left to hold, holds on to the end inside its limits. A full
     plan that passes the independent re-check (before: a no-candidate failure at 2.6 s)."""
     spec = next(s for s in neighbour_specs(("five_finger",)) if s.name.endswith("-100deg-10dps"))
-    scen = build_scenario(spec)
+    scen = build_scenario(spec, contact=CONE_60)
     result = plan_manipulation(
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
     )

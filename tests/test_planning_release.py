@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import assert_close, held_grasp
+from conftest import CONE_60, assert_close, held_grasp
 
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import FailureKind, PlanningError
@@ -22,9 +22,9 @@ CLEARANCE_M = 0.003
 
 @pytest.fixture(scope="module")
 def scene():
-    """The demo's initial grasp held over the first 0.8 s of the turn; the index finger
-    lets go at 0.3 s, while it still holds."""
-    scen = make_scenario("five_finger", "hexagon")
+    """The demo's initial grasp (with 60 deg pad cones: CONE_60) held over the first
+    0.8 s of the turn; the index finger lets go at 0.3 s, while it still holds."""
+    scen = make_scenario("five_finger", "hexagon", contact=CONE_60)
     t = np.round(np.arange(0.0, 0.8 + 1e-9, 0.01), 9)
     scen = dataclasses.replace(scen, motion=ObjectMotion.from_poses(t, scen.motion.pose(t)))
     hand, p = scen.hand, scen.params

@@ -28,6 +28,7 @@ def _track(margin: np.ndarray, error: np.ndarray | None = None) -> ContactTrack:
         error_m=np.zeros(n) if error is None else error,
         margin_rad=margin,
         pad_cos=np.ones(n),
+        cos_cone=0.5,
         link_clearance_m=np.full(n, np.inf),
         reasons=tuple("" for _ in range(n)),
     )

@@ -7,7 +7,10 @@ the object's surface point ``s`` (outward unit normal ``n``) when its centre is 
 1. IK reaches the tip-centre target within tolerance, inside the joint limits;
 2. the pad faces the surface: the angle between the pad direction (out of the finger
    pad, :attr:`~regrasp_pin.model.hand.Finger.pad_axis_tip`) and the inward normal ``-n`` is
-   at most ``cone_deg`` (default 60 deg);
+   at most the pad cone: the finger's own (:attr:`~regrasp_pin.model.hand.Finger.pad_cone_deg`,
+   90 deg where the fingertip link carries the tip sphere, the front hemisphere of
+   the pad and the fingertip's end; 60 deg where the sphere stands in for a mesh
+   pad), or ``cone_deg`` for every finger when given;
 3. no other link of that finger intersects the object (Coal distance between the
    finger's non-tip collision geometries and the object >= ``link_clearance_m``).
 
@@ -17,10 +20,12 @@ Frames: contact points and normals in the object frame; the object pose
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
+from .._validate import positive
+from ..exceptions import InputError
 from ..model.hand import Finger
 
 __all__ = ["ContactModel", "pad_cosines", "pad_cosines_and_overshoot", "tip_targets"]
@@ -31,7 +36,11 @@ class ContactModel:
     """Parameters of the fingertip contact.
 
     Attributes:
-        cone_deg: Largest angle between the pad direction and the inward normal [deg].
+        cone_deg: Largest angle between the pad direction and the inward normal [deg]
+            for every finger; None (default): each finger's own
+            :attr:`~regrasp_pin.model.hand.Finger.pad_cone_deg` (:meth:`cos_cone_of`).
+            Within it, the fingertip link's shape (``tip_penetration_m``) and the
+            other links' clearance decide where the finger can hold.
         ik_tol_m: IK tolerance for a contact to count as reached [m].
         link_clearance_m: A held contact triggers a regrasp when the finger's non-tip
             links come closer than this to the object [m].
@@ -50,7 +59,7 @@ class ContactModel:
             pad tilts).
     """
 
-    cone_deg: float = 60.0
+    cone_deg: float | None = None
     ik_tol_m: float = 1e-5
     link_clearance_m: float = 0.001
     limit_margin_rad: float = 0.05
@@ -59,10 +68,28 @@ class ContactModel:
     finger_trigger_m: float = 0.0015
     tip_penetration_m: float = 5e-5
 
-    @property
-    def cos_cone(self) -> float:
-        """Cosine of the pad cone's half-angle."""
-        return float(np.cos(np.radians(self.cone_deg)))
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.name != "cone_deg":
+                positive(getattr(self, f.name), f"ContactModel.{f.name}", allow_zero=True)
+        if (
+            self.cone_deg is not None
+            and not 0.0 < positive(self.cone_deg, "ContactModel.cone_deg") <= 180.0
+        ):
+            raise InputError(
+                "ContactModel.cone_deg",
+                f"{self.cone_deg!r} is not allowed",
+                "an angle in (0, 180] deg",
+            )
+
+    def cone_deg_of(self, finger: Finger) -> float:
+        """The pad cone's half-angle for ``finger`` [deg]: ``cone_deg``, or the finger's
+        own."""
+        return finger.pad_cone_deg if self.cone_deg is None else float(self.cone_deg)
+
+    def cos_cone_of(self, finger: Finger) -> float:
+        """Cosine of the pad cone's half-angle for ``finger`` (:meth:`cone_deg_of`)."""
+        return float(np.cos(np.radians(self.cone_deg_of(finger))))
 
 
 def tip_targets(

@@ -100,7 +100,7 @@ def holds_to_end(track: ContactTrack, t_from: float, contact: ContactModel) -> b
     return bool(
         np.all(track.error_m[sel] <= contact.ik_tol_m)
         and np.all(track.margin_rad[sel] >= 0.0)
-        and np.all(track.pad_cos[sel] >= contact.cos_cone)
+        and np.all(track.pad_cos[sel] >= track.cos_cone)
         and np.all(track.link_clearance_m[sel] >= 0.0)
     )
 

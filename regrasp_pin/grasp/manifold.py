@@ -369,7 +369,7 @@ def build_manifold(
     best_cos = np.concatenate(
         [(b @ pads_T).max(axis=1) for b in np.array_split(inward, -(-len(inward) // 4))]
     ).reshape(n_palm_faces.shape[:2])
-    can_face = best_cos + slack >= contact.cos_cone
+    can_face = best_cos + slack >= contact.cos_cone_of(finger)
     face_index = np.searchsorted(np.array(list(face_normal)), sample.face_ids)
     solve = can_face[:, face_index] & voxels.contains(targets)
 
@@ -454,7 +454,7 @@ def build_manifold(
         resid[pi[ok]] = 0.0  # reached: retry at once if it fails later
         if ok.any():
             cos, over = pad_cosines_and_overshoot(finger, q_res[ok], normals_palm[ti[ok], pi[ok]])
-            pad[ti[ok], pi[ok]] = cos >= contact.cos_cone
+            pad[ti[ok], pi[ok]] = cos >= contact.cos_cone_of(finger)
             tip_clear[ti[ok], pi[ok]] = over <= contact.tip_penetration_m
         if track is not None:
             good = reach[s0:s1] & pad[s0:s1]

@@ -39,6 +39,9 @@ class ContactTrack:
         error_m: ``(T,)`` IK residual [m].
         margin_rad: ``(T,)`` distance to the nearest boundary plane [rad].
         pad_cos: ``(T,)`` cosine between the pad direction and the inward normal.
+        cos_cone: The cosine of the finger's pad cone the contact was followed with
+            (:meth:`~regrasp_pin.grasp.contact.ContactModel.cos_cone_of`): below it,
+            the pad has turned away.
         link_clearance_m: ``(T,)`` Coal distance of the finger's non-tip links to the
             object [m] (``inf`` where not computed).
         tip_clearance_m: ``(T,)`` Coal distance of the fingertip link's geometries to
@@ -60,6 +63,7 @@ class ContactTrack:
     error_m: np.ndarray
     margin_rad: np.ndarray
     pad_cos: np.ndarray
+    cos_cone: float
     link_clearance_m: np.ndarray
     reasons: tuple[str, ...]
     tip_clearance_m: np.ndarray | None = None
@@ -135,6 +139,7 @@ def track_contact(
     err = np.empty(times.size)
     margin = np.empty(times.size)
     pad_cos = np.empty(times.size)
+    cos_cone = contact.cos_cone_of(f)
     lost_at = times.size - 1  # the last time followed
     prev = q0
     for s0 in range(0, times.size, chunk):
@@ -144,7 +149,7 @@ def track_contact(
         margin[s0:s1] = np.minimum(res.q - f.lower, f.upper - res.q).min(axis=1)
         pad_cos[s0:s1] = pad_cosines(f, res.q, n_palm[s0:s1])
         prev = res.q[-1]
-        lost = _lost(err[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact)
+        lost = _lost(err[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact, cos_cone)
         if lost.any():
             lost_at = s0 + int(np.argmax(lost))
             break
@@ -171,7 +176,7 @@ def track_contact(
             reasons.append(
                 f"joint {f.joint_names[j]} within {margin[i]:.3f} rad of its {side} limit"
             )
-        elif pad_cos[i] < contact.cos_cone:
+        elif pad_cos[i] < cos_cone:
             ang = np.degrees(np.arccos(np.clip(pad_cos[i], -1, 1)))
             reasons.append(f"pad turned {ang:.0f} deg from the surface normal")
         elif clearance[i] < contact.link_clearance_m:
@@ -191,6 +196,7 @@ def track_contact(
         error_m=err,
         margin_rad=margin,
         pad_cos=pad_cos,
+        cos_cone=cos_cone,
         link_clearance_m=clearance,
         reasons=tuple(reasons),
         tip_clearance_m=tip_clear,
@@ -199,9 +205,13 @@ def track_contact(
 
 
 def _lost(
-    err: np.ndarray, margin: np.ndarray, pad_cos: np.ndarray, contact: ContactModel
+    err: np.ndarray,
+    margin: np.ndarray,
+    pad_cos: np.ndarray,
+    contact: ContactModel,
+    cos_cone: float,
 ) -> np.ndarray:
     """Where the contact is lost: not reached, outside the joint limits, or the pad
     turned away beyond the cone (the conditions that end every hold; the links and the
     trigger margin come on top of them)."""
-    return (err > contact.ik_tol_m) | (margin < 0.0) | (pad_cos < contact.cos_cone)
+    return (err > contact.ik_tol_m) | (margin < 0.0) | (pad_cos < cos_cone)

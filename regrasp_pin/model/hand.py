@@ -37,6 +37,16 @@ __all__ = ["Finger", "Hand", "five_finger_urdf_path", "allegro_urdf_path"]
 #: Optional keys of a hand file (:meth:`Hand.from_file`).
 _HAND_FILE_OPTIONAL = ("name", "pad_axes", "palm_frame", "locked", "couplings", "package_dirs")
 
+#: The pad cone of a finger whose fingertip link carries the tip sphere itself [deg]:
+#: the sphere's whole front hemisphere is the finger's surface (the pad and the
+#: fingertip's end; the back, the nail, never touches).
+PAD_CONE_SPHERE_DEG = 90.0
+#: The pad cone of a finger whose tip sphere stands in for a pad of another shape (a
+#: mesh, or a sphere of another radius) [deg]: trusted near the pad only (the Shadow
+#: Hand's distal mesh reaches 5.0-6.0 mm from its 7.5 mm sphere's centre 30-90 deg
+#: towards the fingertip's end, 8.5-9 mm sideways).
+PAD_CONE_STAND_IN_DEG = 60.0
+
 #: Tip frames of the bundled five-finger hand.
 FIVE_FINGER_TIPS = {
     "thumb": "thumb_tip",
@@ -106,6 +116,11 @@ class Finger:
         tip_reach: How far those reach past the plane the tip sphere rests on, by the
             plane's direction (:class:`~regrasp_pin.model.tip_reach.TipReach`); None
             without collision geometry.
+        pad_cone_deg: Largest angle between the pad axis and the inward surface normal
+            at which the fingertip can hold [deg] (the contact model's cone unless
+            :attr:`~regrasp_pin.grasp.contact.ContactModel.cone_deg` overrides it):
+            :data:`PAD_CONE_SPHERE_DEG` where the fingertip link carries the tip sphere
+            itself (``tip_reach.has_tip_sphere()``), else :data:`PAD_CONE_STAND_IN_DEG`.
     """
 
     name: str
@@ -121,6 +136,7 @@ class Finger:
     geometry_ids: tuple[int, ...] = ()
     tip_geometry_ids: tuple[int, ...] = ()
     tip_reach: TipReach | None = field(default=None, repr=False)
+    pad_cone_deg: float = PAD_CONE_STAND_IN_DEG
 
     @property
     def k(self) -> int:
@@ -421,6 +437,7 @@ class Hand:
             else:
                 pad = _default_pad_axis(model, chain, lower, upper)
             geom_ids, tip_ids = _finger_geometries(model, collision, chain, tip)
+            reach = tip_reach(model, collision, tip, radius, tip_ids)
             built[finger_name] = Finger(
                 name=finger_name,
                 tip_frame=tip,
@@ -436,7 +453,10 @@ class Hand:
                 chain=chain,
                 geometry_ids=geom_ids,
                 tip_geometry_ids=tip_ids,
-                tip_reach=tip_reach(model, collision, tip, radius, tip_ids),
+                tip_reach=reach,
+                pad_cone_deg=PAD_CONE_SPHERE_DEG
+                if reach.has_tip_sphere()
+                else PAD_CONE_STAND_IN_DEG,
             )
         _check_disjoint(model, built)
         hand = cls(model, collision, visual, urdf, built, name or urdf.stem)

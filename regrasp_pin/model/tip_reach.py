@@ -44,6 +44,17 @@ class TipReach:
     names: tuple[str, ...] = ()
     skipped: tuple[str, ...] = ()
 
+    def has_tip_sphere(self) -> bool:
+        """Whether one of the geometries is the tip sphere itself: a collision sphere of
+        the tip radius centred on the tip frame (to 1e-6 m, or 0.1 % of the radius). Then
+        the contact model's sphere is the finger's real surface in every direction the
+        other geometries leave free; otherwise it stands in for a pad of unknown shape."""
+        tol = max(1e-6, 1e-3 * self.radius)
+        sphere = np.all(self.params[:, :5] == 0.0, axis=1)
+        sphere &= np.abs(self.params[:, 5] - self.radius) <= tol
+        sphere &= np.linalg.norm(self.centres, axis=1) <= tol
+        return bool(sphere.any())
+
     def overshoot(self, u_tip: np.ndarray) -> np.ndarray:
         """How far the geometries reach past the tangent plane [m], ``(N,)``.
 

@@ -61,7 +61,7 @@ def held_until(track: ContactTrack, contact: ContactModel) -> float:
     ok = (
         (track.error_m <= contact.ik_tol_m)
         & (track.margin_rad >= 0.0)
-        & (track.pad_cos >= contact.cos_cone)
+        & (track.pad_cos >= track.cos_cone)
         & (track.link_clearance_m >= 0.0)
         & (
             True

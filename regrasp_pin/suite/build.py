@@ -63,7 +63,7 @@ def finger_clearance(
     return clearance
 
 
-def build_scenario(spec: ScenarioSpec) -> Scenario:
+def build_scenario(spec: ScenarioSpec, contact: ContactModel | None = None) -> Scenario:
     """Build the scenario of a spec.
 
     The object starts at the hand's canonical pose (:func:`~regrasp_pin.scenarios.setup_pose`)
@@ -78,6 +78,8 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
 
     Args:
         spec: The spec.
+        contact: The contact model of the grasp search and the planner (default
+            ``ContactModel()``: each finger's own pad cone).
 
     Returns:
         The :class:`~regrasp_pin.scenarios.Scenario` (planner settings as make_scenario's).
@@ -92,7 +94,7 @@ def build_scenario(spec: ScenarioSpec) -> Scenario:
     T0[:3, :3] = Rotation.from_rotvec(spec.rotation_offset_rotvec).as_matrix() @ T0[:3, :3]
     T0[:3, 3] = T0[:3, 3] + np.asarray(spec.position_offset_m)
     fingers = setup_fingers(spec.hand)
-    contact = ContactModel()
+    contact = contact or ContactModel()
     if is_hand_file(spec.hand) and m.kind == "contact-axis" and spec.grasp_clearance_m is None:
         # any hand: as scenario_for_hand builds it (the pivot's contact kept, the other
         # fingers' chosen again for the turn about it)
