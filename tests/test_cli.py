@@ -40,6 +40,13 @@ def test_info_takes_a_hand_file(tmp_path, capsys):
     doc = json.loads(capsys.readouterr().out)
     assert doc["hand"] == "five_finger_hand" and set(doc["fingers"]) == set(fingers)
     assert all(f["ik_success"] for f in doc["fingers"].values())
+    # the URDF's tip spheres are 8 mm: the fingertips hold on their front hemispheres
+    assert all(f["pad_cone_deg"] == 90.0 for f in doc["fingers"].values())
+    spec["tip_radius"] = 0.009  # a stand-in sphere: the cone stays near the pad
+    path.write_text(json.dumps(spec))
+    assert main(["info", "--hand", str(path), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert all(f["pad_cone_deg"] == 60.0 for f in doc["fingers"].values())
 
 
 def test_demo_json_writes_plan_and_figures(tmp_path, capsys):

@@ -39,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
         report["fingers"][f.name] = {
             "tip_frame": f.tip_frame,
             "tip_radius_m": f.tip_radius,
+            "pad_cone_deg": f.pad_cone_deg,
             "joints": list(f.joint_names),
             "lower_rad": f.lower.round(4).tolist(),
             "upper_rad": f.upper.round(4).tolist(),
@@ -51,14 +52,15 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(report, indent=2))
         return 0
     print(f"{hand.name}: {hand.model.nq} joint variables, URDF {hand.urdf_path}")
-    header = f"{'finger':8} {'tip frame':14} {'r [mm]':>6}  joints [lower, upper] (deg)"
+    header = f"{'finger':8} {'tip frame':14} {'r [mm]':>6} {'cone':>5}  joints [lower, upper] (deg)"
     print(header)
     for name, fr in report["fingers"].items():
         limits = ", ".join(
             f"{j} [{np.degrees(lo):.0f}, {np.degrees(hi):.0f}]"
             for j, lo, hi in zip(fr["joints"], fr["lower_rad"], fr["upper_rad"], strict=True)
         )
-        print(f"{name:8} {fr['tip_frame']:14} {fr['tip_radius_m'] * 1e3:6.1f}  {limits}")
+        cone = f"{fr['pad_cone_deg']:.0f}"
+        print(f"{name:8} {fr['tip_frame']:14} {fr['tip_radius_m'] * 1e3:6.1f} {cone:>5}  {limits}")
     print("\nIK round trip (random q inside the limits -> FK -> IK from the box centre):")
     for name, fr in report["fingers"].items():
         t = ", ".join(f"{v * 1e3:.1f}" for v in fr["ik_target_palm_m"])
