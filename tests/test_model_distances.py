@@ -9,6 +9,7 @@ from conftest import assert_close
 
 from regrasp_pin import Hand
 from regrasp_pin.exceptions import InputError
+from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.model.distances import (
     _geometry,
     _placements,
@@ -18,7 +19,9 @@ from regrasp_pin.model.distances import (
     capsule_gap,
     capsule_gaps,
     capsule_pair_gaps,
+    object_gap_bound,
 )
+from regrasp_pin.model.objects import Box
 
 
 @pytest.fixture(scope="module")
@@ -144,3 +147,26 @@ def _coal_distance(gm, gd, a, b):
     req, res = coal.DistanceRequest(), coal.DistanceResult()
     oa, ob = gm.geometryObjects[a], gm.geometryObjects[b]
     return coal.distance(oa.geometry, gd.oMg[a], ob.geometry, gd.oMg[b], req, res)
+
+
+@pytest.mark.parametrize("hand_name", ["five_finger", "allegro"])
+def test_object_gap_bound_is_below_coal(hand_name):
+    """object_gap_bound never exceeds Coal's distance (LinkClearance) from a finger's
+    links or fingertip link to a box, near it or inside it, and is inf without
+    geometries."""
+    hand = Hand.five_finger() if hand_name == "five_finger" else Hand.allegro()
+    box = Box((0.04, 0.06, 0.04))
+    rng = np.random.default_rng(4)
+    for name in hand.finger_names:
+        f = hand.finger(name)
+        q = rng.uniform(f.lower, f.upper, (60, f.k))
+        full = hand.to_full(name, q)
+        T = np.tile(np.eye(4), (60, 1, 1))
+        T[:, :3, 3] = f.fk(q) + rng.normal(scale=0.02, size=(60, 3))
+        for tip_only in (False, True):
+            lc = LinkClearance(hand, name, box, tip_only=tip_only)
+            exact = lc(full, T)
+            bound = object_gap_bound(hand, lc.geometry_ids, box, full, T)
+            assert np.all(bound <= exact + 1e-9), (name, tip_only)
+            assert np.any(exact < 0) and np.any(bound > exact - 0.002)  # both cases, tight
+    assert np.all(object_gap_bound(hand, [], box, full, T) == np.inf)

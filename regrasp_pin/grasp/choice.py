@@ -47,6 +47,7 @@ from .screening import (
     ManifoldClearance,
     ObjectClearance,
     ScreeningEpsilons,
+    check_kept_clearance,
     closes_without,
     closest_object_miss,
     held_clear,
@@ -338,6 +339,7 @@ def _arrival_clearance(
         return lambda points: clear.distances(
             hand.to_full(finger, manifold.q[ka, points]), manifold.T_palm_object[ka]
         )
+    check_kept_clearance(distances, finger, manifold, contact)
     return lambda points: distances(np.full(points.size, ka), points)
 
 

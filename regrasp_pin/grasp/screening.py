@@ -11,7 +11,8 @@
 - :func:`held_clear`: held at a contact, the finger stays clear of the object over the
   manifold's times, as the tracking measures it (Coal).
 - :class:`ManifoldClearance`: those Coal distances at a manifold's (time, point)
-  entries, each measured once for the searches of a whole plan.
+  entries, each measured once for the searches of a whole plan (a lower bound spares
+  the query where it already meets the requirements).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from ..exceptions import InputError
 from ..model.clearance import LinkClearance
+from ..model.distances import object_gap_bound
 from ..model.hand import Hand
 from ..model.objects import ConvexObject
 from .contact import ContactModel
@@ -112,6 +114,11 @@ def closes_without(
     return [epsilons.closes(np.delete(p, j, 0), np.delete(n, j, 0)) for j in rows]
 
 
+#: A lower bound spares the Coal query of a :class:`ManifoldClearance` entry when it
+#: meets the requirement by this much [m] (Coal's GJK tolerance is 1e-9 m).
+BOUND_MARGIN_M = 1e-6
+
+
 class ManifoldClearance:
     """The Coal distances [m] of one finger, held at its manifold's points, to the
     object: from its other links and from its fingertip link (negative when sunk in),
@@ -120,26 +127,52 @@ class ManifoldClearance:
     An entry is a pure function of the manifold's configuration and object pose there,
     so the answers are the same bits as measuring afresh; the searches of one plan ask
     for the same entries again and again (the same candidates at the next lift-off
-    time, after a failed attempt, when backing up).
+    time, after a failed attempt, when backing up). Their readers compare them with the
+    contact model's requirements only, so an entry whose lower bound
+    (:func:`~regrasp_pin.model.distances.object_gap_bound`) already meets the largest of
+    them by :data:`BOUND_MARGIN_M` keeps that bound instead of a Coal query: a distance
+    below ``max(link_clearance_m, choice_link_clearance_m)`` (links) or
+    ``-tip_penetration_m`` (fingertip link) is exact, one above may be a lower bound.
 
     Args:
         hand: The hand.
         finger: Finger name.
         obj: The object.
         manifold: The finger's manifold (the entries' configurations and poses).
+        contact: The requirements the readers compare with (default ``ContactModel()``).
+
+    Attributes:
+        n_queries: Configurations measured by Coal so far (the links' and the fingertip
+            link's counted apart).
     """
 
-    def __init__(self, hand: Hand, finger: str, obj: ConvexObject, manifold: Manifold):
+    def __init__(
+        self,
+        hand: Hand,
+        finger: str,
+        obj: ConvexObject,
+        manifold: Manifold,
+        contact: ContactModel | None = None,
+    ):
         self.hand, self.finger, self.manifold = hand, finger, manifold
+        self.contact = contact or ContactModel()
+        self.obj = obj
         self._links = LinkClearance(hand, finger, obj)
         self._tip = LinkClearance(hand, finger, obj, tip_only=True)
+        c = self.contact
+        self._exact_below = (
+            max(c.link_clearance_m, c.choice_link_clearance_m) + BOUND_MARGIN_M,
+            -c.tip_penetration_m + BOUND_MARGIN_M,
+        )
         self._n = int(manifold.q.shape[1])
         self._known = np.zeros(0, np.int64)  # entries measured (row * N + point), sorted
         self._values = np.zeros((0, 2))  # their (links, tip) distances [m]
+        self.n_queries = 0  # configurations measured by Coal (links and tip apart)
 
     def __call__(self, rows: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(links, tip)`` distances ``(M,)`` [m] at the manifold entries
-        ``(rows[j], points[j])`` (time indices and sample indices, ``(M,)`` each)."""
+        ``(rows[j], points[j])`` (time indices and sample indices, ``(M,)`` each); exact
+        below the requirements (see the class)."""
         keys = np.asarray(rows, np.int64).reshape(-1) * self._n + np.asarray(
             points, np.int64
         ).reshape(-1)
@@ -148,13 +181,31 @@ class ManifoldClearance:
             r, c = np.divmod(new, self._n)
             full = self.hand.to_full(self.finger, self.manifold.q[r, c])
             T = self.manifold.T_palm_object[r]
-            measured = np.stack([self._links(full, T), self._tip(full, T)], axis=1)
+            measured = np.stack(
+                [
+                    self._measure(m, full, T, below)
+                    for m, below in zip((self._links, self._tip), self._exact_below, strict=True)
+                ],
+                axis=1,
+            )
             keys_all = np.concatenate([self._known, new])
             order = np.argsort(keys_all, kind="stable")
             self._known = keys_all[order]
             self._values = np.concatenate([self._values, measured])[order]
         out = self._values[np.searchsorted(self._known, keys)]
         return out[:, 0], out[:, 1]
+
+    def _measure(
+        self, clearance: LinkClearance, full: np.ndarray, T: np.ndarray, exact_below: float
+    ) -> np.ndarray:
+        """The lower bounds of the configurations ``full``, replaced by Coal's distance
+        where a bound is below ``exact_below`` [m]."""
+        out = object_gap_bound(self.hand, clearance.geometry_ids, self.obj, full, T)
+        low = np.flatnonzero(out < exact_below)
+        if low.size:
+            out[low] = clearance(full[low], T[low])
+            self.n_queries += int(low.size)
+        return out
 
 
 class ObjectClearance:
@@ -208,6 +259,25 @@ def closest_object_miss(
     return float(tip[j]), float(-contact.tip_penetration_m)
 
 
+def check_kept_clearance(
+    distances: ManifoldClearance, finger: str, manifold: Manifold, contact: ContactModel
+) -> None:
+    """InputError unless ``distances`` are ``finger``'s on ``manifold``, kept for the
+    requirements of ``contact`` (above them its entries may be lower bounds)."""
+    if distances.manifold is not manifold or distances.finger != finger:
+        raise InputError(
+            "distances",
+            f"are {distances.finger!r}'s, on another manifold or finger",
+            f"a ManifoldClearance of {finger!r} on this manifold",
+        )
+    if distances.contact != contact:
+        raise InputError(
+            "distances",
+            "were kept for another contact model",
+            "a ManifoldClearance made with the same ContactModel",
+        )
+
+
 def held_clear(
     hand: Hand,
     finger: str,
@@ -228,13 +298,9 @@ def held_clear(
     distances are kept between calls (the finger's, on this manifold); None: measured
     afresh."""
     if distances is None:
-        distances = ManifoldClearance(hand, finger, obj, manifold)
-    elif distances.manifold is not manifold or distances.finger != finger:
-        raise InputError(
-            "distances",
-            f"are {distances.finger!r}'s, on another manifold or finger",
-            f"a ManifoldClearance of {finger!r} on this manifold",
-        )
+        distances = ManifoldClearance(hand, finger, obj, manifold, contact)
+    else:
+        check_kept_clearance(distances, finger, manifold, contact)
     usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
     still = np.logical_and.accumulate(usable, axis=0)  # (K, C): not left yet
     rows, cols = np.nonzero(still)

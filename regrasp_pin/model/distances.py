@@ -646,6 +646,30 @@ class PairDistances:
         self.n_queries += int(rows.size)
 
 
+def object_gap_bound(
+    hand: Hand, ids: Sequence[int], obj: ConvexObject, q: np.ndarray, T_palm_object: np.ndarray
+) -> np.ndarray:
+    """Lower bound ``(N,)`` [m] on the signed distance from the hand's geometries ``ids``
+    (the smallest over them; inf when empty) to the object, at each configuration row of
+    ``q`` ``(N, nq)`` and object pose ``T_palm_object`` ``(N, 4, 4)`` (palm frame): the
+    face-plane support bound of the broad phase, valid under penetration too. A bound at
+    or above a requirement proves Coal's distance meets it (to Coal's tolerances)."""
+    q = np.atleast_2d(np.asarray(q, float))
+    T = np.broadcast_to(np.asarray(T_palm_object, float), (q.shape[0], 4, 4))
+    if not ids or q.shape[0] == 0:
+        return np.full(q.shape[0], np.inf)
+    geoms = [_geometry(hand, g) for g in ids]
+    R, p = _placements(geoms, q)  # (N, G, 3, 3), (N, G, 3)
+    c = _place(R, p, np.array([g.centre for g in geoms]).reshape(-1, 3))
+    R_po = T[:, None, :3, :3]
+    c_o = np.matmul(c - T[:, None, :3, 3], T[:, :3, :3])  # R^T (x - p), object frame
+    R_og = R_po[..., 0, :, None] * R[..., 0, None, :]  # R_po^T R, term by term
+    R_og += R_po[..., 1, :, None] * R[..., 1, None, :]
+    R_og += R_po[..., 2, :, None] * R[..., 2, None, :]
+    params = np.array([g.support for g in geoms]).reshape(-1, 6)
+    return _object_lower_bound(obj, c_o, R_og, params[None]).min(axis=1)
+
+
 def capsule_gap(
     hand: Hand,
     ids_a: list[int],

@@ -360,7 +360,7 @@ class RegraspSearch:
         kept = self._distances.get(finger)
         if kept is None or kept.manifold is not m:
             kept = self._distances[finger] = ManifoldClearance(
-                self.scene.hand, finger, self.scene.obj, m
+                self.scene.hand, finger, self.scene.obj, m, self.contact
             )
         return kept
 
