@@ -70,12 +70,10 @@ class ContactModel:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            if f.name != "cone_deg":
-                positive(getattr(self, f.name), f"ContactModel.{f.name}", allow_zero=True)
-        if (
-            self.cone_deg is not None
-            and not 0.0 < positive(self.cone_deg, "ContactModel.cone_deg") <= 180.0
-        ):
+            value = getattr(self, f.name)
+            if value is not None:
+                positive(value, f"ContactModel.{f.name}", allow_zero=f.name != "cone_deg")
+        if self.cone_deg is not None and self.cone_deg > 180.0:
             raise InputError(
                 "ContactModel.cone_deg",
                 f"{self.cone_deg!r} is not allowed",

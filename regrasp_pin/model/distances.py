@@ -241,6 +241,20 @@ def _object_lower_bound(
     return np.max(c_obj @ obj.normals.T - obj.offsets - h, axis=-1)
 
 
+def _placed_object_bound(
+    obj: ConvexObject, c: np.ndarray, R: np.ndarray, T: np.ndarray, params: np.ndarray
+) -> np.ndarray:
+    """:func:`_object_lower_bound` ``(D, G)`` [m] of geometries centred at ``c``
+    ``(D, G, 3)`` with orientations ``R`` ``(D, G, 3, 3)`` in the palm frame, the object
+    at ``T`` ``(D, 4, 4)``; ``params`` ``(G, 6)``."""
+    R_po = T[:, None, :3, :3]
+    c_o = np.matmul(c - T[:, None, :3, 3], T[:, :3, :3])  # R^T (x - p), object frame
+    R_og = R_po[..., 0, :, None] * R[..., 0, None, :]  # R_po^T R, term by term
+    R_og += R_po[..., 1, :, None] * R[..., 1, None, :]
+    R_og += R_po[..., 2, :, None] * R[..., 2, None, :]
+    return _object_lower_bound(obj, c_o, R_og, params[None])
+
+
 def _step_bound(c: np.ndarray, R: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Bound on how far any point of a body moves between consecutive samples.
 
@@ -397,13 +411,9 @@ class PairDistances:
         nm, n_g = self._nm, len(self.geoms)
         R, p, T = self._R[rows], self._p[rows], self._T[rows]
         # geometry vs object: the face-plane support bound, in the object frame
-        c = self._c[rows, :nm]
-        R_po = T[:, None, :3, :3]
-        c_o = np.matmul(c - T[:, None, :3, 3], T[:, :3, :3])  # R^T (x - p)
-        R_og = R_po[..., 0, :, None] * R[:, :nm, 0, None, :]  # R_po^T R, term by term
-        R_og += R_po[..., 1, :, None] * R[:, :nm, 1, None, :]
-        R_og += R_po[..., 2, :, None] * R[:, :nm, 2, None, :]
-        lb_obj = _object_lower_bound(self._obj, c_o, R_og, self._params[None, :nm])
+        lb_obj = _placed_object_bound(
+            self._obj, self._c[rows, :nm], R[:, :nm], T, self._params[:nm]
+        )
         # geometry vs geometry: bounding spheres first; near pairs get the capsule bound
         # and the separating-axis bound along the capsules' nearest-point direction
         i1, i2 = self.first[nm:], self.second[nm:]
@@ -661,13 +671,8 @@ def object_gap_bound(
     geoms = [_geometry(hand, g) for g in ids]
     R, p = _placements(geoms, q)  # (N, G, 3, 3), (N, G, 3)
     c = _place(R, p, np.array([g.centre for g in geoms]).reshape(-1, 3))
-    R_po = T[:, None, :3, :3]
-    c_o = np.matmul(c - T[:, None, :3, 3], T[:, :3, :3])  # R^T (x - p), object frame
-    R_og = R_po[..., 0, :, None] * R[..., 0, None, :]  # R_po^T R, term by term
-    R_og += R_po[..., 1, :, None] * R[..., 1, None, :]
-    R_og += R_po[..., 2, :, None] * R[..., 2, None, :]
     params = np.array([g.support for g in geoms]).reshape(-1, 6)
-    return _object_lower_bound(obj, c_o, R_og, params[None]).min(axis=1)
+    return _placed_object_bound(obj, c, R, T, params).min(axis=1)
 
 
 def capsule_gap(

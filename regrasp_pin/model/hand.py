@@ -136,7 +136,12 @@ class Finger:
     geometry_ids: tuple[int, ...] = ()
     tip_geometry_ids: tuple[int, ...] = ()
     tip_reach: TipReach | None = field(default=None, repr=False)
-    pad_cone_deg: float = PAD_CONE_STAND_IN_DEG
+
+    @property
+    def pad_cone_deg(self) -> float:
+        """See the class's attributes: from :attr:`tip_reach`."""
+        sphere = self.tip_reach is not None and self.tip_reach.has_tip_sphere()
+        return PAD_CONE_SPHERE_DEG if sphere else PAD_CONE_STAND_IN_DEG
 
     @property
     def k(self) -> int:
@@ -437,7 +442,6 @@ class Hand:
             else:
                 pad = _default_pad_axis(model, chain, lower, upper)
             geom_ids, tip_ids = _finger_geometries(model, collision, chain, tip)
-            reach = tip_reach(model, collision, tip, radius, tip_ids)
             built[finger_name] = Finger(
                 name=finger_name,
                 tip_frame=tip,
@@ -453,10 +457,7 @@ class Hand:
                 chain=chain,
                 geometry_ids=geom_ids,
                 tip_geometry_ids=tip_ids,
-                tip_reach=reach,
-                pad_cone_deg=PAD_CONE_SPHERE_DEG
-                if reach.has_tip_sphere()
-                else PAD_CONE_STAND_IN_DEG,
+                tip_reach=tip_reach(model, collision, tip, radius, tip_ids),
             )
         _check_disjoint(model, built)
         hand = cls(model, collision, visual, urdf, built, name or urdf.stem)
