@@ -128,8 +128,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
     print("-" * len(head))
     if any(r["route"] == "joint-space" for r in rows):
         print(
-            "* the joint-space fallback (no surface path passed): lift along P's normal, "
-            "move in joint space, land along Q's normal; wp counts its keyframes"
+            "* the joint-space fallback (no surface path passed): lift off P, move in "
+            "joint space, come down onto Q; wp counts its keyframes"
         )
     n = len(rows)
     if n:

@@ -30,8 +30,8 @@ no route keeps a narrower one); a finger near its joint limits is rerouted more
 strongly. A failure that only another duration can fix (velocity) ends the variants at
 once, for the caller
 (:mod:`.planning.search`). When no variant passes for another reason, the joint-space
-fallback (:mod:`.transfer`: lift along P's normal, a joint-space move through a raised
-via, approach along Q's normal; not in the paper) is tried, verified by the same
+fallback (:mod:`.transfer`: lift off P, a joint-space move through a raised via, come
+down onto Q; not in the paper) is tried, verified by the same
 check; its velocity failure is the one reported then (a longer duration may let it
 pass). ``route`` restricts a call to one of the two.
 It never returns a path that has not passed the check;

@@ -1,4 +1,4 @@
-"""The joint-space fallback of a regrasp: lift along P's normal, move, land along Q's normal.
+"""The joint-space fallback of a regrasp: lift off P, move, come down onto Q.
 
 The paper's regrasp follows a path over the virtually inflated surface
 (:mod:`.planning.regrasp`). Where no variant of that path passes -- the finger's
@@ -7,16 +7,17 @@ path crowds another finger -- the finger can still get there another way, the on
 release and a join take (:mod:`.release`, :mod:`.join`):
 
 1. *lift*: over the first ``LIFT_FRACTION`` of the duration the fingertip backs off
-   along P's outward normal, which turns with the object, to ``clearance_m`` above P
-   (minimum jerk);
+   to ``clearance_m`` above P's tangent plane, which turns with the object (minimum
+   jerk): along P's outward normal, or, where a joint limit keeps the finger from
+   that, along a direction tilted from it (:func:`~.lift.back_off`);
 2. *transfer*: a move in the finger's joint space to the configuration above Q, through
    a via configuration whose fingertip is raised away from the object (none: a straight
    move), shape-preserving (PCHIP) through the three configurations, minimum-jerk in
    time, plus a drift that fades in and out (zero at both ends) so that the joint
    velocities are continuous with the lift's and the approach's, which follow the
    moving object;
-3. *approach*: over the last ``LIFT_FRACTION`` the fingertip comes down along Q's
-   normal and touches Q at the landing time.
+3. *approach*: over the last ``LIFT_FRACTION`` the fingertip comes down onto Q the same
+   way (along its normal, or tilted) and touches Q at the landing time.
 
 The vias tried are the straight move and the midpoint of the two backed-off fingertips
 raised along the mean of the two normals by ``VIA_HEIGHTS`` times the clearance plus
@@ -35,12 +36,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from ..exceptions import FailureKind, PlanningError
+from ..exceptions import PlanningError
 from ..model.clearance import LinkClearance
 from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..verify.finger_motion import VerificationReport
+from .lift import back_off
 from .release import verify_or_raise
 from .timing import check_joint_speed, minimum_jerk, velocity_blend
 
@@ -144,8 +146,8 @@ def plan_transfer(
     T = motion.pose(times)
     off_lift = clearance_m * minimum_jerk(tau[lift] / LIFT_FRACTION)
     off_land = clearance_m * minimum_jerk((1.0 - tau[land]) / LIFT_FRACTION)
-    q_lift = _along_normal(f, T[lift], P, off_lift, np.asarray(q_start, float), ik_tol_m)
-    q_app = _along_normal(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m)
+    q_lift = back_off(f, T[lift], P, off_lift, np.asarray(q_start, float), ik_tol_m, Q[0])
+    q_app = back_off(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m, P[0])
     q_app = q_app[::-1]
     q_a, q_b = q_lift[-1], q_app[0]
     mid = times[i_a : i_b + 1]
@@ -254,38 +256,6 @@ def _transfer(
 
 def _over_speed(exc: PlanningError) -> float:
     return float(exc.measured or np.inf) / float(exc.required or 1.0)
-
-
-def _along_normal(
-    f: Finger,
-    T: np.ndarray,
-    contact: tuple[np.ndarray, np.ndarray],
-    offsets: np.ndarray,
-    q_seed: np.ndarray,
-    ik_tol_m: float,
-) -> np.ndarray:
-    """Configurations ``(S, k)`` whose fingertip sits ``offsets`` ``(S,)`` [m] above the
-    contact along its normal at object poses ``T`` ``(S, 4, 4)``, each warm-started from
-    the one before (the first from ``q_seed``)."""
-    p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
-    local = p[None] + (f.tip_radius + offsets)[:, None] * n[None]
-    targets = np.einsum("sij,sj->si", T[:, :3, :3], local) + T[:, :3, 3]
-    q = np.empty((len(T), f.k))
-    seed = q_seed
-    for i, target in enumerate(targets):
-        res = f.ik(target[None], seed, tol_m=ik_tol_m, restarts=False)
-        if res.error_m[0] > ik_tol_m:
-            raise PlanningError(
-                f"cannot move along the contact normal (residual {res.error_m[0] * 1e3:.2f} mm "
-                f"at {offsets[i] * 1e3:.1f} mm above it)",
-                finger=f.name,
-                time_s=None,
-                kind=FailureKind.IK_UNREACHABLE,
-                measured=float(res.error_m[0]),
-                required=ik_tol_m,
-            )
-        q[i] = seed = res.q[0]
-    return q
 
 
 def _via(

@@ -1,0 +1,168 @@
+"""Leaving a contact (and coming down onto one): the direction the fingertip takes.
+
+A fingertip that lets go of its contact P backs off from the surface; one that lands
+on Q comes down onto it. Along the contact's outward normal is the natural way, but
+the finger lets go *because* its contact has reached a joint limit, and there the
+normal may be out of reach: the tip would have to move where only the joint at its
+limit could take it (the IK stops millimetres short). Any direction that leaves the
+surface does as well for the object, since the fingertip only has to rise above the
+face before it travels. So the back-off is searched over directions:
+
+1. the normal first (where it is within reach nothing changes);
+2. then directions tilted from the normal by ``TILTS_DEG``, at ``AZIMUTHS`` azimuths
+   about it (the first pointing, along the surface, towards where the finger goes
+   next), ranked by how much of the move the finger can make to first order within
+   its joint limits (a bounded least-squares step of the tip Jacobian at the contact,
+   :func:`scipy.optimize.lsq_linear`); the ``MAX_TILTED`` best are tried.
+
+Along a direction ``d`` the tip centre rises to the same height above the contact's
+tangent plane as along the normal (it moves ``offset / (d . n)`` along ``d``): the
+clearance reached is the same, only the tip slides sideways on the way. Every
+direction is followed with warm-started IK at the object's poses, so the back-off moves
+with the object; what the finger then does is verified by the Coal check of its caller.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..exceptions import FailureKind, PlanningError
+from ..model.hand import Finger
+
+__all__ = ["AZIMUTHS", "MAX_TILTED", "TILTS_DEG", "back_off", "tilted_directions"]
+
+#: Tilts from the contact normal of the directions tried when the normal is out of
+#: reach [deg].
+TILTS_DEG = (30.0, 60.0)
+#: Azimuths about the normal per tilt.
+AZIMUTHS = 8
+#: Most tilted directions followed with IK (the best ranked at first order).
+MAX_TILTED = 4
+#: First-order shares of the move within the joint limits closer than this are ties,
+#: broken by the smaller tilt, then the azimuth's order [-].
+_SHARE_TOL = 1e-3
+
+
+def tilted_directions(
+    f: Finger,
+    T: np.ndarray,
+    contact: tuple[np.ndarray, np.ndarray],
+    q: np.ndarray,
+    height_m: float,
+    toward: np.ndarray | None = None,
+) -> np.ndarray:
+    """Directions ``(D, 3)`` (object frame, unit) tilted from the contact's outward
+    normal to back off along when the normal is out of reach, in the order to try them:
+    the (at most ``MAX_TILTED``) ones the finger at ``q`` ``(k,)`` [rad] can follow
+    furthest to first order within its joint limits (module docstring).
+
+    Args:
+        f: The finger.
+        T: ``(4, 4)`` the object's pose in the palm frame.
+        contact: ``(point, outward normal)``, object frame [m].
+        q: ``(k,)`` the finger holding the contact [rad].
+        height_m: How high above the tangent plane the back-off goes [m].
+        toward: A point (object frame) the finger goes to next: the first azimuth
+            points along the surface towards it (None, or right above the contact:
+            a fixed basis).
+    """
+    n = np.asarray(contact[1], float)
+    n = n / np.linalg.norm(n)
+    e1 = _tangent_towards(n, None if toward is None else np.asarray(toward, float) - contact[0])
+    e2 = np.cross(n, e1)
+    azimuths = 2.0 * np.pi * np.arange(AZIMUTHS) / AZIMUTHS
+    tilts = np.radians(np.asarray(TILTS_DEG, float))
+    tilt, az = np.repeat(tilts, AZIMUTHS), np.tile(azimuths, tilts.size)
+    dirs = np.cos(tilt)[:, None] * n + np.sin(tilt)[:, None] * (
+        np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2
+    )
+    _, J = f.jacobian(q)
+    R = np.asarray(T, float)[:3, :3]
+    lo = np.minimum(f.lower - q, 0.0)  # a joint at (or past) a limit moves only back
+    hi = np.maximum(np.maximum(f.upper - q, 0.0), lo + 1e-12)
+    share = np.empty(len(dirs))
+    for i, d in enumerate(dirs):  # D = len(TILTS_DEG) * AZIMUTHS small solves
+        move = (height_m / np.cos(tilt[i])) * (R @ d)
+        step = lsq_linear(J, move, bounds=(lo, hi)).x
+        share[i] = float(move @ (J @ step)) / float(move @ move)
+    rounded = np.round(share / _SHARE_TOL)
+    order = np.lexsort((np.arange(len(dirs)), tilt, -rounded))[:MAX_TILTED]
+    return dirs[order]
+
+
+def back_off(
+    f: Finger,
+    T: np.ndarray,
+    contact: tuple[np.ndarray, np.ndarray],
+    offsets: np.ndarray,
+    q_seed: np.ndarray,
+    ik_tol_m: float,
+    toward: np.ndarray | None = None,
+) -> np.ndarray:
+    """Configurations ``(S, k)`` whose fingertip rises ``offsets`` ``(S,)`` [m] above
+    the contact's tangent plane at object poses ``T`` ``(S, 4, 4)``: along the outward
+    normal or, when IK cannot follow it, along the first of :func:`tilted_directions`
+    that it follows (each sample warm-started from the one before, the first from
+    ``q_seed``, the configuration at the contact).
+
+    Raises:
+        PlanningError: ``ik-unreachable`` when no direction can be followed; its
+            numbers are those of the normal.
+    """
+    n = np.asarray(contact[1], float)
+    try:
+        return _along(f, T, contact, n / np.linalg.norm(n), offsets, q_seed, ik_tol_m)
+    except PlanningError as exc:
+        normal = exc
+    height = float(np.max(offsets))
+    for d in tilted_directions(f, T[0], contact, q_seed, height, toward):
+        try:
+            return _along(f, T, contact, d, offsets, q_seed, ik_tol_m)
+        except PlanningError:
+            continue
+    raise normal
+
+
+def _tangent_towards(n: np.ndarray, v: np.ndarray | None) -> np.ndarray:
+    """A unit tangent of the plane with normal ``n``: along ``v``'s tangential part when
+    that is not negligible, else along the frame's x axis (its y axis where ``n`` is
+    within 26 deg of x)."""
+    if v is not None:
+        t = v - (v @ n) * n
+        if np.linalg.norm(t) > 1e-6:
+            return t / np.linalg.norm(t)
+    axis = np.eye(3)[0] if abs(n[0]) < 0.9 else np.eye(3)[1]
+    t = axis - (axis @ n) * n
+    return t / np.linalg.norm(t)
+
+
+def _along(
+    f: Finger,
+    T: np.ndarray,
+    contact: tuple[np.ndarray, np.ndarray],
+    d: np.ndarray,
+    offsets: np.ndarray,
+    q_seed: np.ndarray,
+    ik_tol_m: float,
+) -> np.ndarray:
+    """The back-off along the unit direction ``d`` (object frame), or ik-unreachable."""
+    p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
+    local = p[None] + f.tip_radius * n[None] + (offsets / float(d @ n))[:, None] * d[None]
+    targets = np.einsum("sij,sj->si", T[:, :3, :3], local) + T[:, :3, 3]
+    q = np.empty((len(T), f.k))
+    seed = q_seed
+    for i, target in enumerate(targets):
+        res = f.ik(target[None], seed, tol_m=ik_tol_m, restarts=False)
+        if res.error_m[0] > ik_tol_m:
+            raise PlanningError(
+                f"cannot back off from the contact (residual {res.error_m[0] * 1e3:.2f} mm "
+                f"at {offsets[i] * 1e3:.1f} mm above it)",
+                finger=f.name,
+                time_s=None,
+                kind=FailureKind.IK_UNREACHABLE,
+                measured=float(res.error_m[0]),
+                required=ik_tol_m,
+            )
+        q[i] = seed = res.q[0]
+    return q

@@ -1,0 +1,129 @@
+"""Tests of backing off from a contact (regrasp_pin.planning.lift).
+
+The contacts are made from the five-finger hand's index finger itself: a configuration
+with one joint at a limit, and a contact whose outward normal is the direction in which
+only that joint, moving past its limit, would take the fingertip. Along that normal the
+IK cannot follow; a tilted direction can, and the fingertip then rises exactly as high
+above the contact's tangent plane as asked (forward kinematics of the result).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from regrasp_pin.exceptions import FailureKind, PlanningError
+from regrasp_pin.model.hand import Hand
+from regrasp_pin.planning import lift
+
+IK_TOL_M = 1e-5
+OFFSETS = 0.005 * np.linspace(0.0, 1.0, 11) ** 2  # [m], the lift's minimum-jerk-like rise
+
+
+@pytest.fixture(scope="module")
+def index():
+    return Hand.five_finger().finger("index")
+
+
+def poses(n: int, turn_deg: float, about: np.ndarray) -> np.ndarray:
+    """``(n, 4, 4)`` object poses in the palm frame: a turn of up to ``turn_deg`` about
+    the palm's z axis through ``about`` (the object frame is the palm frame at s=0)."""
+    T = np.repeat(np.eye(4)[None], n, axis=0)
+    R = Rotation.from_euler("z", np.linspace(0.0, turn_deg, n)[:, None], degrees=True).as_matrix()
+    T[:, :3, :3] = R
+    T[:, :3, 3] = about - np.einsum("nij,j->ni", R, about)
+    return T
+
+
+def contacts_past_a_limit(f, seed: int = 0, tries: int = 400):
+    """Yield ``(q, contact)``: ``q`` with one joint at a limit, the contact's normal the
+    direction only that joint moving past the limit gives the fingertip."""
+    rng = np.random.default_rng(seed)
+    for _ in range(tries):
+        q = rng.uniform(f.lower, f.upper)
+        j, upper = int(rng.integers(f.k)), bool(rng.integers(2))
+        q[j] = f.upper[j] if upper else f.lower[j]
+        p, J = f.jacobian(q)
+        v = J[:, j] if upper else -J[:, j]
+        if np.linalg.norm(v) < 1e-3:
+            continue
+        n = v / np.linalg.norm(v)
+        yield q, (p - f.tip_radius * n, n)
+
+
+def heights_above(f, q: np.ndarray, T: np.ndarray, contact) -> np.ndarray:
+    """The fingertip centre's height above the contact's tangent plane minus the tip
+    radius, object frame [m] (forward kinematics)."""
+    tips_palm = f.fk(q)
+    tips_obj = np.einsum("nji,nj->ni", T[:, :3, :3], tips_palm - T[:, :3, 3])
+    return (tips_obj - contact[0]) @ contact[1] - f.tip_radius
+
+
+def test_where_the_normal_is_out_of_reach_a_tilted_back_off_rises_as_asked(index):
+    f, T = index, poses(len(OFFSETS), 3.0, np.array([0.0, 0.05, 0.1]))
+    rescued = 0
+    for q, contact in contacts_past_a_limit(f):
+        with pytest.raises(PlanningError):
+            lift._along(f, T, contact, contact[1], OFFSETS, q, IK_TOL_M)
+        try:
+            qs = lift.back_off(f, T, contact, OFFSETS, q, IK_TOL_M)
+        except PlanningError as exc:
+            assert exc.kind == FailureKind.IK_UNREACHABLE
+            continue
+        rescued += 1
+        np.testing.assert_allclose(heights_above(f, qs, T, contact), OFFSETS, atol=2 * IK_TOL_M)
+        assert np.all(f.within_limits(qs, 1e-9))
+        # the fingertip left along one of the tilted directions (object frame)
+        tips = np.einsum("nji,nj->ni", T[:, :3, :3], f.fk(qs) - T[:, :3, 3])
+        d = tips[-1] - (contact[0] + f.tip_radius * contact[1])
+        tilt = np.degrees(np.arccos(d @ contact[1] / np.linalg.norm(d)))
+        assert min(abs(tilt - t) for t in lift.TILTS_DEG) < 0.1
+        if rescued == 3:
+            break
+    assert rescued == 3
+
+
+def test_where_nothing_can_be_followed_the_failure_is_the_normals(index):
+    f, T = index, poses(len(OFFSETS), 0.0, np.zeros(3))
+    q = f.q_mid.copy()
+    p = f.fk(q)
+    n = p / np.linalg.norm(p)  # away from the palm: out of reach 1 m up
+    contact = (p - f.tip_radius * n, n)
+    far = OFFSETS * 200.0
+    with pytest.raises(PlanningError) as normal:
+        lift._along(f, T, contact, n, far, q, IK_TOL_M)
+    with pytest.raises(PlanningError) as exc:
+        lift.back_off(f, T, contact, far, q, IK_TOL_M)
+    assert exc.value.kind == FailureKind.IK_UNREACHABLE
+    assert exc.value.measured == pytest.approx(normal.value.measured)
+    assert exc.value.required == IK_TOL_M
+
+
+def test_tilted_directions_leave_the_surface_at_the_tilts(index):
+    f = index
+    for q, contact in list(contacts_past_a_limit(f, seed=1))[:5]:
+        dirs = lift.tilted_directions(f, np.eye(4), contact, q, 0.005)
+        n = contact[1]
+        assert len(dirs) == lift.MAX_TILTED
+        np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0)
+        tilts = np.degrees(np.arccos(np.clip(dirs @ n, -1.0, 1.0)))
+        assert all(min(abs(t - s) for s in lift.TILTS_DEG) < 1e-6 for t in tilts)
+
+
+def test_with_every_direction_in_reach_the_ties_go_to_the_small_tilt_towards_the_goal(index):
+    """Far from limits and singularities the finger follows every direction to first
+    order (all shares 1): the tilted ones come in the order smaller tilt first, the
+    first of them leaning towards ``toward``."""
+    f = index
+    q = 0.5 * (f.lower + f.upper)
+    p = f.fk(q)
+    n = np.array([0.0, 0.0, 1.0])
+    contact = (p - f.tip_radius * n, n)
+    goal = contact[0] + np.array([0.01, 0.02, 0.0])
+    dirs = lift.tilted_directions(f, np.eye(4), contact, q, 1e-4, toward=goal)
+    tilts = np.degrees(np.arccos(dirs @ n))
+    np.testing.assert_allclose(tilts, min(lift.TILTS_DEG), atol=1e-6)
+    lean = dirs[0] - (dirs[0] @ n) * n
+    along = (goal - contact[0]) / np.linalg.norm(goal - contact[0])
+    np.testing.assert_allclose(lean / np.linalg.norm(lean), along, atol=1e-9)
