@@ -20,6 +20,7 @@ from .exceptions import (
     ModelFileError,
     PlanningError,
     RegraspError,
+    UnfoldError,
     UnknownNameError,
     VerificationError,
 )
@@ -103,6 +104,7 @@ __all__ = [
     "SurfaceSample",
     "TipPath",
     "Transfer",
+    "UnfoldError",
     "UnknownNameError",
     "VerificationError",
     "VerificationReport",

@@ -82,6 +82,12 @@ class GeometryError(RegraspError, ValueError):
     """An object description is empty, degenerate or not convex where it must be."""
 
 
+class UnfoldError(GeometryError):
+    """No chain of adjacent faces joins P's face to Q's face without overlapping once
+    unfolded: the surface route between them cannot be gridded (a regrasp then takes
+    its joint-space fallback)."""
+
+
 class FailureKind(str, Enum):
     """Why a planning step failed: what a caller (or the planner itself) decides on.
 

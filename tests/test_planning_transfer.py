@@ -26,7 +26,7 @@ from test_planning_regrasp import (
 )
 
 import regrasp_pin.planning.regrasp as regrasp_module
-from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
+from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, UnfoldError
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.planning.regrasp import RegraspParams
 from regrasp_pin.planning.transfer import LIFT_FRACTION, Transfer, plan_transfer
@@ -200,6 +200,34 @@ def test_plan_regrasp_falls_back_to_the_transfer_when_no_surface_variant_passes(
     monkeypatch.undo()
     plain = scene.plan(i_p, i_q, q_land=scene.manifold.q[1, i_q])
     assert plain.route == "surface" and plain.grid_path is not None
+
+
+def test_where_no_region_can_be_unfolded_the_transfer_is_the_route(scenes, checker, monkeypatch):
+    """P and Q too many faces apart (a mesh with many small faces) leave no region to
+    grid: that is a ``grid-unreachable`` attempt of the surface route, and the transfer
+    goes instead; with the surface route alone it is the failure."""
+    scene = scenes["edge-moving"]
+    i_p, i_q = (scene.contact(c) for c in CASES[5][1:])
+    q_land = scene.manifold.q[1, i_q]
+
+    def too_far(obj, P, Q, **kwargs):
+        raise UnfoldError("the region cannot be unfolded (test)")
+
+    monkeypatch.setattr(regrasp_module, "build_surface_grid", too_far)
+    result = scene.plan(i_p, i_q, q_land=q_land)
+    assert result.route == "joint-space" and result.report.ok
+    assert [(a.kind, a.what) for a in result.attempts] == [
+        (FailureKind.GRID_UNREACHABLE, "surface grid")
+    ]
+    recheck_transfer(checker, scene, result.times_s, result.q, 0.0, result.params.duration_s)
+    with pytest.raises(PlanningError) as info:
+        scene.plan(i_p, i_q, q_land=q_land, route="surface")
+    assert info.value.kind == FailureKind.GRID_UNREACHABLE
+    # where the transfer fails too, its failure is the one reported
+    short = dataclasses.replace(PARAMS, duration_s=0.04)
+    with pytest.raises(PlanningError) as info:
+        scene.plan(i_p, i_q, params=short, q_land=q_land)
+    assert info.value.kind == FailureKind.VELOCITY
 
 
 def test_when_the_transfer_fails_too_the_error_keeps_every_attempt(scenes, monkeypatch):

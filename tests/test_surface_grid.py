@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from regrasp_pin.exceptions import GeometryError, InputError
+from regrasp_pin.exceptions import InputError, UnfoldError
 from regrasp_pin.model.objects import Box, ConvexMesh, Prism
 from regrasp_pin.surface.grid import build_surface_grid
 from regrasp_pin.surface.path import shortest_grid_path
@@ -71,7 +71,7 @@ def test_top_to_bottom_goes_over_the_nearest_side(box):
     assert_close(grid.geodesic_m, 0.06, atol=1e-12)
     path = shortest_grid_path(grid)
     assert 0.06 - 1e-12 <= path.length_m <= 1.03 * 0.06
-    with pytest.raises(GeometryError, match="region cannot be unfolded"):
+    with pytest.raises(UnfoldError, match="region cannot be unfolded"):
         build_surface_grid(box, P, Q, spacing_m=SPACING, max_faces=2)
 
 
@@ -167,7 +167,7 @@ def test_geodesic_bounds_on_random_pairs(box, mesh):
             P, Q = sample.points[i], sample.points[j]
             try:
                 grid = build_surface_grid(obj, P, Q, spacing_m=SPACING)
-            except GeometryError:
+            except UnfoldError:
                 continue  # farther than max_faces faces apart
             assert grid.geodesic_m >= np.linalg.norm(Q - P) - 1e-12
             path = shortest_grid_path(grid)

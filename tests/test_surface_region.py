@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from regrasp_pin.exceptions import GeometryError, InputError
+from regrasp_pin.exceptions import InputError, UnfoldError
 from regrasp_pin.model.objects import Box
 from regrasp_pin.surface.region import choose_region
 from tests.conftest import assert_close, face_with_normal
@@ -47,7 +47,7 @@ def test_the_chain_with_the_shortest_route_is_chosen(box):
         face_with_normal(box, [0, 0, -1]),
     )
     assert_close(region.geodesic_m, 0.06, atol=1e-12)
-    with pytest.raises(GeometryError, match="region cannot be unfolded"):
+    with pytest.raises(UnfoldError, match="region cannot be unfolded"):
         choose_region(box, P, Q, max_faces=2, include_neighbours=True)
 
 

@@ -51,9 +51,16 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from .._validate import as_array, positive
-from ..exceptions import Attempt, FailureKind, InputError, PlanningError, VerificationError
+from ..exceptions import (
+    Attempt,
+    FailureKind,
+    InputError,
+    PlanningError,
+    UnfoldError,
+    VerificationError,
+)
 from ..model.clearance import LinkClearance
-from ..model.hand import Hand
+from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..model.scene import Scene
@@ -322,18 +329,15 @@ def plan_regrasp(
         else as_array(others_tips_object, "others_tips_object", (None, 3))
     )
     stages = _Stages()
-    grid = build_surface_grid(obj, P, Q, spacing_m=params.grid_spacing_m, max_detour=_DETOUR)
-    stages.lap("grid")
-    # the other fingers over the whole regrasp: they hold, and move with the object
-    t_others = float(t_start) + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
-    q_others = np.asarray(q_hand(t_others), float)
-    stages.lap("others")
-    task = RegraspTask(scene, f, float(t_start), q0, grid, q_hand, others, t_others, q_others)
-
     attempts: list[Attempt] = []
     last: PlanningError | None = None
     if route != "joint-space":
-        found = _surface_variants(task, params, stages, attempts)
+        task = _surface_route(scene, f, float(t_start), q0, P, Q, others, q_hand, params, stages)
+        if isinstance(task, PlanningError):
+            attempts.append(task.as_attempt("surface grid"))
+            found: RegraspResult | PlanningError = task
+        else:
+            found = _surface_variants(task, params, stages, attempts)
         if isinstance(found, RegraspResult):
             return replace(
                 found,
@@ -370,8 +374,10 @@ def plan_regrasp(
         except PlanningError as exc:
             attempts.append(exc.as_attempt("joint-space transfer"))
             log.debug("regrasp %s joint-space transfer failed: %s", f.name, exc)
-            if last is None or exc.kind == FailureKind.VELOCITY:
-                last = exc  # the only failure, or one a longer duration may fix
+            if last is None or FailureKind.GRID_UNREACHABLE in (last.kind, None) or (
+                exc.kind == FailureKind.VELOCITY
+            ):
+                last = exc  # the only route tried, or a failure a longer duration may fix
         else:
             stages.lap("transfer")
             log.info(
@@ -395,6 +401,39 @@ def plan_regrasp(
         required=last.required,
         attempts=attempts,
     )
+
+
+def _surface_route(
+    scene: Scene,
+    f: Finger,
+    t_start: float,
+    q0: np.ndarray,
+    P: np.ndarray,
+    Q: np.ndarray,
+    others: np.ndarray,
+    q_hand: Callable[[np.ndarray], np.ndarray],
+    params: RegraspParams,
+    stages: _Stages,
+) -> RegraspTask | PlanningError:
+    """The surface route's task (its grid, the other fingers over the regrasp, which
+    hold and move with the object), or a ``grid-unreachable`` failure where the region
+    holding P and Q cannot be unfolded."""
+    try:
+        grid = build_surface_grid(
+            scene.obj, P, Q, spacing_m=params.grid_spacing_m, max_detour=_DETOUR
+        )
+    except UnfoldError as exc:
+        return PlanningError(
+            f"no surface route: {exc}",
+            finger=f.name,
+            time_s=t_start,
+            kind=FailureKind.GRID_UNREACHABLE,
+        )
+    stages.lap("grid")
+    t_others = t_start + np.linspace(0.0, params.duration_s, _OTHERS_TIMES)
+    q_others = np.asarray(q_hand(t_others), float)
+    stages.lap("others")
+    return RegraspTask(scene, f, t_start, q0, grid, q_hand, others, t_others, q_others)
 
 
 def _surface_variants(

@@ -230,8 +230,9 @@ def build_surface_grid(
         InputError: if P or Q is not within 1e-6 m of the surface (the message gives
             the distance), if P and Q are closer than ``spacing_m / 2``, or if
             ``spacing_m`` or ``max_faces`` is not valid.
-        GeometryError: if no chain of at most ``max_faces`` faces joins P's face to
-            Q's face without overlapping once unfolded (the region cannot be unfolded).
+        UnfoldError: if no chain of at most ``max_faces`` faces joins P's face to
+            Q's face without overlapping once unfolded (the region cannot be unfolded;
+            a :class:`~regrasp_pin.exceptions.GeometryError`).
     """
     s = positive(spacing_m, "spacing_m")
     n_max = positive_int(max_faces, "max_faces", minimum=1)

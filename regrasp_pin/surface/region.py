@@ -17,7 +17,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ..exceptions import GeometryError, InputError
+from ..exceptions import InputError, UnfoldError
 from ..model.objects import ConvexObject
 from .unfolding import FaceUnfolding, polygons_overlap, segments_inside, unfold_faces
 
@@ -82,7 +82,7 @@ def choose_region(
         if np.isfinite(key[0]) and (best is None or key < best):
             best, best_uv = key, (pieces, p_uv, q_uv)
     if best is None or best_uv is None:
-        raise GeometryError(
+        raise UnfoldError(
             f"the region cannot be unfolded: no chain of at most {max_faces} adjacent faces "
             f"joins P's face {p_faces} to Q's face {q_faces} without overlapping"
         )
