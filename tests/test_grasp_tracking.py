@@ -274,3 +274,42 @@ def test_bad_input_is_rejected(scene):
         track_contact(hand, "index", box, motion, np.array([0.0, 9.0]), p, n, q0)
     with pytest.raises(UnknownNameError, match="valid names"):
         track_contact(hand, "pinky", box, motion, TIMES, p, n, q0)
+
+
+def test_a_redundant_fingers_spare_joint_keeps_its_fingertip_link_off_the_face(monkeypatch):
+    """Suite spec 25 (Allegro, a box turned and moved): the thumb's start contact leaves
+    its distal box flush with the face, and plain warm-started IK lets the box sink in
+    within 0.1 s; turned by its spare joint (grasp.settle) the thumb holds to the end,
+    its fingertip link off the face as Coal measures it, no joint faster than its limit."""
+    import regrasp_pin.grasp.tracking as tracking_module
+    from regrasp_pin.suite import build_scenario, generate_specs
+
+    scen = build_scenario(generate_specs(26, seed=0)[25])
+    g, f = scen.grasp, scen.hand.finger("thumb")
+    times = np.arange(0.0, scen.motion.t_end, 0.01)
+
+    def track():
+        return track_contact(
+            scen.hand,
+            "thumb",
+            scen.obj,
+            scen.motion,
+            times,
+            g.points_object["thumb"],
+            g.normals_object["thumb"],
+            g.q["thumb"],
+        )
+
+    settled = track()
+    assert settled.trigger()[0] is None and settled.holdable.all()
+    assert settled.tip_clearance_m.min() >= -ContactModel().tip_penetration_m
+    speed = np.abs(np.diff(settled.q, axis=0)) / np.diff(times)[:, None]
+    assert np.all(speed <= f.velocity_limit)
+    monkeypatch.setattr(
+        tracking_module, "settle_tip_link", lambda finger, q, *args, **kwargs: q.copy()
+    )
+    plain = track()
+    t_lost = plain.trigger()[0]
+    assert t_lost is not None and t_lost <= 0.1
+    i = plain.trigger_index()
+    assert plain.tip_clearance_m[i] < -ContactModel().tip_penetration_m

@@ -22,6 +22,7 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from .contact import ContactModel, pad_cosines, tip_targets
+from .settle import settle_tip_link
 
 __all__ = ["ContactTrack", "track_contact"]
 
@@ -142,13 +143,21 @@ def track_contact(
     cos_cone = contact.cos_cone_of(f)
     lost_at = times.size - 1  # the last time followed
     prev = q0
+    # a joint moves at most as far as its velocity limit takes it in one time step
+    allow = f.velocity_limit * (float(np.diff(times).min()) if times.size > 1 else 0.0)
     for s0 in range(0, times.size, chunk):
         s1 = min(s0 + chunk, times.size)
         res = f.ik(targets[s0:s1], prev, tol_m=contact.ik_tol_m)
         q[s0:s1], err[s0:s1] = res.q, res.error_m
-        margin[s0:s1] = np.minimum(res.q - f.lower, f.upper - res.q).min(axis=1)
-        pad_cos[s0:s1] = pad_cosines(f, res.q, n_palm[s0:s1])
-        prev = res.q[-1]
+        # a spare joint turns the fingertip link off the face (grasp.settle)
+        held = s0 + np.flatnonzero(res.error_m <= contact.ik_tol_m)
+        q[held] = settle_tip_link(
+            f, q[held], targets[held], n_palm[held], ik_tol_m=contact.ik_tol_m, max_change_rad=allow
+        )
+        err[held] = np.linalg.norm(f.fk(q[held]) - targets[held], axis=1)
+        margin[s0:s1] = np.minimum(q[s0:s1] - f.lower, f.upper - q[s0:s1]).min(axis=1)
+        pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])
+        prev = q[s1 - 1]
         lost = _lost(err[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact, cos_cone)
         if lost.any():
             lost_at = s0 + int(np.argmax(lost))

@@ -1,0 +1,131 @@
+"""A redundant finger's spare joints: keeping the fingertip link off the face it holds.
+
+Position IK fixes the fingertip centre: three coordinates. A finger with more joints
+(the Allegro's four, the Shadow Hand's thumb) can still turn its fingertip about the
+tip centre without moving it, and where warm-started IK leaves that turn is an accident
+of the seed. The turn decides whether the fingertip link reaches past the plane on
+which the tip sphere rests (:meth:`~regrasp_pin.model.tip_reach.TipReach.overshoot`):
+the Allegro's distal box lets the pad tilt only about 5 deg towards the palm, so a
+contact followed through the object's motion sinks the box into the face after a few
+degrees, although a small move of the spare joint (a few hundredths of a radian) would
+tilt the fingertip back.
+
+:func:`settle_tip_link` makes that move where the link would reach past the plane (by
+at most ``SETTLE_WITHIN_M``: further, a small turn does not lift it off): a
+step in the null space of the tip's position Jacobian along the overshoot's descent
+(forward differences), sized to bring the overshoot to ``SETTLE_TO_M`` below the plane
+to first order (shortened to stay within the allowance), then the tip put back on its
+target by IK (warm-started, no restarts).
+A step is kept only where the IK reaches the target within its tolerance, inside the
+joint limits, and the overshoot fell; at most ``MAX_STEPS`` steps, each joint moving at
+most ``max_change_rad`` in all. A finger without spare joints, or without fingertip
+geometries the overshoot reads, is returned unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.hand import Finger
+
+__all__ = ["MAX_STEPS", "SETTLE_TO_M", "SETTLE_WITHIN_M", "settle_tip_link"]
+
+#: The overshoot a settle aims at: this far below the plane the tip sphere rests on [m].
+SETTLE_TO_M = 1e-4
+#: Configurations whose link reaches further than this past the plane are left as they
+#: are [m]: a turn within a time step's allowance rarely lifts them off (over the
+#: Allegro's manifolds of its demo: 3 % of those reaching 1-2 mm past, 0.1 % beyond,
+#: against 39 % of those up to 1 mm; most that sink reach 2-40 mm past).
+SETTLE_WITHIN_M = 1e-3
+#: Most null-space steps per configuration.
+MAX_STEPS = 6
+_FD_RAD = 1e-6  # finite-difference step of the overshoot's gradient [rad]
+
+
+def settle_tip_link(
+    finger: Finger,
+    q: np.ndarray,
+    targets_palm: np.ndarray,
+    normals_palm: np.ndarray,
+    *,
+    ik_tol_m: float,
+    above_m: float = 0.0,
+    max_change_rad: float | np.ndarray = 0.2,
+) -> np.ndarray:
+    """Configurations ``(N, k)`` holding the same tip centres with the fingertip link
+    turned off the face where it reached past the tip sphere's tangent plane (module
+    docstring).
+
+    Args:
+        finger: The finger.
+        q: ``(N, k)`` configurations reaching ``targets_palm`` [rad].
+        targets_palm: ``(N, 3)`` their tip-centre targets, palm frame [m].
+        normals_palm: ``(N, 3)`` the outward surface normals at the contacts, palm frame.
+        ik_tol_m: IK tolerance a settled configuration must meet [m].
+        above_m: Configurations whose overshoot is above this (and at most
+            ``SETTLE_WITHIN_M``) are settled [m].
+        max_change_rad: Most any joint may move in all [rad] (scalar or ``(k,)``).
+
+    Returns:
+        ``(N, k)``: a copy of ``q`` with the rows that could be settled replaced.
+    """
+    q = np.array(q, dtype=float, copy=True)
+    reach = finger.tip_reach
+    if finger.k <= 3 or reach is None or reach.params.shape[0] == 0 or q.shape[0] == 0:
+        return q
+    targets = np.asarray(targets_palm, float)
+    normals = np.asarray(normals_palm, float)
+    over = _overshoot(finger, q, normals)
+    todo = np.flatnonzero((over > above_m) & (over <= SETTLE_WITHIN_M))
+    lo = np.maximum(finger.lower, q[todo] - max_change_rad)
+    hi = np.minimum(finger.upper, q[todo] + max_change_rad)
+    for _ in range(MAX_STEPS):
+        if todo.size == 0:
+            break
+        qa, n = q[todo], normals[todo]
+        g = _gradient(finger, qa, n, over[todo])
+        _, J = finger.jacobian(qa)
+        # the projector onto the null space of J (rank 3 away from singularities)
+        JJt = J @ np.swapaxes(J, 1, 2) + 1e-12 * np.eye(3)
+        null = np.eye(finger.k)[None] - np.swapaxes(J, 1, 2) @ np.linalg.solve(JJt, J)
+        d = -np.einsum("mij,mj->mi", null, g)
+        slope = np.einsum("mi,mi->m", g, d)  # <= 0 along the descent
+        drop = over[todo] + SETTLE_TO_M
+        with np.errstate(divide="ignore", invalid="ignore"):
+            alpha = np.where(slope < -1e-12, drop / -slope, 0.0)
+        # no further than the allowance left (90 %: the IK's correction is second order)
+        room = np.where(d > 0.0, hi - qa, qa - lo)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fit = np.where(np.abs(d) > 1e-15, 0.9 * room / np.abs(d), np.inf).min(axis=1)
+        q_try = np.clip(qa + np.minimum(alpha, fit)[:, None] * d, lo, hi)
+        res = finger.ik(targets[todo], q_try, tol_m=ik_tol_m, restarts=False)
+        q_new = res.q
+        new_over = _overshoot(finger, q_new, n)
+        inside = np.all((q_new >= lo - 1e-12) & (q_new <= hi + 1e-12), axis=1)
+        better = res.success & inside & (new_over < over[todo] - 1e-9)
+        q[todo[better]] = q_new[better]
+        over[todo[better]] = new_over[better]
+        keep = better & (new_over > above_m)
+        todo, lo, hi = todo[keep], lo[keep], hi[keep]
+    return q
+
+
+def _overshoot(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
+    """``(N,)`` how far the fingertip link reaches past the tip sphere's tangent plane at
+    the contact with outward normal ``normals_palm`` [m]."""
+    R, _ = finger.chain.poses(q)
+    u_tip = -np.einsum("nji,nj->ni", R, normals_palm)  # R^T (-n): into the object
+    assert finger.tip_reach is not None
+    return finger.tip_reach.overshoot(u_tip)
+
+
+def _gradient(
+    finger: Finger, q: np.ndarray, normals_palm: np.ndarray, over: np.ndarray
+) -> np.ndarray:
+    """``(N, k)`` the overshoot's gradient in the joints (forward differences from the
+    overshoot ``over`` ``(N,)`` at ``q``)."""
+    m, k = q.shape
+    qq = q[:, None, :] + _FD_RAD * np.eye(k)[None]
+    nn = np.repeat(normals_palm[:, None, :], k, axis=1)
+    o = _overshoot(finger, qq.reshape(-1, k), nn.reshape(-1, 3)).reshape(m, k)
+    return (o - over[:, None]) / _FD_RAD
