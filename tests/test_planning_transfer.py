@@ -223,11 +223,16 @@ def test_where_no_region_can_be_unfolded_the_transfer_is_the_route(scenes, check
     with pytest.raises(PlanningError) as info:
         scene.plan(i_p, i_q, q_land=q_land, route="surface")
     assert info.value.kind == FailureKind.GRID_UNREACHABLE
-    # where the transfer fails too, its failure is the one reported
-    short = dataclasses.replace(PARAMS, duration_s=0.04)
+    # where the transfer fails too, its failure is the one reported, whatever its kind
+
+    def blocked(*args, **kwargs):
+        raise PlanningError("blocked (test)", finger=FINGER, kind=FailureKind.OBJECT_CLEARANCE)
+
+    monkeypatch.setattr(regrasp_module, "plan_transfer", blocked)
     with pytest.raises(PlanningError) as info:
-        scene.plan(i_p, i_q, params=short, q_land=q_land)
-    assert info.value.kind == FailureKind.VELOCITY
+        scene.plan(i_p, i_q, q_land=q_land)
+    assert info.value.kind == FailureKind.OBJECT_CLEARANCE
+    assert [a.what for a in info.value.attempts] == ["surface grid", "joint-space transfer"]
 
 
 def test_when_the_transfer_fails_too_the_error_keeps_every_attempt(scenes, monkeypatch):

@@ -16,19 +16,22 @@ step in the null space of the tip's position Jacobian along the overshoot's desc
 (forward differences), sized to bring the overshoot to ``SETTLE_TO_M`` below the plane
 to first order (shortened to stay within the allowance), then the tip put back on its
 target by IK (warm-started, no restarts).
-A step is kept only where the IK reaches the target within its tolerance, inside the
-joint limits, and the overshoot fell; at most ``MAX_STEPS`` steps, each joint moving at
-most ``max_change_rad`` in all. A finger without spare joints, or without fingertip
-geometries the overshoot reads, is returned unchanged.
+A step is kept only where the IK reaches the target within its tolerance, the joints
+stay within their limits and within ``max_change_rad`` of a given configuration (the
+time before, when a contact is followed), the overshoot fell, and neither the pad
+turned beyond its cone nor a joint came nearer a limit than the trigger's margin
+(unless they already had); at most ``MAX_STEPS`` steps. A finger without spare joints,
+or without fingertip geometries the overshoot reads, is returned unchanged.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .._validate import as_array
 from ..model.hand import Finger
 
-__all__ = ["MAX_STEPS", "SETTLE_TO_M", "SETTLE_WITHIN_M", "settle_tip_link"]
+__all__ = ["MAX_STEPS", "SETTLE_TO_M", "SETTLE_WITHIN_M", "settle_tip_link", "sinking"]
 
 #: The overshoot a settle aims at: this far below the plane the tip sphere rests on [m].
 SETTLE_TO_M = 1e-4
@@ -49,8 +52,11 @@ def settle_tip_link(
     normals_palm: np.ndarray,
     *,
     ik_tol_m: float,
-    above_m: float = 0.0,
+    around: np.ndarray | None = None,
     max_change_rad: float | np.ndarray = 0.2,
+    cos_cone: float | None = None,
+    margin_rad: float | None = None,
+    above_m: float = 0.0,
 ) -> np.ndarray:
     """Configurations ``(N, k)`` holding the same tip centres with the fingertip link
     turned off the face where it reached past the tip sphere's tangent plane (module
@@ -62,61 +68,114 @@ def settle_tip_link(
         targets_palm: ``(N, 3)`` their tip-centre targets, palm frame [m].
         normals_palm: ``(N, 3)`` the outward surface normals at the contacts, palm frame.
         ik_tol_m: IK tolerance a settled configuration must meet [m].
+        around: ``(N, k)`` configurations a settled row must stay within
+            ``max_change_rad`` of (default ``q``: the move itself is bounded); a row
+            already farther from it is left as it is [rad].
+        max_change_rad: Most any joint may differ from ``around`` [rad] (scalar or
+            ``(k,)``).
+        cos_cone: A step may not turn the pad beyond this cone (cosine of the angle
+            between the pad and the inward normal), unless it already was.
+        margin_rad: A step may not bring a joint nearer than this to a limit than it
+            already was [rad].
         above_m: Configurations whose overshoot is above this (and at most
             ``SETTLE_WITHIN_M``) are settled [m].
-        max_change_rad: Most any joint may move in all [rad] (scalar or ``(k,)``).
 
     Returns:
         ``(N, k)``: a copy of ``q`` with the rows that could be settled replaced.
+
+    Raises:
+        InputError: arrays of the wrong shape (naming the argument).
     """
-    q = np.array(q, dtype=float, copy=True)
+    q = np.array(as_array(q, "q", (None, finger.k)), dtype=float, copy=True)
+    targets = as_array(targets_palm, "targets_palm", (q.shape[0], 3))
+    normals = as_array(normals_palm, "normals_palm", (q.shape[0], 3))
+    base = q.copy() if around is None else as_array(around, "around", q.shape)
     reach = finger.tip_reach
     if finger.k <= 3 or reach is None or reach.params.shape[0] == 0 or q.shape[0] == 0:
         return q
-    targets = np.asarray(targets_palm, float)
-    normals = np.asarray(normals_palm, float)
-    over = _overshoot(finger, q, normals)
-    todo = np.flatnonzero((over > above_m) & (over <= SETTLE_WITHIN_M))
-    lo = np.maximum(finger.lower, q[todo] - max_change_rad)
-    hi = np.minimum(finger.upper, q[todo] + max_change_rad)
+    over, cos = _overshoot_and_cos(finger, q, normals)
+    lo = np.maximum(finger.lower, base - max_change_rad)
+    hi = np.minimum(finger.upper, base + max_change_rad)
+    in_box = np.all((q >= lo - 1e-12) & (q <= hi + 1e-12), axis=1)
+    todo = np.flatnonzero((over > above_m) & (over <= SETTLE_WITHIN_M) & in_box)
+    lo, hi = lo[todo], hi[todo]
+    margin = np.minimum(q - finger.lower, finger.upper - q).min(axis=1)
+    least_cos = np.minimum(-np.inf if cos_cone is None else cos_cone, cos[todo])
+    least_margin = np.minimum(-np.inf if margin_rad is None else margin_rad, margin[todo])
     for _ in range(MAX_STEPS):
         if todo.size == 0:
             break
         qa, n = q[todo], normals[todo]
-        g = _gradient(finger, qa, n, over[todo])
-        _, J = finger.jacobian(qa)
-        # the projector onto the null space of J (rank 3 away from singularities)
-        JJt = J @ np.swapaxes(J, 1, 2) + 1e-12 * np.eye(3)
-        null = np.eye(finger.k)[None] - np.swapaxes(J, 1, 2) @ np.linalg.solve(JJt, J)
-        d = -np.einsum("mij,mj->mi", null, g)
-        slope = np.einsum("mi,mi->m", g, d)  # <= 0 along the descent
-        drop = over[todo] + SETTLE_TO_M
-        with np.errstate(divide="ignore", invalid="ignore"):
-            alpha = np.where(slope < -1e-12, drop / -slope, 0.0)
-        # no further than the allowance left (90 %: the IK's correction is second order)
-        room = np.where(d > 0.0, hi - qa, qa - lo)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            fit = np.where(np.abs(d) > 1e-15, 0.9 * room / np.abs(d), np.inf).min(axis=1)
-        q_try = np.clip(qa + np.minimum(alpha, fit)[:, None] * d, lo, hi)
-        res = finger.ik(targets[todo], q_try, tol_m=ik_tol_m, restarts=False)
-        q_new = res.q
-        new_over = _overshoot(finger, q_new, n)
-        inside = np.all((q_new >= lo - 1e-12) & (q_new <= hi + 1e-12), axis=1)
-        better = res.success & inside & (new_over < over[todo] - 1e-9)
+        q_new = _step(finger, qa, targets[todo], n, over[todo], lo, hi, ik_tol_m)
+        ok = ~np.isnan(q_new[:, 0])
+        q_new[~ok] = qa[~ok]
+        new_over, new_cos = _overshoot_and_cos(finger, q_new, n)
+        new_margin = np.minimum(q_new - finger.lower, finger.upper - q_new).min(axis=1)
+        better = ok & (new_over < over[todo] - 1e-9)
+        better &= (new_cos >= least_cos) & (new_margin >= least_margin)
         q[todo[better]] = q_new[better]
         over[todo[better]] = new_over[better]
         keep = better & (new_over > above_m)
         todo, lo, hi = todo[keep], lo[keep], hi[keep]
+        least_cos, least_margin = least_cos[keep], least_margin[keep]
     return q
 
 
-def _overshoot(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
+def sinking(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
+    """``(N,)`` True where :func:`settle_tip_link` would try to settle ``q`` ``(N, k)``:
+    a finger with spare joints whose fingertip link reaches past the plane by at most
+    ``SETTLE_WITHIN_M``."""
+    reach = finger.tip_reach
+    if finger.k <= 3 or reach is None or reach.params.shape[0] == 0 or len(q) == 0:
+        return np.zeros(len(q), bool)
+    over, _ = _overshoot_and_cos(finger, np.asarray(q, float), np.asarray(normals_palm, float))
+    return (over > 0.0) & (over <= SETTLE_WITHIN_M)
+
+
+def _step(
+    finger: Finger,
+    q: np.ndarray,
+    targets: np.ndarray,
+    normals: np.ndarray,
+    over: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    ik_tol_m: float,
+) -> np.ndarray:
+    """One null-space step of each row ``q`` ``(m, k)`` and IK back onto its target,
+    within ``[lo, hi]``: ``(m, k)``, NaN rows where the IK missed or left the box."""
+    g = _gradient(finger, q, normals, over)
+    _, J = finger.jacobian(q)
+    # the projector onto the null space of J (rank 3 away from singularities)
+    JJt = J @ np.swapaxes(J, 1, 2) + 1e-12 * np.eye(3)
+    null = np.eye(finger.k)[None] - np.swapaxes(J, 1, 2) @ np.linalg.solve(JJt, J)
+    d = -np.einsum("mij,mj->mi", null, g)
+    slope = np.einsum("mi,mi->m", g, d)  # <= 0 along the descent
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha = np.where(slope < -1e-12, (over + SETTLE_TO_M) / -slope, 0.0)
+        # no further than the allowance left (90 %: the IK's correction is second order)
+        room = np.where(d > 0.0, hi - q, q - lo)
+        fit = np.where(np.abs(d) > 1e-15, 0.9 * room / np.abs(d), np.inf).min(axis=1)
+    q_try = np.clip(q + np.minimum(alpha, fit)[:, None] * d, lo, hi)
+    res = finger.ik(targets, q_try, tol_m=ik_tol_m, restarts=False)
+    inside = np.all((res.q >= lo - 1e-12) & (res.q <= hi + 1e-12), axis=1)
+    return np.where((res.success & inside)[:, None], res.q, np.nan)
+
+
+def _overshoot_and_cos(
+    finger: Finger, q: np.ndarray, normals_palm: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """``(N,)`` how far the fingertip link reaches past the tip sphere's tangent plane at
-    the contact with outward normal ``normals_palm`` [m]."""
+    the contact with outward normal ``normals_palm`` [m], and ``(N,)`` the cosine
+    between the pad and the inward normal."""
     R, _ = finger.chain.poses(q)
     u_tip = -np.einsum("nji,nj->ni", R, normals_palm)  # R^T (-n): into the object
     assert finger.tip_reach is not None
-    return finger.tip_reach.overshoot(u_tip)
+    return finger.tip_reach.overshoot(u_tip), u_tip @ finger.pad_axis_tip
+
+
+def _overshoot(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
+    return _overshoot_and_cos(finger, q, normals_palm)[0]
 
 
 def _gradient(

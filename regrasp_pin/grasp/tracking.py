@@ -18,11 +18,11 @@ import numpy as np
 from .._validate import as_array
 from ..exceptions import InputError
 from ..model.clearance import LinkClearance
-from ..model.hand import Hand
+from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from .contact import ContactModel, pad_cosines, tip_targets
-from .settle import settle_tip_link
+from .settle import settle_tip_link, sinking
 
 __all__ = ["ContactTrack", "track_contact"]
 
@@ -149,12 +149,7 @@ def track_contact(
         s1 = min(s0 + chunk, times.size)
         res = f.ik(targets[s0:s1], prev, tol_m=contact.ik_tol_m)
         q[s0:s1], err[s0:s1] = res.q, res.error_m
-        # a spare joint turns the fingertip link off the face (grasp.settle)
-        held = s0 + np.flatnonzero(res.error_m <= contact.ik_tol_m)
-        q[held] = settle_tip_link(
-            f, q[held], targets[held], n_palm[held], ik_tol_m=contact.ik_tol_m, max_change_rad=allow
-        )
-        err[held] = np.linalg.norm(f.fk(q[held]) - targets[held], axis=1)
+        _settle_chunk(f, q, err, targets, n_palm, s0, s1, prev, allow, contact)  # grasp.settle
         margin[s0:s1] = np.minimum(q[s0:s1] - f.lower, f.upper - q[s0:s1]).min(axis=1)
         pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])
         prev = q[s1 - 1]
@@ -211,6 +206,52 @@ def track_contact(
         tip_clearance_m=tip_clear,
         n_followed=lost_at + 1,
     )
+
+
+def _settle_chunk(
+    f: Finger,
+    q: np.ndarray,
+    err: np.ndarray,
+    targets: np.ndarray,
+    n_palm: np.ndarray,
+    s0: int,
+    s1: int,
+    prev: np.ndarray,
+    allow: np.ndarray,
+    contact: ContactModel,
+) -> None:
+    """Turn the fingertip link off the face at times ``s0:s1`` with the finger's spare
+    joints (:func:`~.settle.settle_tip_link`), in place, time by time: each time's
+    configuration within ``allow`` ``(k,)`` [rad] (the velocity limits over a time step)
+    of the time before's (``prev`` before ``s0``), and re-solved from it by IK once a
+    time before was turned, so that the turn carries on; the pad kept within its cone
+    and the joints off the trigger's margin where they were."""
+    if not sinking(f, q[s0:s1], n_palm[s0:s1]).any():
+        return
+    last = prev
+    turned = False
+    for i in range(s0, s1):
+        if err[i] > contact.ik_tol_m:
+            break  # lost here; the caller stops
+        if turned:  # follow on from the turned configuration
+            res = f.ik(targets[i][None], last, tol_m=contact.ik_tol_m, restarts=False)
+            if res.success[0]:
+                q[i], err[i] = res.q[0], res.error_m[0]
+        row = settle_tip_link(
+            f,
+            q[i][None],
+            targets[i][None],
+            n_palm[i][None],
+            ik_tol_m=contact.ik_tol_m,
+            around=last[None],
+            max_change_rad=allow,
+            cos_cone=contact.cos_cone_of(f),
+            margin_rad=contact.limit_margin_rad,
+        )[0]
+        if not np.array_equal(row, q[i]):
+            q[i], err[i] = row, float(np.linalg.norm(f.fk(row) - targets[i]))
+            turned = True
+        last = q[i]
 
 
 def _lost(

@@ -86,9 +86,20 @@ def tilted_directions(
         move = (height_m / np.cos(tilt[i])) * (R @ d)
         step = lsq_linear(J, move, bounds=(lo, hi)).x
         share[i] = float(move @ (J @ step)) / float(move @ move)
-    rounded = np.round(share / _SHARE_TOL)
-    order = np.lexsort((np.arange(len(dirs)), tilt, -rounded))[:MAX_TILTED]
-    return dirs[order]
+    return dirs[_ranked(share, tilt)[:MAX_TILTED]]
+
+
+def _ranked(share: np.ndarray, tilt: np.ndarray) -> list[int]:
+    """Indices by decreasing ``share``, shares within ``_SHARE_TOL`` of the best left
+    counting as ties, broken by the smaller tilt, then the index."""
+    left = list(range(len(share)))
+    order = []
+    while left:
+        best = max(share[i] for i in left)
+        pick = min((i for i in left if share[i] >= best - _SHARE_TOL), key=lambda i: (tilt[i], i))
+        order.append(pick)
+        left.remove(pick)
+    return order
 
 
 def back_off(
@@ -148,6 +159,7 @@ def _along(
 ) -> np.ndarray:
     """The back-off along the unit direction ``d`` (object frame), or ik-unreachable."""
     p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
+    n = n / np.linalg.norm(n)
     local = p[None] + f.tip_radius * n[None] + (offsets / float(d @ n))[:, None] * d[None]
     targets = np.einsum("sij,sj->si", T[:, :3, :3], local) + T[:, :3, 3]
     q = np.empty((len(T), f.k))

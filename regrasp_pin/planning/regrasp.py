@@ -33,7 +33,9 @@ once, for the caller
 fallback (:mod:`.transfer`: lift off P, a joint-space move through a raised via, come
 down onto Q; not in the paper) is tried, verified by the same
 check; its velocity failure is the one reported then (a longer duration may let it
-pass). ``route`` restricts a call to one of the two.
+pass), and any failure of it where the region holding P and Q could not be unfolded
+(too many faces apart: no surface route to try). ``route`` restricts a call to one of
+the two.
 It never returns a path that has not passed the check;
 when nothing passes it raises :class:`~.exceptions.PlanningError` (or
 :class:`~.exceptions.VerificationError`) with the finger, the time, the kind of the
@@ -331,8 +333,10 @@ def plan_regrasp(
     stages = _Stages()
     attempts: list[Attempt] = []
     last: PlanningError | None = None
+    unfoldable: bool | None = None  # whether the region holding P and Q unfolds
     if route != "joint-space":
         task = _surface_route(scene, f, float(t_start), q0, P, Q, others, q_hand, params, stages)
+        unfoldable = not isinstance(task, PlanningError)
         if isinstance(task, PlanningError):
             attempts.append(task.as_attempt("surface grid"))
             found: RegraspResult | PlanningError = task
@@ -374,10 +378,9 @@ def plan_regrasp(
         except PlanningError as exc:
             attempts.append(exc.as_attempt("joint-space transfer"))
             log.debug("regrasp %s joint-space transfer failed: %s", f.name, exc)
-            if last is None or FailureKind.GRID_UNREACHABLE in (last.kind, None) or (
-                exc.kind == FailureKind.VELOCITY
-            ):
-                last = exc  # the only route tried, or a failure a longer duration may fix
+            if last is None or unfoldable is False or exc.kind == FailureKind.VELOCITY:
+                # the only route that could be tried, or a failure a longer duration fixes
+                last = exc
         else:
             stages.lap("transfer")
             log.info(
