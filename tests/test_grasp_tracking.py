@@ -315,6 +315,9 @@ def test_a_redundant_fingers_spare_joint_keeps_its_fingertip_link_off_the_face(m
         tracking_module, "settle_tip_link", lambda finger, q, *args, **kwargs: q.copy()
     )
     plain = track()
+    # the first time is the landing's (or the grasp's) own configuration: never turned
+    np.testing.assert_array_equal(settled.q[0], plain.q[0])
+    assert np.any(settled.q[1:] != plain.q[1:])
     t_lost = plain.trigger()[0]
     assert t_lost is not None and t_lost <= 0.1
     i = plain.trigger_index()

@@ -144,12 +144,13 @@ def track_contact(
     lost_at = times.size - 1  # the last time followed
     prev = q0
     # a joint moves at most as far as its velocity limit takes it in one time step
-    allow = f.velocity_limit * (float(np.diff(times).min()) if times.size > 1 else 0.0)
+    # (at the first time none: q_start is the configuration at that very time)
+    step_s = np.diff(times, prepend=times[0])
     for s0 in range(0, times.size, chunk):
         s1 = min(s0 + chunk, times.size)
         res = f.ik(targets[s0:s1], prev, tol_m=contact.ik_tol_m)
         q[s0:s1], err[s0:s1] = res.q, res.error_m
-        _settle_chunk(f, q, err, targets, n_palm, s0, s1, prev, allow, contact)  # grasp.settle
+        _settle_chunk(f, q, err, targets, n_palm, s0, s1, prev, step_s, contact)  # grasp.settle
         margin[s0:s1] = np.minimum(q[s0:s1] - f.lower, f.upper - q[s0:s1]).min(axis=1)
         pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])
         prev = q[s1 - 1]
@@ -217,15 +218,16 @@ def _settle_chunk(
     s0: int,
     s1: int,
     prev: np.ndarray,
-    allow: np.ndarray,
+    step_s: np.ndarray,
     contact: ContactModel,
 ) -> None:
     """Turn the fingertip link off the face at times ``s0:s1`` with the finger's spare
     joints (:func:`~.settle.settle_tip_link`), in place, time by time: each time's
-    configuration within ``allow`` ``(k,)`` [rad] (the velocity limits over a time step)
-    of the time before's (``prev`` before ``s0``), and re-solved from it by IK once a
-    time before was turned, so that the turn carries on; the pad kept within its cone
-    and the joints off the trigger's margin where they were."""
+    configuration within what the velocity limits allow over ``step_s[i]`` [s] (the
+    time since the time before) of the time before's (``prev`` before ``s0``), and
+    re-solved from it by IK once a time before was turned, so that the turn carries on;
+    the pad kept within its cone and the joints off the trigger's margin where they
+    were."""
     if not sinking(f, q[s0:s1], n_palm[s0:s1]).any():
         return
     last = prev
@@ -244,7 +246,7 @@ def _settle_chunk(
             n_palm[i][None],
             ik_tol_m=contact.ik_tol_m,
             around=last[None],
-            max_change_rad=allow,
+            max_change_rad=f.velocity_limit * step_s[i],
             cos_cone=contact.cos_cone_of(f),
             margin_rad=contact.limit_margin_rad,
         )[0]
