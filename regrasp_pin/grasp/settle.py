@@ -30,6 +30,7 @@ import numpy as np
 
 from .._validate import as_array
 from ..model.hand import Finger
+from .contact import pad_cosines_and_overshoot
 
 __all__ = ["MAX_STEPS", "SETTLE_TO_M", "SETTLE_WITHIN_M", "settle_tip_link", "sinking"]
 
@@ -90,16 +91,15 @@ def settle_tip_link(
     targets = as_array(targets_palm, "targets_palm", (q.shape[0], 3))
     normals = as_array(normals_palm, "normals_palm", (q.shape[0], 3))
     base = q.copy() if around is None else as_array(around, "around", q.shape)
-    reach = finger.tip_reach
-    if finger.k <= 3 or reach is None or reach.params.shape[0] == 0 or q.shape[0] == 0:
+    if not _has_spare_joints(finger) or q.shape[0] == 0:
         return q
-    over, cos = _overshoot_and_cos(finger, q, normals)
+    cos, over = pad_cosines_and_overshoot(finger, q, normals)
     lo = np.maximum(finger.lower, base - max_change_rad)
     hi = np.minimum(finger.upper, base + max_change_rad)
     in_box = np.all((q >= lo - 1e-12) & (q <= hi + 1e-12), axis=1)
     todo = np.flatnonzero((over > above_m) & (over <= SETTLE_WITHIN_M) & in_box)
     lo, hi = lo[todo], hi[todo]
-    margin = np.minimum(q - finger.lower, finger.upper - q).min(axis=1)
+    margin = finger.limit_margin(q)
     least_cos = np.minimum(-np.inf if cos_cone is None else cos_cone, cos[todo])
     least_margin = np.minimum(-np.inf if margin_rad is None else margin_rad, margin[todo])
     for _ in range(MAX_STEPS):
@@ -109,8 +109,8 @@ def settle_tip_link(
         q_new = _step(finger, qa, targets[todo], n, over[todo], lo, hi, ik_tol_m)
         ok = ~np.isnan(q_new[:, 0])
         q_new[~ok] = qa[~ok]
-        new_over, new_cos = _overshoot_and_cos(finger, q_new, n)
-        new_margin = np.minimum(q_new - finger.lower, finger.upper - q_new).min(axis=1)
+        new_cos, new_over = pad_cosines_and_overshoot(finger, q_new, n)
+        new_margin = finger.limit_margin(q_new)
         better = ok & (new_over < over[todo] - 1e-9)
         better &= (new_cos >= least_cos) & (new_margin >= least_margin)
         q[todo[better]] = q_new[better]
@@ -125,11 +125,19 @@ def sinking(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarr
     """``(N,)`` True where :func:`settle_tip_link` would try to settle ``q`` ``(N, k)``:
     a finger with spare joints whose fingertip link reaches past the plane by at most
     ``SETTLE_WITHIN_M``."""
-    reach = finger.tip_reach
-    if finger.k <= 3 or reach is None or reach.params.shape[0] == 0 or len(q) == 0:
+    if not _has_spare_joints(finger) or len(q) == 0:
         return np.zeros(len(q), bool)
-    over, _ = _overshoot_and_cos(finger, np.asarray(q, float), np.asarray(normals_palm, float))
+    _, over = pad_cosines_and_overshoot(
+        finger, np.asarray(q, float), np.asarray(normals_palm, float)
+    )
     return (over > 0.0) & (over <= SETTLE_WITHIN_M)
+
+
+def _has_spare_joints(finger: Finger) -> bool:
+    """More joints than the tip centre's three coordinates, and fingertip geometries
+    whose overshoot can be read."""
+    reach = finger.tip_reach
+    return finger.k > 3 and reach is not None and reach.params.shape[0] > 0
 
 
 def _step(
@@ -162,22 +170,6 @@ def _step(
     return np.where((res.success & inside)[:, None], res.q, np.nan)
 
 
-def _overshoot_and_cos(
-    finger: Finger, q: np.ndarray, normals_palm: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(N,)`` how far the fingertip link reaches past the tip sphere's tangent plane at
-    the contact with outward normal ``normals_palm`` [m], and ``(N,)`` the cosine
-    between the pad and the inward normal."""
-    R, _ = finger.chain.poses(q)
-    u_tip = -np.einsum("nji,nj->ni", R, normals_palm)  # R^T (-n): into the object
-    assert finger.tip_reach is not None
-    return finger.tip_reach.overshoot(u_tip), u_tip @ finger.pad_axis_tip
-
-
-def _overshoot(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
-    return _overshoot_and_cos(finger, q, normals_palm)[0]
-
-
 def _gradient(
     finger: Finger, q: np.ndarray, normals_palm: np.ndarray, over: np.ndarray
 ) -> np.ndarray:
@@ -186,5 +178,6 @@ def _gradient(
     m, k = q.shape
     qq = q[:, None, :] + _FD_RAD * np.eye(k)[None]
     nn = np.repeat(normals_palm[:, None, :], k, axis=1)
-    o = _overshoot(finger, qq.reshape(-1, k), nn.reshape(-1, 3)).reshape(m, k)
+    _, o = pad_cosines_and_overshoot(finger, qq.reshape(-1, k), nn.reshape(-1, 3))
+    o = o.reshape(m, k)
     return (o - over[:, None]) / _FD_RAD

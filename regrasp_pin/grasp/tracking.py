@@ -151,7 +151,7 @@ def track_contact(
         res = f.ik(targets[s0:s1], prev, tol_m=contact.ik_tol_m)
         q[s0:s1], err[s0:s1] = res.q, res.error_m
         _settle_chunk(f, q, err, targets, n_palm, s0, s1, prev, step_s, contact)  # grasp.settle
-        margin[s0:s1] = np.minimum(q[s0:s1] - f.lower, f.upper - q[s0:s1]).min(axis=1)
+        margin[s0:s1] = f.limit_margin(q[s0:s1])
         pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])
         prev = q[s1 - 1]
         lost = _lost(err[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact, cos_cone)
@@ -232,6 +232,7 @@ def _settle_chunk(
         return
     last = prev
     turned = False
+    cos_cone = contact.cos_cone_of(f)
     for i in range(s0, s1):
         if err[i] > contact.ik_tol_m:
             break  # lost here; the caller stops
@@ -247,7 +248,7 @@ def _settle_chunk(
             ik_tol_m=contact.ik_tol_m,
             around=last[None],
             max_change_rad=f.velocity_limit * step_s[i],
-            cos_cone=contact.cos_cone_of(f),
+            cos_cone=cos_cone,
             margin_rad=contact.limit_margin_rad,
         )[0]
         if not np.array_equal(row, q[i]):
