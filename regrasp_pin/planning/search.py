@@ -111,6 +111,28 @@ class Found:
 
 
 @dataclass
+class _Call:
+    """One :meth:`RegraspSearch.find` call: what it was given (see there) and what it
+    has recorded (``attempts``, ``failed``: the regrasps that failed, by what they were;
+    ``out_of_budget``: the budget ran out before a step)."""
+
+    finger: str
+    P: tuple[np.ndarray, np.ndarray]
+    others: Mapping[str, tuple[np.ndarray, np.ndarray]]
+    others_tips: np.ndarray
+    q_hand: Callable[[np.ndarray], np.ndarray]
+    budget: SearchBudget
+    end_by: float
+    shortest_s: float
+    exclude: list[np.ndarray]
+    landing_check: Callable[[RegraspResult], Attempt | None] | None
+    reserved: Sequence[tuple[np.ndarray, float]]
+    attempts: list[Attempt] = field(default_factory=list)
+    failed: dict[tuple, PlanningError] = field(default_factory=dict)
+    out_of_budget: bool = False
+
+
+@dataclass
 class RegraspSearch:
     """The fixed context of the regrasp searches of one manipulation plan.
 
@@ -194,14 +216,24 @@ class RegraspSearch:
             self.scene.motion.t_end if end_by_s is None else min(end_by_s, self.scene.motion.t_end)
         )
         d_min = self.regrasp.duration_s if shortest_s is None else float(shortest_s)
-        others_tips = np.array(
-            [p + self.scene.hand.finger(n).tip_radius * nn for n, (p, nn) in others.items()]
-        ).reshape(-1, 3)
-        attempts: list[Attempt] = []
-        failed: dict[tuple, PlanningError] = {}  # regrasps that failed, by what they were
+        call = _Call(
+            finger=finger,
+            P=P,
+            others=others,
+            others_tips=np.array(
+                [p + self.scene.hand.finger(n).tip_radius * nn for n, (p, nn) in others.items()]
+            ).reshape(-1, 3),
+            q_hand=q_hand,
+            budget=budget,
+            end_by=end_by,
+            shortest_s=d_min,
+            exclude=list(exclude or []),
+            landing_check=landing_check,
+            reserved=reserved,
+        )
         for start in starts:
             if start + d_min > end_by + TIME_TOL_S:
-                attempts.append(
+                call.attempts.append(
                     Attempt(
                         FailureKind.TOO_LATE,
                         finger,
@@ -212,33 +244,27 @@ class RegraspSearch:
                     )
                 )
                 continue
-            q0 = q_start_at(start)
-            excluded: list[np.ndarray] = list(exclude or [])
-            for _ in range(self.candidates):
-                if budget.exhausted:
-                    return self._fail(finger, starts, attempts, budget=True)
-                found = self._try_candidate(
-                    finger,
-                    P,
-                    start,
-                    q0,
-                    others,
-                    others_tips,
-                    q_hand,
-                    excluded,
-                    end_by,
-                    attempts,
-                    budget,
-                    landing_check,
-                    reserved,
-                    d_min,
-                    failed,
-                )
-                if found is None:
-                    break  # no candidate left at this start
-                if isinstance(found, Found):
-                    return found
-        return self._fail(finger, starts, attempts, budget=False)
+            found = self._at_start(call, start, q_start_at(start))
+            if found is not None:
+                return found
+            if call.out_of_budget:
+                return self._fail(finger, starts, call.attempts, budget=True)
+        return self._fail(finger, starts, call.attempts, budget=False)
+
+    def _at_start(self, call: _Call, start: float, q0: np.ndarray) -> Found | None:
+        """Up to :attr:`candidates` new contacts Q from a lift-off at ``start`` [s] in
+        ``q0``: the first verified regrasp, or None."""
+        excluded = list(call.exclude)
+        for _ in range(self.candidates):
+            if call.budget.exhausted:
+                call.out_of_budget = True
+                return None
+            found = self._try_candidate(call, start, q0, excluded)
+            if found is None:
+                return None  # no candidate left at this start
+            if isinstance(found, Found):
+                return found
+        return None
 
     def choose(
         self,
@@ -371,44 +397,39 @@ class RegraspSearch:
 
     def _try_candidate(
         self,
-        finger: str,
-        P: tuple[np.ndarray, np.ndarray],
+        call: _Call,
         start: float,
         q0: np.ndarray,
-        others: Mapping[str, tuple[np.ndarray, np.ndarray]],
-        others_tips: np.ndarray,
-        q_hand: Callable[[np.ndarray], np.ndarray],
         excluded: list[np.ndarray],
-        end_by: float,
-        attempts: list[Attempt],
-        budget: SearchBudget,
-        landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
-        reserved: Sequence[tuple[np.ndarray, float]] = (),
-        shortest_s: float | None = None,
-        failed: dict[tuple, PlanningError] | None = None,
     ) -> Found | bool | None:
         """One Q at one start time: a Found, False (Q failed, excluded) or None (no Q).
 
-        ``failed`` holds the regrasps of this search that failed, by lift-off, Q, its
-        arrival configuration, duration and route: one asked for again (a Q given up for
-        another at a longer duration comes back as the best of the next round) fails
-        as before without being planned, recorded or paid for again."""
-        failed = {} if failed is None else failed
+        ``call.failed`` holds the regrasps of this search that failed, by lift-off, Q,
+        its arrival configuration, duration and route: one asked for again (a Q given
+        up for another at a longer duration comes back as the best of the next round)
+        fails as before without being planned, recorded or paid for again."""
+        finger, attempts = call.finger, call.attempts
         f = self.scene.hand.finger(finger)
-        d_min = self.regrasp.duration_s if shortest_s is None else shortest_s
         where = f"start {start:.2f} s"
         try:
-            budget.spend()
-            landing = self.flight_landing(finger, q0, start, d_min, end_by)
+            call.budget.spend()
+            landing = self.flight_landing(finger, q0, start, call.shortest_s, call.end_by)
             choice = self.choose(
-                finger, P, start + d_min, others, q_hand, excluded, reserved, landing
+                finger,
+                call.P,
+                start + call.shortest_s,
+                call.others,
+                call.q_hand,
+                excluded,
+                call.reserved,
+                landing,
             )
         except ContactError as exc:
             attempts.append(exc.as_attempt(where))
             return None
-        chosen_for = d_min
+        chosen_for = call.shortest_s
         duration = duration_for_move(
-            q0, choice.q_arrive, f.velocity_limit, minimum_s=d_min, dt_s=self.dt_s
+            q0, choice.q_arrive, f.velocity_limit, minimum_s=chosen_for, dt_s=self.dt_s
         )
         speeds: list[tuple[float, float]] = []  # (duration, peak speed / limit) of this Q
         stretches, route = 0, "auto"
@@ -416,14 +437,14 @@ class RegraspSearch:
             what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
             if route != "auto":
                 what += f" ({route})"
-            if start + duration > end_by + TIME_TOL_S:
+            if start + duration > call.end_by + TIME_TOL_S:
                 attempts.append(
                     Attempt(
                         FailureKind.TOO_LATE,
                         finger,
                         start,
                         measured=start + duration,
-                        required=end_by,
+                        required=call.end_by,
                         what=what,
                     )
                 )
@@ -432,9 +453,16 @@ class RegraspSearch:
                 # Q was chosen for an earlier arrival: the arrival time may prefer another
                 chosen_for = duration
                 try:
-                    budget.spend()
+                    call.budget.spend()
                     again = self.choose(
-                        finger, P, start + duration, others, q_hand, excluded, reserved, landing
+                        finger,
+                        call.P,
+                        start + duration,
+                        call.others,
+                        call.q_hand,
+                        excluded,
+                        call.reserved,
+                        landing,
                     )
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))
@@ -444,17 +472,16 @@ class RegraspSearch:
                 choice = again
                 what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
             try:
-                result = self._plan_once(
-                    finger, P, start, choice, q0, q_hand, others_tips, duration, route,
-                    failed, budget, attempts, what,
-                )  # fmt: skip
+                result = self._plan_once(call, start, choice, q0, duration, route, what)
             except PlanningError as exc:
-                retry = self._after_velocity(exc, speeds, duration, start, end_by, stretches, route)
+                retry = self._after_velocity(
+                    exc, speeds, duration, start, call.end_by, stretches, route
+                )
                 if retry is None:
                     break
                 duration, stretches, route = retry
                 continue
-            rejected = None if landing_check is None else landing_check(result)
+            rejected = None if call.landing_check is None else call.landing_check(result)
             if rejected is not None:
                 attempts.append(rejected)
                 break
@@ -464,27 +491,22 @@ class RegraspSearch:
 
     def _plan_once(
         self,
-        finger: str,
-        P: tuple[np.ndarray, np.ndarray],
+        call: _Call,
         start: float,
         choice: NewContact,
         q0: np.ndarray,
-        q_hand: Callable[[np.ndarray], np.ndarray],
-        others_tips: np.ndarray,
         duration: float,
         route: str,
-        failed: dict[tuple, PlanningError],
-        budget: SearchBudget,
-        attempts: list[Attempt],
         what: str,
     ) -> RegraspResult:
         """:func:`~.regrasp.plan_regrasp` of ``choice`` at ``duration`` by ``route``; a
-        failure is recorded in ``attempts`` and ``failed``, and one already in
-        ``failed`` is raised again at no cost."""
+        failure is recorded in ``call.attempts`` and ``call.failed``, and one already in
+        ``call.failed`` is raised again at no cost."""
+        finger, P, failed = call.finger, call.P, call.failed
         key = (round(start, 9), choice.index, choice.q_arrive.tobytes(), round(duration, 9), route)
         if key in failed:
             raise failed[key]
-        budget.spend()
+        call.budget.spend()
         try:
             return plan_regrasp(
                 self.scene.hand,
@@ -497,15 +519,15 @@ class RegraspSearch:
                 choice.p_object,
                 choice.n_object,
                 q0,
-                q_hand,
-                others_tips_object=others_tips,
+                call.q_hand,
+                others_tips_object=call.others_tips,
                 params=replace(self.regrasp, duration_s=duration),
                 q_land=choice.q_arrive,
                 route=route,
             )
         except PlanningError as exc:
             failed[key] = exc
-            attempts.append(exc.as_attempt(what))
+            call.attempts.append(exc.as_attempt(what))
             log.debug("regrasp %s: %s", finger, exc)
             raise
 
