@@ -322,3 +322,34 @@ def test_a_redundant_fingers_spare_joint_keeps_its_fingertip_link_off_the_face(m
     assert t_lost is not None and t_lost <= 0.1
     i = plain.trigger_index()
     assert plain.tip_clearance_m[i] < -ContactModel().tip_penetration_m
+
+
+def test_a_contact_the_joints_cannot_follow_in_time_is_let_go(scene):
+    """The same object poses, those after time index m reached c times sooner: the same
+    IK solutions, their steps c times faster. The contact is lost at the first time a
+    joint would have to move faster than its velocity limit (read here from the slow
+    track's configurations), with that reason; until then the configurations are the
+    slow track's (to the IK's response to the poses' last bits)."""
+    hand, box, motion, contacts = scene
+    f = hand.finger("index")
+    p, n, q0 = contacts["index"]
+    slow = track_contact(hand, "index", box, motion, TIMES, p, n, q0, contact=CONTACT)
+    k = slow.trigger_index()
+    assert k is not None and k > 6
+    # the fastest joint's share of its limit moving into times 1 .. k - 1
+    share = np.max(np.abs(np.diff(slow.q[:k], axis=0)) / f.velocity_limit, axis=1)
+    share /= np.diff(TIMES[:k])
+    m = k // 2
+    c = 1.01 / share[m - 1 :].max()  # a step from m on goes over the limit
+    assert share.max() < 1.0 and c > 1.0
+    steps = np.diff(TIMES)
+    steps[m - 1 :] /= c
+    times = np.concatenate([[0.0], np.cumsum(steps)])
+    first = m + int(np.flatnonzero(c * share[m - 1 :] > 1.0)[0])
+    fast_motion = ObjectMotion.from_poses(times, motion.pose(TIMES))
+    fast = track_contact(hand, "index", box, fast_motion, times, p, n, q0, contact=CONTACT)
+    assert fast.trigger_index() == first
+    assert "cannot follow" in fast.reasons[first], fast.reasons[first]
+    assert f"{c * share[first - 1]:.2f}x its velocity limit" in fast.reasons[first]
+    assert_close(fast.q[:first], slow.q[:first], atol=1e-9, what="q before the loss")
+    assert fast.n_followed == first + 1  # lost there: not followed further

@@ -323,3 +323,29 @@ def test_an_idle_finger_is_checked_against_the_object(clean):
     assert not chk.ok
     assert chk.idles[0].min_object_distance_m == pytest.approx(inside.min(), abs=5e-4)
     assert any("little (idle at 0.000 s) penetrates the object" in p for p in chk.problems)
+
+
+@pytest.mark.parametrize("share", [0.999, 1.5])
+def test_a_joint_faster_than_its_velocity_limit_is_reported(clean, share):
+    """The idle little finger's first joint steps between two samples at ``share`` of
+    its URDF velocity limit (the motion between samples is linear, so that is its
+    speed): over the limit, that joint, its finger, when and how fast are reported;
+    under it, nothing."""
+    plan, hand, _ = clean
+    f = hand.fingers["little"]
+    k, j = 30, f.q_indices[0]
+    limit = float(hand.model.velocityLimit[j])  # revolute joints: idx_v == idx_q
+    q = plan.q.copy()
+    step = share * limit * (plan.t[k + 1] - plan.t[k])
+    q[k + 1 :, j] += step if q[k, j] + step <= f.upper[0] else -step
+    chk = recheck_plan(_with_idle_little(plan, q))
+    if share < 1.0:
+        assert chk.ok, chk.problems
+        assert chk.joint_speed_violations == ()
+        return
+    assert not chk.ok
+    (v,) = chk.joint_speed_violations
+    assert (v.joint, v.finger, v.t_s) == (f.joint_names[0], "little", plan.t[k])
+    assert v.speed_rad_s == pytest.approx(share * limit, rel=1e-9)
+    assert v.limit_rad_s == limit
+    assert any(f"joint {v.joint} (little) moves at" in p for p in chk.problems)

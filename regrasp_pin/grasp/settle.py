@@ -32,7 +32,14 @@ from .._validate import as_array
 from ..model.hand import Finger
 from .contact import pad_cosines_and_overshoot
 
-__all__ = ["MAX_STEPS", "SETTLE_TO_M", "SETTLE_WITHIN_M", "settle_tip_link", "sinking"]
+__all__ = [
+    "MAX_STEPS",
+    "SETTLE_TO_M",
+    "SETTLE_WITHIN_M",
+    "TURN_SPEED_SHARE",
+    "settle_tip_link",
+    "sinking",
+]
 
 #: The overshoot a settle aims at: this far below the plane the tip sphere rests on [m].
 SETTLE_TO_M = 1e-4
@@ -43,6 +50,11 @@ SETTLE_TO_M = 1e-4
 SETTLE_WITHIN_M = 1e-3
 #: Most null-space steps per configuration.
 MAX_STEPS = 6
+#: A turn held over time (:func:`~regrasp_pin.grasp.tracking.track_contact`) moves each
+#: joint at most at this share of its velocity limit: the rest is left to the motion
+#: that follows the object, and to the IK's corrections where a plan samples the hold
+#: between the track's times (at the full limit those reached 1 % over it).
+TURN_SPEED_SHARE = 0.5
 _FD_RAD = 1e-6  # finite-difference step of the overshoot's gradient [rad]
 
 

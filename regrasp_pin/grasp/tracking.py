@@ -22,7 +22,7 @@ from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from .contact import ContactModel, pad_cosines, tip_targets
-from .settle import settle_tip_link, sinking
+from .settle import TURN_SPEED_SHARE, settle_tip_link, sinking
 
 __all__ = ["ContactTrack", "track_contact"]
 
@@ -50,8 +50,9 @@ class ContactTrack:
         reasons: ``(T,)`` why each time is not holdable ("" where it is).
         n_followed: How many of the times were followed (None: all).
 
-    The contact is followed until it is lost (not reached, outside the joint limits, or
-    the pad turned away beyond the cone): after that time, ``q`` repeats its last
+    The contact is followed until it is lost (not reached, a joint that cannot follow it
+    within its velocity limit, outside the joint limits, or the pad turned away beyond
+    the cone): after that time, ``q`` repeats its last
     configuration, ``error_m`` is ``inf``, ``margin_rad`` and ``pad_cos`` are ``-inf``,
     the clearances ``inf`` (not computed), and every time is not holdable.
     """
@@ -140,6 +141,7 @@ def track_contact(
     err = np.empty(times.size)
     margin = np.empty(times.size)
     pad_cos = np.empty(times.size)
+    speed = np.zeros(times.size)  # the fastest joint's share of its velocity limit
     cos_cone = contact.cos_cone_of(f)
     lost_at = times.size - 1  # the last time followed
     prev = q0
@@ -153,8 +155,10 @@ def track_contact(
         _settle_chunk(f, q, err, targets, n_palm, s0, s1, prev, step_s, contact)  # grasp.settle
         margin[s0:s1] = f.limit_margin(q[s0:s1])
         pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])
+        speed[s0:s1] = _speed_share(f, q[s0:s1], q[s0 - 1] if s0 else None, step_s[s0:s1])
         prev = q[s1 - 1]
         lost = _lost(err[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact, cos_cone)
+        lost |= speed[s0:s1] > 1.0
         if lost.any():
             lost_at = s0 + int(np.argmax(lost))
             break
@@ -169,29 +173,9 @@ def track_contact(
         T_held = T_all[: lost_at + 1]
         clearance[: lost_at + 1] = LinkClearance(hand, finger, obj)(q_full, T_held)
         tip_clear[: lost_at + 1] = LinkClearance(hand, finger, obj, tip_only=True)(q_full, T_held)
-    reasons = []
-    for i in range(times.size):
-        if i > lost_at:
-            reasons.append(f"not followed after the contact is lost at t={times[lost_at]:.3f} s")
-        elif err[i] > contact.ik_tol_m:
-            reasons.append(f"IK cannot reach the contact (residual {err[i] * 1e3:.2f} mm)")
-        elif margin[i] < contact.limit_margin_rad:
-            j = int(np.argmin(np.minimum(q[i] - f.lower, f.upper - q[i])))
-            side = "lower" if q[i, j] - f.lower[j] < f.upper[j] - q[i, j] else "upper"
-            reasons.append(
-                f"joint {f.joint_names[j]} within {margin[i]:.3f} rad of its {side} limit"
-            )
-        elif pad_cos[i] < cos_cone:
-            ang = np.degrees(np.arccos(np.clip(pad_cos[i], -1, 1)))
-            reasons.append(f"pad turned {ang:.0f} deg from the surface normal")
-        elif clearance[i] < contact.link_clearance_m:
-            reasons.append(f"a link of the finger touches the object ({clearance[i] * 1e3:.2f} mm)")
-        elif tip_clear[i] < -contact.tip_penetration_m:
-            reasons.append(
-                f"the fingertip link sinks into the object ({-tip_clear[i] * 1e3:.2f} mm)"
-            )
-        else:
-            reasons.append("")
+    reasons = _reasons(
+        f, times, lost_at, q, (err, speed, margin, pad_cos, clearance, tip_clear), contact
+    )
     return ContactTrack(
         finger=finger,
         times_s=times,
@@ -209,6 +193,51 @@ def track_contact(
     )
 
 
+def _reasons(
+    f: Finger,
+    times: np.ndarray,
+    lost_at: int,
+    q: np.ndarray,
+    measured: tuple[np.ndarray, ...],
+    contact: ContactModel,
+) -> list[str]:
+    """Why each time of a track is not holdable ("" where it is), from what was
+    ``measured`` there: ``(error_m, speed share, margin_rad, pad_cos, link clearance,
+    tip clearance)`` ``(T,)`` each."""
+    reasons = []
+    err, speed, margin, pad_cos, clearance, tip_clear = measured
+    cos_cone = contact.cos_cone_of(f)
+    for i in range(times.size):
+        if i > lost_at:
+            reasons.append(f"not followed after the contact is lost at t={times[lost_at]:.3f} s")
+        elif err[i] > contact.ik_tol_m:
+            reasons.append(f"IK cannot reach the contact (residual {err[i] * 1e3:.2f} mm)")
+        elif speed[i] > 1.0:
+            j = int(np.argmax(np.abs(q[i] - q[i - 1]) / f.velocity_limit))
+            reasons.append(
+                f"joint {f.joint_names[j]} cannot follow it "
+                f"({speed[i]:.2f}x its velocity limit {f.velocity_limit[j]:.2f} rad/s)"
+            )
+        elif margin[i] < contact.limit_margin_rad:
+            j = int(np.argmin(np.minimum(q[i] - f.lower, f.upper - q[i])))
+            side = "lower" if q[i, j] - f.lower[j] < f.upper[j] - q[i, j] else "upper"
+            reasons.append(
+                f"joint {f.joint_names[j]} within {margin[i]:.3f} rad of its {side} limit"
+            )
+        elif pad_cos[i] < cos_cone:
+            ang = np.degrees(np.arccos(np.clip(pad_cos[i], -1, 1)))
+            reasons.append(f"pad turned {ang:.0f} deg from the surface normal")
+        elif clearance[i] < contact.link_clearance_m:
+            reasons.append(f"a link of the finger touches the object ({clearance[i] * 1e3:.2f} mm)")
+        elif tip_clear[i] < -contact.tip_penetration_m:
+            reasons.append(
+                f"the fingertip link sinks into the object ({-tip_clear[i] * 1e3:.2f} mm)"
+            )
+        else:
+            reasons.append("")
+    return reasons
+
+
 def _settle_chunk(
     f: Finger,
     q: np.ndarray,
@@ -223,8 +252,9 @@ def _settle_chunk(
 ) -> None:
     """Turn the fingertip link off the face at times ``s0:s1`` with the finger's spare
     joints (:func:`~.settle.settle_tip_link`), in place, time by time: each time's
-    configuration within what the velocity limits allow over ``step_s[i]`` [s] (the
-    time since the time before) of the time before's (``prev`` before ``s0``), and
+    configuration within :data:`~.settle.TURN_SPEED_SHARE` of what the velocity limits
+    allow over ``step_s[i]`` [s] (the time since the time before) of the time
+    before's (``prev`` before ``s0``), and
     re-solved from it by IK once a time before was turned, so that the turn carries on;
     the pad kept within its cone and the joints off the trigger's margin where they
     were."""
@@ -247,7 +277,7 @@ def _settle_chunk(
             n_palm[i][None],
             ik_tol_m=contact.ik_tol_m,
             around=last[None],
-            max_change_rad=f.velocity_limit * step_s[i],
+            max_change_rad=TURN_SPEED_SHARE * f.velocity_limit * step_s[i],
             cos_cone=cos_cone,
             margin_rad=contact.limit_margin_rad,
         )[0]
@@ -255,6 +285,19 @@ def _settle_chunk(
             q[i], err[i] = row, float(np.linalg.norm(f.fk(row) - targets[i]))
             turned = True
         last = q[i]
+
+
+def _speed_share(
+    f: Finger, q: np.ndarray, before: np.ndarray | None, step_s: np.ndarray
+) -> np.ndarray:
+    """``(S,)``: how fast the fastest joint moves into each of the configurations ``q``
+    ``(S, k)`` from the one before (``before`` ahead of the first; None: the first is
+    where the track starts, 0), over ``step_s`` ``(S,)`` [s], as a share of its
+    velocity limit."""
+    prior = np.concatenate([q[:1] if before is None else before[None], q[:-1]])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.max(np.abs(q - prior) / f.velocity_limit, axis=1) / step_s
+    return np.where(step_s > 0.0, np.nan_to_num(share, nan=0.0), 0.0)
 
 
 def _lost(

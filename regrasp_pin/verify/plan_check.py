@@ -22,6 +22,8 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
   links too, and its fingertip link) out of the object within ``penetration_tol_m``;
 * every sample inside the joint limits (linear interpolation between samples inside
   a box stays inside it, so the samples suffice);
+* every joint within its velocity limit (the URDF's) between every two samples (the
+  interpolated motion's speed is constant between them, so the samples are exact);
 * the fewest fingers holding a contact at any instant (exact: the count is constant
   between phase boundaries);
 * during every contact phase, the fingertip centre at ``p + r n`` of its contact (in
@@ -52,10 +54,18 @@ from ..plan import ContactPhase
 if TYPE_CHECKING:
     from ..plan import IdlePhase, JoinPhase, Plan, RegraspPhase, ReleasePhase
 
-__all__ = ["JointLimitViolation", "PlanCheck", "RegraspCheck", "phase_gaps", "recheck_plan"]
+__all__ = [
+    "JointLimitViolation",
+    "JointSpeedViolation",
+    "PlanCheck",
+    "RegraspCheck",
+    "phase_gaps",
+    "recheck_plan",
+]
 
 _TIME_TOL_S = 1e-9  # a sample within this of a phase's ends belongs to the phase
 _JOINT_TOL_RAD = 1e-9  # accepted excess over a joint limit
+_SPEED_TOL = 1e-6  # accepted relative excess over a joint velocity limit
 _GAP_TOL_S = 1e-6  # accepted gap or overlap between consecutive phases of a finger
 
 
@@ -118,6 +128,25 @@ class JointLimitViolation:
 
 
 @dataclass(frozen=True)
+class JointSpeedViolation:
+    """The fastest move of one joint over its velocity limit in the plan.
+
+    Attributes:
+        joint: Joint name (URDF).
+        finger: The finger that moves it (None: no finger's).
+        t_s: When that move starts (the first of its two samples) [s].
+        speed_rad_s: Its speed between the two samples [rad/s].
+        limit_rad_s: The joint's velocity limit [rad/s].
+    """
+
+    joint: str
+    finger: str | None
+    t_s: float
+    speed_rad_s: float
+    limit_rad_s: float
+
+
+@dataclass(frozen=True)
 class PlanCheck:
     """What :func:`recheck_plan` found.
 
@@ -128,6 +157,8 @@ class PlanCheck:
         idles: One :class:`RegraspCheck` per idle phase: the resting finger against the
             object and the other fingers.
         joint_limit_violations: The joints that leave their limits (worst sample each).
+        joint_speed_violations: The joints that move faster than their velocity
+            limits between two samples (the fastest move each).
         min_holding: Fewest fingers holding a contact at any instant of the plan.
         t_min_holding_s: A time when that happens [s].
         min_finger_distance_samples_m: Smallest signed distance between geometries of
@@ -155,6 +186,7 @@ class PlanCheck:
     regrasps: tuple[RegraspCheck, ...]
     idles: tuple[RegraspCheck, ...]
     joint_limit_violations: tuple[JointLimitViolation, ...]
+    joint_speed_violations: tuple[JointSpeedViolation, ...]
     min_holding: int
     t_min_holding_s: float
     min_finger_distance_samples_m: float
@@ -238,6 +270,13 @@ def recheck_plan(
             f"joint {v.joint} at t={v.t_s:.3f} s is {v.q_rad:.4f} rad, outside "
             f"[{v.lower_rad:.4f}, {v.upper_rad:.4f}] rad"
         )
+    too_fast = _joint_speeds(scene)
+    for w in too_fast:
+        problems.append(
+            f"joint {w.joint}{'' if w.finger is None else f' ({w.finger})'} moves at "
+            f"{w.speed_rad_s:.3f} rad/s from t={w.t_s:.3f} s, over its velocity limit "
+            f"{w.limit_rad_s:.3f} rad/s"
+        )
 
     n_hold, t_hold = _min_holding(plan)
     if n_hold < need:
@@ -304,6 +343,7 @@ def recheck_plan(
         regrasps=tuple(checks),
         idles=tuple(idle_checks),
         joint_limit_violations=tuple(violations),
+        joint_speed_violations=tuple(too_fast),
         min_holding=n_hold,
         t_min_holding_s=t_hold,
         min_finger_distance_samples_m=d_ff,
@@ -359,6 +399,7 @@ class _Scene:
                 if not self.model.existJointName(j):
                     raise InputError("plan.hand", f"finger {name!r}: joint {j!r} is not in {urdf}")
                 joint_finger[self.model.getJointId(j)] = name
+        self.joint_finger = joint_finger  # joint id -> the finger that moves it
         self.geom_finger: list[str | None] = []
         self.geom_center: list[np.ndarray] = []
         self.geom_radius: list[float] = []
@@ -479,6 +520,32 @@ def _joint_limits(scene: _Scene) -> list[JointLimitViolation]:
                 upper_rad=float(hi[iq]),
             )
         )
+    return out
+
+
+def _joint_speeds(scene: _Scene) -> list[JointSpeedViolation]:
+    """The fastest move of every joint over its velocity limit (one-dof joints with a
+    positive, finite limit in the URDF; the plan moves linearly between samples)."""
+    m, plan = scene.model, scene.plan
+    dt = np.diff(plan.t)
+    out = []
+    for j in range(1, m.njoints):
+        jm = m.joints[j]
+        limit = float(m.velocityLimit[jm.idx_v]) if jm.nv == 1 else math.inf
+        if jm.nq != 1 or not 0.0 < limit < math.inf or dt.size == 0:
+            continue
+        speed = np.abs(np.diff(plan.q[:, jm.idx_q])) / np.maximum(dt, 1e-12)
+        k = int(np.argmax(speed))
+        if speed[k] > limit * (1.0 + _SPEED_TOL):
+            out.append(
+                JointSpeedViolation(
+                    joint=str(m.names[j]),
+                    finger=scene.joint_finger.get(j),
+                    t_s=float(plan.t[k]),
+                    speed_rad_s=float(speed[k]),
+                    limit_rad_s=limit,
+                )
+            )
     return out
 
 
