@@ -23,12 +23,15 @@ from conftest import assert_close
 from regrasp_pin.exceptions import InputError, UnknownNameError
 from regrasp_pin.grasp.choice import exit_times
 from regrasp_pin.grasp.contact import ContactModel
+from regrasp_pin.grasp.holding import Holding
 from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box
+from regrasp_pin.planning.schedule import held_until
+from regrasp_pin.planning.state import loss_reason
 
 #: A 60 deg pad cone (the bundled fingers' own is 90 deg, the front hemisphere): with it
 #: every finger's best contact of the scene is let go within the turn, each for its own
@@ -188,6 +191,7 @@ def test_track_records_what_it_checks(scene, finger):
         last = k - 1
         assert (
             err[last] > CONTACT.ik_tol_m
+            or track.speed_share[last] > 1.0
             or track.margin_rad[last] < 0.0
             or track.pad_cos[last] < CONTACT.cos_cone_of(f)
         ), "a track stops only where the contact is lost"
@@ -195,7 +199,12 @@ def test_track_records_what_it_checks(scene, finger):
         assert np.all(track.margin_rad[k:] == -np.inf) and np.all(track.pad_cos[k:] == -np.inf)
         assert not track.holdable[k:].any()
     assert_close(track.error_m[:k], err[:k], atol=1e-12, what="residuals")
+    # the speed shares are the configurations' steps over the times' steps
+    steps = np.abs(np.diff(track.q[:k], axis=0)) / f.velocity_limit / np.diff(TIMES[:k])[:, None]
+    assert track.speed_share[0] == 0.0
+    assert_close(track.speed_share[1:k], steps.max(axis=1), atol=1e-12, what="speed shares")
     hold = track.holdable
+    assert np.all(track.speed_share[hold] <= 1.0)
     assert np.all(err[hold] <= CONTACT.ik_tol_m)
     assert_close(track.margin_rad[:k], f.limit_margin(track.q[:k]), atol=1e-15, what="margins")
     assert np.all(track.margin_rad[hold] >= CONTACT.limit_margin_rad)
@@ -353,3 +362,10 @@ def test_a_contact_the_joints_cannot_follow_in_time_is_let_go(scene):
     assert f"{c * share[first - 1]:.2f}x its velocity limit" in fast.reasons[first]
     assert_close(fast.q[:first], slow.q[:first], atol=1e-9, what="q before the loss")
     assert fast.n_followed == first + 1  # lost there: not followed further
+    assert np.flatnonzero(fast.cannot_follow).tolist() == [first]
+    assert not slow.cannot_follow.any()
+    # the planner's lift-off window and loss reason read the same loss: the hold ends
+    # at the time before (as for every other kind of loss), for this reason
+    assert held_until(fast, CONTACT) == times[first - 1]
+    h = Holding(p=p, n=n, t_from=0.0, track=fast)
+    assert loss_reason(h, times[first - 1]) == fast.reasons[first]

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.planning.timing import (
     MJ_PEAK,
     PATH_FACTOR,
     STRETCH_MARGIN,
+    check_joint_speed,
     duration_for_move,
     durations_for_moves,
     inverse_minimum_jerk,
@@ -164,3 +166,20 @@ def test_durations_for_moves_keeps_each_path_factor_longer_move_under_the_limits
         assert np.all(_peak_speed(PATH_FACTOR * dq, D) <= vmax * (1 + 1e-6))
         if D > 0.2 + 1e-9:  # one step shorter would not do
             assert np.any(_peak_speed(PATH_FACTOR * dq, D - 0.01) > vmax)
+
+
+def test_joint_speed_check_skips_joints_without_a_limit_but_not_the_others():
+    """A joint whose velocity limit is 0 (none in the URDF) is not counted, as the plan
+    re-check does not count it; it neither fails the check nor hides another joint over
+    its own limit (10x here)."""
+    times = np.array([0.0, 0.01])
+    limit = np.array([1.0, 0.0, 1.0])
+    still = np.array([[0.0, 0.0, 0.0], [0.005, 0.0, 0.0]])  # 0.5 rad/s, the 0-limit joint still
+    check_joint_speed("f", ("a", "b", "c"), limit, times, still)
+    moved = np.array([[0.0, 0.0, 0.0], [0.005, 0.3, 0.0]])  # the 0-limit joint at 30 rad/s
+    check_joint_speed("f", ("a", "b", "c"), limit, times, moved)
+    fast = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.1]])  # c at 10 rad/s
+    with pytest.raises(PlanningError) as err:
+        check_joint_speed("f", ("a", "b", "c"), limit, times, fast)
+    assert err.value.kind == FailureKind.VELOCITY and "joint c" in err.value.reason
+    assert err.value.measured == pytest.approx(10.0) and err.value.required == 1.0

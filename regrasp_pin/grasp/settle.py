@@ -50,10 +50,12 @@ SETTLE_TO_M = 1e-4
 SETTLE_WITHIN_M = 1e-3
 #: Most null-space steps per configuration.
 MAX_STEPS = 6
-#: A turn held over time (:func:`~regrasp_pin.grasp.tracking.track_contact`) moves each
-#: joint at most at this share of its velocity limit: the rest is left to the motion
-#: that follows the object, and to the IK's corrections where a plan samples the hold
-#: between the track's times (at the full limit those reached 1 % over it).
+#: A turn held over time (:func:`~regrasp_pin.grasp.tracking.track_contact`) keeps each
+#: joint's whole step from the time before (the motion that follows the object and the
+#: turn together) within this share of its velocity limit; a time whose following
+#: motion alone moves a joint further is not turned. The rest of the limit is left to
+#: the IK's corrections where a plan samples the hold between the track's times (with
+#: the whole limit those reached 1 % over it).
 TURN_SPEED_SHARE = 0.5
 _FD_RAD = 1e-6  # finite-difference step of the overshoot's gradient [rad]
 

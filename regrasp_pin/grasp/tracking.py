@@ -49,6 +49,10 @@ class ContactTrack:
             the object [m] (about 0 at a contact; ``inf`` where not computed).
         reasons: ``(T,)`` why each time is not holdable ("" where it is).
         n_followed: How many of the times were followed (None: all).
+        speed_share: ``(T,)`` how fast the fastest joint moves into each time's
+            configuration from the time before's, as a share of its velocity limit
+            (0 at the first time and after the contact is lost; above 1 the finger
+            cannot follow); None: not measured.
 
     The contact is followed until it is lost (not reached, a joint that cannot follow it
     within its velocity limit, outside the joint limits, or the pad turned away beyond
@@ -70,12 +74,21 @@ class ContactTrack:
     reasons: tuple[str, ...]
     tip_clearance_m: np.ndarray | None = None
     n_followed: int | None = None
+    speed_share: np.ndarray | None = None
 
     @property
     def followed_until_s(self) -> float:
         """The last time [s] followed: where the contact is lost, or the last time."""
         n = len(self.times_s) if self.n_followed is None else self.n_followed
         return float(self.times_s[n - 1])
+
+    @property
+    def cannot_follow(self) -> np.ndarray:
+        """``(T,)`` True where a joint would have to move faster than its velocity limit
+        to follow the contact from the time before (:attr:`speed_share` above 1)."""
+        if self.speed_share is None:
+            return np.zeros(len(self.times_s), bool)
+        return np.asarray(self.speed_share) > 1.0
 
     @property
     def holdable(self) -> np.ndarray:
@@ -157,8 +170,7 @@ def track_contact(
         pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])
         speed[s0:s1] = _speed_share(f, q[s0:s1], q[s0 - 1] if s0 else None, step_s[s0:s1])
         prev = q[s1 - 1]
-        lost = _lost(err[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact, cos_cone)
-        lost |= speed[s0:s1] > 1.0
+        lost = _lost(err[s0:s1], speed[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact, cos_cone)
         if lost.any():
             lost_at = s0 + int(np.argmax(lost))
             break
@@ -166,6 +178,7 @@ def track_contact(
     # would cost most of the track) and no Coal
     after = slice(lost_at + 1, None)
     q[after], err[after], margin[after], pad_cos[after] = q[lost_at], np.inf, -np.inf, -np.inf
+    speed[after] = 0.0
     clearance = np.full(times.size, np.inf)
     tip_clear = np.full(times.size, np.inf)
     if check_links:
@@ -190,6 +203,7 @@ def track_contact(
         reasons=tuple(reasons),
         tip_clearance_m=tip_clear,
         n_followed=lost_at + 1,
+        speed_share=speed,
     )
 
 
@@ -212,8 +226,9 @@ def _reasons(
             reasons.append(f"not followed after the contact is lost at t={times[lost_at]:.3f} s")
         elif err[i] > contact.ik_tol_m:
             reasons.append(f"IK cannot reach the contact (residual {err[i] * 1e3:.2f} mm)")
-        elif speed[i] > 1.0:
-            j = int(np.argmax(np.abs(q[i] - q[i - 1]) / f.velocity_limit))
+        elif speed[i] > 1.0:  # never at i = 0
+            limit = np.where(f.velocity_limit > 0.0, f.velocity_limit, np.inf)
+            j = int(np.argmax(np.abs(q[i] - q[i - 1]) / limit))
             reasons.append(
                 f"joint {f.joint_names[j]} cannot follow it "
                 f"({speed[i]:.2f}x its velocity limit {f.velocity_limit[j]:.2f} rad/s)"
@@ -293,21 +308,28 @@ def _speed_share(
     """``(S,)``: how fast the fastest joint moves into each of the configurations ``q``
     ``(S, k)`` from the one before (``before`` ahead of the first; None: the first is
     where the track starts, 0), over ``step_s`` ``(S,)`` [s], as a share of its
-    velocity limit."""
+    velocity limit (joints without a positive limit are not counted, as
+    :func:`~regrasp_pin.verify.plan_check.recheck_plan` does not)."""
     prior = np.concatenate([q[:1] if before is None else before[None], q[:-1]])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        share = np.max(np.abs(q - prior) / f.velocity_limit, axis=1) / step_s
-    return np.where(step_s > 0.0, np.nan_to_num(share, nan=0.0), 0.0)
+    limit = np.asarray(f.velocity_limit, float)
+    counted = limit > 0.0
+    per_joint = np.zeros(q.shape)
+    np.divide(np.abs(q - prior), limit, out=per_joint, where=counted)
+    out = np.zeros(q.shape[0])
+    np.divide(per_joint.max(axis=1), step_s, out=out, where=step_s > 0.0)
+    return out
 
 
 def _lost(
     err: np.ndarray,
+    speed: np.ndarray,
     margin: np.ndarray,
     pad_cos: np.ndarray,
     contact: ContactModel,
     cos_cone: float,
 ) -> np.ndarray:
-    """Where the contact is lost: not reached, outside the joint limits, or the pad
-    turned away beyond the cone (the conditions that end every hold; the links and the
-    trigger margin come on top of them)."""
-    return (err > contact.ik_tol_m) | (margin < 0.0) | (pad_cos < cos_cone)
+    """Where the contact is lost: not reached, a joint that cannot follow it within its
+    velocity limit (``speed``: :func:`_speed_share`), outside the joint limits, or the
+    pad turned away beyond the cone (the conditions that end every hold; the links and
+    the trigger margin come on top of them)."""
+    return (err > contact.ik_tol_m) | (speed > 1.0) | (margin < 0.0) | (pad_cos < cos_cone)

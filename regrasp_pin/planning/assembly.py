@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..exceptions import PlanningError
 from ..grasp.holding import Holding, holding_q
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
@@ -20,8 +21,9 @@ from .regrasp import RegraspResult
 from .release import Release
 from .schedule import TIME_TOL_S
 from .state import PlanContext, PlanState
+from .timing import check_joint_speed
 
-__all__ = ["plan_until"]
+__all__ = ["joint_speed_failure", "plan_until"]
 
 
 def plan_until(ctx: PlanContext, state: PlanState, until: float, *, final: bool = False) -> Plan:
@@ -107,6 +109,22 @@ def _assemble(
         phases=_with_idle(hand, phases, float(times[0]), float(times[-1])),
         summary={},
     )
+
+
+def joint_speed_failure(hand: Hand, times: np.ndarray, q: np.ndarray) -> PlanningError | None:
+    """The first finger (in the hand's order) of the hand configurations ``q``
+    ``(S, nq)`` [rad] at ``times`` ``(S,)`` [s] that moves a joint faster than its
+    velocity limit between two samples, as :func:`~.timing.check_joint_speed`'s
+    ``velocity`` PlanningError (its fastest joint); None if none does. The assembled
+    plan's holds are placed by IK at every sample, so their speeds are checked here,
+    where the plan's samples are known."""
+    for name in hand.finger_names:
+        f = hand.fingers[name]
+        try:
+            check_joint_speed(name, f.joint_names, f.velocity_limit, times, q[:, f.q_indices])
+        except PlanningError as exc:
+            return exc
+    return None
 
 
 def _with_idle(hand: Hand, phases: dict[str, list], t0: float, t1: float) -> dict[str, list]:

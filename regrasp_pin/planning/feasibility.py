@@ -56,13 +56,19 @@ def must_hold_runs(
 
 def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
     """The first time in ``[h.t_from, t_to]`` at which the tracked hold ``h`` is lost
-    (not reached, outside the limits or the pad turned away; the motion's last step
-    excepted, as the planner counts it held to the end), or None if it is held."""
+    (not reached, not within the velocity limits, outside the joint limits or the pad
+    turned away; the motion's last step excepted, as the planner counts it held to
+    the end), or None if it is held."""
     tr, c = h.track, ctx.params.contact
     sel = (tr.times_s <= min(t_to, ctx.scene.motion.t_end - ctx.params.dt_s) + TIME_TOL_S) & (
         tr.times_s >= h.t_from - TIME_TOL_S
     )
-    lost = sel & ((tr.error_m > c.ik_tol_m) | (tr.margin_rad < 0.0) | (tr.pad_cos < tr.cos_cone))
+    lost = sel & (
+        (tr.error_m > c.ik_tol_m)
+        | tr.cannot_follow
+        | (tr.margin_rad < 0.0)
+        | (tr.pad_cos < tr.cos_cone)
+    )
     return float(tr.times_s[np.argmax(lost)]) if lost.any() else None
 
 

@@ -57,7 +57,7 @@ from ..model.scene import Scene
 from ..plan import Plan
 from ..verify.plan_check import phase_gaps
 from .advance import Step, advance, contenders
-from .assembly import plan_until
+from .assembly import joint_speed_failure, plan_until
 from .feasibility import first_infeasibility, must_hold_runs, no_plan_exists
 from .params import PlannerParams
 from .recovery import recover
@@ -250,17 +250,7 @@ def plan_manipulation(
     stage["regrasps"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    plan = plan_until(ctx, state, motion.t_end, final=True)
-    uncovered = phase_gaps(plan)
-    ends = (abs(float(plan.t[0]) - motion.t_start), abs(float(plan.t[-1]) - motion.t_end))
-    spans = max(ends) <= 1e-6
-    if uncovered or not spans:
-        # every move was verified on its samples; a plan whose samples or phases do not
-        # span the motion would leave part of it unverified (a bug, not an outcome)
-        raise AssertionError(
-            f"the assembled plan spans {float(plan.t[0]):.4f}-{float(plan.t[-1]):.4f} s of "
-            f"the motion's {motion.t_start:.4f}-{motion.t_end:.4f} s: " + "; ".join(uncovered)
-        )
+    plan = _final_plan(ctx, state)
     stage["assembly"] = time.perf_counter() - t0
     plan.summary.update(
         {
@@ -276,6 +266,38 @@ def plan_manipulation(
     )
     taking_part = {n: m for n, m in every.items() if n in manifolds or n in state.joined}
     return ManipulationPlan(plan, list(state.regrasps), grasp, taking_part, sample, stage)
+
+
+def _final_plan(ctx: PlanContext, state: PlanState) -> Plan:
+    """The whole plan of ``state``, checked where only the assembled plan can be: its
+    phases and samples span the motion (else a bug: AssertionError), and the holds,
+    placed by IK at every sample, keep the joints within their velocity limits (else a
+    ``velocity`` PlanningError with the plan before it)."""
+    motion = ctx.scene.motion
+    plan = plan_until(ctx, state, motion.t_end, final=True)
+    uncovered = phase_gaps(plan)
+    ends = (abs(float(plan.t[0]) - motion.t_start), abs(float(plan.t[-1]) - motion.t_end))
+    spans = max(ends) <= 1e-6
+    if uncovered or not spans:
+        # every move was verified on its samples; a plan whose samples or phases do not
+        # span the motion would leave part of it unverified (a bug, not an outcome)
+        raise AssertionError(
+            f"the assembled plan spans {float(plan.t[0]):.4f}-{float(plan.t[-1]):.4f} s of "
+            f"the motion's {motion.t_start:.4f}-{motion.t_end:.4f} s: " + "; ".join(uncovered)
+        )
+    too_fast = joint_speed_failure(ctx.scene.hand, plan.t, plan.q)
+    if too_fast is not None:
+        # the holds are placed by IK at the plan's samples: checked where they are known
+        raise PlanningError(
+            f"the assembled plan is too fast where the fingers hold: {too_fast.reason}",
+            finger=too_fast.finger,
+            time_s=too_fast.time_s,
+            partial=plan_until(ctx, state, too_fast.time_s or motion.t_start),
+            kind=FailureKind.VELOCITY,
+            measured=too_fast.measured,
+            required=too_fast.required,
+        )
+    return plan
 
 
 def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:

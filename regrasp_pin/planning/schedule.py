@@ -56,10 +56,11 @@ class LiftOffWindow:
 
 def held_until(track: ContactTrack, contact: ContactModel) -> float:
     """Last track time [s] up to which the contact is held inside the joint limits
-    (margin >= 0), reached, pad facing, with the links clear and the fingertip link
-    not sunk in, without a break."""
+    (margin >= 0), reached within the velocity limits, pad facing, with the links clear
+    and the fingertip link not sunk in, without a break."""
     ok = (
         (track.error_m <= contact.ik_tol_m)
+        & ~track.cannot_follow
         & (track.margin_rad >= 0.0)
         & (track.pad_cos >= track.cos_cone)
         & (track.link_clearance_m >= 0.0)

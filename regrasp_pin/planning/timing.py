@@ -146,9 +146,12 @@ def check_joint_speed(
 ) -> None:
     """Raise a ``velocity`` PlanningError (the fastest joint, its speed and limit
     [rad/s]) if a joint of ``q`` ``(S, k)`` [rad] moves faster than its limit between
-    the samples ``times`` ``(S,)`` [s]."""
+    the samples ``times`` ``(S,)`` [s] (joints without a positive limit are not
+    counted, as :func:`~regrasp_pin.verify.plan_check.recheck_plan` does not)."""
     vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
-    ratio = vel / velocity_limit
+    limit = np.asarray(velocity_limit, float)
+    ratio = np.zeros(vel.shape)
+    np.divide(vel, limit, out=ratio, where=limit > 0.0)
     if (ratio > 1.0).any():
         i, j = (int(v) for v in np.unravel_index(np.argmax(ratio), vel.shape))
         raise PlanningError(

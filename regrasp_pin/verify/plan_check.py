@@ -22,8 +22,10 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
   links too, and its fingertip link) out of the object within ``penetration_tol_m``;
 * every sample inside the joint limits (linear interpolation between samples inside
   a box stays inside it, so the samples suffice);
-* every joint within its velocity limit (the URDF's) between every two samples (the
-  interpolated motion's speed is constant between them, so the samples are exact);
+* every one-dof joint with a positive, finite velocity limit in the hand's model (the
+  URDF's; a coupled group's driver carries the tightest of its group's limits) within
+  it between every two samples (the interpolated motion's speed is constant between
+  them, so the samples are exact);
 * the fewest fingers holding a contact at any instant (exact: the count is constant
   between phase boundaries);
 * during every contact phase, the fingertip centre at ``p + r n`` of its contact (in
@@ -525,7 +527,8 @@ def _joint_limits(scene: _Scene) -> list[JointLimitViolation]:
 
 def _joint_speeds(scene: _Scene) -> list[JointSpeedViolation]:
     """The fastest move of every joint over its velocity limit (one-dof joints with a
-    positive, finite limit in the URDF; the plan moves linearly between samples)."""
+    positive, finite limit in the hand's model; the plan moves linearly between
+    samples)."""
     m, plan = scene.model, scene.plan
     dt = np.diff(plan.t)
     out = []
@@ -534,7 +537,7 @@ def _joint_speeds(scene: _Scene) -> list[JointSpeedViolation]:
         limit = float(m.velocityLimit[jm.idx_v]) if jm.nv == 1 else math.inf
         if jm.nq != 1 or not 0.0 < limit < math.inf or dt.size == 0:
             continue
-        speed = np.abs(np.diff(plan.q[:, jm.idx_q])) / np.maximum(dt, 1e-12)
+        speed = np.abs(np.diff(plan.q[:, jm.idx_q])) / dt  # Plan: t strictly increasing
         k = int(np.argmax(speed))
         if speed[k] > limit * (1.0 + _SPEED_TOL):
             out.append(
