@@ -347,6 +347,46 @@ def test_a_plan_whose_samples_stop_short_of_the_end_is_never_returned(monkeypatc
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
 
 
+def test_a_plan_too_fast_between_its_samples_is_never_returned(monkeypatch):
+    """The holds are placed by IK at every sample of the assembled plan, so the planner
+    checks the assembled plan's joint speeds: a held finger's joint made to jump (2x its
+    velocity limit) between two samples is a velocity failure of that finger, there,
+    with the plan before it."""
+    from regrasp_pin.planning import planner
+
+    assemble = planner.plan_until
+    jumped = {}
+
+    def jump(ctx, state, until, *, final=False):
+        plan = assemble(ctx, state, until, final=final)
+        if not final:
+            return plan
+        f = ctx.scene.hand.fingers["middle"]
+        k = plan.t.size // 2
+        q = plan.q.copy()
+        step = 2.0 * f.velocity_limit[1] * (plan.t[k + 1] - plan.t[k])
+        q[k + 1 :, f.q_indices[1]] += step if q[k, f.q_indices[1]] + step <= f.upper[1] else -step
+        j, dt = f.q_indices[1], plan.t[k + 1] - plan.t[k]
+        jumped.update(
+            t=float(plan.t[k]),
+            limit=float(f.velocity_limit[1]),
+            speed=float(abs(q[k + 1, j] - q[k, j]) / dt),  # the jump and the hold's own
+        )
+        return replace(plan, q=q)
+
+    monkeypatch.setattr(planner, "plan_until", jump)
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    exc = err.value
+    assert exc.kind == FailureKind.VELOCITY and exc.finger == "middle"
+    assert exc.time_s == jumped["t"]
+    assert exc.measured == pytest.approx(jumped["speed"], rel=1e-9)
+    assert exc.measured > 1.5 * jumped["limit"]
+    assert exc.required == jumped["limit"]
+    assert exc.partial is not None and exc.partial.t[-1] <= jumped["t"] + 1e-9
+
+
 def test_holds_that_end_together_are_regrasped_in_turn(tmp_path):
     """100 deg at 40 deg/s: the holds of the three regrasping fingers end within about
     one second of each other, again and again, so waiting for each finger's own trigger
