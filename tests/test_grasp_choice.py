@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import re
 
 import coal
 import numpy as np
@@ -1335,3 +1336,42 @@ def test_q_that_would_land_too_late_is_not_chosen(five):
     for bad in (lambda q: 0.5, lambda q: np.full(len(q), np.nan)):
         with pytest.raises(InputError, match="landing_s"):
             _choose_from_grasp(five, "middle", 1.25, landing_s=bad, land_by_s=1.0)
+
+
+def test_a_failure_names_what_refused_the_candidates_that_cleared_the_object(five, monkeypatch):
+    """Most candidates refused for their links (the 80th percentile of their distances
+    asked), the rest, which clear the object, refused for another finger 1 m away: the
+    error's kind and numbers are the finger clearance's, what bound the candidates that
+    got furthest, though the object clearance refused more; the message counts both."""
+    hand, box, _, sample, manifolds, grasp = five
+    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in ("thumb", "ring")}
+    kw = dict(
+        mu=MU,
+        others=others,
+        P_object=grasp.points_object["index"],
+        n_P_object=grasp.normals_object["index"],
+    )
+    seen = []
+    real = ObjectClearance.distances
+    monkeypatch.setattr(
+        ObjectClearance, "distances", lambda self, *a: seen.append(real(self, *a)) or seen[-1]
+    )
+    everything = dataclasses.replace(CONTACT, choice_link_clearance_m=1.0)
+    with pytest.raises(ContactError):
+        choose_new_contact(hand, box, manifolds["index"], sample, 0.5, contact=everything, **kw)
+    links = np.concatenate([d for d, _ in seen])
+    some = dataclasses.replace(CONTACT, choice_link_clearance_m=float(np.quantile(links, 0.8)))
+    q_hand = np.zeros(hand.model.nq)
+    for n, q in grasp.q.items():
+        q_hand[hand.finger(n).q_indices] = q
+    with pytest.raises(ContactError) as e:
+        choose_new_contact(
+            hand, box, manifolds["index"], sample, 0.5, contact=some, q_hand_arrive=q_hand,
+            finger_clearance_m=1.0, max_checks=1000, **kw,
+        )  # fmt: skip
+    counts = {
+        k: int(n) for n, k in re.findall(r"(\d+) (link clearance|finger clearance)", str(e.value))
+    }
+    assert counts["link clearance"] > counts["finger clearance"] > 0
+    assert e.value.kind == FailureKind.FINGER_COLLISION and e.value.required == 1.0
+    assert 0.0 < e.value.measured < 1.0

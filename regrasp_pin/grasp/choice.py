@@ -556,16 +556,21 @@ class _Screen:
                 break
         if passing:
             return max(passing, key=lambda c: c[:3])[3]
-        raise self.failure(screened + self.rejected["link clearance"], idx.size)
+        raise self.failure(screened + self.rejected["link clearance"], idx.size, screened)
 
-    def failure(self, checked: int, n_candidates: int) -> ContactError:
-        """The error when none of ``checked`` candidates passes: the most frequent
-        rejection, with the numbers of the candidate that came nearest to passing it
-        (a distance [m] and its requirement, or an epsilon and the force-closure
-        tolerance)."""
+    def failure(self, checked: int, n_candidates: int, screened: int = 0) -> ContactError:
+        """The error when none of ``checked`` candidates passes: the binding rejection,
+        with the numbers of the candidate that came nearest to passing it (a distance
+        [m] and its requirement, or an epsilon and the force-closure tolerance). When
+        ``screened`` candidates cleared the object, what refused those binds (the most
+        frequent of the later tests); else the object clearance."""
         rejected = self.rejected
         why = ", ".join(f"{n} {k}" for k, n in rejected.items() if n)
-        main = max(rejected, key=lambda k: rejected[k])  # dict order breaks ties
+        later = {k: n for k, n in rejected.items() if k != "link clearance" and n}
+        if screened and later:
+            main = max(later, key=lambda k: later[k])  # dict order breaks ties
+        else:
+            main = max(rejected, key=lambda k: rejected[k])
         measured, required = self.closest.get(main, (None, None))
         nearest = ""
         if measured is not None and required is not None:
