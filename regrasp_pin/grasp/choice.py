@@ -558,7 +558,7 @@ class _Screen:
             return max(passing, key=lambda c: c[:3])[3]
         raise self.failure(screened + self.rejected["link clearance"], idx.size, screened)
 
-    def failure(self, checked: int, n_candidates: int, screened: int = 0) -> ContactError:
+    def failure(self, checked: int, n_candidates: int, screened: int) -> ContactError:
         """The error when none of ``checked`` candidates passes: the binding rejection,
         with the numbers of the candidate that came nearest to passing it (a distance
         [m] and its requirement, or an epsilon and the force-closure tolerance). When

@@ -18,7 +18,7 @@ import numpy as np
 from .._validate import as_array
 from ..exceptions import InputError
 from ..model.clearance import LinkClearance
-from ..model.hand import Finger, Hand
+from ..model.hand import Finger, Hand, speed_shares
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from .contact import ContactModel, pad_cosines, tip_targets
@@ -227,8 +227,10 @@ def _reasons(
         elif err[i] > contact.ik_tol_m:
             reasons.append(f"IK cannot reach the contact (residual {err[i] * 1e3:.2f} mm)")
         elif speed[i] > 1.0:  # never at i = 0
-            limit = np.where(f.velocity_limit > 0.0, f.velocity_limit, np.inf)
-            j = int(np.argmax(np.abs(q[i] - q[i - 1]) / limit))
+            step = speed_shares(
+                (q[i] - q[i - 1])[None], times[i : i + 1] - times[i - 1], f.velocity_limit
+            )
+            j = int(np.argmax(step[0]))
             reasons.append(
                 f"joint {f.joint_names[j]} cannot follow it "
                 f"({speed[i]:.2f}x its velocity limit {f.velocity_limit[j]:.2f} rad/s)"
@@ -268,11 +270,10 @@ def _settle_chunk(
     """Turn the fingertip link off the face at times ``s0:s1`` with the finger's spare
     joints (:func:`~.settle.settle_tip_link`), in place, time by time: each time's
     configuration within :data:`~.settle.TURN_SPEED_SHARE` of what the velocity limits
-    allow over ``step_s[i]`` [s] (the time since the time before) of the time
-    before's (``prev`` before ``s0``), and
-    re-solved from it by IK once a time before was turned, so that the turn carries on;
-    the pad kept within its cone and the joints off the trigger's margin where they
-    were."""
+    allow over ``step_s[i]`` [s] (the time since the time before) of the time before's
+    (``prev`` before ``s0``), and re-solved from it by IK once a time before was turned,
+    so that the turn carries on; the pad kept within its cone and the joints off the
+    trigger's margin where they were."""
     if not sinking(f, q[s0:s1], n_palm[s0:s1]).any():
         return
     last = prev
@@ -308,16 +309,9 @@ def _speed_share(
     """``(S,)``: how fast the fastest joint moves into each of the configurations ``q``
     ``(S, k)`` from the one before (``before`` ahead of the first; None: the first is
     where the track starts, 0), over ``step_s`` ``(S,)`` [s], as a share of its
-    velocity limit (joints without a positive limit are not counted, as
-    :func:`~regrasp_pin.verify.plan_check.recheck_plan` does not)."""
+    velocity limit (:func:`~regrasp_pin.model.hand.speed_shares`)."""
     prior = np.concatenate([q[:1] if before is None else before[None], q[:-1]])
-    limit = np.asarray(f.velocity_limit, float)
-    counted = limit > 0.0
-    per_joint = np.zeros(q.shape)
-    np.divide(np.abs(q - prior), limit, out=per_joint, where=counted)
-    out = np.zeros(q.shape[0])
-    np.divide(per_joint.max(axis=1), step_s, out=out, where=step_s > 0.0)
-    return out
+    return speed_shares(q - prior, step_s, f.velocity_limit).max(axis=1)
 
 
 def _lost(

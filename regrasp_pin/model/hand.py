@@ -32,7 +32,7 @@ from .kinematics import FingerChain
 from .tip_reach import TipReach, tip_reach
 from .urdf import HandModels, load_hand_models
 
-__all__ = ["Finger", "Hand", "five_finger_urdf_path", "allegro_urdf_path"]
+__all__ = ["Finger", "Hand", "allegro_urdf_path", "five_finger_urdf_path", "speed_shares"]
 
 #: Optional keys of a hand file (:meth:`Hand.from_file`).
 _HAND_FILE_OPTIONAL = ("name", "pad_axes", "palm_frame", "locked", "couplings", "package_dirs")
@@ -90,6 +90,21 @@ def allegro_urdf_path() -> Path:
         if path.is_file():
             return path
     raise ModelFileError(rel, "not found in the installed example-robot-data")
+
+
+def speed_shares(dq: np.ndarray, dt_s: np.ndarray, velocity_limit: np.ndarray) -> np.ndarray:
+    """``(S, k)``: joint steps ``dq`` ``(S, k)`` [rad] taken over ``dt_s`` ``(S,)`` [s],
+    each as a share of its joint's velocity limit ``(k,)`` [rad/s] (above 1: too fast).
+    0 for joints without a positive limit (not counted, as
+    :func:`~regrasp_pin.verify.plan_check.recheck_plan` does not count them) and for
+    steps that take no time."""
+    limit = np.asarray(velocity_limit, float)
+    dt = np.asarray(dt_s, float)[:, None]
+    speed = np.zeros(np.shape(dq))
+    np.divide(np.abs(dq), dt, out=speed, where=dt > 0.0)  # [rad/s]
+    out = np.zeros(speed.shape)
+    np.divide(speed, limit, out=out, where=limit > 0.0)
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..exceptions import FailureKind, PlanningError
+from ..model.hand import speed_shares
 
 __all__ = [
     "MJ_PEAK",
@@ -146,12 +147,10 @@ def check_joint_speed(
 ) -> None:
     """Raise a ``velocity`` PlanningError (the fastest joint, its speed and limit
     [rad/s]) if a joint of ``q`` ``(S, k)`` [rad] moves faster than its limit between
-    the samples ``times`` ``(S,)`` [s] (joints without a positive limit are not
-    counted, as :func:`~regrasp_pin.verify.plan_check.recheck_plan` does not)."""
+    the samples ``times`` ``(S,)`` [s] (:func:`~regrasp_pin.model.hand.speed_shares`:
+    joints without a positive limit are not counted)."""
     vel = np.abs(np.diff(q, axis=0)) / np.diff(times)[:, None]
-    limit = np.asarray(velocity_limit, float)
-    ratio = np.zeros(vel.shape)
-    np.divide(vel, limit, out=ratio, where=limit > 0.0)
+    ratio = speed_shares(np.diff(q, axis=0), np.diff(times), velocity_limit)
     if (ratio > 1.0).any():
         i, j = (int(v) for v in np.unravel_index(np.argmax(ratio), vel.shape))
         raise PlanningError(
