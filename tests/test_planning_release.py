@@ -12,6 +12,7 @@ from conftest import CONE_60, assert_close, held_grasp
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.grasp.holding import holding_q, rest_configuration
+from regrasp_pin.model.clearance import FingerClearance
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.planning.release import plan_release
 from regrasp_pin.planning.timing import duration_for_move
@@ -187,3 +188,66 @@ def test_a_release_at_the_end_of_the_motion_is_too_late(scene):
             ik_tol_m=1e-5,
         )
     assert info.value.kind == FailureKind.TOO_LATE and info.value.required == scen.motion.t_end
+
+
+def _contacts_past_a_limit(f, rng, tries=400):
+    """``(q, (p, n))`` in the palm frame: ``q`` with one joint at a limit, ``n`` the
+    direction in which only that joint, moving past the limit, takes the fingertip; the
+    normal is out of reach there."""
+    for _ in range(tries):
+        q = rng.uniform(f.lower, f.upper)
+        j, upper = int(rng.integers(f.k)), bool(rng.integers(2))
+        q[j] = f.upper[j] if upper else f.lower[j]
+        c, J = f.jacobian(q)
+        v = J[:, j] if upper else -J[:, j]
+        if np.linalg.norm(v) > 1e-3:
+            n = v / np.linalg.norm(v)
+            yield q, (c - f.tip_radius * n, n)
+
+
+def test_where_the_normal_is_out_of_reach_the_finger_backs_off_tilted(scene):
+    """At a contact whose normal only a joint past its limit could follow (the object
+    kept 1 m away, at rest), the normal back-off is out of reach; the release backs off
+    along a tilted direction instead: the tip centre ends ``clearance`` above the
+    contact's tangent plane (FK), the joints within their limits."""
+    scen, _, _, _ = scene
+    hand, f = scen.hand, scen.hand.finger("index")
+    t = np.round(np.arange(0.0, 0.8 + 1e-9, 0.01), 9)
+    T = np.repeat(np.eye(4)[None], t.size, axis=0)
+    T[:, :3, 3] = [0.0, 0.0, 1.0]
+    far = ObjectMotion.from_poses(t, T)
+    base = rest_configuration(hand, scen.obj, scen.motion, list(hand.finger_names))
+
+    def q_hand(times):
+        return np.broadcast_to(base, (times.size, base.size)).copy()
+
+    clear_of_others = FingerClearance(hand, "index")
+    rescued = 0
+    for q, (p, n) in _contacts_past_a_limit(f, np.random.default_rng(3)):
+        p_obj = p - T[0, :3, 3]  # the object frame is the palm frame shifted
+        target = p + (f.tip_radius + CLEARANCE_M) * n
+        if f.ik(target[None], q, tol_m=1e-5).error_m[0] <= 1e-5:
+            continue  # the normal is within reach here
+        q_all = base.copy()
+        q_all[f.q_indices] = q
+        if clear_of_others(q_all) < 0.005:
+            continue  # a finger holding there would be in its neighbour
+        try:
+            rel = plan_release(
+                hand, scen.obj, far, "index", T_RELEASE_S, (p_obj, n), q, q_hand,
+                clearance_m=CLEARANCE_M, back_off_s=0.1, dt_s=0.01,
+                link_clearance_m=0.0, finger_clearance_m=0.0005, ik_tol_m=1e-5,
+            )  # fmt: skip
+        except PlanningError as exc:
+            if exc.kind == FailureKind.IK_UNREACHABLE:  # no tilted direction either
+                assert exc.measured > exc.required == 1e-5
+                continue
+            raise
+        rescued += 1
+        tip = f.fk(rel.q[-1][None])[0]
+        assert (tip - p) @ n - f.tip_radius == pytest.approx(CLEARANCE_M, abs=2e-5)
+        assert np.linalg.norm(tip - target) > 1e-4  # not along the normal
+        assert np.all(f.within_limits(rel.q, 1e-9))
+        if rescued == 3:
+            break
+    assert rescued == 3

@@ -4,7 +4,9 @@ Near the end of a motion a contact may be lost with no time left for a regrasp
 (lift-off, flight and landing take at least ``RegraspParams.duration_s``). If the
 other fingers hold the object in force closure to the end, the finger can simply let
 go: from the release time ``t_r`` its fingertip backs off along the contact normal
-(fixed in the palm frame: ``clearance`` from where the pad touched) over a short
+or, where a joint limit puts that out of reach, along a direction tilted from it
+(:func:`~.lift.back_off`; fixed in the palm frame: ``clearance`` above the tangent
+plane where the pad touched) over a short
 minimum-jerk move (straight in joint space, as long as the joint velocity limits
 need: near a joint limit, backing off may swing another joint far); the finger then
 stays still or, given a parking configuration, moves there (minimum jerk, joint
@@ -30,6 +32,7 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..verify.finger_motion import VerificationReport, verify_finger_motion
+from .lift import back_off
 from .timing import check_joint_speed, duration_for_move, minimum_jerk
 
 __all__ = ["Release", "plan_release", "verify_or_raise"]
@@ -127,17 +130,21 @@ def plan_release(
     p, n = np.asarray(P[0], float), np.asarray(P[1], float)
     target = tip_targets(p[None], n[None], f.tip_radius + clearance_m, T_r[None])[0, 0]
     res = f.ik(target[None], q_release, tol_m=ik_tol_m)
-    if res.error_m[0] > ik_tol_m:
-        raise PlanningError(
-            f"cannot back off {clearance_m * 1e3:.1f} mm from the contact "
-            f"(residual {res.error_m[0] * 1e3:.2f} mm)",
-            finger=finger,
-            time_s=t_r,
-            kind=FailureKind.IK_UNREACHABLE,
-            measured=float(res.error_m[0]),
-            required=ik_tol_m,
-        )
-    q_off = res.q[0]
+    if res.error_m[0] <= ik_tol_m:
+        q_off = res.q[0]
+    else:  # the normal is out of reach at a joint limit: a direction tilted from it
+        try:
+            q_off = back_off(f, T_r[None], (p, n), np.array([clearance_m]), q_release, ik_tol_m)[0]
+        except PlanningError:
+            raise PlanningError(
+                f"cannot back off {clearance_m * 1e3:.1f} mm from the contact, along its "
+                f"normal (residual {res.error_m[0] * 1e3:.2f} mm) or tilted from it",
+                finger=finger,
+                time_s=t_r,
+                kind=FailureKind.IK_UNREACHABLE,
+                measured=float(res.error_m[0]),
+                required=ik_tol_m,
+            ) from None
     need = duration_for_move(
         q_release,
         q_off,
