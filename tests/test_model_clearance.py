@@ -140,3 +140,37 @@ def test_finger_clearance_sees_two_fingers_pressed_together(hand):
             q2[idx.q_indices[0]], q2[mid.q_indices[0]] = a, b
             best = min(best, fc(q2))
     assert best < base
+
+
+def _shared_in_a_thread(hand: Hand) -> FingerClearance:
+    import threading
+
+    out: list[FingerClearance] = []
+    t = threading.Thread(
+        target=lambda h: out.append(FingerClearance.shared(h, "index", ["middle"])), args=(hand,)
+    )
+    t.start()
+    t.join()
+    return out[0]
+
+
+def test_a_shared_finger_clearance_is_one_per_hand_pair_and_thread_and_dies_with_the_hand():
+    import gc
+    import weakref
+
+    hand = Hand.five_finger()
+    fc = FingerClearance.shared(hand, "index", ["middle"])
+    assert FingerClearance.shared(hand, "index", ("middle",)) is fc
+    assert FingerClearance.shared(hand, "index") is not fc  # every other finger
+    assert FingerClearance.shared(Hand.five_finger(), "index", ["middle"]) is not fc
+    rng = np.random.default_rng(2)
+    q = hand.neutral()
+    for f in hand.fingers.values():
+        q[f.q_indices] = rng.uniform(f.lower, f.upper)
+    assert fc(q) == FingerClearance(hand, "index", ["middle"])(q)  # the same distance
+    # its Pinocchio data is not shared across threads
+    assert _shared_in_a_thread(hand) is not fc
+    gone = weakref.ref(hand)
+    del hand, fc
+    gc.collect()
+    assert gone() is None  # the shared checks do not keep the hand alive

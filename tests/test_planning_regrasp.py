@@ -751,3 +751,48 @@ def test_the_same_call_gives_the_same_trajectory(scenes):
     assert np.array_equal(a.times_s, b.times_s)
     assert np.array_equal(a.waypoints_object, b.waypoints_object)
     assert a.attempts == b.attempts
+
+
+def test_a_variant_that_leaves_the_path_as_it_was_is_not_attempted_again(hand, scenes, monkeypatch):
+    """Next to the middle finger every variant fails; the wider gaps that leave the tip
+    path as it was (the same points, the same m) fail as that path did, without being
+    attempted again: the attempts and the error are those of attempting every one."""
+    scene = scenes["upright-static"]
+    i_p, i_q = landing_next_to(scene, Placer(hand), "middle")
+    real = regrasp_module._attempt
+    calls = []
+
+    def counted(task, gpath, tip_path, p, stages):
+        calls.append((tip_path.points_object.tobytes(), min(p.m, len(tip_path))))
+        return real(task, gpath, tip_path, p, stages)
+
+    monkeypatch.setattr(regrasp_module, "_attempt", counted)
+
+    def outcome():
+        calls.clear()
+        with pytest.raises(PlanningError) as info:
+            scene.plan(i_p, i_q, q_hand=scene.q_neutral, route="surface")
+        return info.value, list(calls)
+
+    reused, reused_calls = outcome()
+    monkeypatch.setattr(regrasp_module, "_path_key", lambda path: object())  # never equal
+    every, every_calls = outcome()
+    assert reused.attempts == every.attempts and reused.kind == every.kind
+    assert len(every_calls) == len(every.attempts) > len(reused_calls)
+    assert len(set(reused_calls)) == len(reused_calls) == len(set(every_calls))
+
+
+def test_a_polygon_asked_for_again_is_the_one_computed_before(monkeypatch):
+    """The regrasp's polygons: the same points and settings give the answer of
+    ``approximate_polygon`` itself, computed once."""
+    rng = np.random.default_rng(5)
+    pts = np.cumsum(rng.normal(size=(60, 3)) * 1e-3, axis=0)
+    first = regrasp_module._polygon(pts, 7, "max", "hopfield")
+    direct = regrasp_module.approximate_polygon(
+        pts, 7, closed=False, deviation="max", method="hopfield", stop_at_optimum=True
+    )
+    assert np.array_equal(first.indices, direct.indices) and first.energy == direct.energy
+    monkeypatch.setattr(regrasp_module, "approximate_polygon", None)  # not called again
+    assert regrasp_module._polygon(pts.copy(), 7, "max", "hopfield") is first
+    with pytest.raises(TypeError):  # another m is not the same polygon
+        regrasp_module._polygon(pts, 8, "max", "hopfield")

@@ -433,7 +433,7 @@ class _Screen:
         self.link_clear, self.contact = link_clear, contact
         self.q_hand_arrive = q_hand_arrive
         self.finger_clear = (
-            FingerClearance(hand, finger.name) if q_hand_arrive is not None else None
+            FingerClearance.shared(hand, finger.name) if q_hand_arrive is not None else None
         )
         self.finger_clearance_m = finger_clearance_m
         self.rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}

@@ -164,35 +164,29 @@ class ManifoldClearance:
             max(c.link_clearance_m, c.choice_link_clearance_m) + BOUND_MARGIN_M,
             -c.tip_penetration_m + BOUND_MARGIN_M,
         )
-        self._n = int(manifold.q.shape[1])
-        self._known = np.zeros(0, np.int64)  # entries measured (row * N + point), sorted
-        self._values = np.zeros((0, 2))  # their (links, tip) distances [m]
+        shape = manifold.q.shape[:2]  # (times, points)
+        self._known = np.zeros(shape, bool)  # entries measured
+        self._values = np.empty((*shape, 2))  # their (links, tip) distances [m]
         self.n_queries = 0  # configurations measured by Coal (links and tip apart)
 
     def __call__(self, rows: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(links, tip)`` distances ``(M,)`` [m] at the manifold entries
         ``(rows[j], points[j])`` (time indices and sample indices, ``(M,)`` each); exact
         below the requirements (see the class)."""
-        keys = np.asarray(rows, np.int64).reshape(-1) * self._n + np.asarray(
-            points, np.int64
-        ).reshape(-1)
-        new = np.setdiff1d(keys, self._known)  # sorted, unique
-        if new.size:
-            r, c = np.divmod(new, self._n)
-            full = self.hand.to_full(self.finger, self.manifold.q[r, c])
-            T = self.manifold.T_palm_object[r]
-            measured = np.stack(
-                [
-                    self._measure(m, full, T, below)
-                    for m, below in zip((self._links, self._tip), self._exact_below, strict=True)
-                ],
-                axis=1,
-            )
-            keys_all = np.concatenate([self._known, new])
-            order = np.argsort(keys_all, kind="stable")
-            self._known = keys_all[order]
-            self._values = np.concatenate([self._values, measured])[order]
-        out = self._values[np.searchsorted(self._known, keys)]
+        r = np.asarray(rows, np.int64).reshape(-1)
+        c = np.asarray(points, np.int64).reshape(-1)
+        unknown = ~self._known[r, c]
+        if unknown.any():
+            n = self._known.shape[1]
+            new_r, new_c = np.divmod(np.unique(r[unknown] * n + c[unknown]), n)
+            full = self.hand.to_full(self.finger, self.manifold.q[new_r, new_c])
+            T = self.manifold.T_palm_object[new_r]
+            for j, (m, below) in enumerate(
+                zip((self._links, self._tip), self._exact_below, strict=True)
+            ):
+                self._values[new_r, new_c, j] = self._measure(m, full, T, below)
+            self._known[new_r, new_c] = True
+        out = self._values[r, c]
         return out[:, 0], out[:, 1]
 
     def _measure(

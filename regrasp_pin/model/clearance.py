@@ -12,6 +12,8 @@ penetrating.
 
 from __future__ import annotations
 
+import threading
+import weakref
 from collections.abc import Iterable
 
 import coal
@@ -128,7 +130,7 @@ class FingerClearance:
     """
 
     def __init__(self, hand: Hand, finger: str, others: Iterable[str] | None = None):
-        self.hand = hand
+        self._pin_model = hand.model  # not the hand: a shared one must not keep it alive
         self.finger = hand.finger(finger)
         mine = set(self.finger.geometry_ids)
         keep = set(hand.finger_names if others is None else others) - {finger}
@@ -151,11 +153,29 @@ class FingerClearance:
         for k in range(len(self.pairs)):
             self._gdata.distanceRequests[k] = coal.DistanceRequest()
 
+    @classmethod
+    def shared(
+        cls, hand: Hand, finger: str, others: Iterable[str] | None = None
+    ) -> FingerClearance:
+        """The :class:`FingerClearance` of ``(hand, finger, others)`` built at the first
+        call and kept while ``hand`` lives (building one copies the hand's collision
+        model; the searches of a plan ask for the same pairs thousands of times), one
+        per thread (its Pinocchio data is written by every call)."""
+        per_hand = _SHARED.setdefault(hand, {})
+        key = (threading.get_ident(), finger, None if others is None else tuple(sorted(others)))
+        fc = per_hand.get(key)
+        if fc is None:
+            fc = per_hand[key] = cls(hand, finger, others)
+        return fc
+
     def __call__(self, q_full: np.ndarray) -> float:
         """Smallest distance [m] between this finger and any other finger at ``q_full``."""
         if not self.pairs:
             return float(np.inf)
         q = np.asarray(q_full, float)
         # Pinocchio returns the pair of the smallest distance (the first of equals)
-        k = pin.computeDistances(self.hand.model, self._data, self._model, self._gdata, q)
+        k = pin.computeDistances(self._pin_model, self._data, self._model, self._gdata, q)
         return float(self._gdata.distanceResults[k].min_distance)
+
+
+_SHARED: weakref.WeakKeyDictionary[Hand, dict[tuple, FingerClearance]] = weakref.WeakKeyDictionary()

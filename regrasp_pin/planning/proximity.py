@@ -66,7 +66,7 @@ class _PairDistance:
     def __call__(self, a: str, b: str, q: np.ndarray) -> float:
         fc = self.checks.get((a, b))
         if fc is None:
-            fc = self.checks[(a, b)] = FingerClearance(self.hand, a, others=[b])
+            fc = self.checks[(a, b)] = FingerClearance.shared(self.hand, a, others=[b])
         return fc(q)
 
 

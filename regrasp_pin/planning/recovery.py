@@ -360,7 +360,7 @@ def _room_taken(
     hand = ctx.scene.hand
     q = q_hand_of(ctx, state, [other])(np.array([wanted.t_arrive_s]))[0]
     q[hand.finger(name).q_indices] = wanted.q_arrive
-    if FingerClearance(hand, name, [other])(q) < LANDING_FINGER_CLEARANCE_M:
+    if FingerClearance.shared(hand, name, [other])(q) < LANDING_FINGER_CLEARANCE_M:
         return d + hand.finger(name).tip_radius
     return None
 

@@ -46,8 +46,9 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -448,6 +449,7 @@ def _surface_variants(
     last: PlanningError | None = None
     tried: set[tuple] = set()
     paths: dict[tuple, tuple[GridPath, TipPath]] = {}
+    failed: dict[tuple, PlanningError] = {}  # an attempt's failure, by what it depends on
     p_try = params
     for _ in range(params.max_variants):
         tried.add(_variant_key(p_try))
@@ -457,7 +459,14 @@ def _surface_variants(
                 paths[key] = surface_path(task, p_try)
             gpath, tip_path = paths[key]
             stages.lap("path")
-            result = _attempt(task, gpath, tip_path, p_try, stages)
+            same = (_path_key(tip_path), min(p_try.m, len(tip_path)))
+            if same in failed:  # a variant that left the path as it was fails as it did
+                raise failed[same]
+            try:
+                result = _attempt(task, gpath, tip_path, p_try, stages)
+            except PlanningError as exc:
+                failed[same] = exc
+                raise
         except PlanningError as exc:
             attempts.append(exc.as_attempt(_describe(p_try)))
             last = exc
@@ -521,6 +530,38 @@ def _transferred(
     )
 
 
+_POLYGONS: OrderedDict[tuple, PolygonResult] = OrderedDict()
+_POLYGONS_KEPT = 256  # the polygons remembered (the searches of a plan ask again)
+
+
+def _polygon(pts: np.ndarray, m: int, deviation: str, method: str) -> PolygonResult:
+    """``approximate_polygon`` of an open tip path (stopping at the optimum), the
+    result of an earlier call with the same points and settings when it is one of the
+    last ``_POLYGONS_KEPT`` (recovery plans the same regrasp again from other
+    branches; the function is deterministic, so the answer is the same)."""
+    key = (pts.dtype.str, pts.shape, pts.tobytes(), m, deviation, method)
+    poly = _POLYGONS.get(key)
+    if poly is None:
+        poly = approximate_polygon(
+            pts, m, closed=False, deviation=deviation, method=method, stop_at_optimum=True
+        )
+        _POLYGONS[key] = poly
+        if len(_POLYGONS) > _POLYGONS_KEPT:
+            _POLYGONS.popitem(last=False)
+    else:
+        _POLYGONS.move_to_end(key)
+    return poly
+
+
+def _path_key(path: TipPath) -> tuple:
+    """What an attempt along ``path`` depends on of it: every field, arrays by their
+    bytes (two variants of the grid path may lift to the same tip path)."""
+    return tuple(
+        (v.dtype.str, v.shape, v.tobytes()) if isinstance(v, np.ndarray) else v
+        for v in (getattr(path, f.name) for f in fields(path))
+    )
+
+
 def _variant_key(p: RegraspParams) -> tuple:
     return (p.m, p.inflation_factor, p.limit_weight, p.finger_gap_m)
 
@@ -571,9 +612,7 @@ def _attempt(
     finger = f.name
     pts = tip_path.points_object
     m = min(p.m, len(tip_path))
-    poly = approximate_polygon(
-        pts, m, closed=False, deviation=p.deviation, method=p.method, stop_at_optimum=True
-    )
+    poly = _polygon(pts, m, p.deviation, p.method)
     W = poly.vertices
     stages.lap("hopfield")
 
