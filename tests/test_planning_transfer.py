@@ -26,6 +26,7 @@ from test_planning_regrasp import (
 )
 
 import regrasp_pin.planning.regrasp as regrasp_module
+import regrasp_pin.planning.transfer as transfer_module
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, UnfoldError
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.planning.regrasp import RegraspParams
@@ -146,20 +147,20 @@ def test_too_short_a_transfer_is_a_velocity_failure_with_its_numbers(scenes):
 def test_of_the_vias_too_fast_the_least_too_fast_whose_geometry_passes_is_reported(
     scenes, monkeypatch
 ):
-    # at 0.5 s no via passes: alone, each raises either its velocity failure (its
-    # geometry passes the Coal check) or its Coal failure; together, the velocity
-    # failure reported is the smallest over-speed among those whose geometry passes,
-    # the one a stretch of the duration fixes soonest
-    import regrasp_pin.planning.transfer as transfer_module
-
+    # at 0.5 s no fixed via passes (the sampled ones left out): alone, each raises
+    # either its velocity failure (its geometry passes the Coal check) or its Coal
+    # failure; together, the velocity failure reported is the smallest over-speed among
+    # those whose geometry passes, the one a stretch of the duration fixes soonest
     scene, case = scenes["edge-static"], CASES[4][1:]
+    heights = transfer_module.VIA_HEIGHTS
+    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: [])
     alone = {}
-    for height in transfer_module.VIA_HEIGHTS:
+    for height in heights:
         monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (height,))
         with pytest.raises(PlanningError) as info:
             transfer(scene, *case, duration_s=0.5)
         alone[height] = info.value
-    monkeypatch.undo()
+    monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", heights)
     fixable = [e.measured / e.required for e in alone.values() if e.kind == FailureKind.VELOCITY]
     assert any(e.kind != FailureKind.VELOCITY for e in alone.values())  # the straight move
     with pytest.raises(PlanningError) as info:
@@ -323,3 +324,30 @@ def test_a_landing_seed_of_the_wrong_shape_is_an_input_error_naming_it(scenes):
     with pytest.raises(InputError) as info:
         scene.plan(i_p, i_q, q_land=np.zeros(7), route="surface")
     assert info.value.argument == "q_land"
+
+
+@pytest.mark.parametrize(("scene_name", "p_object", "q_object"), CASES[4:])
+def test_where_no_fixed_via_passes_a_sampled_via_does(
+    scenes, checker, scene_name, p_object, q_object, monkeypatch
+):
+    """Around the edge the straight move cuts the box; with the raised vias taken
+    away, the transfer searches vias sampled clear of the box (and of the other
+    fingers) at its middle, and one passes the independent dense re-check."""
+    monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (0.0,))
+    scene = scenes[scene_name]
+    moved = transfer(scene, p_object, q_object)
+    assert np.isnan(moved.via_height) and len(moved.keyframes_object) == 5
+    recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, 0.8)
+    # the via (the middle keyframe) is one of the sampled ones the search found clear
+    i_m = int(np.argmin(np.abs(moved.times_s - moved.keyframe_times_s[2])))
+    vias = transfer_module._clear_vias(
+        scene.hand, scene.obj, checker.finger, scene.q_neutral(moved.times_s[[i_m]])[0],
+        scene.motion.pose(moved.times_s[[i_m]])[0], moved.q[0], moved.q[-1],
+        PARAMS.clearance_m, PARAMS.finger_clearance_m,
+    )  # fmt: skip
+    assert 0 < len(vias) <= transfer_module.SAMPLED_VERIFIED
+    q_full = scene.q_neutral(moved.times_s[[i_m] * len(vias)])
+    q_full[:, checker.finger.q_indices] = np.array(vias)
+    d_obj, d_ff, _ = checker.run(q_full, scene.motion.pose(moved.times_s[[i_m] * len(vias)]))
+    assert d_obj.min() >= PARAMS.clearance_m + transfer_module.VIA_MARGIN_M - 1e-9
+    assert d_ff.min() >= PARAMS.finger_clearance_m + transfer_module.VIA_MARGIN_M - 1e-9

@@ -164,7 +164,7 @@ class ManifoldClearance:
             max(c.link_clearance_m, c.choice_link_clearance_m) + BOUND_MARGIN_M,
             -c.tip_penetration_m + BOUND_MARGIN_M,
         )
-        shape = manifold.q.shape[:2]  # (times, points)
+        shape = (int(manifold.q.shape[0]), int(manifold.q.shape[1]))  # (times, points)
         self._known = np.zeros(shape, bool)  # entries measured
         self._values = np.empty((*shape, 2))  # their (links, tip) distances [m]
         self.n_queries = 0  # configurations measured by Coal (links and tip apart)
@@ -177,7 +177,7 @@ class ManifoldClearance:
         c = np.asarray(points, np.int64).reshape(-1)
         unknown = ~self._known[r, c]
         if unknown.any():
-            n = self._known.shape[1]
+            n = int(self._known.shape[1])
             new_r, new_c = np.divmod(np.unique(r[unknown] * n + c[unknown]), n)
             full = self.hand.to_full(self.finger, self.manifold.q[new_r, new_c])
             T = self.manifold.T_palm_object[new_r]

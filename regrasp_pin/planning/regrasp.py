@@ -385,7 +385,7 @@ def plan_regrasp(
         else:
             stages.lap("transfer")
             log.info(
-                "regrasp %s at t=%.3f s verified in joint space (via %.0f, clearance %.2f mm)",
+                "regrasp %s at t=%.3f s verified in joint space (via %g, clearance %.2f mm)",
                 f.name,
                 t_start,
                 moved.via_height,

@@ -21,8 +21,12 @@ release and a join take (:mod:`.release`, :mod:`.join`):
 
 The vias tried are the straight move and the midpoint of the two backed-off fingertips
 raised along the mean of the two normals by ``VIA_HEIGHTS`` times the clearance plus
-the tip radius. Each candidate is checked against the joint velocity limits and
-verified with Coal exactly as a surface path is
+the tip radius; where one of those fails its Coal check (the move crosses another
+finger or the object), vias sampled in the finger's joint box (a fixed seed: the same
+every call), the shortest detours first, that are clear of the object and the other
+fingers at the transfer's middle with ``VIA_MARGIN_M`` to spare: a one-via roadmap
+searched in order, the rest of the motion judged by the Coal check. Each candidate
+is checked against the joint velocity limits and verified with Coal exactly as a surface path is
 (:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip and the
 other links clear of the object by ``clearance_m`` during the transfer, allowed to touch
 only at lift-off and landing, the other fingers clear, joints within their limits).
@@ -30,14 +34,15 @@ only at lift-off and landing, the other fingers clear, joints within their limit
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from ..exceptions import PlanningError
-from ..model.clearance import LinkClearance
+from ..model.clearance import FingerClearance, LinkClearance
 from ..model.hand import Finger, Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
@@ -53,6 +58,14 @@ LIFT_FRACTION = 0.25
 #: Heights of the via above the two backed-off tips' midpoint, in units of
 #: (clearance + tip radius); 0 is the straight joint-space move.
 VIA_HEIGHTS = (0.0, 1.0, 2.0)
+#: Vias sampled in the finger's joint box when none of ``VIA_HEIGHTS`` passes; the
+#: ``SAMPLED_SCREENED`` shortest detours are screened at the transfer's middle and the
+#: first ``SAMPLED_VERIFIED`` clear ones are tried.
+SAMPLED_VIAS = 256
+SAMPLED_SCREENED = 48
+SAMPLED_VERIFIED = 3
+#: What a sampled via keeps to spare, beyond the clearances, at the transfer's middle [m].
+VIA_MARGIN_M = 0.002
 
 
 @dataclass(frozen=True)
@@ -71,7 +84,7 @@ class Transfer:
             lower bounds, see ``min_clearance_m``).
         min_clearance_m: Smallest Coal distance between the finger and the object
             during the transfer [m].
-        via_height: The ``VIA_HEIGHTS`` entry that passed.
+        via_height: The ``VIA_HEIGHTS`` entry that passed (NaN: a sampled via).
     """
 
     times_s: np.ndarray
@@ -143,6 +156,7 @@ def plan_transfer(
     lift = tau <= LIFT_FRACTION + 1e-12
     land = tau >= 1.0 - LIFT_FRACTION - 1e-12
     i_a, i_b = int(np.flatnonzero(lift)[-1]), int(np.flatnonzero(land)[0])
+    i_m = (i_a + i_b) // 2  # the via's sample
     T = motion.pose(times)
     off_lift = clearance_m * minimum_jerk(tau[lift] / LIFT_FRACTION)
     off_land = clearance_m * minimum_jerk((1.0 - tau[land]) / LIFT_FRACTION)
@@ -157,16 +171,17 @@ def plan_transfer(
     drift = velocity_blend(mid, v_lift, v_approach)
     required = np.where(lift | land, 0.0, clearance_m)
     required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
-    paths = []
-    for height in VIA_HEIGHTS:
-        via = _via(f, T[(i_a + i_b) // 2], P, Q, q_a, q_b, height * (clearance_m + f.tip_radius))
-        path = (
-            PchipInterpolator([0.0, 1.0], np.stack([q_a, q_b]), axis=0)
-            if via is None
-            else PchipInterpolator([0.0, 0.5, 1.0], np.stack([q_a, via, q_b]), axis=0)
-        )
-        paths.append((height, np.vstack([q_lift[:-1], path(s) + drift, q_app[1:]])))
 
+    def through(via: np.ndarray | None) -> np.ndarray:
+        """The finger's trajectory ``(S, k)`` through ``via`` (None: straight)."""
+        knots = np.stack([q_a, q_b]) if via is None else np.stack([q_a, via, q_b])
+        path = PchipInterpolator(np.linspace(0.0, 1.0, len(knots)), knots, axis=0)
+        return np.vstack([q_lift[:-1], path(s) + drift, q_app[1:]])
+
+    fixed = [
+        (h, through(_via(f, T[i_m], P, Q, q_a, q_b, h * (clearance_m + f.tip_radius))))
+        for h in VIA_HEIGHTS
+    ]
     q_others = np.array(q_hand(times), dtype=float)  # the same for every via
 
     def coal_failure(
@@ -191,31 +206,63 @@ def plan_transfer(
             return exc, None, q_full
         return None, report, q_full
 
-    # within the velocity limits first; the others only if none of those passes, and
-    # then only their geometry decides whether a velocity failure is reported
+    # the fixed vias within the velocity limits first, then vias sampled clear of the
+    # object and the other fingers; the fixed ones that are too fast only if none of
+    # those passes, and then only their geometry decides whether a velocity failure
+    # is reported
     too_fast: list[tuple[float, np.ndarray, PlanningError]] = []
-    last: PlanningError | None = None
-    for height, q in paths:
+    failures: list[PlanningError] = []
+
+    def sampled() -> list[np.ndarray]:  # asked for only when a fixed via fails
+        return _clear_vias(
+            hand, obj, f, q_others[i_m], T[i_m], q_a, q_b, clearance_m, finger_clearance_m
+        )
+
+    for height, q in _candidates(fixed, sampled, through, failures):
         try:
             check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
         except PlanningError as exc:
-            too_fast.append((height, q, exc))
+            if not math.isnan(height):  # a longer duration is the fixed vias' to ask for
+                too_fast.append((height, q, exc))
             continue
         failure, report, q_full = coal_failure(q)
         if report is not None:
             return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
-        last = failure
-    slowest: PlanningError | None = None  # the velocity failure a stretch fixes soonest
+        if failure is not None and not math.isnan(height):
+            failures.append(failure)
+    raise _reported_failure(too_fast, failures, coal_failure)
+
+
+def _candidates(
+    fixed: list[tuple[float, np.ndarray]],
+    sampled: Callable[[], list[np.ndarray]],
+    through: Callable[[np.ndarray], np.ndarray],
+    failures: list[PlanningError],
+) -> Iterator[tuple[float, np.ndarray]]:
+    """``(via height, trajectory)`` to try: the fixed vias, then, if one of them failed
+    its Coal check (``failures``), the sampled ones (height NaN)."""
+    yield from fixed
+    if failures:
+        for via in sampled():
+            yield math.nan, through(via)
+
+
+def _reported_failure(
+    too_fast: list[tuple[float, np.ndarray, PlanningError]],
+    failures: list[PlanningError],
+    coal_failure: Callable[[np.ndarray], tuple[PlanningError | None, object, np.ndarray]],
+) -> PlanningError:
+    """The failure of a transfer no via passed: the velocity failure a longer duration
+    fixes soonest among the too fast fixed vias that pass their Coal check, else the
+    last Coal failure."""
+    last = failures[-1] if failures else None
     for _, q, speed_error in sorted(too_fast, key=lambda c: (_over_speed(c[2]), c[0])):
         failure, _, _ = coal_failure(q)
         if failure is None:
-            slowest = speed_error
-            break
+            return speed_error
         last = failure
-    if slowest is not None:
-        raise slowest
     assert last is not None  # VIA_HEIGHTS is not empty
-    raise last
+    return last
 
 
 def _transfer(
@@ -252,6 +299,44 @@ def _transfer(
         min_clearance_m=float(lc(q_full[flight], T[flight]).min()),
         via_height=float(height),
     )
+
+
+def _clear_vias(
+    hand: Hand,
+    obj: ConvexObject,
+    f: Finger,
+    q_mid: np.ndarray,
+    T_mid: np.ndarray,
+    q_a: np.ndarray,
+    q_b: np.ndarray,
+    clearance_m: float,
+    finger_clearance_m: float,
+) -> list[np.ndarray]:
+    """Via configurations ``(k,)`` of the finger, sampled in its joint box (the same
+    ``SAMPLED_VIAS`` every call), the shortest detours from ``q_a`` to ``q_b`` first,
+    that are clear at the middle of the transfer (hand ``q_mid``, object pose
+    ``T_mid``): the whole finger ``clearance_m`` from the object and
+    ``finger_clearance_m`` from the other fingers, each with ``VIA_MARGIN_M`` to spare
+    (the object and the others move on while the finger passes). At most
+    ``SAMPLED_VERIFIED``; the Coal check of the whole motion judges them."""
+    rng = np.random.default_rng(0)
+    vias = f.lower + rng.random((SAMPLED_VIAS, f.k)) * (f.upper - f.lower)
+    detour = np.linalg.norm(vias - q_a, axis=1) + np.linalg.norm(vias - q_b, axis=1)
+    order = np.lexsort((np.arange(SAMPLED_VIAS), np.round(detour, 9)))
+    fingers = FingerClearance.shared(hand, f.name)
+    links = LinkClearance(hand, f.name, obj, include_tip=True)
+    clear: list[np.ndarray] = []
+    for i in order[:SAMPLED_SCREENED]:
+        q_full = np.array(q_mid, float)
+        q_full[f.q_indices] = vias[i]
+        if fingers(q_full) < finger_clearance_m + VIA_MARGIN_M:
+            continue
+        if links(q_full[None], T_mid[None])[0] < clearance_m + VIA_MARGIN_M:
+            continue
+        clear.append(vias[i])
+        if len(clear) == SAMPLED_VERIFIED:
+            break
+    return clear
 
 
 def _over_speed(exc: PlanningError) -> float:
