@@ -982,7 +982,7 @@ def test_choices_with_kept_distances_and_epsilons_are_the_same(five, finger, t_a
             fresh.exit_time_s,
         )
         excluded.append(fresh.p_object)
-    assert len(kept._known) > 0 and len(epsilons._known) > 0
+    assert kept._known.any() and len(epsilons._known) > 0
     with pytest.raises(InputError, match="epsilons"):
         _choose_from_grasp(five, finger, t_arrive, epsilons=ScreeningEpsilons(MU + 0.1, 1.0))
 

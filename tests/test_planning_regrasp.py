@@ -784,15 +784,26 @@ def test_a_variant_that_leaves_the_path_as_it_was_is_not_attempted_again(hand, s
 
 def test_a_polygon_asked_for_again_is_the_one_computed_before(monkeypatch):
     """The regrasp's polygons: the same points and settings give the answer of
-    ``approximate_polygon`` itself, computed once."""
+    ``approximate_polygon`` itself, computed once; what a caller does to its arrays
+    does not reach the next caller."""
+    monkeypatch.setattr(regrasp_module, "_POLYGONS", type(regrasp_module._POLYGONS)())
+    real = regrasp_module.approximate_polygon
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(args[1])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(regrasp_module, "approximate_polygon", counted)
     rng = np.random.default_rng(5)
     pts = np.cumsum(rng.normal(size=(60, 3)) * 1e-3, axis=0)
     first = regrasp_module._polygon(pts, 7, "max", "hopfield")
-    direct = regrasp_module.approximate_polygon(
-        pts, 7, closed=False, deviation="max", method="hopfield", stop_at_optimum=True
-    )
+    direct = real(pts, 7, closed=False, deviation="max", method="hopfield", stop_at_optimum=True)
     assert np.array_equal(first.indices, direct.indices) and first.energy == direct.energy
-    monkeypatch.setattr(regrasp_module, "approximate_polygon", None)  # not called again
-    assert regrasp_module._polygon(pts.copy(), 7, "max", "hopfield") is first
-    with pytest.raises(TypeError):  # another m is not the same polygon
-        regrasp_module._polygon(pts, 8, "max", "hopfield")
+    assert np.array_equal(first.vertices, direct.vertices)
+    first.vertices[:] = 0.0  # a caller writing into its result
+    again = regrasp_module._polygon(pts.copy(), 7, "max", "hopfield")
+    assert calls == [7]  # not computed again
+    assert np.array_equal(again.vertices, direct.vertices)
+    regrasp_module._polygon(pts, 8, "max", "hopfield")
+    assert calls == [7, 8]  # another m is another polygon

@@ -332,22 +332,42 @@ def test_where_no_fixed_via_passes_a_sampled_via_does(
 ):
     """Around the edge the straight move cuts the box; with the raised vias taken
     away, the transfer searches vias sampled clear of the box (and of the other
-    fingers) at its middle, and one passes the independent dense re-check."""
+    fingers) at its middle, and one passes the independent dense re-check. The vias
+    it was given are clear there by the margin (independent Coal distances)."""
     monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (0.0,))
+    real, given = transfer_module._clear_vias, []
+
+    def spy(hand, obj, f, q_mid, T_mid, *rest):
+        vias = real(hand, obj, f, q_mid, T_mid, *rest)
+        given.append((q_mid, T_mid, vias))
+        return vias
+
+    monkeypatch.setattr(transfer_module, "_clear_vias", spy)
     scene = scenes[scene_name]
     moved = transfer(scene, p_object, q_object)
     assert np.isnan(moved.via_height) and len(moved.keyframes_object) == 5
     recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, 0.8)
-    # the via (the middle keyframe) is one of the sampled ones the search found clear
-    i_m = int(np.argmin(np.abs(moved.times_s - moved.keyframe_times_s[2])))
-    vias = transfer_module._clear_vias(
-        scene.hand, scene.obj, checker.finger, scene.q_neutral(moved.times_s[[i_m]])[0],
-        scene.motion.pose(moved.times_s[[i_m]])[0], moved.q[0], moved.q[-1],
-        PARAMS.clearance_m, PARAMS.finger_clearance_m,
-    )  # fmt: skip
+    [(q_mid, T_mid, vias)] = given
     assert 0 < len(vias) <= transfer_module.SAMPLED_VERIFIED
-    q_full = scene.q_neutral(moved.times_s[[i_m] * len(vias)])
+    q_full = np.tile(q_mid, (len(vias), 1))
     q_full[:, checker.finger.q_indices] = np.array(vias)
-    d_obj, d_ff, _ = checker.run(q_full, scene.motion.pose(moved.times_s[[i_m] * len(vias)]))
+    d_obj, d_ff, _ = checker.run(q_full, np.repeat(T_mid[None], len(vias), axis=0))
     assert d_obj.min() >= PARAMS.clearance_m + transfer_module.VIA_MARGIN_M - 1e-9
     assert d_ff.min() >= PARAMS.finger_clearance_m + transfer_module.VIA_MARGIN_M - 1e-9
+
+
+def test_sampled_vias_that_fail_leave_the_fixed_vias_failure_as_it_was(scenes, monkeypatch):
+    """Sampled vias are tried only for a passing motion: when none passes (here one
+    through the middle of the box), the failure reported is the fixed vias' own."""
+    scene, case = scenes["edge-static"], CASES[4][1:]
+    monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (0.0,))
+    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: [])
+    with pytest.raises(PlanningError) as without:
+        transfer(scene, *case)
+    f = scene.hand.finger(FINGER)
+    inside = f.ik(np.zeros((1, 3)) + scene.motion.pose(np.array([0.4]))[0, :3, 3], f.q_mid).q[0]
+    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: [inside, f.q_mid])
+    with pytest.raises(PlanningError) as through_bad:
+        transfer(scene, *case)
+    a, b = without.value, through_bad.value
+    assert (a.kind, a.measured, a.required, a.time_s) == (b.kind, b.measured, b.required, b.time_s)

@@ -130,7 +130,8 @@ class FingerClearance:
     """
 
     def __init__(self, hand: Hand, finger: str, others: Iterable[str] | None = None):
-        self._pin_model = hand.model  # not the hand: a shared one must not keep it alive
+        self._hand = weakref.ref(hand)  # a shared one must not keep the hand alive
+        self._pin_model = hand.model
         self.finger = hand.finger(finger)
         mine = set(self.finger.geometry_ids)
         keep = set(hand.finger_names if others is None else others) - {finger}
@@ -160,13 +161,23 @@ class FingerClearance:
         """The :class:`FingerClearance` of ``(hand, finger, others)`` built at the first
         call and kept while ``hand`` lives (building one copies the hand's collision
         model; the searches of a plan ask for the same pairs thousands of times), one
-        per thread (its Pinocchio data is written by every call)."""
+        per thread (its Pinocchio data is written by every call: do not hand it to
+        another thread; the entries of finished threads stay while the hand lives)."""
+        names = None if others is None else tuple(others)  # read an iterator once
         per_hand = _SHARED.setdefault(hand, {})
-        key = (threading.get_ident(), finger, None if others is None else tuple(sorted(others)))
+        key = (threading.get_ident(), finger, None if names is None else tuple(sorted(names)))
         fc = per_hand.get(key)
         if fc is None:
-            fc = per_hand[key] = cls(hand, finger, others)
+            fc = per_hand[key] = cls(hand, finger, names)
         return fc
+
+    @property
+    def hand(self) -> Hand:
+        """The hand (raises ReferenceError once it is gone)."""
+        hand = self._hand()
+        if hand is None:
+            raise ReferenceError("the hand of this FingerClearance no longer exists")
+        return hand
 
     def __call__(self, q_full: np.ndarray) -> float:
         """Smallest distance [m] between this finger and any other finger at ``q_full``."""

@@ -45,6 +45,7 @@ failure, its numbers and every attempt.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -532,6 +533,7 @@ def _transferred(
 
 _POLYGONS: OrderedDict[tuple, PolygonResult] = OrderedDict()
 _POLYGONS_KEPT = 256  # the polygons remembered (the searches of a plan ask again)
+_POLYGONS_LOCK = threading.Lock()
 
 
 def _polygon(pts: np.ndarray, m: int, deviation: str, method: str) -> PolygonResult:
@@ -540,17 +542,26 @@ def _polygon(pts: np.ndarray, m: int, deviation: str, method: str) -> PolygonRes
     last ``_POLYGONS_KEPT`` (recovery plans the same regrasp again from other
     branches; the function is deterministic, so the answer is the same)."""
     key = (pts.dtype.str, pts.shape, pts.tobytes(), m, deviation, method)
-    poly = _POLYGONS.get(key)
+    with _POLYGONS_LOCK:
+        poly = _POLYGONS.get(key)
+        if poly is not None:
+            _POLYGONS.move_to_end(key)
     if poly is None:
         poly = approximate_polygon(
             pts, m, closed=False, deviation=deviation, method=method, stop_at_optimum=True
         )
-        _POLYGONS[key] = poly
-        if len(_POLYGONS) > _POLYGONS_KEPT:
-            _POLYGONS.popitem(last=False)
-    else:
-        _POLYGONS.move_to_end(key)
-    return poly
+        with _POLYGONS_LOCK:
+            _POLYGONS[key] = poly
+            if len(_POLYGONS) > _POLYGONS_KEPT:
+                _POLYGONS.popitem(last=False)
+    # the caller's own arrays: what it does with them cannot reach the kept result
+    return replace(
+        poly,
+        indices=poly.indices.copy(),
+        vertices=poly.vertices.copy(),
+        energy_history=np.array(poly.energy_history, copy=True),
+        timings_ms=dict(poly.timings_ms),
+    )
 
 
 def _path_key(path: TipPath) -> tuple:

@@ -95,7 +95,8 @@ def plan_release(
         q_release: ``(k,)`` the finger's configuration holding P at ``t_release_s``.
         q_hand: Maps times ``(S,)`` to hand configurations ``(S, nq)`` with the other
             fingers holding.
-        clearance_m: How far the fingertip backs off along the normal [m].
+        clearance_m: How high the fingertip rises above the contact's tangent plane
+            (along the normal, or tilted from it where that is out of reach) [m].
         back_off_s: Shortest duration of the back-off [s] (longer when the joint
             velocity limits need it; cut short if the motion ends first).
         dt_s: Sampling step after the back-off [s].

@@ -60,7 +60,8 @@ LIFT_FRACTION = 0.25
 VIA_HEIGHTS = (0.0, 1.0, 2.0)
 #: Vias sampled in the finger's joint box when none of ``VIA_HEIGHTS`` passes; the
 #: ``SAMPLED_SCREENED`` shortest detours are screened at the transfer's middle and the
-#: first ``SAMPLED_VERIFIED`` clear ones are tried.
+#: first ``SAMPLED_VERIFIED`` clear ones are tried (one too fast for the duration is
+#: not replaced by the next, and asks for no longer duration: the fixed vias do).
 SAMPLED_VIAS = 256
 SAMPLED_SCREENED = 48
 SAMPLED_VERIFIED = 3
@@ -322,6 +323,7 @@ def _clear_vias(
     rng = np.random.default_rng(0)
     vias = f.lower + rng.random((SAMPLED_VIAS, f.k)) * (f.upper - f.lower)
     detour = np.linalg.norm(vias - q_a, axis=1) + np.linalg.norm(vias - q_b, axis=1)
+    # detours equal to 1e-9 rad go by index (ties broken the same way everywhere)
     order = np.lexsort((np.arange(SAMPLED_VIAS), np.round(detour, 9)))
     fingers = FingerClearance.shared(hand, f.name)
     links = LinkClearance(hand, f.name, obj, include_tip=True)
