@@ -153,7 +153,7 @@ def test_of_the_vias_too_fast_the_least_too_fast_whose_geometry_passes_is_report
     # those whose geometry passes, the one a stretch of the duration fixes soonest
     scene, case = scenes["edge-static"], CASES[4][1:]
     heights = transfer_module.VIA_HEIGHTS
-    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: [])
+    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: iter([]))
     alone = {}
     for height in heights:
         monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (height,))
@@ -338,9 +338,9 @@ def test_where_no_fixed_via_passes_a_sampled_via_does(
     real, given = transfer_module._clear_vias, []
 
     def spy(hand, obj, f, q_mid, T_mid, *rest):
-        vias = real(hand, obj, f, q_mid, T_mid, *rest)
+        vias = list(real(hand, obj, f, q_mid, T_mid, *rest))
         given.append((q_mid, T_mid, vias))
-        return vias
+        return iter(vias)
 
     monkeypatch.setattr(transfer_module, "_clear_vias", spy)
     scene = scenes[scene_name]
@@ -348,7 +348,7 @@ def test_where_no_fixed_via_passes_a_sampled_via_does(
     assert np.isnan(moved.via_height) and len(moved.keyframes_object) == 5
     recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, 0.8)
     [(q_mid, T_mid, vias)] = given
-    assert 0 < len(vias) <= transfer_module.SAMPLED_VERIFIED
+    assert 0 < len(vias) <= transfer_module.SAMPLED_SCREENED
     q_full = np.tile(q_mid, (len(vias), 1))
     q_full[:, checker.finger.q_indices] = np.array(vias)
     d_obj, d_ff, _ = checker.run(q_full, np.repeat(T_mid[None], len(vias), axis=0))
@@ -361,12 +361,12 @@ def test_sampled_vias_that_fail_leave_the_fixed_vias_failure_as_it_was(scenes, m
     through the middle of the box), the failure reported is the fixed vias' own."""
     scene, case = scenes["edge-static"], CASES[4][1:]
     monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (0.0,))
-    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: [])
+    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: iter([]))
     with pytest.raises(PlanningError) as without:
         transfer(scene, *case)
     f = scene.hand.finger(FINGER)
     inside = f.ik(np.zeros((1, 3)) + scene.motion.pose(np.array([0.4]))[0, :3, 3], f.q_mid).q[0]
-    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: [inside, f.q_mid])
+    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: iter([inside, f.q_mid]))
     with pytest.raises(PlanningError) as through_bad:
         transfer(scene, *case)
     a, b = without.value, through_bad.value

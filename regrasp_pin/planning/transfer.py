@@ -60,8 +60,8 @@ LIFT_FRACTION = 0.25
 VIA_HEIGHTS = (0.0, 1.0, 2.0)
 #: Vias sampled in the finger's joint box when none of ``VIA_HEIGHTS`` passes; the
 #: ``SAMPLED_SCREENED`` shortest detours are screened at the transfer's middle and the
-#: first ``SAMPLED_VERIFIED`` clear ones are tried (one too fast for the duration is
-#: not replaced by the next, and asks for no longer duration: the fixed vias do).
+#: first ``SAMPLED_VERIFIED`` clear ones within the velocity limits are given the Coal
+#: check (a too fast one asks for no longer duration: the fixed vias do).
 SAMPLED_VIAS = 256
 SAMPLED_SCREENED = 48
 SAMPLED_VERIFIED = 3
@@ -214,18 +214,21 @@ def plan_transfer(
     too_fast: list[tuple[float, np.ndarray, PlanningError]] = []
     failures: list[PlanningError] = []
 
-    def sampled() -> list[np.ndarray]:  # asked for only when a fixed via fails
+    def sampled() -> Iterator[np.ndarray]:  # asked for only when a fixed via fails
         return _clear_vias(
             hand, obj, f, q_others[i_m], T[i_m], q_a, q_b, clearance_m, finger_clearance_m
         )
 
-    for height, q in _candidates(fixed, sampled, through, failures):
+    checked: list[np.ndarray] = []  # the sampled vias' trajectories given the Coal check
+    for height, q in _candidates(fixed, sampled, through, failures, checked):
         try:
             check_joint_speed(finger, f.joint_names, f.velocity_limit, times, q)
         except PlanningError as exc:
             if not math.isnan(height):  # a longer duration is the fixed vias' to ask for
                 too_fast.append((height, q, exc))
             continue
+        if math.isnan(height):
+            checked.append(q)
         failure, report, q_full = coal_failure(q)
         if report is not None:
             return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
@@ -236,15 +239,19 @@ def plan_transfer(
 
 def _candidates(
     fixed: list[tuple[float, np.ndarray]],
-    sampled: Callable[[], list[np.ndarray]],
+    sampled: Callable[[], Iterator[np.ndarray]],
     through: Callable[[np.ndarray], np.ndarray],
     failures: list[PlanningError],
+    checked: list[np.ndarray],
 ) -> Iterator[tuple[float, np.ndarray]]:
     """``(via height, trajectory)`` to try: the fixed vias, then, if one of them failed
-    its Coal check (``failures``), the sampled ones (height NaN)."""
+    its Coal check (``failures``), the sampled ones (height NaN) until
+    ``SAMPLED_VERIFIED`` of them were given the Coal check (``checked``)."""
     yield from fixed
     if failures:
         for via in sampled():
+            if len(checked) >= SAMPLED_VERIFIED:
+                return
             yield math.nan, through(via)
 
 
@@ -312,14 +319,14 @@ def _clear_vias(
     q_b: np.ndarray,
     clearance_m: float,
     finger_clearance_m: float,
-) -> list[np.ndarray]:
+) -> Iterator[np.ndarray]:
     """Via configurations ``(k,)`` of the finger, sampled in its joint box (the same
     ``SAMPLED_VIAS`` every call), the shortest detours from ``q_a`` to ``q_b`` first,
     that are clear at the middle of the transfer (hand ``q_mid``, object pose
     ``T_mid``): the whole finger ``clearance_m`` from the object and
     ``finger_clearance_m`` from the other fingers, each with ``VIA_MARGIN_M`` to spare
-    (the object and the others move on while the finger passes). At most
-    ``SAMPLED_VERIFIED``; the Coal check of the whole motion judges them."""
+    (the object and the others move on while the finger passes), screened as they
+    are asked for; the Coal check of the whole motion judges them."""
     rng = np.random.default_rng(0)
     vias = f.lower + rng.random((SAMPLED_VIAS, f.k)) * (f.upper - f.lower)
     detour = np.linalg.norm(vias - q_a, axis=1) + np.linalg.norm(vias - q_b, axis=1)
@@ -327,7 +334,6 @@ def _clear_vias(
     order = np.lexsort((np.arange(SAMPLED_VIAS), np.round(detour, 9)))
     fingers = FingerClearance.shared(hand, f.name)
     links = LinkClearance(hand, f.name, obj, include_tip=True)
-    clear: list[np.ndarray] = []
     for i in order[:SAMPLED_SCREENED]:
         q_full = np.array(q_mid, float)
         q_full[f.q_indices] = vias[i]
@@ -335,10 +341,7 @@ def _clear_vias(
             continue
         if links(q_full[None], T_mid[None])[0] < clearance_m + VIA_MARGIN_M:
             continue
-        clear.append(vias[i])
-        if len(clear) == SAMPLED_VERIFIED:
-            break
-    return clear
+        yield vias[i]
 
 
 def _over_speed(exc: PlanningError) -> float:
