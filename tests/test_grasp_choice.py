@@ -1375,3 +1375,33 @@ def test_a_failure_names_what_refused_the_candidates_that_cleared_the_object(fiv
     assert counts["link clearance"] > counts["finger clearance"] > 0
     assert e.value.kind == FailureKind.FINGER_COLLISION and e.value.required == 1.0
     assert 0.0 < e.value.measured < 1.0
+
+
+def test_a_new_contact_is_apart_when_the_fingertip_spheres_resting_there_are():
+    """Around a box's edge the fingertip spheres resting on the two faces stand further
+    apart than their contact points (the normals diverge): a candidate within
+    ``2 r + 1 mm`` of another contact, on the next face, is apart when the spheres'
+    centres are ``2 r + TIP_GAP_M`` apart; on the same face the points' distance is the
+    centres' one."""
+    from regrasp_pin.grasp import choice as choice_module
+    from regrasp_pin.model.objects import Box
+
+    hand = Hand.five_finger()
+    f = hand.finger("index")
+    r = f.tip_radius
+    box = Box((0.04, 0.04, 0.04))
+    sample = box.sample_surface(0.001)
+    p_other, n_other = np.array([0.02, 0.015, 0.0]), np.array([1.0, 0.0, 0.0])  # face +x
+    others = {"middle": (p_other, n_other)}
+    ok = choice_module._apart_from(hand, f, sample, others, None)
+    centres = sample.points + r * sample.normals
+    c_other = p_other + hand.finger("middle").tip_radius * n_other
+    gap = np.linalg.norm(centres - c_other, axis=1) - r - hand.finger("middle").tip_radius
+    np.testing.assert_array_equal(ok, gap >= choice_module.TIP_GAP_M)
+    near = np.linalg.norm(sample.points - p_other, axis=1) < 2 * r + 0.001
+    same_face = np.abs(sample.normals @ n_other - 1.0) < 1e-9
+    assert not (ok & near & same_face).any()  # on one face: as the points' distance
+    assert (ok & near & ~same_face).any()  # across the edge: some the points' test refused
+    # an explicit separation is the points' distance, as before
+    by_points = choice_module._apart_from(hand, f, sample, others, 2 * r + 0.001)
+    np.testing.assert_array_equal(by_points, ~near)

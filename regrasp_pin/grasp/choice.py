@@ -9,14 +9,15 @@ those, Q stays inside longest over the rest of the motion (read from
 reaching past the plane the tip rests on). Ties are broken by the
 larger joint margin at arrival, then by the shorter distance from P.
 
-Beyond the paper, the grasp must keep holding: Q must be at least ``min_separation_m``
-from the other fingers' contacts, the other contacts plus Q must be in force closure,
-and Q should keep or improve the grasp quality (Ferrari-Canny epsilon) that P gave
-with the others. Candidates are taken in the order of (b) and tested (and a Coal check
-that no other link of the finger touches the object at arrival); among the first four
-that pass, Q is the one after which most other fingers could let go with the rest in
-force closure (so that a finger that must regrasp later can), then one that keeps the
-quality, then the first; the result says whether the quality was kept.
+Beyond the paper, the grasp must keep holding: Q's fingertip sphere must stand clear of
+the other fingers' (``TIP_GAP_M`` apart, each resting on its contact's normal), the
+other contacts plus Q must be in force closure, and Q should keep or improve the grasp
+quality (Ferrari-Canny epsilon) that P gave with the others. Candidates are taken in the
+order of (b) and tested (and a Coal check that no other link of the finger touches the
+object at arrival); among the first four that pass, Q is the one after which most other
+fingers could let go with the rest in force closure (so that a finger that must regrasp
+later can), then one that keeps the quality, then the first; the result says whether the
+quality was kept.
 
 What the manifold does not model (the finger's other links reaching the object, a
 holding neighbour coming near) only shortens a hold, so the manifold's exit times bound
@@ -60,6 +61,8 @@ __all__ = [
     "exit_times",
 ]
 
+#: The gap kept between a new contact's fingertip sphere and another finger's [m].
+TIP_GAP_M = 0.001
 _REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
 _LINK_BATCH = 64  # candidates whose link clearance is measured at once (Coal)
 
@@ -165,8 +168,10 @@ def choose_new_contact(
             object frame.
         contact: Contact model (margin for condition (a), link clearance).
         mu: Friction coefficient for the grasp-quality test.
-        min_separation_m: Smallest distance from the other contacts [m]; default
-            ``2 * tip_radius + 1 mm``.
+        min_separation_m: Smallest distance from the other contacts [m]; default:
+            the fingertip spheres resting on Q and on each other contact (along
+            their normals) ``TIP_GAP_M`` apart (``2 * tip_radius + 1 mm`` between the
+            points on one face).
         link_check: Check with Coal that no other link of the finger touches the
             object at arrival.
         max_checks: Most candidates given the (slower) quality and finger-clearance
@@ -217,14 +222,13 @@ def choose_new_contact(
     """
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
-    sep = 2 * finger.tip_radius + 0.001 if min_separation_m is None else min_separation_m
     ka, kb = _arrival_indices(manifold, t_arrive_s)
     usable = manifold.usable(contact.limit_margin_rad)
     choice = manifold.usable(contact.choice_margin_rad)
     # the landing falls between two manifold times: Q must be usable at both
     cand = choice[ka] & choice[min(kb, ka)]
     pts = sample.points
-    cand &= _far_from(pts, [p for p, _ in others.values()], sep)
+    cand &= _apart_from(hand, finger, sample, others, min_separation_m)
     if exclude_radius_m > 0:
         cand &= _far_from(pts, [P_object], exclude_radius_m)
     if exclude_points_object is not None:
@@ -357,6 +361,29 @@ def _arrival_indices(manifold: Manifold, t_arrive_s: float) -> tuple[int, int]:
     ka = manifold.time_index(t_arrive)
     kb = max(int(np.searchsorted(manifold.times_s, t_arrive + 1e-9)) - 1, 0)
     return ka, kb
+
+
+def _apart_from(
+    hand: Hand,
+    finger: Finger,
+    sample: SurfaceSample,
+    others: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    min_separation_m: float | None,
+) -> np.ndarray:
+    """``(N,)`` whether each sample point is far enough from the other contacts: at
+    least ``min_separation_m`` from each when given, else with the two fingertip
+    spheres resting there (each on its own normal) ``TIP_GAP_M`` apart. On one face
+    that is ``2 r + 1 mm`` between the points; across an edge the spheres stand
+    further apart than their points (the normals diverge), so it admits more."""
+    if min_separation_m is not None:
+        return _far_from(sample.points, [p for p, _ in others.values()], min_separation_m)
+    ok = np.ones(len(sample.points), bool)
+    centres = sample.points + finger.tip_radius * sample.normals
+    for name, (p, n) in others.items():
+        r = hand.finger(name).tip_radius
+        c = np.asarray(p, float) + r * np.asarray(n, float)
+        ok &= np.linalg.norm(centres - c, axis=1) >= finger.tip_radius + r + TIP_GAP_M
+    return ok
 
 
 def _far_from(pts: np.ndarray, centres: list[np.ndarray], radius_m: float) -> np.ndarray:
