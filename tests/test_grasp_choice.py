@@ -1402,6 +1402,12 @@ def test_a_new_contact_is_apart_when_the_fingertip_spheres_resting_there_are():
     same_face = np.abs(sample.normals @ n_other - 1.0) < 1e-9
     assert not (ok & near & same_face).any()  # on one face: as the points' distance
     assert (ok & near & ~same_face).any()  # across the edge: some the points' test refused
+    # the pair test the recovery's room reads is the same test
+    for i in np.random.default_rng(1).choice(len(ok), 50, replace=False):
+        g = choice_module.tip_gap(
+            hand, "index", (sample.points[i], sample.normals[i]), "middle", others["middle"]
+        )
+        assert g == pytest.approx(gap[i], abs=1e-15) and (g >= choice_module.TIP_GAP_M) == ok[i]
     # an explicit separation is the points' distance, as before
     by_points = choice_module._apart_from(hand, f, sample, others, 2 * r + 0.001)
     np.testing.assert_array_equal(by_points, ~near)

@@ -56,9 +56,11 @@ from .screening import (
 )
 
 __all__ = [
+    "TIP_GAP_M",
     "NewContact",
     "choose_new_contact",
     "exit_times",
+    "tip_gap",
 ]
 
 #: The gap kept between a new contact's fingertip sphere and another finger's [m].
@@ -361,6 +363,22 @@ def _arrival_indices(manifold: Manifold, t_arrive_s: float) -> tuple[int, int]:
     ka = manifold.time_index(t_arrive)
     kb = max(int(np.searchsorted(manifold.times_s, t_arrive + 1e-9)) - 1, 0)
     return ka, kb
+
+
+def tip_gap(
+    hand: Hand,
+    a: str,
+    contact_a: tuple[np.ndarray, np.ndarray],
+    b: str,
+    contact_b: tuple[np.ndarray, np.ndarray],
+) -> float:
+    """The gap [m] between the fingertip spheres of fingers ``a`` and ``b`` resting on
+    their contacts ``(point, outward unit normal)`` (object frame [m]): the distance of
+    the centres ``p + r n`` less the two radii (negative where they overlap)."""
+    ra, rb = hand.finger(a).tip_radius, hand.finger(b).tip_radius
+    ca = np.asarray(contact_a[0], float) + ra * np.asarray(contact_a[1], float)
+    cb = np.asarray(contact_b[0], float) + rb * np.asarray(contact_b[1], float)
+    return float(np.linalg.norm(ca - cb)) - ra - rb
 
 
 def _apart_from(

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..exceptions import ContactError, FailureKind, PlanningError
-from ..grasp.choice import NewContact
+from ..grasp.choice import TIP_GAP_M, NewContact, tip_gap
 from ..model.clearance import FingerClearance
 from .advance import Step, advance, window
 from .letgo import idle_fingers, join_origin
@@ -349,11 +349,15 @@ def _room_taken(
 ) -> float | None:
     """The radius [m] of the room around ``wanted`` (``name``'s new contact) that the
     holding finger ``other`` must leave, or None if its hold leaves ``name`` room there:
-    ``sep`` if its contact is nearer than that; if the fingers' links would meet (Coal,
-    closer than :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing), farther
-    than its contact is now by a tip radius (only with ``links``)."""
-    d = float(np.linalg.norm(wanted.p_object - state.holding[other].p))
-    if d < sep:
+    ``sep`` if the two fingertip spheres would stand nearer than
+    :data:`~regrasp_pin.grasp.choice.TIP_GAP_M` (the choice's own test); if the
+    fingers' links would meet (Coal, closer than
+    :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing), farther than its
+    contact is now by a tip radius (only with ``links``)."""
+    h = state.holding[other]
+    d = float(np.linalg.norm(wanted.p_object - h.p))
+    gap = tip_gap(ctx.scene.hand, name, (wanted.p_object, wanted.n_object), other, (h.p, h.n))
+    if gap < TIP_GAP_M:
         return sep
     if not links:
         return None
