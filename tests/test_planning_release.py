@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from conftest import CONE_60, assert_close, held_grasp
+from test_planning_lift import contacts_past_a_limit
 
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import FailureKind, PlanningError
@@ -190,21 +191,6 @@ def test_a_release_at_the_end_of_the_motion_is_too_late(scene):
     assert info.value.kind == FailureKind.TOO_LATE and info.value.required == scen.motion.t_end
 
 
-def _contacts_past_a_limit(f, rng, tries=400):
-    """``(q, (p, n))`` in the palm frame: ``q`` with one joint at a limit, ``n`` the
-    direction in which only that joint, moving past the limit, takes the fingertip; the
-    normal is out of reach there."""
-    for _ in range(tries):
-        q = rng.uniform(f.lower, f.upper)
-        j, upper = int(rng.integers(f.k)), bool(rng.integers(2))
-        q[j] = f.upper[j] if upper else f.lower[j]
-        c, J = f.jacobian(q)
-        v = J[:, j] if upper else -J[:, j]
-        if np.linalg.norm(v) > 1e-3:
-            n = v / np.linalg.norm(v)
-            yield q, (c - f.tip_radius * n, n)
-
-
 def test_where_the_normal_is_out_of_reach_the_finger_backs_off_tilted(scene):
     """At a contact whose normal only a joint past its limit could follow (the object
     kept 1 m away, at rest), the normal back-off is out of reach; the release backs off
@@ -223,7 +209,7 @@ def test_where_the_normal_is_out_of_reach_the_finger_backs_off_tilted(scene):
 
     clear_of_others = FingerClearance(hand, "index")
     rescued = 0
-    for q, (p, n) in _contacts_past_a_limit(f, np.random.default_rng(3)):
+    for q, (p, n) in contacts_past_a_limit(f, seed=3):
         p_obj = p - T[0, :3, 3]  # the object frame is the palm frame shifted
         target = p + (f.tip_radius + CLEARANCE_M) * n
         if f.ik(target[None], q, tol_m=1e-5).error_m[0] <= 1e-5:

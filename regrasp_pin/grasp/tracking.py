@@ -90,6 +90,14 @@ class ContactTrack:
             return np.zeros(len(self.times_s), bool)
         return np.asarray(self.speed_share) > 1.0
 
+    def lost(self, contact: ContactModel) -> np.ndarray:
+        """``(T,)`` True where the contact is lost under ``contact``'s IK tolerance: not
+        reached, a joint that cannot follow it, outside the joint limits or the pad
+        turned away (the conditions that end every hold; not the links nor the trigger
+        margin)."""
+        speed = np.zeros(len(self.times_s)) if self.speed_share is None else self.speed_share
+        return _lost(self.error_m, speed, self.margin_rad, self.pad_cos, contact, self.cos_cone)
+
     @property
     def holdable(self) -> np.ndarray:
         """``(T,)`` True where the contact can be held (no trigger condition)."""

@@ -63,12 +63,7 @@ def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
     sel = (tr.times_s <= min(t_to, ctx.scene.motion.t_end - ctx.params.dt_s) + TIME_TOL_S) & (
         tr.times_s >= h.t_from - TIME_TOL_S
     )
-    lost = sel & (
-        (tr.error_m > c.ik_tol_m)
-        | tr.cannot_follow
-        | (tr.margin_rad < 0.0)
-        | (tr.pad_cos < tr.cos_cone)
-    )
+    lost = sel & tr.lost(c)
     return float(tr.times_s[np.argmax(lost)]) if lost.any() else None
 
 
