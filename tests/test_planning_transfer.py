@@ -78,17 +78,25 @@ def transfer(scene: Scene, p_object, q_object, duration_s: float = 0.8) -> Trans
     )
 
 
-def recheck_transfer(checker: CoalCheck, scene: Scene, times, q, t0: float, D: float) -> dict:
+def recheck_transfer(
+    checker: CoalCheck,
+    scene: Scene,
+    times,
+    q,
+    t0: float,
+    D: float,
+    shares: tuple[float, float] = (LIFT_FRACTION, LIFT_FRACTION),
+) -> dict:
     """Dense independent re-check: no geometry of the finger in the box; between the
-    lift and the approach every geometry keeps the clearance; joints and speeds within
-    limits."""
+    lift and the approach (``shares`` of ``D``) every geometry keeps the clearance;
+    joints and speeds within limits."""
     f = checker.finger
     q_full = scene.q_neutral(times)
     q_full[:, f.q_indices] = q
     t_d, q_d, T_d = dense(times, q_full, scene.motion)
     d_obj, d_ff, _ = checker.run(q_d, T_d)
     tau = (t_d - t0) / D
-    flight = (tau > LIFT_FRACTION + 1e-9) & (tau < 1.0 - LIFT_FRACTION - 1e-9)
+    flight = (tau > shares[0] + 1e-9) & (tau < 1.0 - shares[1] - 1e-9)
     assert d_obj.min() >= -PENETRATION_TOL_M, f"penetrates by {-1e3 * d_obj.min():.3f} mm"
     assert d_obj[flight].min() >= PARAMS.clearance_m - PENETRATION_TOL_M
     assert d_ff.min() > 0.0
@@ -142,6 +150,42 @@ def test_too_short_a_transfer_is_a_velocity_failure_with_its_numbers(scenes):
     exc = info.value
     assert exc.kind == FailureKind.VELOCITY and exc.finger == FINGER
     assert exc.measured > exc.required > 0.0
+
+
+@pytest.mark.parametrize(
+    ("scene_name", "case", "duration_s"),
+    [("upright-moving", CASES[3], 0.2), ("edge-moving", CASES[5], 0.25)],
+)
+def test_where_the_even_split_is_too_fast_the_parts_are_paced_within_the_limits(
+    scenes, checker, monkeypatch, scene_name, case, duration_s
+):
+    # a quarter of the duration each for the lift and the approach moves a joint too
+    # fast in these short transfers; paced by the joints' needs, the same transfer
+    # stays within the limits and passes the independent re-check
+    scene = scenes[scene_name]
+    monkeypatch.setattr(transfer_module, "_paced_shares", lambda *args: None)
+    with pytest.raises(PlanningError) as info:
+        transfer(scene, *case[1:], duration_s=duration_s)
+    assert info.value.kind == FailureKind.VELOCITY
+    monkeypatch.undo()
+    moved = transfer(scene, *case[1:], duration_s=duration_s)
+    t_lift, t_land = moved.keyframe_times_s[1], moved.keyframe_times_s[-2]
+    shares = (t_lift / duration_s, 1.0 - t_land / duration_s)
+    assert shares != pytest.approx((LIFT_FRACTION, LIFT_FRACTION))
+    assert min(shares) >= transfer_module.MIN_SHARE - 1e-9
+    stats = recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, duration_s, shares)
+    assert stats["n_flight"] > 0
+    # the lift still ends at the clearance above P (FK round trip)
+    S, f = scene.sample, checker.finger
+    i_p = scene.contact(case[1])
+    above_p = S.points[i_p] + (f.tip_radius + PARAMS.clearance_m) * S.normals[i_p]
+    assert np.linalg.norm(moved.keyframes_object[1] - above_p) <= IK_TOL_M
+
+
+def test_a_transfer_within_the_limits_keeps_the_even_split(scenes):
+    moved = transfer(scenes["edge-moving"], *CASES[5][1:], duration_s=0.4)
+    assert moved.keyframe_times_s[1] == pytest.approx(LIFT_FRACTION * 0.4)
+    assert moved.keyframe_times_s[-2] == pytest.approx((1.0 - LIFT_FRACTION) * 0.4)
 
 
 def test_of_the_vias_too_fast_the_least_too_fast_whose_geometry_passes_is_reported(

@@ -19,6 +19,11 @@ release and a join take (:mod:`.release`, :mod:`.join`):
 3. *approach*: over the last ``LIFT_FRACTION`` the fingertip comes down onto Q the same
    way (along its normal, or tilted) and touches Q at the landing time.
 
+Where that even split would move a joint faster than its limit, the three parts are
+paced: each gets the time its fastest joint needs at its limit (a tilted back-off at a
+joint limit may need much more than a quarter of a short regrasp while the move
+between needs less), when their needs fit in the duration (:func:`_paced_shares`).
+
 The vias tried are the straight move and the midpoint of the two backed-off fingertips
 raised along the mean of the two normals by ``VIA_HEIGHTS`` times the clearance plus
 the tip radius; where one of those fails its Coal check (the move crosses another
@@ -43,7 +48,7 @@ from scipy.interpolate import PchipInterpolator
 
 from ..exceptions import PlanningError
 from ..model.clearance import FingerClearance, LinkClearance
-from ..model.hand import Finger, Hand
+from ..model.hand import Finger, Hand, speed_shares
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..verify.finger_motion import VerificationReport
@@ -67,6 +72,13 @@ SAMPLED_SCREENED = 48
 SAMPLED_VERIFIED = 3
 #: What a sampled via keeps to spare, beyond the clearances, at the transfer's middle [m].
 VIA_MARGIN_M = 0.002
+#: Peak over mean speed of a minimum-jerk move [-].
+MIN_JERK_PEAK = 1.875
+#: Where the even split is too fast, what the paced parts keep to spare below the
+#: velocity limits [-] (the back-off at the paced times differs a little).
+PACE_MARGIN = 0.05
+#: The smallest share of the duration a paced part gets [-].
+MIN_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -153,17 +165,11 @@ def plan_transfer(
     f = hand.finger(finger)
     n_t = max(int(np.ceil(duration_s / sample_dt_s)), 8) + 1
     times = t_start + np.linspace(0.0, duration_s, n_t)
-    tau = np.linspace(0.0, 1.0, n_t)
-    lift = tau <= LIFT_FRACTION + 1e-12
-    land = tau >= 1.0 - LIFT_FRACTION - 1e-12
+    T = motion.pose(times)
+    ends = _paced_ends(f, times, T, P, Q, q_start, q_land, clearance_m, ik_tol_m)
+    lift, land, q_lift, q_app = ends.lift, ends.land, ends.q_lift, ends.q_app
     i_a, i_b = int(np.flatnonzero(lift)[-1]), int(np.flatnonzero(land)[0])
     i_m = (i_a + i_b) // 2  # the via's sample
-    T = motion.pose(times)
-    off_lift = clearance_m * minimum_jerk(tau[lift] / LIFT_FRACTION)
-    off_land = clearance_m * minimum_jerk((1.0 - tau[land]) / LIFT_FRACTION)
-    q_lift = back_off(f, T[lift], P, off_lift, np.asarray(q_start, float), ik_tol_m, Q[0])
-    q_app = back_off(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m, P[0])
-    q_app = q_app[::-1]
     q_a, q_b = q_lift[-1], q_app[0]
     mid = times[i_a : i_b + 1]
     s = minimum_jerk((mid - mid[0]) / (mid[-1] - mid[0]))
@@ -235,6 +241,115 @@ def plan_transfer(
         if failure is not None and not math.isnan(height):
             failures.append(failure)
     raise _reported_failure(too_fast, failures, coal_failure)
+
+
+@dataclass(frozen=True)
+class _Ends:
+    """The lift and the approach of a transfer: their sample masks ``(S,)`` and the
+    finger's configurations ``(L, k)``, ``(A, k)`` along them [rad]."""
+
+    lift: np.ndarray
+    land: np.ndarray
+    q_lift: np.ndarray
+    q_app: np.ndarray
+
+
+def _paced_ends(
+    f: Finger,
+    times: np.ndarray,
+    T: np.ndarray,
+    P: tuple[np.ndarray, np.ndarray],
+    Q: tuple[np.ndarray, np.ndarray],
+    q_start: np.ndarray,
+    q_land: np.ndarray,
+    clearance_m: float,
+    ik_tol_m: float,
+) -> _Ends:
+    """The lift and the approach over ``LIFT_FRACTION`` of the samples ``times`` each,
+    or paced (:func:`_paced_shares`) where that is too fast and a paced split is not."""
+    tau = np.linspace(0.0, 1.0, len(times))
+    even = (LIFT_FRACTION, LIFT_FRACTION)
+    ends = _lift_and_approach(f, tau, T, P, Q, q_start, q_land, clearance_m, ik_tol_m, even)
+    paced = _paced_shares(f, times, ends, even)
+    if paced is None:
+        return ends
+    try:
+        return _lift_and_approach(f, tau, T, P, Q, q_start, q_land, clearance_m, ik_tol_m, paced)
+    except PlanningError:
+        return ends  # the back-off at the paced times is out of reach
+
+
+def _lift_and_approach(
+    f: Finger,
+    tau: np.ndarray,
+    T: np.ndarray,
+    P: tuple[np.ndarray, np.ndarray],
+    Q: tuple[np.ndarray, np.ndarray],
+    q_start: np.ndarray,
+    q_land: np.ndarray,
+    clearance_m: float,
+    ik_tol_m: float,
+    shares: tuple[float, float],
+) -> _Ends:
+    """The lift over the first ``shares[0]`` of the normalized time ``tau`` ``(S,)`` and
+    the approach over the last ``shares[1]`` (object poses ``T`` ``(S, 4, 4)``): the
+    fingertip backs off ``clearance_m`` from P, and comes down onto Q, minimum jerk
+    (:func:`~.lift.back_off`); ``ik-unreachable`` if either is out of reach."""
+    s_lift, s_land = shares
+    lift = tau <= s_lift + 1e-12
+    land = tau >= 1.0 - s_land - 1e-12
+    off_lift = clearance_m * minimum_jerk(tau[lift] / s_lift)
+    off_land = clearance_m * minimum_jerk((1.0 - tau[land]) / s_land)
+    q_lift = back_off(f, T[lift], P, off_lift, np.asarray(q_start, float), ik_tol_m, Q[0])
+    q_app = back_off(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m, P[0])
+    return _Ends(lift, land, q_lift, q_app[::-1])
+
+
+def _paced_shares(
+    f: Finger, times: np.ndarray, ends: _Ends, shares: tuple[float, float]
+) -> tuple[float, float] | None:
+    """Shares of the duration for the lift and the approach that keep the joints within
+    their velocity limits where the even split ``shares`` does not, or None (the split
+    is within the limits, or no split is).
+
+    Each part needs the time its fastest joint takes at its limit: its share times its
+    peak speed share (the lift and the approach as :func:`_lift_and_approach` gave them,
+    the move between as a straight minimum-jerk move, whose peak speed is
+    ``MIN_JERK_PEAK`` times its mean). When the parts' needs, with
+    ``PACE_MARGIN`` to spare, add up to at most the whole duration, each part gets its
+    need (at least ``MIN_SHARE`` and two samples) and the time left is shared as the
+    even split shares it, rounded up to whole samples for the lift and the approach;
+    a back-off that only a joint jump could follow stays too fast, and the velocity
+    failure asks for a longer duration."""
+    lift, land = ends.lift, ends.land
+    peak_lift = _peak_share(f, times[lift], ends.q_lift)
+    peak_land = _peak_share(f, times[land], ends.q_app)
+    t_mid = float(times[np.flatnonzero(land)[0]] - times[np.flatnonzero(lift)[-1]])
+    step = np.abs(ends.q_app[0] - ends.q_lift[-1])
+    limit = np.where(f.velocity_limit > 0.0, f.velocity_limit, np.inf)
+    peak_mid = MIN_JERK_PEAK * float(np.max(step / limit)) / max(t_mid, 1e-12)
+    if max(peak_lift, peak_land, peak_mid) <= 1.0:
+        return None
+    even = np.array([shares[0], 1.0 - shares[0] - shares[1], shares[1]])
+    steps = len(times) - 1
+    need = even * np.array([peak_lift, peak_mid, peak_land]) * (1.0 + PACE_MARGIN)
+    need = np.maximum(need, max(MIN_SHARE, 2.0 / steps))  # two steps at least
+    if need.sum() > 1.0:
+        return None
+    share = need + (1.0 - need.sum()) * even
+    # whole steps: the lift ends, and the approach begins, on a sample
+    k_lift, k_land = (int(np.ceil(share[i] * steps - 1e-9)) for i in (0, 2))
+    if (steps - k_lift - k_land) < need[1] * steps:
+        return None
+    return k_lift / steps, k_land / steps
+
+
+def _peak_share(f: Finger, t: np.ndarray, q: np.ndarray) -> float:
+    """The largest joint speed of ``q`` ``(S, k)`` over ``t`` ``(S,)`` as a share of its
+    limit (0 for a single sample)."""
+    if len(t) < 2:
+        return 0.0
+    return float(speed_shares(np.diff(q, axis=0), np.diff(t), f.velocity_limit).max())
 
 
 def _candidates(
