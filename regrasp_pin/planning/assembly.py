@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..exceptions import PlanningError
+from ..exceptions import FailureKind, PlanningError
 from ..grasp.holding import Holding, holding_q
+from ..model.clearance import LinkClearance
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
@@ -23,7 +24,7 @@ from .schedule import TIME_TOL_S
 from .state import PlanContext, PlanState
 from .timing import check_joint_speed
 
-__all__ = ["joint_speed_failure", "plan_until"]
+__all__ = ["joint_speed_failure", "object_penetration_failure", "plan_until"]
 
 
 def plan_until(ctx: PlanContext, state: PlanState, until: float, *, final: bool = False) -> Plan:
@@ -124,6 +125,41 @@ def joint_speed_failure(hand: Hand, times: np.ndarray, q: np.ndarray) -> Plannin
             check_joint_speed(name, f.joint_names, f.velocity_limit, times, q[:, f.q_indices])
         except PlanningError as exc:
             return exc
+    return None
+
+
+def object_penetration_failure(
+    hand: Hand,
+    obj: ConvexObject,
+    times: np.ndarray,
+    q: np.ndarray,
+    T_palm_object: np.ndarray,
+    allowed_m: float,
+) -> PlanningError | None:
+    """The first finger (in the hand's order) one of whose geometries, fingertip
+    included, enters the object by more than ``allowed_m`` [m] at one of the samples
+    ``times`` ``(S,)`` [s] of the hand configurations ``q`` ``(S, nq)`` [rad], the object
+    at ``T_palm_object`` ``(S, 4, 4)`` (Coal), as an ``object-clearance`` PlanningError
+    (that finger's deepest sample); None if none does.
+
+    Every move was verified on its own samples and every hold tracked on the time
+    grid, where a hold counts as lasting to the end of the motion when it is lost only
+    at the grid's last time; the holds are placed by IK at the plan's samples. So the
+    whole plan is measured once more here, as the re-check of its file will measure
+    it (:func:`~regrasp_pin.verify.plan_check.recheck_plan`)."""
+    for name in hand.finger_names:
+        d = LinkClearance(hand, name, obj, include_tip=True)(q, T_palm_object)
+        i = int(np.argmin(d))
+        if d[i] < -allowed_m:
+            return PlanningError(
+                f"a geometry of the finger enters the object by {-1e3 * d[i]:.3f} mm "
+                f"(at most {1e3 * allowed_m:.3f} mm allowed) in the assembled plan",
+                finger=name,
+                time_s=float(times[i]),
+                kind=FailureKind.OBJECT_CLEARANCE,
+                measured=float(d[i]),
+                required=-float(allowed_m),
+            )
     return None
 
 

@@ -57,7 +57,7 @@ from ..model.scene import Scene
 from ..plan import Plan
 from ..verify.plan_check import phase_gaps
 from .advance import Step, advance, contenders
-from .assembly import joint_speed_failure, plan_until
+from .assembly import joint_speed_failure, object_penetration_failure, plan_until
 from .feasibility import first_infeasibility, must_hold_runs, no_plan_exists
 from .params import PlannerParams
 from .recovery import recover
@@ -296,6 +296,24 @@ def _final_plan(ctx: PlanContext, state: PlanState) -> Plan:
             kind=FailureKind.VELOCITY,
             measured=too_fast.measured,
             required=too_fast.required,
+        )
+    sinks = object_penetration_failure(
+        ctx.scene.hand,
+        ctx.scene.obj,
+        plan.t,
+        plan.q,
+        plan.poses(),
+        ctx.params.contact.tip_penetration_m,
+    )
+    if sinks is not None:
+        raise PlanningError(
+            sinks.reason,
+            finger=sinks.finger,
+            time_s=sinks.time_s,
+            partial=plan_until(ctx, state, sinks.time_s or motion.t_start),
+            kind=FailureKind.OBJECT_CLEARANCE,
+            measured=sinks.measured,
+            required=sinks.required,
         )
     return plan
 
