@@ -32,12 +32,22 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
   the object frame, moved by the object's pose) within ``contact_tol_m``;
 * every finger's phases follow each other without gap or overlap over the plan.
 
-Exact minima at little cost. Each geometry (and the object) is enclosed in a sphere
-(Coal's local AABB centre and radius); ``|c_a - c_b| - r_a - r_b`` is a lower bound on
-the signed distance of two bodies. Candidate (sample, pair) entries are visited in
-increasing order of that bound and Coal is called until the next bound is not below
-the smallest exact distance found, so the minimum reported is Coal's exact minimum
-over all densified samples and pairs.
+Exact minima at little cost. Every (sample, pair) entry gets a lower bound on its
+signed distance, penetration included. Each collision geometry lies in a capsule (a
+sphere or a capsule in itself, a cylinder about its axis, a box about its longest
+axis; any other shape in the sphere of Coal's local AABB), hence in the sphere around
+that capsule, and the object in a sphere around its vertices: ``|c_a - c_b| - r_a -
+r_b`` bounds every entry. Coal measures the entry of the smallest bound first; the
+entries whose bound is below that distance get a tighter one. Two geometries: the
+larger of their capsules' signed distance (the closed-form segment-segment distance,
+Ericson 5.1.9, less both radii; exact for spheres and capsules) and their separation
+along the line through the capsules' nearest points (the gap between two slabs, from
+the shapes' support functions; exact for boxes face to face). A geometry and the
+object: its separation from the face plane of the object's convex hull its centre is
+farthest in front of. Every bound is put 2 um below its value, twice Coal's GJK and
+EPA tolerance. The candidates are visited in increasing order of their bound and Coal
+is called until the next bound is not below the smallest exact distance found, so the
+minimum reported is Coal's exact minimum over all densified samples and pairs.
 """
 
 from __future__ import annotations
@@ -69,6 +79,11 @@ _TIME_TOL_S = 1e-9  # a sample within this of a phase's ends belongs to the phas
 _JOINT_TOL_RAD = 1e-9  # accepted excess over a joint limit
 _SPEED_TOL = 1e-6  # accepted relative excess over a joint velocity limit
 _GAP_TOL_S = 1e-6  # accepted gap or overlap between consecutive phases of a finger
+# Coal's distances are precise to its GJK and EPA tolerances (1e-6 m each by default,
+# coal.DistanceRequest), above or below; every lower bound on a distance is put twice
+# that below its geometric value, so that it stays below whatever Coal answers [m]
+_BOUND_MARGIN_M = 2e-6
+_REFINE_CHUNK = 32768  # entries per call of a tighter bound (a few kB of arrays each)
 
 
 @dataclass(frozen=True)
@@ -284,8 +299,8 @@ def recheck_plan(
     if n_hold < need:
         problems.append(f"only {n_hold} fingers hold at t={t_hold:.3f} s (need {need})")
 
-    tips, R_geom, x_geom = scene.kinematics(plan.q)
-    err, err_finger, err_t = _contact_error(scene, tips)
+    R_geom, x_geom = scene.kinematics(plan.q)
+    err, err_finger, err_t = _contact_error(scene, scene.tips(plan.q))
     if err_finger is not None and err > tip_tol:
         problems.append(
             f"{err_finger} at t={err_t:.3f} s is {err * 1e3:.3f} mm from its contact "
@@ -392,6 +407,7 @@ class _Scene:
         lo, hi = verts.min(axis=0), verts.max(axis=0)
         self.obj_center = 0.5 * (lo + hi)
         self.obj_radius = float(np.max(np.linalg.norm(verts - self.obj_center, axis=1)))
+        self.obj_planes = _hull_planes(verts)
 
         # which finger moves each geometry: the finger whose joints are its ancestors
         joint_finger: dict[int, str] = {}
@@ -403,17 +419,14 @@ class _Scene:
                 joint_finger[self.model.getJointId(j)] = name
         self.joint_finger = joint_finger  # joint id -> the finger that moves it
         self.geom_finger: list[str | None] = []
-        self.geom_center: list[np.ndarray] = []
-        self.geom_radius: list[float] = []
         for g in self.geom.geometryObjects:
             j, owner = int(g.parentJoint), None
             while j > 0 and owner is None:
                 owner = joint_finger.get(j)
                 j = int(self.model.parents[j])
             self.geom_finger.append(owner)
-            g.geometry.computeLocalAABB()
-            self.geom_center.append(np.array(g.geometry.aabb_center, float))
-            self.geom_radius.append(float(g.geometry.aabb_radius))
+        # every geometry's capsule and support function: the lower bounds of _exact_min
+        self.geom_shapes = _Shapes.of([g.geometry for g in self.geom.geometryObjects])
         self.tip_frames: dict[str, int] = {}
         for name, f in fingers.items():
             if not self.model.existFrame(f["tip_frame"]):
@@ -423,6 +436,7 @@ class _Scene:
             self.tip_frames[name] = self.model.getFrameId(f["tip_frame"])
         self.finger_geoms = [g for g, f in enumerate(self.geom_finger) if f is not None]
         ids = self.finger_geoms
+        self.finger_shapes = self.geom_shapes[ids]
         self.ff_pairs = np.array(
             [
                 (a, b)
@@ -445,35 +459,41 @@ class _Scene:
         x = np.stack([np.interp(times, p.t, p.T_palm_object[:, j]) for j in range(3)], axis=1)
         return self.slerp(times).as_matrix(), x
 
-    def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Fingertip frame origins and the finger geometries' placements (palm frame).
+    def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The finger geometries' placements (palm frame), Pinocchio's.
 
         Args:
             q: Configurations ``(K, nq)`` [rad].
 
         Returns:
-            ``tips (K, F, 3)`` [m] (fingers in ``tip_frames`` order), and rotations
-            ``(K, G, 3, 3)`` and translations ``(K, G, 3)`` [m] of the geometries
-            :attr:`finger_geoms`.
+            Rotations ``(K, G, 3, 3)`` and translations ``(K, G, 3)`` [m] of the
+            geometries :attr:`finger_geoms`.
         """
         import pinocchio as pin
 
-        m, d, ids = self.model, self.data, self.finger_geoms
-        frames = list(self.tip_frames.values())
+        m, d, oMg, ids = self.model, self.data, self.gdata.oMg, self.finger_geoms
+        M = np.empty((q.shape[0], len(ids), 4, 4))  # homogeneous placements
+        if ids:
+            for k in range(q.shape[0]):
+                pin.forwardKinematics(m, d, q[k])
+                pin.updateGeometryPlacements(m, d, self.geom, self.gdata)
+                # one read per geometry: reading the placements costs more than computing
+                placed = oMg.tolist()
+                M[k] = [placed[g].homogeneous for g in ids]
+        return np.ascontiguousarray(M[..., :3, :3]), np.ascontiguousarray(M[..., :3, 3])
+
+    def tips(self, q: np.ndarray) -> np.ndarray:
+        """Fingertip frame origins ``(K, F, 3)`` [m] (palm frame; fingers in
+        ``tip_frames`` order) at the configurations ``q`` ``(K, nq)`` [rad]."""
+        import pinocchio as pin
+
+        m, d, frames = self.model, self.data, list(self.tip_frames.values())
         tips = np.empty((q.shape[0], len(frames), 3))
-        R = np.empty((q.shape[0], len(ids), 3, 3))
-        x = np.empty((q.shape[0], len(ids), 3))
-        for k in range(q.shape[0]):
-            pin.forwardKinematics(m, d, q[k])
-            pin.updateFramePlacements(m, d)
-            pin.updateGeometryPlacements(m, d, self.geom, self.gdata)
-            for i, fid in enumerate(frames):
-                tips[k, i] = d.oMf[fid].translation
-            for i, g in enumerate(ids):
-                M = self.gdata.oMg[g]
-                R[k, i] = M.rotation
-                x[k, i] = M.translation
-        return tips, R, x
+        if frames:
+            for k in range(q.shape[0]):
+                pin.forwardKinematics(m, d, q[k])
+                tips[k] = [pin.updateFramePlacement(m, d, f).translation for f in frames]
+        return tips
 
 
 # ---------------------------------------------------------------------- the checks
@@ -646,7 +666,7 @@ def _check_regrasp(
         sel = np.array([k - 1, k])
     times, q = _densify(plan, sel, max_step)
     R_obj, x_obj = scene.object_poses(times)
-    _, R, x = scene.kinematics(q)
+    R, x = scene.kinematics(q)
     # the moving finger's geometries against the object
     moving = [i for i, g in enumerate(scene.finger_geoms) if scene.geom_finger[g] == phase.finger]
     d_obj, k_obj, _ = _min_object_distance(scene, R, x, R_obj, x_obj, moving)
@@ -662,12 +682,6 @@ def _check_regrasp(
         t_min_finger_s=float(times[k_ff]),
         finger_pair=pair,
     )
-
-
-def _centres(scene: _Scene, R: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Centres ``(K, G, 3)`` [m] of the finger geometries' bounding spheres."""
-    local = np.array([scene.geom_center[g] for g in scene.finger_geoms])  # (G, 3)
-    return np.einsum("kgij,gj->kgi", R, local) + x
 
 
 def _min_finger_distance(
@@ -687,13 +701,16 @@ def _min_finger_distance(
     pairs, ids = scene.ff_pairs, scene.finger_geoms
     if pairs.size == 0:
         return math.inf, 0, ("", "")
-    c = _centres(scene, R, x)
-    radius = np.array([scene.geom_radius[g] for g in ids])
-    lower = (
-        np.linalg.norm(c[:, pairs[:, 0]] - c[:, pairs[:, 1]], axis=2)
-        - radius[pairs[:, 0]]
-        - radius[pairs[:, 1]]
+    bodies = scene.finger_shapes.placed(R, x)  # (K, G)
+    c, rho = bodies.c, bodies.rho
+    lower = _sphere_bound(
+        c[:, pairs[:, 0]], rho[:, pairs[:, 0]], c[:, pairs[:, 1]], rho[:, pairs[:, 1]]
     )
+
+    def refine(idx: np.ndarray) -> np.ndarray:
+        k, j = np.divmod(idx, len(pairs))
+        return _pair_bound(bodies.take(k, pairs[j, 0]), bodies.take(k, pairs[j, 1]))
+
     shapes = [scene.geom.geometryObjects[g].geometry for g in ids]
     ends = pairs.tolist()
     place, req, res = _Transforms(R, x), coal.DistanceRequest(), coal.DistanceResult()
@@ -703,7 +720,7 @@ def _min_finger_distance(
         res.clear()
         return coal.distance(shapes[a], place(k, a), shapes[b], place(k, b), req, res)
 
-    d, (k, j) = _exact_min(lower, d_pair)
+    d, (k, j) = _exact_min(lower, d_pair, refine)
     a, b = pairs[j]
     return d, k, (str(scene.geom_finger[ids[a]]), str(scene.geom_finger[ids[b]]))
 
@@ -719,16 +736,17 @@ def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
     if not fixed:
         return math.inf, 0, ""
     R_obj, x_obj = scene.sample_poses
-    c_obj = x_obj + R_obj @ scene.obj_center
     place = [objs[g].placement for g in fixed]
-    c_fix = np.array(
-        [
-            M.rotation @ scene.geom_center[g] + M.translation
-            for M, g in zip(place, fixed, strict=True)
-        ]
-    )
-    r_fix = np.array([scene.geom_radius[g] for g in fixed])
-    lower = np.linalg.norm(c_obj[:, None] - c_fix[None], axis=2) - r_fix[None] - scene.obj_radius
+    bodies = scene.geom_shapes[fixed].placed(
+        np.array([M.rotation for M in place]), np.array([M.translation for M in place])
+    )  # (F,)
+    c_obj = x_obj + R_obj @ scene.obj_center
+    lower = _sphere_bound(c_obj[:, None], scene.obj_radius, bodies.c[None], bodies.rho[None])
+
+    def refine(idx: np.ndarray) -> np.ndarray:
+        k, j = np.divmod(idx, len(fixed))
+        return _object_bound(bodies[j], R_obj[k], x_obj[k], scene.obj_planes)
+
     shapes = [objs[g].geometry for g in fixed]
     fixed_at = [coal.Transform3s(M.rotation, M.translation) for M in place]
     obj_at = _Transforms(R_obj[:, None], x_obj[:, None])
@@ -738,7 +756,7 @@ def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
         res.clear()
         return coal.distance(shapes[j], fixed_at[j], scene.obj, obj_at(k, 0), req, res)
 
-    d, (k, j) = _exact_min(lower, d_fixed)
+    d, (k, j) = _exact_min(lower, d_fixed, refine)
     return d, k, str(objs[fixed[j]].name)
 
 
@@ -759,10 +777,14 @@ def _min_object_distance(
     if not columns:
         return math.inf, 0, 0
     ids, objs = scene.finger_geoms, scene.geom.geometryObjects
-    c_geom = _centres(scene, R, x)[:, columns]  # (K, C, 3)
+    bodies = scene.finger_shapes[columns].placed(R[:, columns], x[:, columns])  # (K, C)
     c_obj = np.einsum("kij,j->ki", R_obj, scene.obj_center) + x_obj  # (K, 3)
-    radius = np.array([scene.geom_radius[ids[i]] for i in columns])
-    lower = np.linalg.norm(c_geom - c_obj[:, None], axis=2) - radius - scene.obj_radius
+    lower = _sphere_bound(bodies.c, bodies.rho, c_obj[:, None], scene.obj_radius)
+
+    def refine(idx: np.ndarray) -> np.ndarray:
+        k, j = np.divmod(idx, len(columns))
+        return _object_bound(bodies.take(k, j), R_obj[k], x_obj[k], scene.obj_planes)
+
     shapes = [objs[ids[i]].geometry for i in columns]
     place, obj_at = _Transforms(R, x), _Transforms(R_obj[:, None], x_obj[:, None])
     req, res = coal.DistanceRequest(), coal.DistanceResult()
@@ -771,7 +793,7 @@ def _min_object_distance(
         res.clear()
         return coal.distance(shapes[j], place(k, columns[j]), scene.obj, obj_at(k, 0), req, res)
 
-    d, (k, j) = _exact_min(lower, d_object)
+    d, (k, j) = _exact_min(lower, d_object, refine)
     return d, k, columns[j]
 
 
@@ -798,34 +820,284 @@ class _Transforms:
         import coal
 
         self._make = coal.Transform3s
-        self._R, self._x = R, x
-        self._known: dict[tuple[int, int], Any] = {}
+        self._n = R.shape[1]
+        self._R, self._x = R.reshape(-1, 3, 3), x.reshape(-1, 3)  # row k * G + g
+        self._known: list[Any] = [None] * self._x.shape[0]
 
     def __call__(self, k: int, g: int) -> Any:
         """The transform of body ``g`` at sample ``k``."""
-        tf = self._known.get((k, g))
+        i = k * self._n + g
+        tf = self._known[i]
         if tf is None:
-            tf = self._known[(k, g)] = self._make(self._R[k, g], self._x[k, g])
+            tf = self._known[i] = self._make(self._R[i], self._x[i])
         return tf
 
 
-def _exact_min(lower: np.ndarray, exact: Any) -> tuple[float, tuple[int, int]]:
+def _exact_min(lower: np.ndarray, exact: Any, refine: Any = None) -> tuple[float, tuple[int, int]]:
     """The exact minimum of ``exact(k, j)`` over all entries of ``lower`` (K, J).
 
-    ``lower[k, j]`` must be a lower bound of ``exact(k, j)``. Entries are evaluated in
-    increasing order of their bound until the next bound is not below the best exact
-    value: every entry left has a value at least its bound, hence at least the best.
+    ``lower[k, j]`` must be a lower bound of ``exact(k, j)``, and so must ``refine(idx)``
+    of the entries at the flat indices ``idx`` (a tighter, costlier bound; optional).
+    The entry of the smallest bound is evaluated first; the entries whose bound is
+    below its value get the tighter bound (the others cannot be below it). They are
+    evaluated in increasing order of that bound until the next bound is not below the
+    best exact value: every entry left has a value at least its bound, hence at least
+    the best.
     """
-    flat = lower.ravel()
+    flat, n = lower.ravel(), lower.shape[1]
     if flat.size == 0:
         return math.inf, (0, 0)
-    order = np.argsort(flat, kind="stable")
-    best, arg = math.inf, int(order[0])
-    for idx in order:
-        if flat[idx] >= best:
+    seed = int(np.argmin(flat))
+    d = float(exact(*divmod(seed, n)))
+    best, arg = (d if d < math.inf else math.inf), seed
+    todo = np.flatnonzero(~(flat >= best))  # NaN bounds too: no bound
+    bound = flat[todo]
+    if refine is not None and todo.size:
+        chunks = [refine(todo[i : i + _REFINE_CHUNK]) for i in range(0, todo.size, _REFINE_CHUNK)]
+        bound = np.maximum(bound, np.concatenate(chunks))
+        keep = ~(bound >= best)
+        todo, bound = todo[keep], bound[keep]
+    order = np.argsort(bound, kind="stable")
+    for idx, b in zip(todo[order].tolist(), bound[order].tolist(), strict=True):
+        if b >= best:
             break
-        k, j = divmod(int(idx), lower.shape[1])
-        d = float(exact(k, j))
+        if idx == seed:
+            continue
+        d = float(exact(*divmod(idx, n)))
         if d < best:
-            best, arg = d, int(idx)
-    return best, divmod(arg, lower.shape[1])
+            best, arg = d, idx
+    return best, divmod(arg, n)
+
+
+# ---------------------------------------------------------------------- lower bounds
+@dataclass(frozen=True)
+class _Shapes:
+    """Convex shapes in their own frames: a capsule around each, and its support function.
+
+    A shape lies in its capsule, the points within ``r`` of the segment from ``c - u`` to
+    ``c + u``. Its support function about ``c`` in a unit direction ``v`` of its frame
+    (the largest ``v . (p - c)`` over its points ``p``) is ``sum_i half_i |v_i| + axial
+    |v_z| + radial sqrt(v_x^2 + v_y^2) + round``: a box (``half``), a cylinder
+    (``axial`` its half length, ``radial`` its radius), a capsule (``axial``,
+    ``round``), a sphere (``round``); every shape is symmetric about ``c``.
+
+    Attributes:
+        c: Centres ``(G, 3)`` [m].
+        u: Half segments ``(G, 3)`` [m] (zero: the capsule is a sphere).
+        r: Capsule radii ``(G,)`` [m].
+        s: Support parameters ``(G, 6)`` [m]: ``half`` (3), ``axial``, ``radial``,
+            ``round``.
+    """
+
+    c: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    s: np.ndarray
+
+    @classmethod
+    def of(cls, shapes: list[Any]) -> _Shapes:
+        """The capsules and support functions of Coal shapes (:func:`_shape_bounds`)."""
+        rows = [_shape_bounds(shape) for shape in shapes]
+        c, u, r, s = (np.array([row[i] for row in rows], float) for i in range(4))
+        return cls(c.reshape(-1, 3), u.reshape(-1, 3), r, s.reshape(-1, 6))
+
+    def __getitem__(self, index: Any) -> _Shapes:
+        """The shapes at ``index``."""
+        return _Shapes(self.c[index], self.u[index], self.r[index], self.s[index])
+
+    def placed(self, R: np.ndarray, x: np.ndarray) -> _Bodies:
+        """The shapes placed by rotations ``R (..., G, 3, 3)`` and translations ``x (...,
+        G, 3)`` [m] (their frames in the frame of reference)."""
+        return _Bodies(
+            _rotate(R, self.c) + x,
+            _rotate(R, self.u),
+            np.broadcast_to(self.r, x.shape[:-1]),
+            R,
+            np.broadcast_to(self.s, (*x.shape[:-1], 6)),
+        )
+
+
+@dataclass(frozen=True)
+class _Bodies:
+    """:class:`_Shapes` placed in a frame of reference (the palm's).
+
+    Attributes:
+        c: Centres ``(..., 3)`` [m].
+        u: Half segments ``(..., 3)`` [m].
+        r: Capsule radii ``(...)`` [m].
+        R: Rotations ``(..., 3, 3)`` of the shapes' frames (columns: their axes).
+        s: Support parameters ``(..., 6)`` [m] (:class:`_Shapes`).
+    """
+
+    c: np.ndarray
+    u: np.ndarray
+    r: np.ndarray
+    R: np.ndarray
+    s: np.ndarray
+
+    def __getitem__(self, index: Any) -> _Bodies:
+        """The bodies at ``index`` of the leading axes (slices and arrays, no ellipsis)."""
+        return _Bodies(self.c[index], self.u[index], self.r[index], self.R[index], self.s[index])
+
+    def take(self, k: np.ndarray, g: np.ndarray) -> _Bodies:
+        """The bodies ``(N,)`` at samples ``k`` and columns ``g`` ``(N,)`` of bodies ``(K,
+        G)`` (``self[k, g]``, gathered faster)."""
+        i = k * self.c.shape[1] + g
+
+        def rows(a: np.ndarray) -> np.ndarray:
+            return np.take(a.reshape(-1, *a.shape[2:]), i, axis=0)
+
+        return _Bodies(rows(self.c), rows(self.u), self.r[k, g], rows(self.R), self.s[k, g])
+
+    @property
+    def rho(self) -> np.ndarray:
+        """Radii ``(...)`` [m] of the spheres about the centres around the capsules."""
+        return np.sqrt(_dot(self.u, self.u)) + self.r
+
+    def support(self, w: np.ndarray) -> np.ndarray:
+        """The support function ``(...)`` [m] about the centres in the unit directions
+        ``w`` ``(..., 3)`` (the frame of reference), broadcast."""
+        return _local_support(np.einsum("...ji,...j->...i", self.R, w), self.s)
+
+
+def _rotate(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``R @ v`` ``(..., G, 3)`` for rotations ``R`` ``(..., G, 3, 3)`` and vectors ``v``
+    ``(G, 3)``, column by column (faster than einsum on a broadcast operand)."""
+    return R[..., 0] * v[:, 0, None] + R[..., 1] * v[:, 1, None] + R[..., 2] * v[:, 2, None]
+
+
+def _local_support(v: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The support function ``(...)`` [m] of bodies with support parameters ``s``
+    ``(..., 6)`` (:class:`_Shapes`) in the unit directions ``v`` ``(..., 3)`` of their
+    own frames, broadcast."""
+    ax, ay, az = np.abs(v[..., 0]), np.abs(v[..., 1]), np.abs(v[..., 2])
+    return (
+        s[..., 0] * ax
+        + s[..., 1] * ay
+        + (s[..., 2] + s[..., 3]) * az
+        + s[..., 4] * np.hypot(ax, ay)
+        + s[..., 5]
+    )
+
+
+def _shape_bounds(shape: Any) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """The capsule ``(c, u, r)`` [m] around a Coal shape and its support parameters
+    (:class:`_Shapes`), in the shape's frame.
+
+    A sphere or a capsule is its own capsule; a cylinder (axis z) gets its axis and
+    radius; a box the segment along its longest side and the half diagonal of the other
+    two. Any other shape is taken as the sphere of its local AABB.
+    """
+    import coal
+
+    zero, z = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    if isinstance(shape, coal.Sphere):
+        r = float(shape.radius)
+        return zero, zero, r, np.array([0.0, 0.0, 0.0, 0.0, 0.0, r])
+    if isinstance(shape, coal.Capsule):
+        r, a = float(shape.radius), float(shape.halfLength)
+        return zero, a * z, r, np.array([0.0, 0.0, 0.0, a, 0.0, r])
+    if isinstance(shape, coal.Cylinder):
+        r, a = float(shape.radius), float(shape.halfLength)
+        return zero, a * z, r, np.array([0.0, 0.0, 0.0, a, r, 0.0])
+    if isinstance(shape, coal.Box):
+        half = np.asarray(shape.halfSide, float)
+        i = int(np.argmax(half))
+        u = np.zeros(3)
+        u[i] = half[i]
+        return zero, u, float(np.linalg.norm(np.delete(half, i))), np.append(half, [0.0] * 3)
+    shape.computeLocalAABB()
+    r = float(shape.aabb_radius)
+    return np.array(shape.aabb_center, float), zero, r, np.array([0.0, 0.0, 0.0, 0.0, 0.0, r])
+
+
+def _hull_planes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Planes around the points ``(N, 3)`` [m], in their frame: outward unit normals
+    ``(F, 3)`` and offsets ``(F,)`` [m] with ``n . p <= o`` for every point ``p`` (hence
+    for their convex hull), the normals of the hull's faces (those of the bounding box
+    when the points are flat)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        n = np.unique(np.round(ConvexHull(points).equations[:, :3], 12), axis=0)
+    except QhullError:
+        n = np.vstack([np.eye(3), -np.eye(3)])
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    return n, np.max(points @ n.T, axis=0)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products over the last axis (broadcast)."""
+    return np.einsum("...i,...i->...", a, b)
+
+
+def _segment_gap(c1: np.ndarray, u1: np.ndarray, c2: np.ndarray, u2: np.ndarray) -> np.ndarray:
+    """The vector ``(..., 3)`` [m] from the nearest point of the segment ``c2 -/+ u2`` to
+    that of the segment ``c1 -/+ u1`` (``(..., 3)`` [m], broadcast).
+
+    Closed form of Ericson, *Real-Time Collision Detection*, 5.1.9, vectorized
+    (segments reduced to a point included): the nearest points' parameters, clamped to
+    the segments, and the vector between those two points.
+    """
+    d1, d2, r = 2.0 * u1, 2.0 * u2, (c1 - u1) - (c2 - u2)
+    a, e, b = _dot(d1, d1), _dot(d2, d2), _dot(d1, d2)
+    c, f = _dot(d1, r), _dot(d2, r)
+    denom = a * e - b * b  # 0 for parallel segments (or a point)
+    with np.errstate(divide="ignore", invalid="ignore"):  # the branches np.where drops
+        s = np.where(denom > 0.0, np.clip((b * f - c * e) / denom, 0.0, 1.0), 0.0)
+        t = np.where(e > 0.0, (b * s + f) / e, 0.0)
+        redo = (t < 0.0) | (t > 1.0) | (e <= 0.0)  # t clamped: s again, for that t
+        t = np.clip(t, 0.0, 1.0)
+        s = np.where(redo, np.where(a > 0.0, np.clip((b * t - c) / a, 0.0, 1.0), 0.0), s)
+    return r + s[..., None] * d1 - t[..., None] * d2
+
+
+def _sphere_bound(
+    c_a: np.ndarray, rho_a: np.ndarray | float, c_b: np.ndarray, rho_b: np.ndarray | float
+) -> np.ndarray:
+    """Lower bounds ``(...)`` [m] of Coal's signed distance between bodies inside the
+    spheres ``(c_a, rho_a)`` and ``(c_b, rho_b)`` (centres ``(..., 3)``, radii ``(...)``
+    [m], broadcast): ``|c_a - c_b| - rho_a - rho_b``, less :data:`_BOUND_MARGIN_M`."""
+    d = c_a - c_b
+    return np.sqrt(_dot(d, d)) - rho_a - rho_b - _BOUND_MARGIN_M
+
+
+def _pair_bound(a: _Bodies, b: _Bodies) -> np.ndarray:
+    """Lower bounds ``(...)`` [m] of Coal's signed distance between the bodies ``a`` and
+    ``b`` (placed in one frame, broadcast), penetration included.
+
+    The larger of two: the capsules' signed distance (their segments' distance less
+    both radii: a body inside another is no farther from a third, and penetrates it no
+    deeper), exact for two spheres or capsules; and the bodies' separation along the
+    unit ``w`` joining the capsules' nearest points, ``w . (c_a - c_b) - h_a(w) -
+    h_b(w)`` with their support functions ``h`` (the gap between two slabs, one around
+    each), exact for two boxes face to face. Less :data:`_BOUND_MARGIN_M`, for Coal's
+    tolerance.
+    """
+    gap = _segment_gap(a.c, a.u, b.c, b.u)
+    dist = np.sqrt(_dot(gap, gap))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(dist[..., None] > 0.0, gap / dist[..., None], [1.0, 0.0, 0.0])
+    apart = _dot(w, a.c - b.c) - a.support(w) - b.support(w)
+    return np.maximum(dist - a.r - b.r, apart) - _BOUND_MARGIN_M
+
+
+def _object_bound(
+    bodies: _Bodies, R_obj: np.ndarray, x_obj: np.ndarray, planes: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
+    """Lower bounds ``(N,)`` [m] of Coal's signed distance between the bodies ``(N,)`` and
+    the object at ``R_obj (N, 3, 3)``, ``x_obj (N, 3)`` (the bodies' frame of
+    reference), penetration included.
+
+    ``planes``: the object's face planes in its frame (:func:`_hull_planes`), each
+    holding the object behind it. The bound is ``n . c - o - h(n)`` with ``c`` a
+    body's centre, ``h`` its support function and ``n . x = o`` the plane its centre is
+    farthest in front of: the body lies that far in front of the plane (or at most
+    that far behind it). Less :data:`_BOUND_MARGIN_M`, for Coal's tolerance.
+    """
+    normals, offsets = planes
+    c = np.einsum("nji,nj->ni", R_obj, bodies.c - x_obj)  # (N, 3) object frame
+    ahead = c @ normals.T - offsets  # (N, F)
+    f = np.argmax(ahead, axis=1)
+    n = np.einsum("nij,nj->ni", R_obj, normals[f])  # (N, 3) palm frame
+    return ahead[np.arange(f.size), f] - bodies.support(n) - _BOUND_MARGIN_M
