@@ -156,10 +156,9 @@ def test_planner_refuses_a_grasp_that_cannot_last(three_fingers):
     e = err.value
     assert e.kind == FailureKind.INFEASIBLE
     assert e.finger in keep and e.time_s == scen.motion.t_start
-    # the run is the whole motion but its last step (where a lost hold counts as held to
-    # the end): up to the last manifold time before it; the contact leaves before that
-    last_step = params.dt_s + params.manifold_dt_s
-    assert scen.motion.duration_s - last_step - 1e-9 <= e.required < scen.motion.duration_s
+    # the run is the whole motion, its last sample included (a plan holds there too);
+    # the contact leaves before its end
+    assert e.required == pytest.approx(scen.motion.duration_s, abs=1e-9)
     assert 0.0 <= e.measured <= e.required
     assert e.partial is not None and e.attempts == ()
 

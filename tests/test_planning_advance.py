@@ -50,12 +50,12 @@ def test_a_regrasp_lands_before_any_other_hold_is_lost():
 def test_holds_that_do_not_bound_the_landing():
     """Not a bound: a hold lost because the finger itself comes near (its landing
     elsewhere changes that), a hold kept to the end, a finger not holding, and a hold
-    that lasts to the motion's last step."""
+    that lasts to the motion's end."""
     triggers = [
         _trigger("ring", 1.2, lost_near="index"),
         _trigger("middle", 1.5),
         _trigger("little", 0.9),
-        _trigger("thumb", T_END - DT),
+        _trigger("thumb", T_END),
     ]
     state = _state(["ring", "middle", "thumb"], held_to_end=["middle"])
     assert _others_lost_by(_ctx(), state, "index", triggers) is None
@@ -136,9 +136,10 @@ def _holding_state(track):
 
 def test_a_hold_that_lasts_to_the_end_needs_no_regrasp():
     """A trigger warns before a hold is lost: a finger whose hold is not lost before
-    the motion's last step, and whose contact stays reached, inside its limits, pad
-    facing and clear to the end, may hold on to the end; one whose contact leaves
-    its limits before the end, or whose hold is lost before, may not."""
+    the motion's end, and whose contact stays reached, inside its limits, pad facing
+    and clear to the end, may hold on to the end; one whose contact leaves its limits
+    before the end, or whose hold is lost before (at the last sample too: the plan's
+    last sample is the re-check's as well), may not."""
     ctx = _holding_ctx()
     lasting = _holding_state(_track(T_END))
     held = _held_to_end(ctx, lasting, _trigger("ring", T_END), "why")
@@ -146,8 +147,9 @@ def test_a_hold_that_lasts_to_the_end_needs_no_regrasp():
         "why; held to the end inside the joint limits"
     )
     assert held.holding == lasting.holding and held.now == lasting.now
-    # lost (by the trigger) before the motion's last step
+    # lost (by the trigger) before the motion's end, or only at its last sample
     assert _held_to_end(ctx, lasting, _trigger("ring", T_END - 3 * DT), "why") is None
+    assert _held_to_end(ctx, lasting, _trigger("ring", T_END - DT), "why") is None
     # the track leaves the joint limits before the end
     leaving = _holding_state(_track(T_END, lost_at=T_END - 0.5))
     assert _held_to_end(ctx, leaving, _trigger("ring", T_END), "why") is None

@@ -225,8 +225,7 @@ def must_hold(
         mu: Friction coefficient.
         fingers: The fingers to examine (default: all of ``manifolds``).
         min_fingers: Fewest fingers that can hold (:func:`closure_possible_without`).
-        until_s: Times after this claim nothing [s] (the planner counts a hold lost in
-            the motion's last step as held to the end); None: every time.
+        until_s: Times after this claim nothing [s]; None: every time.
     """
     out = []
     for name in fingers if fingers is not None else list(manifolds):

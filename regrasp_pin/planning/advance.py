@@ -245,14 +245,12 @@ def _advance(
 def _held_to_end(ctx: PlanContext, state: PlanState, trig: Trigger, why: str) -> PlanState | None:
     """The state with ``trig.finger`` holding its contact to the end of the motion when
     it need not regrasp (``why``: why it does not): its hold is not lost before the
-    motion's last step and the contact stays reached, inside the joint limits (within
-    the trigger margin only), pad facing and its links clear until the end; else
-    None."""
+    motion's end (its last sample included) and the contact stays reached, inside the
+    joint limits (within the trigger margin only), pad facing and its links clear until
+    the end; else None."""
     p, motion = ctx.params, ctx.scene.motion
     h = state.holding[trig.finger]
-    if trig.lost_s < motion.t_end - p.dt_s - TIME_TOL_S or not holds_to_end(
-        h.track, trig.time_s, p.contact
-    ):
+    if trig.lost_s < motion.t_end - TIME_TOL_S or not holds_to_end(h.track, trig.time_s, p.contact):
         return None
     note = f"{trig.reason} at t={trig.time_s:.3f} s, {why}; held to the end inside the joint limits"
     log.info("%s: %s", trig.finger, note)
@@ -316,7 +314,7 @@ def _check_landing(
     hold = landing_hold(ctx, name, res)
     landed[id(res)] = hold
     lost = held_until(hold.track, p.contact)
-    end = ctx.scene.motion.t_end - p.dt_s
+    end = ctx.scene.motion.t_end
     need = min(res.t_end + p.regrasp.duration_s, end)
     where = f"start {res.t_start:.2f} s, Q={np.round(res.Q_object, 4).tolist()}"
     if lost < need - TIME_TOL_S:
@@ -362,7 +360,7 @@ def _others_lost_by(
     finger no turn to let go (one finger in the air at a time), a dead end whatever
     follows (a long regrasp, stretched for the joint velocity limits, used to land
     there and the search went on from a state it could not leave)."""
-    end = ctx.scene.motion.t_end - ctx.params.dt_s - TIME_TOL_S
+    end = ctx.scene.motion.t_end - TIME_TOL_S
     lost = [
         e.lost_s
         for e in triggers
@@ -389,7 +387,7 @@ def _refuse_dead_end(
     does, that finger would lose its hold while this one is in the air."""
     p, name = ctx.params, trig.finger
     land = win.earliest_s + p.regrasp.duration_s
-    end = ctx.scene.motion.t_end - p.dt_s
+    end = ctx.scene.motion.t_end
     lost = [
         e
         for e in triggers

@@ -49,18 +49,16 @@ def must_hold_runs(
         if params.release
         else dict(manifolds)
     )
-    # a hold lost in the motion's last step counts as held to the end (planning.state)
-    until = motion.t_end - params.dt_s
-    return every, must_hold(every, sample, obj, params.mu, list(manifolds), until_s=until)
+    # a plan holds to the motion's end, its last sample included (planning.state)
+    return every, must_hold(every, sample, obj, params.mu, list(manifolds), until_s=motion.t_end)
 
 
 def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
     """The first time in ``[h.t_from, t_to]`` at which the tracked hold ``h`` is lost
     (not reached, not within the velocity limits, outside the joint limits or the pad
-    turned away; the motion's last step excepted, as the planner counts it held to
-    the end), or None if it is held."""
+    turned away), or None if it is held."""
     tr, c = h.track, ctx.params.contact
-    sel = (tr.times_s <= min(t_to, ctx.scene.motion.t_end - ctx.params.dt_s) + TIME_TOL_S) & (
+    sel = (tr.times_s <= min(t_to, ctx.scene.motion.t_end) + TIME_TOL_S) & (
         tr.times_s >= h.t_from - TIME_TOL_S
     )
     lost = sel & tr.lost(c)

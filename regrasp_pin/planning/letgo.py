@@ -77,7 +77,7 @@ def _try_release(
     """
     p, motion = ctx.params, ctx.scene.motion
     name = trig.finger
-    end = motion.t_end - p.dt_s - TIME_TOL_S
+    end = motion.t_end - TIME_TOL_S
     if not p.release or win.empty or trig.lost_s >= end:
         return None
     without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
@@ -113,7 +113,7 @@ def _lost_before_now(ctx: PlanContext, after: PlanState) -> Trigger | None:
     """A hold of ``after`` that is lost before ``after.now`` (the plan would have that
     finger hold past its loss while the others moved on), the first lost first; None
     if every hold lasts until then."""
-    end = min(after.now, ctx.scene.motion.t_end - ctx.params.dt_s) - TIME_TOL_S
+    end = min(after.now, ctx.scene.motion.t_end) - TIME_TOL_S
     lost = [e for e in pending_triggers(ctx, after) if e.lost_s < end]
     return min(lost, key=lambda e: (round(e.lost_s, 9), e.finger), default=None)
 
@@ -449,7 +449,7 @@ def _join(
             continue
         hold = landing_hold(ctx, name, join)
         lost = held_until(hold.track, p.contact)
-        if lost < min(join.t_end + p.regrasp.duration_s, motion.t_end - p.dt_s) - TIME_TOL_S:
+        if lost < min(join.t_end + p.regrasp.duration_s, motion.t_end) - TIME_TOL_S:
             log.debug("%s cannot join: Q held only to t=%.3f s", name, lost)
             continue
         phase = JoinPhase(

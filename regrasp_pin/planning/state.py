@@ -126,7 +126,7 @@ def pending_triggers(
         # a hold that will be lost triggers at least one regrasp (and the lead) before:
         # a margin that closes fast (a link nearing the object) leaves no time otherwise
         due = lost - p.regrasp.duration_s - p.lead_s
-        if lost < ctx.scene.motion.t_end - p.dt_s - TIME_TOL_S and (t is None or due < t):
+        if lost < ctx.scene.motion.t_end - TIME_TOL_S and (t is None or due < t):
             t = max(due, state.now, h.t_from)
             why = f"its hold is lost after t={lost:.3f} s ({loss})"
         if t is not None:
@@ -139,7 +139,7 @@ def _chain_first(ctx: PlanContext, state: PlanState, triggers: list[Trigger]) ->
     triggered by the chain's latest start, if that comes before its own trigger: holds
     that end close together cannot wait for each other's triggers."""
     p = ctx.params
-    end = ctx.scene.motion.t_end - p.dt_s - TIME_TOL_S
+    end = ctx.scene.motion.t_end - TIME_TOL_S
     lost = {e.finger: e.lost_s for e in triggers if e.lost_s < end}
     chain = regrasp_chain(lost, p.regrasp.duration_s)
     if len(chain.order) < 2:
