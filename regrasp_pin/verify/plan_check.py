@@ -33,19 +33,10 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
 * every finger's phases follow each other without gap or overlap over the plan.
 
 Exact minima at little cost. Every (sample, pair) entry gets a lower bound on its
-signed distance, penetration included. Each collision geometry lies in a capsule (a
-sphere or a capsule in itself, a cylinder about its axis, a box about its longest
-axis; any other shape in the sphere of Coal's local AABB), hence in the sphere around
-that capsule, and the object in a sphere around its vertices: ``|c_a - c_b| - r_a -
-r_b`` bounds every entry. Coal measures the entry of the smallest bound first; the
-entries whose bound is below that distance get a tighter one. Two geometries: the
-larger of their capsules' signed distance (the closed-form segment-segment distance,
-Ericson 5.1.9, less both radii; exact for spheres and capsules) and their separation
-along the line through the capsules' nearest points (the gap between two slabs, from
-the shapes' support functions; exact for boxes face to face). A geometry and the
-object: its separation from the face plane of the object's convex hull its centre is
-farthest in front of. Every bound is put 2 um below its value, twice Coal's GJK and
-EPA tolerance. The candidates are visited in increasing order of their bound and Coal
+signed distance, penetration included (:mod:`._bounds`: spheres around each geometry's
+capsule for all entries; for the entries below the first exact distance, the capsules'
+signed distance, the shapes' gap along the capsules' nearest points, and the object's
+face planes). The candidates are visited in increasing order of their bound and Coal
 is called until the next bound is not below the smallest exact distance found, so the
 minimum reported is Coal's exact minimum over all densified samples and pairs.
 """
@@ -62,6 +53,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from .._validate import positive, positive_int
 from ..exceptions import InputError
 from ..plan import ContactPhase
+from ._bounds import Shapes, hull_planes, object_bound, pair_bound, sphere_bound
 
 if TYPE_CHECKING:
     from ..plan import IdlePhase, JoinPhase, Plan, RegraspPhase, ReleasePhase
@@ -79,10 +71,6 @@ _TIME_TOL_S = 1e-9  # a sample within this of a phase's ends belongs to the phas
 _JOINT_TOL_RAD = 1e-9  # accepted excess over a joint limit
 _SPEED_TOL = 1e-6  # accepted relative excess over a joint velocity limit
 _GAP_TOL_S = 1e-6  # accepted gap or overlap between consecutive phases of a finger
-# Coal's distances are precise to its GJK and EPA tolerances (1e-6 m each by default,
-# coal.DistanceRequest), above or below; every lower bound on a distance is put twice
-# that below its geometric value, so that it stays below whatever Coal answers [m]
-_BOUND_MARGIN_M = 2e-6
 _REFINE_CHUNK = 32768  # entries per call of a tighter bound (a few kB of arrays each)
 
 
@@ -407,7 +395,7 @@ class _Scene:
         lo, hi = verts.min(axis=0), verts.max(axis=0)
         self.obj_center = 0.5 * (lo + hi)
         self.obj_radius = float(np.max(np.linalg.norm(verts - self.obj_center, axis=1)))
-        self.obj_planes = _hull_planes(verts)
+        self.obj_planes = hull_planes(verts)
 
         # which finger moves each geometry: the finger whose joints are its ancestors
         joint_finger: dict[int, str] = {}
@@ -426,7 +414,7 @@ class _Scene:
                 j = int(self.model.parents[j])
             self.geom_finger.append(owner)
         # every geometry's capsule and support function: the lower bounds of _exact_min
-        self.geom_shapes = _Shapes.of([g.geometry for g in self.geom.geometryObjects])
+        self.geom_shapes = Shapes.of([g.geometry for g in self.geom.geometryObjects])
         self.tip_frames: dict[str, int] = {}
         for name, f in fingers.items():
             if not self.model.existFrame(f["tip_frame"]):
@@ -703,13 +691,13 @@ def _min_finger_distance(
         return math.inf, 0, ("", "")
     bodies = scene.finger_shapes.placed(R, x)  # (K, G)
     c, rho = bodies.c, bodies.rho
-    lower = _sphere_bound(
+    lower = sphere_bound(
         c[:, pairs[:, 0]], rho[:, pairs[:, 0]], c[:, pairs[:, 1]], rho[:, pairs[:, 1]]
     )
 
     def refine(idx: np.ndarray) -> np.ndarray:
         k, j = np.divmod(idx, len(pairs))
-        return _pair_bound(bodies.take(k, pairs[j, 0]), bodies.take(k, pairs[j, 1]))
+        return pair_bound(bodies.take(k, pairs[j, 0]), bodies.take(k, pairs[j, 1]))
 
     shapes = [scene.geom.geometryObjects[g].geometry for g in ids]
     ends = pairs.tolist()
@@ -741,11 +729,11 @@ def _min_palm_distance(scene: _Scene) -> tuple[float, int, str]:
         np.array([M.rotation for M in place]), np.array([M.translation for M in place])
     )  # (F,)
     c_obj = x_obj + R_obj @ scene.obj_center
-    lower = _sphere_bound(c_obj[:, None], scene.obj_radius, bodies.c[None], bodies.rho[None])
+    lower = sphere_bound(c_obj[:, None], scene.obj_radius, bodies.c[None], bodies.rho[None])
 
     def refine(idx: np.ndarray) -> np.ndarray:
         k, j = np.divmod(idx, len(fixed))
-        return _object_bound(bodies[j], R_obj[k], x_obj[k], scene.obj_planes)
+        return object_bound(bodies[j], R_obj[k], x_obj[k], scene.obj_planes)
 
     shapes = [objs[g].geometry for g in fixed]
     fixed_at = [coal.Transform3s(M.rotation, M.translation) for M in place]
@@ -779,11 +767,11 @@ def _min_object_distance(
     ids, objs = scene.finger_geoms, scene.geom.geometryObjects
     bodies = scene.finger_shapes[columns].placed(R[:, columns], x[:, columns])  # (K, C)
     c_obj = np.einsum("kij,j->ki", R_obj, scene.obj_center) + x_obj  # (K, 3)
-    lower = _sphere_bound(bodies.c, bodies.rho, c_obj[:, None], scene.obj_radius)
+    lower = sphere_bound(bodies.c, bodies.rho, c_obj[:, None], scene.obj_radius)
 
     def refine(idx: np.ndarray) -> np.ndarray:
         k, j = np.divmod(idx, len(columns))
-        return _object_bound(bodies.take(k, j), R_obj[k], x_obj[k], scene.obj_planes)
+        return object_bound(bodies.take(k, j), R_obj[k], x_obj[k], scene.obj_planes)
 
     shapes = [objs[ids[i]].geometry for i in columns]
     place, obj_at = _Transforms(R, x), _Transforms(R_obj[:, None], x_obj[:, None])
@@ -867,237 +855,3 @@ def _exact_min(lower: np.ndarray, exact: Any, refine: Any = None) -> tuple[float
         if d < best:
             best, arg = d, idx
     return best, divmod(arg, n)
-
-
-# ---------------------------------------------------------------------- lower bounds
-@dataclass(frozen=True)
-class _Shapes:
-    """Convex shapes in their own frames: a capsule around each, and its support function.
-
-    A shape lies in its capsule, the points within ``r`` of the segment from ``c - u`` to
-    ``c + u``. Its support function about ``c`` in a unit direction ``v`` of its frame
-    (the largest ``v . (p - c)`` over its points ``p``) is ``sum_i half_i |v_i| + axial
-    |v_z| + radial sqrt(v_x^2 + v_y^2) + round``: a box (``half``), a cylinder
-    (``axial`` its half length, ``radial`` its radius), a capsule (``axial``,
-    ``round``), a sphere (``round``); every shape is symmetric about ``c``.
-
-    Attributes:
-        c: Centres ``(G, 3)`` [m].
-        u: Half segments ``(G, 3)`` [m] (zero: the capsule is a sphere).
-        r: Capsule radii ``(G,)`` [m].
-        s: Support parameters ``(G, 6)`` [m]: ``half`` (3), ``axial``, ``radial``,
-            ``round``.
-    """
-
-    c: np.ndarray
-    u: np.ndarray
-    r: np.ndarray
-    s: np.ndarray
-
-    @classmethod
-    def of(cls, shapes: list[Any]) -> _Shapes:
-        """The capsules and support functions of Coal shapes (:func:`_shape_bounds`)."""
-        rows = [_shape_bounds(shape) for shape in shapes]
-        c, u, r, s = (np.array([row[i] for row in rows], float) for i in range(4))
-        return cls(c.reshape(-1, 3), u.reshape(-1, 3), r, s.reshape(-1, 6))
-
-    def __getitem__(self, index: Any) -> _Shapes:
-        """The shapes at ``index``."""
-        return _Shapes(self.c[index], self.u[index], self.r[index], self.s[index])
-
-    def placed(self, R: np.ndarray, x: np.ndarray) -> _Bodies:
-        """The shapes placed by rotations ``R (..., G, 3, 3)`` and translations ``x (...,
-        G, 3)`` [m] (their frames in the frame of reference)."""
-        return _Bodies(
-            _rotate(R, self.c) + x,
-            _rotate(R, self.u),
-            np.broadcast_to(self.r, x.shape[:-1]),
-            R,
-            np.broadcast_to(self.s, (*x.shape[:-1], 6)),
-        )
-
-
-@dataclass(frozen=True)
-class _Bodies:
-    """:class:`_Shapes` placed in a frame of reference (the palm's).
-
-    Attributes:
-        c: Centres ``(..., 3)`` [m].
-        u: Half segments ``(..., 3)`` [m].
-        r: Capsule radii ``(...)`` [m].
-        R: Rotations ``(..., 3, 3)`` of the shapes' frames (columns: their axes).
-        s: Support parameters ``(..., 6)`` [m] (:class:`_Shapes`).
-    """
-
-    c: np.ndarray
-    u: np.ndarray
-    r: np.ndarray
-    R: np.ndarray
-    s: np.ndarray
-
-    def __getitem__(self, index: Any) -> _Bodies:
-        """The bodies at ``index`` of the leading axes (slices and arrays, no ellipsis)."""
-        return _Bodies(self.c[index], self.u[index], self.r[index], self.R[index], self.s[index])
-
-    def take(self, k: np.ndarray, g: np.ndarray) -> _Bodies:
-        """The bodies ``(N,)`` at samples ``k`` and columns ``g`` ``(N,)`` of bodies ``(K,
-        G)`` (``self[k, g]``, gathered faster)."""
-        i = k * self.c.shape[1] + g
-
-        def rows(a: np.ndarray) -> np.ndarray:
-            return np.take(a.reshape(-1, *a.shape[2:]), i, axis=0)
-
-        return _Bodies(rows(self.c), rows(self.u), self.r[k, g], rows(self.R), self.s[k, g])
-
-    @property
-    def rho(self) -> np.ndarray:
-        """Radii ``(...)`` [m] of the spheres about the centres around the capsules."""
-        return np.sqrt(_dot(self.u, self.u)) + self.r
-
-    def support(self, w: np.ndarray) -> np.ndarray:
-        """The support function ``(...)`` [m] about the centres in the unit directions
-        ``w`` ``(..., 3)`` (the frame of reference), broadcast."""
-        return _local_support(np.einsum("...ji,...j->...i", self.R, w), self.s)
-
-
-def _rotate(R: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``R @ v`` ``(..., G, 3)`` for rotations ``R`` ``(..., G, 3, 3)`` and vectors ``v``
-    ``(G, 3)``, column by column (faster than einsum on a broadcast operand)."""
-    return R[..., 0] * v[:, 0, None] + R[..., 1] * v[:, 1, None] + R[..., 2] * v[:, 2, None]
-
-
-def _local_support(v: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """The support function ``(...)`` [m] of bodies with support parameters ``s``
-    ``(..., 6)`` (:class:`_Shapes`) in the unit directions ``v`` ``(..., 3)`` of their
-    own frames, broadcast."""
-    ax, ay, az = np.abs(v[..., 0]), np.abs(v[..., 1]), np.abs(v[..., 2])
-    return (
-        s[..., 0] * ax
-        + s[..., 1] * ay
-        + (s[..., 2] + s[..., 3]) * az
-        + s[..., 4] * np.hypot(ax, ay)
-        + s[..., 5]
-    )
-
-
-def _shape_bounds(shape: Any) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """The capsule ``(c, u, r)`` [m] around a Coal shape and its support parameters
-    (:class:`_Shapes`), in the shape's frame.
-
-    A sphere or a capsule is its own capsule; a cylinder (axis z) gets its axis and
-    radius; a box the segment along its longest side and the half diagonal of the other
-    two. Any other shape is taken as the sphere of its local AABB.
-    """
-    import coal
-
-    zero, z = np.zeros(3), np.array([0.0, 0.0, 1.0])
-    if isinstance(shape, coal.Sphere):
-        r = float(shape.radius)
-        return zero, zero, r, np.array([0.0, 0.0, 0.0, 0.0, 0.0, r])
-    if isinstance(shape, coal.Capsule):
-        r, a = float(shape.radius), float(shape.halfLength)
-        return zero, a * z, r, np.array([0.0, 0.0, 0.0, a, 0.0, r])
-    if isinstance(shape, coal.Cylinder):
-        r, a = float(shape.radius), float(shape.halfLength)
-        return zero, a * z, r, np.array([0.0, 0.0, 0.0, a, r, 0.0])
-    if isinstance(shape, coal.Box):
-        half = np.asarray(shape.halfSide, float)
-        i = int(np.argmax(half))
-        u = np.zeros(3)
-        u[i] = half[i]
-        return zero, u, float(np.linalg.norm(np.delete(half, i))), np.append(half, [0.0] * 3)
-    shape.computeLocalAABB()
-    r = float(shape.aabb_radius)
-    return np.array(shape.aabb_center, float), zero, r, np.array([0.0, 0.0, 0.0, 0.0, 0.0, r])
-
-
-def _hull_planes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Planes around the points ``(N, 3)`` [m], in their frame: outward unit normals
-    ``(F, 3)`` and offsets ``(F,)`` [m] with ``n . p <= o`` for every point ``p`` (hence
-    for their convex hull), the normals of the hull's faces (those of the bounding box
-    when the points are flat)."""
-    from scipy.spatial import ConvexHull, QhullError
-
-    try:
-        n = np.unique(np.round(ConvexHull(points).equations[:, :3], 12), axis=0)
-    except QhullError:
-        n = np.vstack([np.eye(3), -np.eye(3)])
-    n = n / np.linalg.norm(n, axis=1, keepdims=True)
-    return n, np.max(points @ n.T, axis=0)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Dot products over the last axis (broadcast)."""
-    return np.einsum("...i,...i->...", a, b)
-
-
-def _segment_gap(c1: np.ndarray, u1: np.ndarray, c2: np.ndarray, u2: np.ndarray) -> np.ndarray:
-    """The vector ``(..., 3)`` [m] from the nearest point of the segment ``c2 -/+ u2`` to
-    that of the segment ``c1 -/+ u1`` (``(..., 3)`` [m], broadcast).
-
-    Closed form of Ericson, *Real-Time Collision Detection*, 5.1.9, vectorized
-    (segments reduced to a point included): the nearest points' parameters, clamped to
-    the segments, and the vector between those two points.
-    """
-    d1, d2, r = 2.0 * u1, 2.0 * u2, (c1 - u1) - (c2 - u2)
-    a, e, b = _dot(d1, d1), _dot(d2, d2), _dot(d1, d2)
-    c, f = _dot(d1, r), _dot(d2, r)
-    denom = a * e - b * b  # 0 for parallel segments (or a point)
-    with np.errstate(divide="ignore", invalid="ignore"):  # the branches np.where drops
-        s = np.where(denom > 0.0, np.clip((b * f - c * e) / denom, 0.0, 1.0), 0.0)
-        t = np.where(e > 0.0, (b * s + f) / e, 0.0)
-        redo = (t < 0.0) | (t > 1.0) | (e <= 0.0)  # t clamped: s again, for that t
-        t = np.clip(t, 0.0, 1.0)
-        s = np.where(redo, np.where(a > 0.0, np.clip((b * t - c) / a, 0.0, 1.0), 0.0), s)
-    return r + s[..., None] * d1 - t[..., None] * d2
-
-
-def _sphere_bound(
-    c_a: np.ndarray, rho_a: np.ndarray | float, c_b: np.ndarray, rho_b: np.ndarray | float
-) -> np.ndarray:
-    """Lower bounds ``(...)`` [m] of Coal's signed distance between bodies inside the
-    spheres ``(c_a, rho_a)`` and ``(c_b, rho_b)`` (centres ``(..., 3)``, radii ``(...)``
-    [m], broadcast): ``|c_a - c_b| - rho_a - rho_b``, less :data:`_BOUND_MARGIN_M`."""
-    d = c_a - c_b
-    return np.sqrt(_dot(d, d)) - rho_a - rho_b - _BOUND_MARGIN_M
-
-
-def _pair_bound(a: _Bodies, b: _Bodies) -> np.ndarray:
-    """Lower bounds ``(...)`` [m] of Coal's signed distance between the bodies ``a`` and
-    ``b`` (placed in one frame, broadcast), penetration included.
-
-    The larger of two: the capsules' signed distance (their segments' distance less
-    both radii: a body inside another is no farther from a third, and penetrates it no
-    deeper), exact for two spheres or capsules; and the bodies' separation along the
-    unit ``w`` joining the capsules' nearest points, ``w . (c_a - c_b) - h_a(w) -
-    h_b(w)`` with their support functions ``h`` (the gap between two slabs, one around
-    each), exact for two boxes face to face. Less :data:`_BOUND_MARGIN_M`, for Coal's
-    tolerance.
-    """
-    gap = _segment_gap(a.c, a.u, b.c, b.u)
-    dist = np.sqrt(_dot(gap, gap))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = np.where(dist[..., None] > 0.0, gap / dist[..., None], [1.0, 0.0, 0.0])
-    apart = _dot(w, a.c - b.c) - a.support(w) - b.support(w)
-    return np.maximum(dist - a.r - b.r, apart) - _BOUND_MARGIN_M
-
-
-def _object_bound(
-    bodies: _Bodies, R_obj: np.ndarray, x_obj: np.ndarray, planes: tuple[np.ndarray, np.ndarray]
-) -> np.ndarray:
-    """Lower bounds ``(N,)`` [m] of Coal's signed distance between the bodies ``(N,)`` and
-    the object at ``R_obj (N, 3, 3)``, ``x_obj (N, 3)`` (the bodies' frame of
-    reference), penetration included.
-
-    ``planes``: the object's face planes in its frame (:func:`_hull_planes`), each
-    holding the object behind it. The bound is ``n . c - o - h(n)`` with ``c`` a
-    body's centre, ``h`` its support function and ``n . x = o`` the plane its centre is
-    farthest in front of: the body lies that far in front of the plane (or at most
-    that far behind it). Less :data:`_BOUND_MARGIN_M`, for Coal's tolerance.
-    """
-    normals, offsets = planes
-    c = np.einsum("nji,nj->ni", R_obj, bodies.c - x_obj)  # (N, 3) object frame
-    ahead = c @ normals.T - offsets  # (N, F)
-    f = np.argmax(ahead, axis=1)
-    n = np.einsum("nij,nj->ni", R_obj, normals[f])  # (N, 3) palm frame
-    return ahead[np.arange(f.size), f] - bodies.support(n) - _BOUND_MARGIN_M
