@@ -30,6 +30,7 @@ import regrasp_pin.planning.transfer as transfer_module
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, UnfoldError
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.planning.regrasp import RegraspParams
+from regrasp_pin.planning.timing import minimum_jerk
 from regrasp_pin.planning.transfer import LIFT_FRACTION, Transfer, plan_transfer
 
 PARAMS = RegraspParams()
@@ -180,6 +181,42 @@ def test_where_the_even_split_is_too_fast_the_parts_are_paced_within_the_limits(
     i_p = scene.contact(case[1])
     above_p = S.points[i_p] + (f.tip_radius + PARAMS.clearance_m) * S.normals[i_p]
     assert np.linalg.norm(moved.keyframes_object[1] - above_p) <= IK_TOL_M
+
+
+def _ends_moving_joint(f, times, lift_rad: float):
+    """An even split of ``times`` whose lift moves the finger's first joint by
+    ``lift_rad`` (minimum jerk), the rest still."""
+    tau = np.linspace(0.0, 1.0, len(times))
+    lift = tau <= LIFT_FRACTION + 1e-12
+    land = tau >= 1.0 - LIFT_FRACTION - 1e-12
+    q_lift = np.zeros((int(lift.sum()), f.k))
+    q_lift[:, 0] = lift_rad * minimum_jerk(tau[lift] / LIFT_FRACTION)
+    q_app = np.repeat(q_lift[-1:], int(land.sum()), axis=0)
+    return transfer_module._Ends(lift, land, q_lift, q_app)
+
+
+def test_paced_shares_give_a_too_fast_part_the_time_its_joints_need(hand):
+    f = hand.fingers[FINGER]
+    times = np.linspace(0.0, 0.4, 41)  # 40 steps: 10 each for the lift and the approach
+    # a lift at 1.5 times the limit: it needs 1.5 x (1 + margin) of its quarter, the
+    # still parts their least; the rest of the time is shared as the split shares it
+    lift_rad = 1.5 * f.velocity_limit[0] * 0.1 / 1.875
+    ends = _ends_moving_joint(f, times, lift_rad)
+    peak = transfer_module._peak_share(f, times[ends.lift], ends.q_lift)
+    assert 1.4 < peak < 1.5  # sampled: a little under the continuous peak
+    s_lift, s_land = transfer_module._paced_shares(f, times, ends)
+    need = 0.25 * peak * (1.0 + transfer_module.PACE_MARGIN)
+    assert need <= s_lift < need + 0.25 * (1.0 - need - 0.2) + 1.0 / 40 + 1e-12
+    assert s_land >= transfer_module.MIN_SHARE
+    assert (s_lift * 40) == pytest.approx(round(s_lift * 40)) and s_lift + s_land < 1.0
+    # within the limits, or too fast for any split of the duration: None
+    assert (
+        transfer_module._paced_shares(f, times, _ends_moving_joint(f, times, 0.5 * lift_rad))
+        is None
+    )
+    assert (
+        transfer_module._paced_shares(f, times, _ends_moving_joint(f, times, 4 * lift_rad)) is None
+    )
 
 
 def test_a_transfer_within_the_limits_keeps_the_even_split(scenes):

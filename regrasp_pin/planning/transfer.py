@@ -19,10 +19,12 @@ release and a join take (:mod:`.release`, :mod:`.join`):
 3. *approach*: over the last ``LIFT_FRACTION`` the fingertip comes down onto Q the same
    way (along its normal, or tilted) and touches Q at the landing time.
 
-Where that even split would move a joint faster than its limit, the three parts are
-paced: each gets the time its fastest joint needs at its limit (a tilted back-off at a
-joint limit may need much more than a quarter of a short regrasp while the move
-between needs less), when their needs fit in the duration (:func:`_paced_shares`).
+Where that even split fails with a velocity failure, the three parts are paced and
+the vias tried again: each part gets the time its fastest joint needs at its limit (a
+tilted back-off at a joint limit may need much more than a quarter of a short regrasp
+while the move between needs less), when their needs fit in the duration
+(:func:`_paced_shares`); if the paced transfer fails too, the even split's velocity
+failure stands (a longer duration is its to ask for).
 
 The vias tried are the straight move and the midpoint of the two backed-off fingertips
 raised along the mean of the two normals by ``VIA_HEIGHTS`` times the clearance plus
@@ -46,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from ..exceptions import PlanningError
+from ..exceptions import FailureKind, PlanningError
 from ..model.clearance import FingerClearance, LinkClearance
 from ..model.hand import Finger, Hand, speed_shares
 from ..model.motion import ObjectMotion
@@ -54,7 +56,7 @@ from ..model.objects import ConvexObject
 from ..verify.finger_motion import VerificationReport
 from .lift import back_off
 from .release import verify_or_raise
-from .timing import check_joint_speed, minimum_jerk, velocity_blend
+from .timing import MJ_PEAK, check_joint_speed, minimum_jerk, velocity_blend
 
 __all__ = ["LIFT_FRACTION", "VIA_HEIGHTS", "Transfer", "plan_transfer"]
 
@@ -72,8 +74,6 @@ SAMPLED_SCREENED = 48
 SAMPLED_VERIFIED = 3
 #: What a sampled via keeps to spare, beyond the clearances, at the transfer's middle [m].
 VIA_MARGIN_M = 0.002
-#: Peak over mean speed of a minimum-jerk move [-].
-MIN_JERK_PEAK = 1.875
 #: Where the even split is too fast, what the paced parts keep to spare below the
 #: velocity limits [-] (the back-off at the paced times differs a little).
 PACE_MARGIN = 0.05
@@ -165,8 +165,65 @@ def plan_transfer(
     f = hand.finger(finger)
     n_t = max(int(np.ceil(duration_s / sample_dt_s)), 8) + 1
     times = t_start + np.linspace(0.0, duration_s, n_t)
-    T = motion.pose(times)
-    ends = _paced_ends(f, times, T, P, Q, q_start, q_land, clearance_m, ik_tol_m)
+    moving = _Moving(
+        hand,
+        obj,
+        f,
+        times,
+        motion.pose(times),
+        (np.asarray(P[0], float), np.asarray(P[1], float)),
+        (np.asarray(Q[0], float), np.asarray(Q[1], float)),
+        np.array(q_hand(times), dtype=float),  # the same for every via
+        clearance_m,
+        link_clearance_m,
+        finger_clearance_m,
+    )
+    tau = np.linspace(0.0, 1.0, n_t)
+    even = (LIFT_FRACTION, LIFT_FRACTION)
+    ends = _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, even)
+    try:
+        return _through_vias(moving, ends)
+    except PlanningError as exc:
+        paced = _paced_shares(f, times, ends) if exc.kind == FailureKind.VELOCITY else None
+        if paced is None:
+            raise
+        failure = exc
+    # too fast with the even split: the parts paced by their joints' needs, the even
+    # split's failure standing if that fails too (a longer duration is its to ask for)
+    try:
+        return _through_vias(
+            moving, _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, paced)
+        )
+    except PlanningError:
+        raise failure from None
+
+
+@dataclass(frozen=True)
+class _Moving:
+    """What a transfer's trajectories are judged by: the finger, its sample times
+    ``(S,)`` [s], the object's poses ``(S, 4, 4)``, the contacts P and Q (object frame
+    [m]), the hand ``(S, nq)`` [rad] with the other fingers holding, and the
+    clearances [m]."""
+
+    hand: Hand
+    obj: ConvexObject
+    f: Finger
+    times: np.ndarray
+    T: np.ndarray
+    P: tuple[np.ndarray, np.ndarray]
+    Q: tuple[np.ndarray, np.ndarray]
+    q_others: np.ndarray
+    clearance_m: float
+    link_clearance_m: float
+    finger_clearance_m: float
+
+
+def _through_vias(m: _Moving, ends: _Ends) -> Transfer:
+    """The first trajectory through a via, between the lift and the approach ``ends``,
+    that is within the velocity limits and passes its Coal check (module docstring);
+    else the failure :func:`plan_transfer` raises."""
+    hand, obj, f, times, T, P, Q = m.hand, m.obj, m.f, m.times, m.T, m.P, m.Q
+    finger, clearance_m, finger_clearance_m = f.name, m.clearance_m, m.finger_clearance_m
     lift, land, q_lift, q_app = ends.lift, ends.land, ends.q_lift, ends.q_app
     i_a, i_b = int(np.flatnonzero(lift)[-1]), int(np.flatnonzero(land)[0])
     i_m = (i_a + i_b) // 2  # the via's sample
@@ -177,7 +234,7 @@ def plan_transfer(
     v_approach = (q_app[1] - q_app[0]) / (times[i_b + 1] - times[i_b])
     drift = velocity_blend(mid, v_lift, v_approach)
     required = np.where(lift | land, 0.0, clearance_m)
-    required[[i_a, i_b]] = 0.0  # the backed-off tip sits exactly at clearance_m
+    required[[i_a, i_b]] = 0.0  # the backed-off tip sits at clearance_m
 
     def through(via: np.ndarray | None) -> np.ndarray:
         """The finger's trajectory ``(S, k)`` through ``via`` (None: straight)."""
@@ -189,7 +246,7 @@ def plan_transfer(
         (h, through(_via(f, T[i_m], P, Q, q_a, q_b, h * (clearance_m + f.tip_radius))))
         for h in VIA_HEIGHTS
     ]
-    q_others = np.array(q_hand(times), dtype=float)  # the same for every via
+    q_others = m.q_others
 
     def coal_failure(
         q: np.ndarray,
@@ -206,7 +263,7 @@ def plan_transfer(
                 q_full,
                 T,
                 tip_clearance_m=required,
-                link_clearance_m=np.maximum(required, link_clearance_m),
+                link_clearance_m=np.maximum(required, m.link_clearance_m),
                 finger_clearance_m=finger_clearance_m,
             )
         except PlanningError as exc:
@@ -254,89 +311,59 @@ class _Ends:
     q_app: np.ndarray
 
 
-def _paced_ends(
-    f: Finger,
-    times: np.ndarray,
-    T: np.ndarray,
-    P: tuple[np.ndarray, np.ndarray],
-    Q: tuple[np.ndarray, np.ndarray],
-    q_start: np.ndarray,
-    q_land: np.ndarray,
-    clearance_m: float,
-    ik_tol_m: float,
-) -> _Ends:
-    """The lift and the approach over ``LIFT_FRACTION`` of the samples ``times`` each,
-    or paced (:func:`_paced_shares`) where that is too fast and a paced split is not."""
-    tau = np.linspace(0.0, 1.0, len(times))
-    even = (LIFT_FRACTION, LIFT_FRACTION)
-    ends = _lift_and_approach(f, tau, T, P, Q, q_start, q_land, clearance_m, ik_tol_m, even)
-    paced = _paced_shares(f, times, ends, even)
-    if paced is None:
-        return ends
-    try:
-        return _lift_and_approach(f, tau, T, P, Q, q_start, q_land, clearance_m, ik_tol_m, paced)
-    except PlanningError:
-        return ends  # the back-off at the paced times is out of reach
-
-
 def _lift_and_approach(
-    f: Finger,
+    m: _Moving,
     tau: np.ndarray,
-    T: np.ndarray,
-    P: tuple[np.ndarray, np.ndarray],
-    Q: tuple[np.ndarray, np.ndarray],
     q_start: np.ndarray,
     q_land: np.ndarray,
-    clearance_m: float,
     ik_tol_m: float,
     shares: tuple[float, float],
 ) -> _Ends:
     """The lift over the first ``shares[0]`` of the normalized time ``tau`` ``(S,)`` and
-    the approach over the last ``shares[1]`` (object poses ``T`` ``(S, 4, 4)``): the
-    fingertip backs off ``clearance_m`` from P, and comes down onto Q, minimum jerk
-    (:func:`~.lift.back_off`); ``ik-unreachable`` if either is out of reach."""
+    the approach over the last ``shares[1]``: the fingertip backs off ``clearance_m``
+    from P, and comes down onto Q, minimum jerk, with the object moving
+    (:func:`~.lift.back_off`, from ``q_start`` and towards ``q_land`` ``(k,)`` [rad]);
+    ``ik-unreachable`` if either is out of reach."""
+    f, T, P, Q = m.f, m.T, m.P, m.Q
     s_lift, s_land = shares
     lift = tau <= s_lift + 1e-12
     land = tau >= 1.0 - s_land - 1e-12
-    off_lift = clearance_m * minimum_jerk(tau[lift] / s_lift)
-    off_land = clearance_m * minimum_jerk((1.0 - tau[land]) / s_land)
+    off_lift = m.clearance_m * minimum_jerk(tau[lift] / s_lift)
+    off_land = m.clearance_m * minimum_jerk((1.0 - tau[land]) / s_land)
     q_lift = back_off(f, T[lift], P, off_lift, np.asarray(q_start, float), ik_tol_m, Q[0])
     q_app = back_off(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m, P[0])
     return _Ends(lift, land, q_lift, q_app[::-1])
 
 
-def _paced_shares(
-    f: Finger, times: np.ndarray, ends: _Ends, shares: tuple[float, float]
-) -> tuple[float, float] | None:
+def _paced_shares(f: Finger, times: np.ndarray, ends: _Ends) -> tuple[float, float] | None:
     """Shares of the duration for the lift and the approach that keep the joints within
-    their velocity limits where the even split ``shares`` does not, or None (the split
-    is within the limits, or no split is).
+    their velocity limits, after the split of ``ends`` (sampled at ``times`` ``(S,)``
+    [s]) was too fast; None where no split is (or this one is not).
 
     Each part needs the time its fastest joint takes at its limit: its share times its
-    peak speed share (the lift and the approach as :func:`_lift_and_approach` gave them,
-    the move between as a straight minimum-jerk move, whose peak speed is
-    ``MIN_JERK_PEAK`` times its mean). When the parts' needs, with
-    ``PACE_MARGIN`` to spare, add up to at most the whole duration, each part gets its
-    need (at least ``MIN_SHARE`` and two samples) and the time left is shared as the
-    even split shares it, rounded up to whole samples for the lift and the approach;
-    a back-off that only a joint jump could follow stays too fast, and the velocity
-    failure asks for a longer duration."""
+    peak speed share (the lift and the approach as backed off, the move between as a
+    straight minimum-jerk move, whose peak speed is ``MJ_PEAK`` times its mean). When
+    the parts' needs, with ``PACE_MARGIN`` to spare, add up to at most the whole
+    duration, each part gets its need (at least ``MIN_SHARE`` and two steps) and the
+    time left is shared as the split shares it, rounded up to whole steps for the lift
+    and the approach; a back-off that only a joint jump could follow stays too fast."""
     lift, land = ends.lift, ends.land
+    steps = len(times) - 1
+    i_a, i_b = int(np.flatnonzero(lift)[-1]), int(np.flatnonzero(land)[0])
+    split = np.diff([0, i_a, i_b, steps]) / steps  # the shares the parts have
     peak_lift = _peak_share(f, times[lift], ends.q_lift)
     peak_land = _peak_share(f, times[land], ends.q_app)
-    t_mid = float(times[np.flatnonzero(land)[0]] - times[np.flatnonzero(lift)[-1]])
     step = np.abs(ends.q_app[0] - ends.q_lift[-1])
     limit = np.where(f.velocity_limit > 0.0, f.velocity_limit, np.inf)
-    peak_mid = MIN_JERK_PEAK * float(np.max(step / limit)) / max(t_mid, 1e-12)
+    t_mid = float(times[i_b] - times[i_a])
+    peak_mid = MJ_PEAK * float(np.max(step / limit)) / max(t_mid, 1e-12)
     if max(peak_lift, peak_land, peak_mid) <= 1.0:
-        return None
-    even = np.array([shares[0], 1.0 - shares[0] - shares[1], shares[1]])
-    steps = len(times) - 1
-    need = even * np.array([peak_lift, peak_mid, peak_land]) * (1.0 + PACE_MARGIN)
+        return None  # within the limits as far as this tells: not the split's fault
+    need = split * np.array([peak_lift, peak_mid, peak_land]) * (1.0 + PACE_MARGIN)
     need = np.maximum(need, max(MIN_SHARE, 2.0 / steps))  # two steps at least
     if need.sum() > 1.0:
         return None
-    share = need + (1.0 - need.sum()) * even
+    share = need + (1.0 - need.sum()) * split
     # whole steps: the lift ends, and the approach begins, on a sample
     k_lift, k_land = (int(np.ceil(share[i] * steps - 1e-9)) for i in (0, 2))
     if (steps - k_lift - k_land) < need[1] * steps:
