@@ -387,6 +387,39 @@ def test_a_plan_too_fast_between_its_samples_is_never_returned(monkeypatch):
     assert exc.partial is not None and exc.partial.t[-1] <= jumped["t"] + 1e-9
 
 
+def test_a_plan_whose_finger_enters_the_object_is_never_returned(monkeypatch):
+    """Every move is verified and every hold tracked, but the assembled plan is
+    measured against the object once more before it is returned: the object moved 10 mm
+    towards the index's fingertip at one sample of the assembled plan is an
+    object-clearance failure of the index, there, with the plan before it."""
+    from regrasp_pin.planning import planner
+
+    assemble = planner.plan_until
+    moved = {}
+
+    def shift(ctx, state, until, *, final=False):
+        plan = assemble(ctx, state, until, final=final)
+        if not final:
+            return plan
+        f = ctx.scene.hand.fingers["index"]
+        k = plan.t.size // 2
+        x = plan.T_palm_object.copy()
+        towards = f.fk(plan.q[k, f.q_indices]) - x[k, :3]
+        x[k, :3] += 0.010 * towards / np.linalg.norm(towards)
+        moved.update(t=float(plan.t[k]))
+        return replace(plan, T_palm_object=x)
+
+    monkeypatch.setattr(planner, "plan_until", shift)
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    exc = err.value
+    assert exc.kind == FailureKind.OBJECT_CLEARANCE and exc.finger == "index"
+    assert exc.time_s == moved["t"]
+    assert exc.measured < -0.004 and exc.required < 0.0  # millimetres in; microns allowed
+    assert exc.partial is not None and exc.partial.t[-1] <= moved["t"] + 1e-9
+
+
 def test_holds_that_end_together_are_regrasped_in_turn(tmp_path):
     """100 deg at 40 deg/s: the holds of the three regrasping fingers end within about
     one second of each other, again and again, so waiting for each finger's own trigger

@@ -143,10 +143,11 @@ def object_penetration_failure(
     (that finger's deepest sample); None if none does.
 
     Every move was verified on its own samples and every hold tracked on the time
-    grid, where a hold counts as lasting to the end of the motion when it is lost only
-    at the grid's last time; the holds are placed by IK at the plan's samples. So the
-    whole plan is measured once more here, as the re-check of its file will measure
-    it (:func:`~regrasp_pin.verify.plan_check.recheck_plan`)."""
+    grid, but the holds are placed by IK at the plan's samples, and a rule of the
+    search that let a hold's loss through (one lost at the motion's last sample used
+    to count as held to the end) would show only in the plan. So the whole plan is
+    measured once more here, as the re-check of its file will measure it
+    (:func:`~regrasp_pin.verify.plan_check.recheck_plan`): a safety net."""
     for name in hand.finger_names:
         d = LinkClearance(hand, name, obj, include_tip=True)(q, T_palm_object)
         i = int(np.argmin(d))

@@ -55,6 +55,7 @@ from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from ..model.scene import Scene
 from ..plan import Plan
+from ..verify.finger_motion import PENETRATION_TOL_M
 from ..verify.plan_check import phase_gaps
 from .advance import Step, advance, contenders
 from .assembly import joint_speed_failure, object_penetration_failure, plan_until
@@ -270,9 +271,13 @@ def plan_manipulation(
 
 def _final_plan(ctx: PlanContext, state: PlanState) -> Plan:
     """The whole plan of ``state``, checked where only the assembled plan can be: its
-    phases and samples span the motion (else a bug: AssertionError), and the holds,
-    placed by IK at every sample, keep the joints within their velocity limits (else a
-    ``velocity`` PlanningError with the plan before it)."""
+    phases and samples span the motion (else a bug: AssertionError), the holds, placed
+    by IK at every sample, keep the joints within their velocity limits (else a
+    ``velocity`` PlanningError with the plan before it), and no finger enters the
+    object at any sample by more than the holds and the moves allow (the larger of
+    ``ContactModel.tip_penetration_m`` and the verification's tolerance, plus the
+    holds' IK tolerance; else an ``object-clearance`` PlanningError with the plan
+    before it: :func:`~.assembly.object_penetration_failure`)."""
     motion = ctx.scene.motion
     plan = plan_until(ctx, state, motion.t_end, final=True)
     uncovered = phase_gaps(plan)
@@ -297,13 +302,16 @@ def _final_plan(ctx: PlanContext, state: PlanState) -> Plan:
             measured=too_fast.measured,
             required=too_fast.required,
         )
+    contact = ctx.params.contact
     sinks = object_penetration_failure(
         ctx.scene.hand,
         ctx.scene.obj,
         plan.t,
         plan.q,
         plan.poses(),
-        ctx.params.contact.tip_penetration_m,
+        # what the holds (fingertip) and the moves (verification) allow, and the holds'
+        # IK tolerance at the plan's samples
+        max(contact.tip_penetration_m, PENETRATION_TOL_M) + contact.ik_tol_m,
     )
     if sinks is not None:
         raise PlanningError(

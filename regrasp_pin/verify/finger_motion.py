@@ -71,6 +71,7 @@ from ..model.objects import ConvexObject
 __all__ = [
     "BROAD_PHASE_MARGIN_M",
     "MAX_MINIMUM_QUERIES",
+    "PENETRATION_TOL_M",
     "Failure",
     "VerificationReport",
     "densify",
@@ -79,6 +80,9 @@ __all__ = [
 
 #: Tolerance on the joint limits [rad].
 JOINT_LIMIT_TOL_RAD = 1e-9
+#: How far a geometry may enter the object where it is required to touch it (0
+#: clearance) before the check fails, by default [m].
+PENETRATION_TOL_M = 5e-5
 #: At most this many failures are kept in a report (all are counted).
 MAX_REPORTED_FAILURES = 20
 #: Densification bounds the object's translation per step by max_joint_step_rad x this [m].
@@ -328,7 +332,7 @@ def verify_finger_motion(
     tip_clearance_m: float | np.ndarray,
     link_clearance_m: float | np.ndarray = 0.0,
     finger_clearance_m: float = 0.0005,
-    penetration_tol_m: float = 5e-5,
+    penetration_tol_m: float = PENETRATION_TOL_M,
     max_joint_step_rad: float = 1e-3,
     max_tip_step_m: float | None = None,
     exact_minima: bool = True,
