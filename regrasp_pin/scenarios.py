@@ -450,10 +450,8 @@ def grasp_for_motion(
     runs: list[MustHold] = []
     if must_hold_check:  # on the unrestricted manifolds: what every finger could use
         every = with_idle_fingers(hand, manifolds, sample, motion, contact)
-        # the last step of the motion claims nothing (the planner counts a hold lost
-        # there as held to the end)
-        until = motion.t_end - step if t_last >= motion.t_end - 1e-9 else None
-        runs = must_hold(every, sample, obj, mu, list(fingers), until_s=until)
+        # up to the motion's end, its last sample included, as the planner's proof
+        runs = must_hold(every, sample, obj, mu, list(fingers))
     for name, index in (keep or {}).items():
         if name not in manifolds:
             raise UnknownNameError("keep", name, list(manifolds))

@@ -330,7 +330,7 @@ def _check_landing(
     losses = {
         e.finger: e.lost_s
         for e in triggers
-        if e.finger != name and e.lost_near != name and e.lost_s < end
+        if e.finger != name and e.lost_near != name and e.lost_s < end - TIME_TOL_S
     }
     if lost < end - TIME_TOL_S:
         losses[name] = lost

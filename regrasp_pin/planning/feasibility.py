@@ -50,7 +50,7 @@ def must_hold_runs(
         else dict(manifolds)
     )
     # a plan holds to the motion's end, its last sample included (planning.state)
-    return every, must_hold(every, sample, obj, params.mu, list(manifolds), until_s=motion.t_end)
+    return every, must_hold(every, sample, obj, params.mu, list(manifolds))
 
 
 def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
