@@ -293,15 +293,8 @@ def _final_plan(ctx: PlanContext, state: PlanState) -> Plan:
     too_fast = joint_speed_failure(ctx.scene.hand, plan.t, plan.q)
     if too_fast is not None:
         # the holds are placed by IK at the plan's samples: checked where they are known
-        raise PlanningError(
-            f"the assembled plan is too fast where the fingers hold: {too_fast.reason}",
-            finger=too_fast.finger,
-            time_s=too_fast.time_s,
-            partial=plan_until(ctx, state, too_fast.time_s or motion.t_start),
-            kind=FailureKind.VELOCITY,
-            measured=too_fast.measured,
-            required=too_fast.required,
-        )
+        reason = f"the assembled plan is too fast where the fingers hold: {too_fast.reason}"
+        raise _with_partial(ctx, state, too_fast, reason)
     contact = ctx.params.contact
     sinks = object_penetration_failure(
         ctx.scene.hand,
@@ -314,16 +307,24 @@ def _final_plan(ctx: PlanContext, state: PlanState) -> Plan:
         max(contact.tip_penetration_m, PENETRATION_TOL_M) + contact.ik_tol_m,
     )
     if sinks is not None:
-        raise PlanningError(
-            sinks.reason,
-            finger=sinks.finger,
-            time_s=sinks.time_s,
-            partial=plan_until(ctx, state, sinks.time_s or motion.t_start),
-            kind=FailureKind.OBJECT_CLEARANCE,
-            measured=sinks.measured,
-            required=sinks.required,
-        )
+        raise _with_partial(ctx, state, sinks, sinks.reason)
     return plan
+
+
+def _with_partial(
+    ctx: PlanContext, state: PlanState, failure: PlanningError, reason: str
+) -> PlanningError:
+    """``failure`` of the assembled plan (its finger, time, kind and numbers) told as
+    ``reason``, with the plan of ``state`` up to its time."""
+    return PlanningError(
+        reason,
+        finger=failure.finger,
+        time_s=failure.time_s,
+        partial=plan_until(ctx, state, failure.time_s or ctx.scene.motion.t_start),
+        kind=failure.kind,
+        measured=failure.measured,
+        required=failure.required,
+    )
 
 
 def _time_grid(motion: ObjectMotion, dt_s: float) -> np.ndarray:
