@@ -780,6 +780,41 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     assert (free.index, free.rank, free.epsilon) == (alone.index, alone.rank, alone.epsilon)
 
 
+def test_candidates_too_near_another_finger_do_not_use_up_the_checks(five, monkeypatch):
+    """A candidate refused for its finger clearance (one Coal pass) does not count
+    against ``max_checks``: with one check allowed and the first candidate too near
+    another finger, the choice goes on to a candidate that clears the fingers."""
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]
+    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in grasp.points_object}
+    del others["middle"]
+    q_hand = np.zeros(hand.model.nq)
+    for n, q in grasp.q.items():
+        q_hand[hand.finger(n).q_indices] = q
+    kw = dict(
+        P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False,
+        q_hand_arrive=q_hand,
+    )  # fmt: skip
+    seen = []
+    real_gap = FingerClearance.__call__
+    monkeypatch.setattr(
+        FingerClearance, "__call__", lambda self, q: seen.append(real_gap(self, q)) or seen[-1]
+    )
+    first = choose_new_contact(hand, box, manifolds["middle"], sample, 1.5, max_checks=1,
+                               finger_clearance_m=-1.0, **kw)  # fmt: skip
+    # ask a little more than the first candidate in the ranking keeps
+    need = seen[0] + 1e-6
+    seen.clear()
+    q = choose_new_contact(
+        hand, box, manifolds["middle"], sample, 1.5, max_checks=1, finger_clearance_m=need, **kw
+    )
+    assert seen[0] < need and len(seen) > 1
+    assert q.rank > first.rank
+    q_all = q_hand.copy()
+    q_all[hand.finger("middle").q_indices] = q.q_arrive
+    assert real_gap(FingerClearance(hand, "middle"), q_all) >= need
+
+
 def test_an_object_clearance_failure_gives_the_nearest_candidate_in_metres(five, monkeypatch):
     """Every candidate refused for its links (1 m asked of them): the error's numbers
     are the largest links' distance measured (Coal) and the 1 m asked, not a count."""

@@ -176,9 +176,10 @@ def choose_new_contact(
             points on one face).
         link_check: Check with Coal that no other link of the finger touches the
             object at arrival.
-        max_checks: Most candidates given the (slower) quality and finger-clearance
-            tests, among those whose links clear the object at arrival (tested in
-            batches, in the order of the ranking, until enough pass).
+        max_checks: Most candidates given the (slower) quality test, among those
+            whose links clear the object at arrival (tested in batches, in the order
+            of the ranking, until enough pass) and the other fingers (one Coal pass
+            each; a candidate refused there does not count).
         exclude_radius_m: Candidates closer than this to P (and to each of
             ``exclude_points_object``) are ignored [m].
         exclude_points_object: ``(E, 3)`` points to stay away from (e.g. contacts
@@ -555,17 +556,18 @@ class _Screen:
         passes.
 
         The link clearance is tested first, in batches of ``_LINK_BATCH`` candidates in
-        order (Coal); at most ``max_checks`` candidates whose links clear the object get
-        the slower tests."""
+        order (Coal); at most ``max_checks`` candidates whose links clear the object and
+        the other fingers get the slower quality test (a finger-clearance refusal costs
+        one Coal pass and does not count)."""
         pts, normals, idx = self.sample.points, self.sample.normals, ranked.idx
         eps_P = self.eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
         passing: list[tuple[int, bool, int, NewContact]] = []
         best_removable = self.other_p.shape[0] if self.other_p.shape[0] >= 3 else 0
         clear = np.zeros(order.size, bool)
         links, tip = np.zeros(order.size), np.zeros(order.size)  # [m]
-        screened = 0
+        screened = tested = 0
         for position, j in enumerate(order):
-            if screened >= max_checks:
+            if tested >= max_checks:
                 break
             if position % _LINK_BATCH == 0:
                 batch = slice(position, position + _LINK_BATCH)
@@ -577,6 +579,8 @@ class _Screen:
             screened += 1
             i = int(idx[j])
             why, e = self.rejection(i, pts[i], normals[i])
+            if why != "finger clearance":
+                tested += 1
             if why is not None:
                 continue
             result = NewContact(
