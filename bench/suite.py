@@ -25,7 +25,7 @@ one worker, the speed-up over one worker is first measured on the first ``--spee
 scenarios (both runs in this run, one after the other) and printed.
 
 Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
-[--out out/suite] [--jobs 1] [--speedup K] [--max-steps 400] [--budget S]
+[--out out/suite] [--jobs 1] [--speedup K] [--max-steps 800] [--budget S]
 [--baseline old/results.jsonl]``.
 """
 

@@ -176,10 +176,10 @@ def choose_new_contact(
             points on one face).
         link_check: Check with Coal that no other link of the finger touches the
             object at arrival.
-        max_checks: Most candidates given the (slower) quality test, among those
-            whose links clear the object at arrival (tested in batches, in the order
-            of the ranking, until enough pass) and the other fingers (one Coal pass
-            each; a candidate refused there does not count).
+        max_checks: Most candidates given the (slower) force-closure test, in the
+            order of the ranking. Candidates refused before it, for their links
+            (Coal, in batches) or for their finger clearance (one Coal pass each,
+            about 70 us), do not count: the choice may read every candidate.
         exclude_radius_m: Candidates closer than this to P (and to each of
             ``exclude_points_object``) are ignored [m].
         exclude_points_object: ``(E, 3)`` points to stay away from (e.g. contacts

@@ -35,8 +35,8 @@ class PlannerParams:
             :class:`~.search.SearchBudget`): once spent, no new attempt starts and the
             planner stops with a ``budget`` failure and the partial plan. Counted, not
             timed, so that a plan is the same on every machine; on a 2-core machine a
-            step takes 20-45 ms on average, so 800 steps take at most about 35 s (the
-            plans of the bundled suites that spent 400 took 8-17 s).
+            step took 20-45 ms on average as measured (the suites' plans that spent 400
+            steps took 8-17 s), so 800 steps take about 35 s at most.
         budget_s: An optional wall-clock limit of the whole call [s] (manifolds and
             tracking included) on top of ``max_steps``, with the same effect; None (the
             default): none, so that the outcome never depends on the machine's speed.
