@@ -740,17 +740,30 @@ def test_no_feasible_q_names_the_finger_and_time(five):
     assert e.value.kind == FailureKind.FORCE_CLOSURE
 
 
+def _regrasp_of(grasp, finger):
+    """``(P, n_P, others)`` of ``finger`` regrasping from ``grasp``: its contact, and
+    the other fingers' contacts (point, normal), object frame."""
+    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in grasp.points_object}
+    P, n_P = others.pop(finger)
+    return P, n_P, others
+
+
+def _grasp_configuration(hand, grasp):
+    """The whole hand's configuration ``(nq,)`` with every finger of ``grasp`` at its
+    grasp (the others at zero)."""
+    q_hand = np.zeros(hand.model.nq)
+    for n, q in grasp.q.items():
+        q_hand[hand.finger(n).q_indices] = q
+    return q_hand
+
+
 def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     """A candidate too close to another finger is refused without its 6-D hull, and
     counts as a finger-clearance rejection; with the clearance met, the same Q as
     without the test."""
     hand, box, _, sample, manifolds, grasp = five
-    P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]
-    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in grasp.points_object}
-    del others["middle"]
-    q_hand = np.zeros(hand.model.nq)
-    for n, q in grasp.q.items():
-        q_hand[hand.finger(n).q_indices] = q
+    P, n_P, others = _regrasp_of(grasp, "middle")
+    q_hand = _grasp_configuration(hand, grasp)
     kw = dict(P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False)
     calls = []
     real = screening_module.ferrari_canny_epsilon
@@ -785,12 +798,8 @@ def test_candidates_too_near_another_finger_do_not_use_up_the_checks(five, monke
     against ``max_checks``: with one check allowed and the first candidate too near
     another finger, the choice goes on to a candidate that clears the fingers."""
     hand, box, _, sample, manifolds, grasp = five
-    P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]
-    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in grasp.points_object}
-    del others["middle"]
-    q_hand = np.zeros(hand.model.nq)
-    for n, q in grasp.q.items():
-        q_hand[hand.finger(n).q_indices] = q
+    P, n_P, others = _regrasp_of(grasp, "middle")
+    q_hand = _grasp_configuration(hand, grasp)
     kw = dict(
         P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False,
         q_hand_arrive=q_hand,
@@ -1396,9 +1405,7 @@ def test_a_failure_names_what_refused_the_candidates_that_cleared_the_object(fiv
         choose_new_contact(hand, box, manifolds["index"], sample, 0.5, contact=everything, **kw)
     links = np.concatenate([d for d, _ in seen])
     some = dataclasses.replace(CONTACT, choice_link_clearance_m=float(np.quantile(links, 0.8)))
-    q_hand = np.zeros(hand.model.nq)
-    for n, q in grasp.q.items():
-        q_hand[hand.finger(n).q_indices] = q
+    q_hand = _grasp_configuration(hand, grasp)
     with pytest.raises(ContactError) as e:
         choose_new_contact(
             hand, box, manifolds["index"], sample, 0.5, contact=some, q_hand_arrive=q_hand,

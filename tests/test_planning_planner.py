@@ -347,20 +347,33 @@ def test_a_plan_whose_samples_stop_short_of_the_end_is_never_returned(monkeypatc
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
 
 
+def _failure_of_final_plan(monkeypatch, alter):
+    """The PlanningError of the five-finger hexagon turned 60 deg at 40 deg/s when its
+    assembled whole plan is replaced by ``alter(ctx, plan)`` (the partial plans are
+    left as they are)."""
+    from regrasp_pin.planning import planner
+
+    assemble = planner.plan_until
+
+    def altered(ctx, state, until, *, final=False):
+        plan = assemble(ctx, state, until, final=final)
+        return alter(ctx, plan) if final else plan
+
+    monkeypatch.setattr(planner, "plan_until", altered)
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
+    with pytest.raises(PlanningError) as err:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    return err.value
+
+
 def test_a_plan_too_fast_between_its_samples_is_never_returned(monkeypatch):
     """The holds are placed by IK at every sample of the assembled plan, so the planner
     checks the assembled plan's joint speeds: a held finger's joint made to jump (2x its
     velocity limit) between two samples is a velocity failure of that finger, there,
     with the plan before it."""
-    from regrasp_pin.planning import planner
-
-    assemble = planner.plan_until
     jumped = {}
 
-    def jump(ctx, state, until, *, final=False):
-        plan = assemble(ctx, state, until, final=final)
-        if not final:
-            return plan
+    def jump(ctx, plan):
         f = ctx.scene.hand.fingers["middle"]
         k = plan.t.size // 2
         q = plan.q.copy()
@@ -374,11 +387,7 @@ def test_a_plan_too_fast_between_its_samples_is_never_returned(monkeypatch):
         )
         return replace(plan, q=q)
 
-    monkeypatch.setattr(planner, "plan_until", jump)
-    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
-    with pytest.raises(PlanningError) as err:
-        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
-    exc = err.value
+    exc = _failure_of_final_plan(monkeypatch, jump)
     assert exc.kind == FailureKind.VELOCITY and exc.finger == "middle"
     assert exc.time_s == jumped["t"]
     assert exc.measured == pytest.approx(jumped["speed"], rel=1e-9)
@@ -392,15 +401,9 @@ def test_a_plan_whose_finger_enters_the_object_is_never_returned(monkeypatch):
     measured against the object once more before it is returned: the object moved 10 mm
     towards the index's fingertip at one sample of the assembled plan is an
     object-clearance failure of the index, there, with the plan before it."""
-    from regrasp_pin.planning import planner
-
-    assemble = planner.plan_until
     moved = {}
 
-    def shift(ctx, state, until, *, final=False):
-        plan = assemble(ctx, state, until, final=final)
-        if not final:
-            return plan
+    def shift(ctx, plan):
         f = ctx.scene.hand.fingers["index"]
         k = plan.t.size // 2
         x = plan.T_palm_object.copy()
@@ -409,11 +412,7 @@ def test_a_plan_whose_finger_enters_the_object_is_never_returned(monkeypatch):
         moved.update(t=float(plan.t[k]))
         return replace(plan, T_palm_object=x)
 
-    monkeypatch.setattr(planner, "plan_until", shift)
-    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
-    with pytest.raises(PlanningError) as err:
-        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
-    exc = err.value
+    exc = _failure_of_final_plan(monkeypatch, shift)
     assert exc.kind == FailureKind.OBJECT_CLEARANCE and exc.finger == "index"
     assert exc.time_s == moved["t"]
     assert exc.measured < -0.004 and exc.required < 0.0  # millimetres in; microns allowed
