@@ -45,6 +45,7 @@ from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.initial import (
     _CombinationSearch,
     _grasp_score,
+    _PairGaps,
     _spread_out,
     _start_candidates,
     initial_grasp,
@@ -1129,6 +1130,10 @@ class _TableGaps:
         self.calls = getattr(self, "calls", 0) + 1
         return min((self.table[finger, i, o, j] for o, j in picked.items()), default=np.inf)
 
+    def smallest_of(self, finger, positions, picked, at_least_m):
+        values = np.array([self.smallest(finger, self.ids[finger][r], picked) for r in positions])
+        return None if (values >= at_least_m).any() else values
+
     def clear_of(self, finger, picked):
         return np.array(
             [
@@ -1179,6 +1184,44 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
         assert admissible([int(ids[f][found[f]]) for f in names])
     else:
         assert search.refused > 0 and search.closest < gap_m
+
+
+def test_finger_gaps_of_many_candidates_are_those_of_each(five):
+    """_PairGaps.smallest_of, which measures only what it needs in one batch, against
+    smallest, candidate by candidate (Coal below the threshold, capsule bounds above
+    it): the same distances, bit for bit, or None exactly when one reaches the
+    threshold; with nothing measured before and with every distance measured."""
+    hand, box, _, sample, manifolds, _ = five
+    names = ["thumb", "index", "middle", "ring"]
+    cands = {
+        n: _start_candidates(hand, box, manifolds[n], sample.points, 0, CONTACT, 12)[0]
+        for n in names
+    }
+    q = {n: manifolds[n].q[:3] for n in names}
+    rng = np.random.default_rng(7)
+    seen = {True: 0, False: 0}
+    for trial in range(12):
+        finger, *others = rng.permutation(names)
+        picked = {str(o): int(rng.choice(cands[o])) for o in others[: 1 + trial % 3]}
+        positions = rng.permutation(cands[finger].size)[: 4 + trial % 5]
+        reference = _PairGaps(hand, q, cands, 0.002)
+        each = np.array(
+            [reference.smallest(finger, int(cands[finger][r]), picked) for r in positions]
+        )
+        # thresholds below, among and above the distances
+        for at_least in (np.min(each) - 1e-4, np.median(each), np.max(each) + 1e-4):
+            for warm in (False, True):
+                gaps = _PairGaps(hand, q, cands, 0.002)
+                if warm:
+                    for r in positions:
+                        gaps.smallest(finger, int(cands[finger][r]), picked)
+                out = gaps.smallest_of(finger, positions, picked, at_least)
+                if (each >= at_least).any():
+                    assert out is None
+                else:
+                    np.testing.assert_array_equal(out, each)
+                seen[out is None] += 1
+    assert seen[True] and seen[False]
 
 
 class _Forgetful(dict):
