@@ -1187,10 +1187,11 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
 
 
 def test_finger_gaps_of_many_candidates_are_those_of_each(five):
-    """_PairGaps.smallest_of, which measures only what it needs in one batch, against
-    smallest, candidate by candidate (Coal below the threshold, capsule bounds above
-    it): the same distances, bit for bit, or None exactly when one reaches the
-    threshold; with nothing measured before and with every distance measured."""
+    """_PairGaps.smallest_of, which reads many candidates at once from the capsule
+    bounds and a table of the Coal distances measured so far, against smallest,
+    candidate by candidate (Coal below the threshold, capsule bounds above it): the
+    same distances, bit for bit, or None exactly when one reaches the threshold; with
+    nothing measured before, and with every distance of the pairs measured."""
     hand, box, _, sample, manifolds, _ = five
     names = ["thumb", "index", "middle", "ring"]
     cands = {
@@ -1199,7 +1200,8 @@ def test_finger_gaps_of_many_candidates_are_those_of_each(five):
     }
     q = {n: manifolds[n].q[:3] for n in names}
     rng = np.random.default_rng(7)
-    seen = {True: 0, False: 0}
+    outcomes = {True: 0, False: 0}
+    exact = 0  # candidates whose distance is Coal's (below the threshold)
     for trial in range(12):
         finger, *others = rng.permutation(names)
         picked = {str(o): int(rng.choice(cands[o])) for o in others[: 1 + trial % 3]}
@@ -1208,20 +1210,24 @@ def test_finger_gaps_of_many_candidates_are_those_of_each(five):
         each = np.array(
             [reference.smallest(finger, int(cands[finger][r]), picked) for r in positions]
         )
-        # thresholds below, among and above the distances
-        for at_least in (np.min(each) - 1e-4, np.median(each), np.max(each) + 1e-4):
+        exact += int((each < 0.002).sum())
+        # below every distance, at the largest only, above every one
+        for at_least in (np.min(each) - 1e-4, np.max(each), np.max(each) + 1e-4):
             for warm in (False, True):
                 gaps = _PairGaps(hand, q, cands, 0.002)
-                if warm:
-                    for r in positions:
-                        gaps.smallest(finger, int(cands[finger][r]), picked)
+                if warm:  # every distance of the finger to the picked fingers' candidates
+                    for o in picked:
+                        for i in cands[finger]:
+                            for j in cands[o]:
+                                gaps.pair(finger, int(i), o, int(j))
                 out = gaps.smallest_of(finger, positions, picked, at_least)
                 if (each >= at_least).any():
                     assert out is None
                 else:
                     np.testing.assert_array_equal(out, each)
-                seen[out is None] += 1
-    assert seen[True] and seen[False]
+                outcomes[out is None] += 1
+    assert outcomes == {True: 48, False: 24}
+    assert exact > 0
 
 
 class _Forgetful(dict):

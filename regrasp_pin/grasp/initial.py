@@ -694,7 +694,7 @@ class _PairGaps:
         """Distance [m] between finger ``a`` at candidate ``ia`` and ``b`` at ``ib``."""
         if b < a:
             a, ia, b, ib = b, ib, a, ia
-        known = self._known(a, b)
+        known = self._measured(a, b)
         ra, rb = self._row[a][ia], self._row[b][ib]
         if np.isnan(known[ra, rb]):
             if (a, b) not in self._checks:
@@ -711,7 +711,7 @@ class _PairGaps:
             known[ra, rb] = d
         return float(known[ra, rb])
 
-    def _known(self, a: str, b: str) -> np.ndarray:
+    def _measured(self, a: str, b: str) -> np.ndarray:
         """The distances :meth:`pair` measured so far, ``(n_a, n_b)`` in candidate
         order (``a < b``), NaN where not measured."""
         if (a, b) not in self._exact:
@@ -775,10 +775,10 @@ class _PairGaps:
         find it differs, the answer does not)."""
         values = np.empty((positions.size, len(picked)))
         for col, (o, j) in enumerate(picked.items()):
-            lb = self.bounds(finger, o)[positions, self._row[o][j]]
-            a, b = (finger, o) if finger < o else (o, finger)
-            known = self._known(a, b)
             j_row = self._row[o][j]
+            lb = self.bounds(finger, o)[positions, j_row]
+            a, b = (finger, o) if finger < o else (o, finger)
+            known = self._measured(a, b)
             exact = known[positions, j_row] if a == finger else known[j_row, positions]
             values[:, col] = np.where(lb >= self._clear, lb, exact)
         # rows measured in full decide at once; of the others, those that may still
