@@ -45,7 +45,6 @@ from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.initial import (
     _CombinationSearch,
     _grasp_score,
-    _PairGaps,
     _spread_out,
     _start_candidates,
     initial_grasp,
@@ -1130,10 +1129,6 @@ class _TableGaps:
         self.calls = getattr(self, "calls", 0) + 1
         return min((self.table[finger, i, o, j] for o, j in picked.items()), default=np.inf)
 
-    def smallest_of(self, finger, positions, picked, at_least_m):
-        values = np.array([self.smallest(finger, self.ids[finger][r], picked) for r in positions])
-        return None if (values >= at_least_m).any() else values
-
     def clear_of(self, finger, picked):
         return np.array(
             [
@@ -1184,50 +1179,6 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
         assert admissible([int(ids[f][found[f]]) for f in names])
     else:
         assert search.refused > 0 and search.closest < gap_m
-
-
-def test_finger_gaps_of_many_candidates_are_those_of_each(five):
-    """_PairGaps.smallest_of, which reads many candidates at once from the capsule
-    bounds and a table of the Coal distances measured so far, against smallest,
-    candidate by candidate (Coal below the threshold, capsule bounds above it): the
-    same distances, bit for bit, or None exactly when one reaches the threshold; with
-    nothing measured before, and with every distance of the pairs measured."""
-    hand, box, _, sample, manifolds, _ = five
-    names = ["thumb", "index", "middle", "ring"]
-    cands = {
-        n: _start_candidates(hand, box, manifolds[n], sample.points, 0, CONTACT, 12)[0]
-        for n in names
-    }
-    q = {n: manifolds[n].q[:3] for n in names}
-    rng = np.random.default_rng(7)
-    outcomes = {True: 0, False: 0}
-    exact = 0  # candidates whose distance is Coal's (below the threshold)
-    for trial in range(12):
-        finger, *others = rng.permutation(names)
-        picked = {str(o): int(rng.choice(cands[o])) for o in others[: 1 + trial % 3]}
-        positions = rng.permutation(cands[finger].size)[: 4 + trial % 5]
-        reference = _PairGaps(hand, q, cands, 0.002)
-        each = np.array(
-            [reference.smallest(finger, int(cands[finger][r]), picked) for r in positions]
-        )
-        exact += int((each < 0.002).sum())
-        # below every distance, at the largest only, above every one
-        for at_least in (np.min(each) - 1e-4, np.max(each), np.max(each) + 1e-4):
-            for warm in (False, True):
-                gaps = _PairGaps(hand, q, cands, 0.002)
-                if warm:  # every distance of the finger to the picked fingers' candidates
-                    for o in picked:
-                        for i in cands[finger]:
-                            for j in cands[o]:
-                                gaps.pair(finger, int(i), o, int(j))
-                out = gaps.smallest_of(finger, positions, picked, at_least)
-                if (each >= at_least).any():
-                    assert out is None
-                else:
-                    np.testing.assert_array_equal(out, each)
-                outcomes[out is None] += 1
-    assert outcomes == {True: 48, False: 24}
-    assert exact > 0
 
 
 class _Forgetful(dict):

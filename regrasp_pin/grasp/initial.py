@@ -587,14 +587,19 @@ class _CombinationSearch:
 
     def _too_close(self, name: str, picked: Mapping[str, int]) -> list[float] | None:
         """None if some candidate of ``name`` is spaced from and clear of ``picked``;
-        else the finger gaps [m] of its spaced candidates (all too small), in order."""
-        rows = self._rows[name]
+        else the finger gaps [m] of its spaced candidates (all too small)."""
+        ids, rows = self.per_finger[name][0], self._rows[name]
         taken = np.array([self._row[j] for j in picked.values()], int)
-        spaced = np.flatnonzero(~self._near[np.ix_(rows, taken)].any(axis=1))
-        if self.gaps.clear_of(name, picked)[spaced].any():
+        spaced = ~self._near[np.ix_(rows, taken)].any(axis=1)
+        if (spaced & self.gaps.clear_of(name, picked)).any():
             return None  # a spaced candidate is clear by its capsule bounds alone
-        gaps = self.gaps.smallest_of(name, spaced, picked, self.min_gap_m)
-        return None if gaps is None else gaps.tolist()
+        gaps: list[float] = []
+        for i in ids[spaced]:
+            g = self.gaps.smallest(name, int(i), picked)
+            if g >= self.min_gap_m:
+                return None
+            gaps.append(g)
+        return gaps
 
     def _extend(
         self,
@@ -683,7 +688,7 @@ class _PairGaps:
     ):
         self.hand, self.q = hand, q
         self._checks: dict[tuple[str, str], FingerClearance] = {}
-        self._exact: dict[tuple[str, str], np.ndarray] = {}
+        self._cache: dict[tuple[str, int, str, int], float] = {}
         self._neutral = hand.neutral()
         self._cand = {n: np.asarray(c, dtype=np.int64) for n, c in candidates.items()}
         self._row = {n: {int(i): r for r, i in enumerate(c)} for n, c in self._cand.items()}
@@ -694,9 +699,8 @@ class _PairGaps:
         """Distance [m] between finger ``a`` at candidate ``ia`` and ``b`` at ``ib``."""
         if b < a:
             a, ia, b, ib = b, ib, a, ia
-        known = self._measured(a, b)
-        ra, rb = self._row[a][ia], self._row[b][ib]
-        if np.isnan(known[ra, rb]):
+        key = (a, ia, b, ib)
+        if key not in self._cache:
             if (a, b) not in self._checks:
                 self._checks[(a, b)] = FingerClearance(self.hand, a, others=[b])
             qa, qb = self.q[a][:, ia], self.q[b][:, ib]
@@ -708,15 +712,8 @@ class _PairGaps:
                 q[self.hand.finger(a).q_indices] = qa[k]
                 q[self.hand.finger(b).q_indices] = qb[k]
                 d = min(d, self._checks[(a, b)](q))
-            known[ra, rb] = d
-        return float(known[ra, rb])
-
-    def _measured(self, a: str, b: str) -> np.ndarray:
-        """The distances :meth:`pair` measured so far, ``(n_a, n_b)`` in candidate
-        order (``a < b``), NaN where not measured."""
-        if (a, b) not in self._exact:
-            self._exact[(a, b)] = np.full((self._cand[a].size, self._cand[b].size), np.nan)
-        return self._exact[(a, b)]
+            self._cache[key] = d
+        return self._cache[key]
 
     def bounds(self, a: str, b: str) -> np.ndarray:
         """Capsule lower bounds ``(n_a, n_b)`` [m] on :meth:`pair` for every candidate
@@ -766,35 +763,6 @@ class _PairGaps:
             lb = self._bound(finger, i, o, j)
             out = min(out, lb if lb >= self._clear else self.pair(finger, i, o, j))
         return out
-
-    def smallest_of(
-        self, finger: str, positions: np.ndarray, picked: Mapping[str, int], at_least_m: float
-    ) -> np.ndarray | None:
-        """:meth:`smallest` of ``finger``'s candidates at ``positions`` (candidate order),
-        ``(n,)`` [m]; None if one of them is ``at_least_m`` or more (what is measured to
-        find it differs, the answer does not)."""
-        values = np.empty((positions.size, len(picked)))
-        for col, (o, j) in enumerate(picked.items()):
-            j_row = self._row[o][j]
-            lb = self.bounds(finger, o)[positions, j_row]
-            a, b = (finger, o) if finger < o else (o, finger)
-            known = self._measured(a, b)
-            exact = known[positions, j_row] if a == finger else known[j_row, positions]
-            values[:, col] = np.where(lb >= self._clear, lb, exact)
-        # rows measured in full decide at once; of the others, those that may still
-        # reach ``at_least_m`` are measured first
-        smallest_known = np.fmin.reduce(values, axis=1, initial=np.inf)
-        unknown = np.isnan(values).any(axis=1)
-        if (smallest_known[~unknown] >= at_least_m).any():
-            return None
-        ids = self._cand[finger]
-        hopeful = unknown & (smallest_known >= at_least_m)
-        for r in np.r_[np.flatnonzero(hopeful), np.flatnonzero(unknown & ~hopeful)]:
-            g = self.smallest(finger, int(ids[positions[r]]), picked)
-            if g >= at_least_m:
-                return None
-            values[r] = g
-        return np.min(values, axis=1, initial=np.inf)
 
     def clear_of(self, finger: str, picked: Mapping[str, int]) -> np.ndarray:
         """``(n,)`` whether each candidate of ``finger`` (in candidate order) is, by the
