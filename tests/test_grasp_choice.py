@@ -819,8 +819,7 @@ def test_candidates_too_near_another_finger_do_not_use_up_the_checks(five, monke
     )
     assert seen[0] < need and len(seen) > 1
     assert q.rank > first.rank
-    q_all = q_hand.copy()
-    q_all[hand.finger("middle").q_indices] = q.q_arrive
+    q_all = hand.to_full("middle", q.q_arrive, q_hand)
     assert real_gap(FingerClearance(hand, "middle"), q_all) >= need
 
 
