@@ -13,6 +13,7 @@ backtracking (:mod:`.recovery`) can revisit.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -21,6 +22,7 @@ from ..exceptions import Attempt, FailureKind, PlanningError
 from ..grasp.holding import Holding, holding_q, holds_to_end
 from ..grasp.quality import ferrari_canny_epsilon
 from ..plan import RegraspPhase
+from .feasibility import longest_start_hold
 from .letgo import let_go
 from .regrasp import RegraspResult
 from .schedule import (
@@ -264,6 +266,28 @@ def _tip_path_record(res: RegraspResult) -> list:
     return pts[:: max(1, len(pts) // 200)].tolist()
 
 
+def _must_let_go_note(ctx: PlanContext, name: str) -> str:
+    """What a finger that cannot let go (the others not in force closure without it)
+    tells the user: whether any grasp could have kept it from having to, and what to
+    change (:func:`~.feasibility.longest_start_hold`)."""
+    motion, c = ctx.scene.motion, ctx.params.contact
+    lasts = longest_start_hold(ctx.manifolds[name], c.limit_margin_rad)
+    if math.isinf(lasts):
+        return (
+            f"within its joint limits {name} could hold a contact from the start to the "
+            "end: start it on such a contact, one whose links stay clear of the object "
+            "and of the other fingers"
+        )
+    return (
+        f"no contact that {name} can hold at the start stays holdable within its joint "
+        f"limits past t={lasts:.2f} s (the motion ends at t={motion.t_end:.2f} s), so "
+        f"every plan must let {name} go while the others hold alone: place the object "
+        f"so that a contact of {name} stays within its limits through the motion (for "
+        f"a turn about an axis through the object, the axis through a contact {name} "
+        "reaches), or turn less"
+    )
+
+
 def _fingers_that_stay(
     ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow
 ) -> list[str]:
@@ -286,7 +310,7 @@ def _fingers_that_stay(
     if eps_stay <= 0.0:
         raise PlanningError(
             f"{trig.reason} at t={trig.time_s:.3f} s, but without it the other fingers are "
-            "not in force closure",
+            f"not in force closure; {_must_let_go_note(ctx, name)}",
             finger=name,
             time_s=win.preferred_s,
             kind=FailureKind.FORCE_CLOSURE,

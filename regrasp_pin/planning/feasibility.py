@@ -5,6 +5,8 @@ start).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..exceptions import FailureKind, PlanningError
@@ -20,7 +22,7 @@ from .params import PlannerParams
 from .schedule import TIME_TOL_S
 from .state import PlanContext, PlanState
 
-__all__ = ["first_infeasibility", "must_hold_runs", "no_plan_exists"]
+__all__ = ["first_infeasibility", "longest_start_hold", "must_hold_runs", "no_plan_exists"]
 
 
 def must_hold_runs(
@@ -51,6 +53,27 @@ def must_hold_runs(
     )
     # a plan holds to the motion's end, its last sample included (planning.state)
     return every, must_hold(every, sample, obj, params.mu, list(manifolds))
+
+
+def longest_start_hold(man: Manifold, margin_rad: float) -> float:
+    """How long a finger could hold without a regrasp, by its manifold: the time [s] at
+    which the longest-lasting of the contacts it can hold at the manifold's first time
+    (:meth:`~regrasp_pin.grasp.manifold.Manifold.holdable` with ``margin_rad``) stops
+    being holdable; ``math.inf`` if one stays holdable to the last time, the first time
+    if none is holdable there.
+
+    A bound, not a promise: the tracking of a hold (Coal, the velocity limits) may end
+    it sooner, never later. Below the motion's end it says that every plan must let the
+    finger go at least once, whatever grasp it starts from.
+    """
+    holdable = man.holdable(margin_rad)
+    start = holdable[0]
+    if not start.any():
+        return float(man.times_s[0])
+    tail = holdable[:, start]
+    if tail.all(axis=0).any():
+        return math.inf
+    return float(exit_times(tail, man.times_s, 0).max())
 
 
 def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:

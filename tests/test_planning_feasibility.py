@@ -1,0 +1,65 @@
+"""What no plan can avoid (regrasp_pin.planning.feasibility): how long a finger could
+hold from the start without a regrasp, read from its manifold."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from regrasp_pin.grasp.manifold import Manifold
+from regrasp_pin.planning.feasibility import longest_start_hold
+
+TIMES = np.array([0.0, 0.5, 1.0, 1.5, 2.0])
+
+
+def _manifold(holdable: np.ndarray, margin: float = 0.1) -> Manifold:
+    """A manifold of ``holdable.shape[1]`` points whose entries are holdable (inside
+    with ``margin`` to the limits, pad facing, fingertip link clear) exactly where
+    ``holdable`` is True; elsewhere one of the three fails in turn."""
+    n_t, n = holdable.shape
+    fails = np.arange(n_t * n).reshape(n_t, n) % 3
+    inside = holdable | (fails != 0)
+    pad_ok = holdable | (fails != 1)
+    tip_clear = holdable | (fails != 2)
+    return Manifold(
+        finger="index",
+        times_s=TIMES[:n_t],
+        q=np.zeros((n_t, n, 3)),
+        reachable=np.ones((n_t, n), bool),
+        inside=inside,
+        margin_rad=np.full((n_t, n), margin),
+        pad_ok=pad_ok,
+        lower=np.full(3, -1.0),
+        upper=np.full(3, 1.0),
+        T_palm_object=np.broadcast_to(np.eye(4), (n_t, 4, 4)).copy(),
+        tip_clear=tip_clear,
+    )
+
+
+def test_the_longest_lasting_start_contact_bounds_the_hold():
+    """The exit of the contact that lasts longest from the start, without a break:
+    a contact holdable again after a break, or only later, does not count."""
+    # columns: lost at 1.0 s, lost at 1.5 s, back after a break at 0.5 s, holdable
+    # from 0.5 s only
+    h = np.array(
+        [
+            [True, True, True, False],
+            [True, True, False, True],
+            [False, True, True, True],
+            [False, False, True, True],
+            [False, False, True, True],
+        ]
+    )
+    assert longest_start_hold(_manifold(h), 0.1) == 1.5
+    # every entry is checked: a fourth point lasting to the end from the start
+    h2 = np.hstack([h, np.ones((5, 1), bool)])
+    assert math.isinf(longest_start_hold(_manifold(h2), 0.1))
+
+
+def test_the_margin_to_the_limits_counts_and_none_holdable_is_the_start():
+    h = np.ones((5, 2), bool)
+    assert math.isinf(longest_start_hold(_manifold(h, margin=0.1), 0.1))
+    assert longest_start_hold(_manifold(h, margin=0.1), 0.2) == 0.0
+    h[0] = False
+    assert longest_start_hold(_manifold(h), 0.1) == 0.0
