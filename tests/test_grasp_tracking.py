@@ -133,7 +133,7 @@ _REASON_WORDS = {
     "IK": "IK cannot reach",
     "joint": "rad of its",
     "pad": "pad turned",
-    "link": "link of the finger touches",
+    "link": "link of the finger comes within",
     "tip": "fingertip link sinks into",
 }
 

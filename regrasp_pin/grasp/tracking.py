@@ -5,8 +5,8 @@ its tip-centre target ``T_palm_object(t) (P + r n)`` moves with the object, and 
 finger follows it by IK (warm-started from one time to the next). The *trigger* is the
 first time P comes within ``limit_margin_rad`` of a boundary plane of the joint box,
 or stops being feasible (IK fails, the pad turns away beyond the cone, or another link
-of the finger touches the object) -- the moment the paper's contact point "meets one of
-the boundary planes".
+of the finger comes within ``link_clearance_m`` of the object) -- the moment the
+paper's contact point "meets one of the boundary planes".
 """
 
 from __future__ import annotations
@@ -253,7 +253,10 @@ def _reasons(
             ang = np.degrees(np.arccos(np.clip(pad_cos[i], -1, 1)))
             reasons.append(f"pad turned {ang:.0f} deg from the surface normal")
         elif clearance[i] < contact.link_clearance_m:
-            reasons.append(f"a link of the finger touches the object ({clearance[i] * 1e3:.2f} mm)")
+            reasons.append(
+                f"a link of the finger comes within {contact.link_clearance_m * 1e3:.2f} mm "
+                f"of the object ({clearance[i] * 1e3:.2f} mm)"
+            )
         elif tip_clear[i] < -contact.tip_penetration_m:
             reasons.append(
                 f"the fingertip link sinks into the object ({-tip_clear[i] * 1e3:.2f} mm)"
