@@ -183,42 +183,55 @@ def test_a_finger_that_cannot_regrasp_holds_on_if_its_hold_lasts(monkeypatch, ma
         advance.advance(ctx, _holding_state(_track(T_END, lost_at=3.0)), trig, [trig], [])
 
 
-@pytest.mark.parametrize("lasting", [True, False])
-def test_a_finger_the_others_cannot_hold_without_says_whether_any_grasp_could_keep_it(lasting):
+@pytest.mark.parametrize("case", ["lasting", "short", "joined"])
+def test_a_finger_the_others_cannot_hold_without_says_whether_any_grasp_could_keep_it(case):
     """The force-closure failure of a finger that must let go (the three others all
     press on one face: no force closure without it) says how long any of its start
-    contacts could be held, by its manifold: past the motion's end, a grasp could have
-    started it there; short of it, every plan must let it go, and the object's place
-    is what to change."""
+    contacts could be held, by its manifold with the contact model's margin: to the
+    motion's end, a grasp could have started it there; short of it, every plan must let
+    it go, and the object's place is what to change. A finger that joined later did
+    not hold from the start: nothing is said of its start contacts."""
     times = np.linspace(0.0, T_END, 11)
     holdable = np.ones((times.size, 3), bool)
     holdable[4:, 0] = False  # the longest-lasting start contact is lost at 2.0 s
     holdable[2:, 1] = False
-    holdable[:, 2] = lasting
-    man = SimpleNamespace(times_s=times, holdable=lambda margin: holdable)
-    top = SimpleNamespace(n=np.array([0.0, 0.0, 1.0]))
+    holdable[:, 2] = case != "short"
+    margins = []
+
+    def read(margin):
+        margins.append(margin)
+        return holdable
+
+    man = SimpleNamespace(times_s=times, holdable=read)
+    top = np.array([0.0, 0.0, 1.0])
+    contact = ContactModel()
     ctx = SimpleNamespace(
         scene=SimpleNamespace(
             hand=SimpleNamespace(finger_names=("thumb", "index", "middle", "ring")),
             obj=SimpleNamespace(radius_m=0.03),
             motion=SimpleNamespace(t_end=T_END),
         ),
-        params=SimpleNamespace(min_holding=3, mu=0.8, contact=ContactModel()),
+        params=SimpleNamespace(min_holding=3, mu=0.8, contact=contact),
         manifolds={"thumb": man},
     )
     holding = {
-        n: SimpleNamespace(p=np.array([x, y, 0.02]), n=top.n)
+        n: SimpleNamespace(p=np.array([x, y, 0.02]), n=top)
         for n, x, y in [("index", 0.01, 0.0), ("middle", -0.01, 0.01), ("ring", 0.0, -0.01)]
     }
-    holding["thumb"] = SimpleNamespace(p=np.array([0.0, 0.0, -0.02]), n=-top.n)
-    state = SimpleNamespace(holding=holding)
+    holding["thumb"] = SimpleNamespace(p=np.array([0.0, 0.0, -0.02]), n=-top)
+    state = SimpleNamespace(holding=holding, joined={"thumb": object()} if case == "joined" else {})
     trig = Trigger(time_s=1.2, finger="thumb", reason="near its limit", lost_s=1.5)
     with pytest.raises(PlanningError) as err:
         advance._fingers_that_stay(ctx, state, trig, SimpleNamespace(preferred_s=1.2))
     assert err.value.kind == FailureKind.FORCE_CLOSURE and err.value.finger == "thumb"
     text = str(err.value)
-    if lasting:
-        assert "could hold a contact from the start to the end" in text
+    assert "the other fingers are not in force closure" in text
+    if case == "joined":
+        assert margins == [] and "contact" not in text.split("force closure", 1)[1]
+        return
+    assert margins == [contact.limit_margin_rad]
+    if case == "lasting":
+        assert "thumb could hold a contact from the start to the end" in text
     else:
-        assert "past t=2.00 s (the motion ends at t=5.00 s)" in text
+        assert "the longest until t=2.00 s, the motion ends at t=5.00 s" in text
         assert "every plan must let thumb go" in text

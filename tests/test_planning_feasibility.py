@@ -10,7 +10,7 @@ import numpy as np
 from regrasp_pin.grasp.manifold import Manifold
 from regrasp_pin.planning.feasibility import longest_start_hold
 
-TIMES = np.array([0.0, 0.5, 1.0, 1.5, 2.0])
+TIMES = np.array([1.0, 1.5, 2.0, 2.5, 3.0])  # the motion's start need not be 0
 
 
 def _manifold(holdable: np.ndarray, margin: float = 0.1) -> Manifold:
@@ -39,9 +39,10 @@ def _manifold(holdable: np.ndarray, margin: float = 0.1) -> Manifold:
 
 def test_the_longest_lasting_start_contact_bounds_the_hold():
     """The exit of the contact that lasts longest from the start, without a break:
-    a contact holdable again after a break, or only later, does not count."""
-    # columns: lost at 1.0 s, lost at 1.5 s, back after a break at 0.5 s, holdable
-    # from 0.5 s only
+    a contact holdable again after a break, or only later (even to the end), does not
+    count."""
+    # columns: lost at 2.0 s, lost at 2.5 s, back after a break at 1.5 s, holdable
+    # from 1.5 s to the end
     h = np.array(
         [
             [True, True, True, False],
@@ -51,8 +52,8 @@ def test_the_longest_lasting_start_contact_bounds_the_hold():
             [False, False, True, True],
         ]
     )
-    assert longest_start_hold(_manifold(h), 0.1) == 1.5
-    # every entry is checked: a fourth point lasting to the end from the start
+    assert longest_start_hold(_manifold(h), 0.1) == 2.5
+    # every entry is checked: a fifth point lasting to the end from the start
     h2 = np.hstack([h, np.ones((5, 1), bool)])
     assert math.isinf(longest_start_hold(_manifold(h2), 0.1))
 
@@ -60,6 +61,6 @@ def test_the_longest_lasting_start_contact_bounds_the_hold():
 def test_the_margin_to_the_limits_counts_and_none_holdable_is_the_start():
     h = np.ones((5, 2), bool)
     assert math.isinf(longest_start_hold(_manifold(h, margin=0.1), 0.1))
-    assert longest_start_hold(_manifold(h, margin=0.1), 0.2) == 0.0
+    assert longest_start_hold(_manifold(h, margin=0.1), 0.2) == TIMES[0]
     h[0] = False
-    assert longest_start_hold(_manifold(h), 0.1) == 0.0
+    assert longest_start_hold(_manifold(h), 0.1) == TIMES[0]

@@ -266,25 +266,31 @@ def _tip_path_record(res: RegraspResult) -> list:
     return pts[:: max(1, len(pts) // 200)].tolist()
 
 
-def _must_let_go_note(ctx: PlanContext, name: str) -> str:
+def _must_let_go_note(ctx: PlanContext, state: PlanState, name: str) -> str:
     """What a finger that cannot let go (the others not in force closure without it)
-    tells the user: whether any grasp could have kept it from having to, and what to
-    change (:func:`~.feasibility.longest_start_hold`)."""
+    tells the user, as ``"; ..."`` (empty for a finger that joined later, or without its
+    manifold): whether any start contact of it could have been held to the end, by its
+    manifold (:func:`~.feasibility.longest_start_hold`), and what to change."""
+    man = ctx.manifolds.get(name)
+    if man is None or name in state.joined:
+        return ""
     motion, c = ctx.scene.motion, ctx.params.contact
-    lasts = longest_start_hold(ctx.manifolds[name], c.limit_margin_rad)
+    lasts = longest_start_hold(man, c.limit_margin_rad)
     if math.isinf(lasts):
         return (
-            f"within its joint limits {name} could hold a contact from the start to the "
-            "end: start it on such a contact, one whose links stay clear of the object "
+            f"; {name} could hold a contact from the start to the end (by its manifold: "
+            "inside its joint limits, the pad facing the surface, the fingertip link "
+            "clear): start it on such a contact, one whose links stay clear of the object "
             "and of the other fingers"
         )
     return (
-        f"no contact that {name} can hold at the start stays holdable within its joint "
-        f"limits past t={lasts:.2f} s (the motion ends at t={motion.t_end:.2f} s), so "
-        f"every plan must let {name} go while the others hold alone: place the object "
-        f"so that a contact of {name} stays within its limits through the motion (for "
-        f"a turn about an axis through the object, the axis through a contact {name} "
-        "reaches), or turn less"
+        f"; no contact that {name} can hold at the start stays holdable (inside its joint "
+        "limits, the pad facing the surface, the fingertip link clear) to the end of the "
+        f"motion (the longest until t={lasts:.2f} s, the motion ends at "
+        f"t={motion.t_end:.2f} s), so every plan must let {name} go while the others "
+        f"hold alone: place the object so that a contact of {name} stays within its "
+        f"limits through the motion (for a turn about an axis through the object, the "
+        f"axis through a contact {name} reaches), or turn less"
     )
 
 
@@ -310,7 +316,7 @@ def _fingers_that_stay(
     if eps_stay <= 0.0:
         raise PlanningError(
             f"{trig.reason} at t={trig.time_s:.3f} s, but without it the other fingers are "
-            f"not in force closure; {_must_let_go_note(ctx, name)}",
+            f"not in force closure{_must_let_go_note(ctx, state, name)}",
             finger=name,
             time_s=win.preferred_s,
             kind=FailureKind.FORCE_CLOSURE,

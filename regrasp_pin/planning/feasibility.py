@@ -62,9 +62,10 @@ def longest_start_hold(man: Manifold, margin_rad: float) -> float:
     being holdable; ``math.inf`` if one stays holdable to the last time, the first time
     if none is holdable there.
 
-    A bound, not a promise: the tracking of a hold (Coal, the velocity limits) may end
-    it sooner, never later. Below the motion's end it says that every plan must let the
-    finger go at least once, whatever grasp it starts from.
+    An estimate on the manifold's sample of the surface and its time grid, read as the
+    choice of contacts reads it: the tracking of a hold (Coal, the velocity limits) may
+    end it sooner. Below the motion's end it says that every plan in which the finger
+    holds from the start must let it go at least once, whatever contact it starts on.
     """
     holdable = man.holdable(margin_rad)
     start = holdable[0]
