@@ -68,13 +68,11 @@ def longest_start_hold(man: Manifold, margin_rad: float) -> float:
     holds from the start must let it go at least once, whatever contact it starts on.
     """
     holdable = man.holdable(margin_rad)
-    start = holdable[0]
-    if not start.any():
-        return float(man.times_s[0])
-    tail = holdable[:, start]
-    if tail.all(axis=0).any():
+    if holdable.all(axis=0).any():
         return math.inf
-    return float(exit_times(tail, man.times_s, 0).max())
+    # a contact not holdable at the first time exits there (exit_times)
+    exits = exit_times(holdable, man.times_s, 0)
+    return float(exits.max()) if exits.size else float(man.times_s[0])
 
 
 def _held_until(ctx: PlanContext, h: Holding, t_to: float) -> float | None:
