@@ -59,9 +59,9 @@ from regrasp_pin.grasp.quality import (
 )
 from regrasp_pin.grasp.screening import (
     BOUND_MARGIN_M,
+    HELD_FIRST_RUN,
     SCREEN_EDGES,
     ManifoldClearance,
-    ObjectClearance,
     ScreeningEpsilons,
     closest_object_miss,
     held_clear,
@@ -758,7 +758,7 @@ def _grasp_configuration(hand, grasp):
 
 
 def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
-    """A candidate too close to another finger is refused without its 6-D hull, and
+    """A candidate too close to another finger is refused without any 6-D hull, and
     counts as a finger-clearance rejection; with the clearance met, the same Q as
     without the test."""
     hand, box, _, sample, manifolds, grasp = five
@@ -775,7 +775,8 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     monkeypatch.setattr(
         FingerClearance, "__call__", lambda self, q: seen.append(real_gap(self, q)) or seen[-1]
     )
-    # 1 m from every other finger: nothing passes, and only P's epsilon is computed
+    # 1 m from every other finger: nothing passes, and no epsilon is computed (not even
+    # P's: it is read only to compare a passing candidate's with it)
     with pytest.raises(ContactError) as e:
         choose_new_contact(
             hand, box, manifolds["middle"], sample, 1.5, q_hand_arrive=q_hand,
@@ -784,7 +785,7 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     # the numbers are those of the candidate nearest to passing: the largest distance
     assert e.value.kind == FailureKind.FINGER_COLLISION and e.value.required == 1.0
     assert e.value.measured == max(seen) and 0.0 < e.value.measured < 1.0
-    assert len(calls) == 1
+    assert len(calls) == 0
     free = choose_new_contact(
         hand, box, manifolds["middle"], sample, 1.5, q_hand_arrive=q_hand,
         finger_clearance_m=-1.0, **kw,
@@ -823,15 +824,27 @@ def test_candidates_too_near_another_finger_do_not_use_up_the_checks(five, monke
     assert real_gap(FingerClearance(hand, "middle"), q_all) >= need
 
 
+def _record_links_at(monkeypatch, ka):
+    """A list that collects the links' distances (Coal, or a bound above the
+    requirements) that ManifoldClearance gives at the manifold time ``ka``: at arrival,
+    those of the candidates measured."""
+    seen = []
+    real = ManifoldClearance.__call__
+
+    def record(self, rows, points):
+        d, d_tip = real(self, rows, points)
+        seen.append(d[np.asarray(rows) == ka])
+        return d, d_tip
+
+    monkeypatch.setattr(ManifoldClearance, "__call__", record)
+    return seen
+
+
 def test_an_object_clearance_failure_gives_the_nearest_candidate_in_metres(five, monkeypatch):
     """Every candidate refused for its links (1 m asked of them): the error's numbers
     are the largest links' distance measured (Coal) and the 1 m asked, not a count."""
     hand, box, _, sample, manifolds, grasp = five
-    seen = []
-    real = ObjectClearance.distances
-    monkeypatch.setattr(
-        ObjectClearance, "distances", lambda self, *a: seen.append(real(self, *a)) or seen[-1]
-    )
+    seen = _record_links_at(monkeypatch, manifolds["index"].time_index(0.5))
     far = dataclasses.replace(CONTACT, choice_link_clearance_m=1.0)
     others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in ("thumb", "ring")}
     with pytest.raises(ContactError, match="link clearance") as e:
@@ -839,7 +852,7 @@ def test_an_object_clearance_failure_gives_the_nearest_candidate_in_metres(five,
             hand, box, manifolds["index"], sample, 0.5, contact=far, mu=MU, others=others,
             P_object=grasp.points_object["index"], n_P_object=grasp.normals_object["index"],
         )  # fmt: skip
-    links = np.concatenate([d for d, _ in seen])
+    links = np.concatenate(seen)
     assert e.value.kind == FailureKind.OBJECT_CLEARANCE and e.value.required == 1.0
     assert e.value.measured == links.max() < 1.0
 
@@ -917,6 +930,49 @@ def test_link_exit_measures_only_until_each_point_leaves(five, finger, t_arrive)
         expected = m.times_s[-1] if first_bad is None else m.times_s[ka + first_bad]
         assert t_exit[c] == pytest.approx(expected), (i, ok)
         assert lasts[c] == (first_bad is None)
+
+
+@pytest.mark.parametrize("finger, t_arrive", [("middle", 0.5), ("thumb", 0.75), ("index", 0.0)])
+def test_held_clear_measures_each_point_only_in_runs_up_to_its_first_failure(
+    five, finger, t_arrive
+):
+    """held_clear asks for a point's usable times in runs of HELD_FIRST_RUN, then twice
+    as many, and so on, and stops after the run that holds its first failure (or at its
+    last usable time); its answer is that of measuring every usable time."""
+    hand, box, _, _, manifolds, _ = five
+    m = manifolds[finger]
+    ka = m.time_index(t_arrive)
+    usable = m.usable(CONTACT.limit_margin_rad)[ka:]
+    pool = np.flatnonzero(usable[0])
+    points = np.random.default_rng(3).choice(pool, size=min(40, pool.size), replace=False)
+    asked = []
+
+    class Asked(ManifoldClearance):
+        def __call__(self, rows, points):
+            asked.append(np.asarray(points))
+            return super().__call__(rows, points)
+
+    got = held_clear(
+        hand, finger, box, m, points, ka, CONTACT, Asked(hand, finger, box, m, CONTACT)
+    )
+    # the full measurement: every time before each point leaves its usable set
+    still = np.logical_and.accumulate(usable[:, points], axis=0)
+    full = ManifoldClearance(hand, finger, box, m, CONTACT)
+    rows, cols = np.nonzero(still)
+    d, d_tip = full(ka + rows, points[cols])
+    ok = np.zeros_like(still)
+    ok[rows, cols] = (d >= CONTACT.link_clearance_m) & (d_tip >= -CONTACT.tip_penetration_m)
+    np.testing.assert_array_equal(got, np.logical_and.accumulate(ok, axis=0))
+    ends = np.cumsum(HELD_FIRST_RUN * 2 ** np.arange(10))  # where the runs end
+    every = np.concatenate(asked)
+    measured = np.array([(every == p).sum() for p in points])
+    n_still = still.sum(axis=0)
+    for c in range(points.size):
+        fails = np.flatnonzero(still[:, c] & ~ok[:, c])
+        need = fails[0] + 1 if fails.size else n_still[c]
+        expected = min(int(ends[np.searchsorted(ends, need)]), int(n_still[c]))
+        assert measured[c] == expected, (c, need, n_still[c])
+    assert measured.sum() < still.sum()  # some point failed early: its tail was spared
 
 
 @pytest.mark.parametrize("finger, t_arrive", [("middle", 0.5), ("thumb", 0.75)])
@@ -1394,15 +1450,12 @@ def test_a_failure_names_what_refused_the_candidates_that_cleared_the_object(fiv
         P_object=grasp.points_object["index"],
         n_P_object=grasp.normals_object["index"],
     )
-    seen = []
-    real = ObjectClearance.distances
-    monkeypatch.setattr(
-        ObjectClearance, "distances", lambda self, *a: seen.append(real(self, *a)) or seen[-1]
-    )
+    seen = _record_links_at(monkeypatch, manifolds["index"].time_index(0.5))
     everything = dataclasses.replace(CONTACT, choice_link_clearance_m=1.0)
     with pytest.raises(ContactError):
         choose_new_contact(hand, box, manifolds["index"], sample, 0.5, contact=everything, **kw)
-    links = np.concatenate([d for d, _ in seen])
+    links = np.concatenate(seen)
+    monkeypatch.undo()
     some = dataclasses.replace(CONTACT, choice_link_clearance_m=float(np.quantile(links, 0.8)))
     q_hand = _grasp_configuration(hand, grasp)
     with pytest.raises(ContactError) as e:

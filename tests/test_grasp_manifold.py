@@ -127,8 +127,17 @@ def test_inside_margin_and_pad_follow_from_the_coordinates(scene):
         assert np.array_equal(m.pad_ok[r], cos >= CONTACT.cos_cone_of(f)), name
         assert not m.pad_ok[~r].any()
         assert np.array_equal(m.feasible, m.inside & m.pad_ok)
+        rows, points = np.array([3, 0, 3]), np.arange(0, m.q.shape[1], 7)
         for margin in (0.0, 0.05, 0.2):
-            assert np.array_equal(m.usable(margin), m.feasible & (m.margin_rad >= margin))
+            usable = m.feasible & (m.margin_rad >= margin)
+            assert np.array_equal(m.usable(margin), usable)
+            # a block: index arrays (an outer product), slices, or one of each
+            assert np.array_equal(
+                m.usable(margin, rows=rows, points=points), usable[np.ix_(rows, points)]
+            )
+            assert np.array_equal(m.usable(margin, rows=slice(2, None)), usable[2:])
+            assert np.array_equal(m.usable(margin, rows=rows), usable[rows])
+            assert np.array_equal(m.usable(margin, points=points), usable[:, points])
 
 
 def test_tip_clear_follows_from_the_tip_orientation(scene):
@@ -147,8 +156,13 @@ def test_tip_clear_follows_from_the_tip_orientation(scene):
         clear = f.tip_reach.overshoot(u_tip) <= CONTACT.tip_penetration_m
         assert np.array_equal(m.tip_clear[r], clear), name
         assert not m.tip_clear[~r].any()
+        rows, points = np.array([1, 0]), np.arange(3, m.q.shape[1], 5)
         for margin in (0.0, 0.05):
-            assert np.array_equal(m.holdable(margin), m.usable(margin) & m.tip_clear)
+            holdable = m.usable(margin) & m.tip_clear
+            assert np.array_equal(m.holdable(margin), holdable)
+            block = m.holdable(margin, rows=rows, points=points)
+            assert np.array_equal(block, holdable[np.ix_(rows, points)])
+            assert np.array_equal(m.holdable(margin, rows=slice(1, None)), holdable[1:])
         tilted += int((m.feasible & ~m.tip_clear).sum())
     assert tilted > 0
 

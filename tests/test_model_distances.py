@@ -20,6 +20,7 @@ from regrasp_pin.model.distances import (
     capsule_gaps,
     capsule_pair_gaps,
     object_gap_bound,
+    object_gap_bounds,
 )
 from regrasp_pin.model.objects import Box
 
@@ -170,3 +171,25 @@ def test_object_gap_bound_is_below_coal(hand_name):
             assert np.all(bound <= exact + 1e-9), (name, tip_only)
             assert np.any(exact < 0) and np.any(bound > exact - 0.002)  # both cases, tight
     assert np.all(object_gap_bound(hand, [], box, full, T) == np.inf)
+
+
+def test_object_gap_bounds_of_groups_are_the_bounds_of_each_group():
+    """object_gap_bounds places the groups' geometries once: each row is, to the bit,
+    object_gap_bound of that group alone (an empty group: inf)."""
+    hand = Hand.five_finger()
+    box = Box((0.04, 0.06, 0.04))
+    rng = np.random.default_rng(5)
+    f = hand.finger("index")
+    q = rng.uniform(f.lower, f.upper, (50, f.k))
+    full = hand.to_full("index", q)
+    T = np.tile(np.eye(4), (50, 1, 1))
+    T[:, :3, 3] = f.fk(q) + rng.normal(scale=0.02, size=(50, 3))
+    links = LinkClearance(hand, "index", box).geometry_ids
+    tip = LinkClearance(hand, "index", box, tip_only=True).geometry_ids
+    thumb = LinkClearance(hand, "thumb", box, include_tip=True).geometry_ids
+    groups = [links, [], tip, thumb]
+    got = object_gap_bounds(hand, groups, box, full, T)
+    assert got.shape == (4, 50)
+    for row, group in zip(got, groups, strict=True):
+        np.testing.assert_array_equal(row, object_gap_bound(hand, group, box, full, T))
+    assert np.all(got[1] == np.inf) and np.isfinite(got[[0, 2, 3]]).all()

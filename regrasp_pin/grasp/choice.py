@@ -46,7 +46,6 @@ from .manifold import Manifold
 from .quality import FORCE_CLOSURE_TOL, kept_quality
 from .screening import (
     ManifoldClearance,
-    ObjectClearance,
     ScreeningEpsilons,
     check_kept_clearance,
     closes_without,
@@ -226,10 +225,8 @@ def choose_new_contact(
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
     ka, kb = _arrival_indices(manifold, t_arrive_s)
-    usable = manifold.usable(contact.limit_margin_rad)
-    choice = manifold.usable(contact.choice_margin_rad)
     # the landing falls between two manifold times: Q must be usable at both
-    cand = choice[ka] & choice[min(kb, ka)]
+    cand = manifold.usable(contact.choice_margin_rad, rows=np.array([ka, min(kb, ka)])).all(0)
     pts = sample.points
     cand &= _apart_from(hand, finger, sample, others, min_separation_m)
     if exclude_radius_m > 0:
@@ -242,30 +239,38 @@ def choose_new_contact(
         cand &= _far_from(pts, [np.asarray(point, float)], float(radius))
     idx = np.flatnonzero(cand)
     if idx.size == 0:
+        usable = manifold.usable(contact.limit_margin_rad, rows=np.array([ka]))[0]
         raise ContactError(
             f"no surface point is inside the joint limits (margin >= "
             f"{contact.choice_margin_rad:.2f} rad), faces the pad and is clear of the other "
-            f"contacts at arrival ({int(usable[ka].sum())} usable before the separation test)",
+            f"contacts at arrival ({int(usable.sum())} usable before the separation test)",
             finger=finger.name,
             time_s=float(manifold.times_s[ka]),
             kind=FailureKind.NO_CANDIDATE,
-            measured=float(usable[ka].sum()),
+            measured=float(usable.sum()),
             required=1.0,
         )
     if landing_s is not None:
         idx = _landing_in_time(idx, manifold, ka, landing_s, land_by_s, finger.name)
     # condition (b) read from the contacts the finger can hold: inside the limits and,
     # as far as the fingertip link's shape tells, without it sinking into the face
-    holdable = manifold.holdable(contact.limit_margin_rad)
+    holdable = manifold.holdable(contact.limit_margin_rad, rows=slice(ka, None), points=idx)
     ranked = _Ranking(
-        t_exit=exit_times(holdable[:, idx], manifold.times_s, ka),
+        t_exit=exit_times(holdable, manifold.times_s[ka:], 0),
         margin=manifold.margin_rad[ka, idx],
         dist=np.linalg.norm(pts[idx] - P_object, axis=1),
         idx=idx,
         exit_tolerance_s=exit_tolerance_s,
     )
-    lasts = holdable[-1, idx].copy()
+    lasts = holdable[-1].copy()
     order = ranked.order(lasts)
+    if link_check:
+        # one store for the call's link measurements (the re-rank's first times are the
+        # arrival's), or the one kept between calls
+        if distances is None:
+            distances = ManifoldClearance(hand, finger.name, obj, manifold, contact)
+        else:
+            check_kept_clearance(distances, finger.name, manifold, contact)
     if link_check and rerank > 0:
         ranked, order = _rerank(
             ranked,
@@ -285,8 +290,8 @@ def choose_new_contact(
         ka,
         others,
         mu,
-        _arrival_clearance(hand, finger.name, obj, manifold, ka, contact, distances)
-        if link_check
+        _arrival_clearance(manifold, ka, distances)
+        if link_check and distances is not None
         else None,
         contact,
         q_hand_arrive,
@@ -329,24 +334,11 @@ def _landing_in_time(
 
 
 def _arrival_clearance(
-    hand: Hand,
-    finger: str,
-    obj: ConvexObject,
-    manifold: Manifold,
-    ka: int,
-    contact: ContactModel,
-    distances: ManifoldClearance | None,
+    manifold: Manifold, ka: int, distances: ManifoldClearance
 ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """``points (C,) -> (links, tip)``: held at the sample ``points`` at the manifold
-    time ``ka``, the Coal distances ``(C,)`` [m] of the finger's other links and of its
-    fingertip link to the object (:meth:`ObjectClearance.distances`; from the kept
-    ``distances`` if given)."""
-    if distances is None:
-        clear = ObjectClearance(hand, finger, obj, contact)
-        return lambda points: clear.distances(
-            hand.to_full(finger, manifold.q[ka, points]), manifold.T_palm_object[ka]
-        )
-    check_kept_clearance(distances, finger, manifold, contact)
+    time ``ka``, the distances ``(C,)`` [m] of the finger's other links and of its
+    fingertip link to the object, from ``distances`` (exact below the requirements)."""
     return lambda points: distances(np.full(points.size, ka), points)
 
 
@@ -487,9 +479,14 @@ class _Screen:
         self.closest: dict[str, tuple[float, float]] = {}
         self.window = _REMOVABLE_WINDOW
 
+    def with_others(self, p: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The other contacts and ``(p, n)``: points and normals ``(F, 3)``."""
+        return np.vstack([self.other_p, p[None]]), np.vstack([self.other_n, n[None]])
+
     def eps(self, p: np.ndarray, n: np.ndarray) -> float:
-        """Ferrari-Canny epsilon of the other contacts and ``(p, n)``."""
-        return self.epsilons(np.vstack([self.other_p, p[None]]), np.vstack([self.other_n, n[None]]))
+        """Ferrari-Canny epsilon of the other contacts and ``(p, n)`` (each set's hull
+        computed once)."""
+        return self.epsilons(*self.with_others(p, n))
 
     def links_clear(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(C,)`` bool: the finger at the sample ``points`` keeps its links clear of the
@@ -509,24 +506,25 @@ class _Screen:
         if best is None or measured - required > best[0] - best[1]:
             self.closest[why] = (measured, required)
 
-    def rejection(self, i: int, p: np.ndarray, n: np.ndarray) -> tuple[str | None, float]:
+    def rejection(self, i: int, p: np.ndarray, n: np.ndarray) -> str | None:
         """Why sample point ``i`` at ``(p, n)`` (its links already clear of the object)
-        is refused, or None, and its epsilon with the other contacts (NaN when not
-        computed); a refusal is counted (:attr:`rejected`, :attr:`closest`). The finger
-        clearance is tested first: one Coal pass, where the epsilon is a 6-D hull; a
-        candidate that fails both counts as a finger-clearance rejection."""
+        is refused, or None; a refusal is counted (:attr:`rejected`, :attr:`closest`).
+        The finger clearance is tested first: one Coal pass, where the epsilon is a 6-D
+        hull; a candidate that fails both counts as a finger-clearance rejection. Force
+        closure is decided by :meth:`ScreeningEpsilons.closes` (mostly without the hull);
+        a refusal measures the epsilon, for the failure's numbers."""
         if self.finger_clear is not None:
             q_all = np.array(self.q_hand_arrive, float)
             q_all[self.finger.q_indices] = self.manifold.q[self.ka, i]
             d = self.finger_clear(q_all)
             if d < self.finger_clearance_m:
                 self._reject("finger clearance", d, self.finger_clearance_m)
-                return "finger clearance", float("nan")
-        e = self.eps(p, n)
-        if e <= FORCE_CLOSURE_TOL:
-            self._reject("force closure", e, FORCE_CLOSURE_TOL)
-            return "force closure", e
-        return None, e
+                return "finger clearance"
+        p_all, n_all = self.with_others(p, n)
+        if not self.epsilons.closes(p_all, n_all):
+            self._reject("force closure", self.epsilons(p_all, n_all), FORCE_CLOSURE_TOL)
+            return "force closure"
+        return None
 
     def removable(self, p: np.ndarray, n: np.ndarray) -> int:
         """How many of the other contacts could let go, with ``(p, n)`` landed, the rest
@@ -558,10 +556,15 @@ class _Screen:
         The link clearance is tested first, in batches of ``_LINK_BATCH`` candidates in
         order (Coal); at most ``max_checks`` candidates whose links clear the object and
         the other fingers get the slower quality test (a finger-clearance refusal costs
-        one Coal pass and does not count)."""
+        one Coal pass and does not count). The epsilons (6-D hulls) of P and of a
+        passing candidate are computed only where the choice reads them."""
         pts, normals, idx = self.sample.points, self.sample.normals, ranked.idx
-        eps_P = self.eps(np.asarray(P_object, float), np.asarray(n_P_object, float))
-        passing: list[tuple[int, bool, int, NewContact]] = []
+        P, n_P = np.asarray(P_object, float), np.asarray(n_P_object, float)
+
+        def kept(i: int) -> bool:
+            return kept_quality(self.eps(pts[i], normals[i]), self.eps(P, n_P))
+
+        passing: list[tuple[int, int, int]] = []  # (removable, position, candidate)
         best_removable = self.other_p.shape[0] if self.other_p.shape[0] >= 3 else 0
         clear = np.zeros(order.size, bool)
         links, tip = np.zeros(order.size), np.zeros(order.size)  # [m]
@@ -578,34 +581,47 @@ class _Screen:
                 continue
             screened += 1
             i = int(idx[j])
-            why, e = self.rejection(i, pts[i], normals[i])
+            why = self.rejection(i, pts[i], normals[i])
             if why != "finger clearance":
                 tested += 1
             if why is not None:
                 continue
-            result = NewContact(
-                finger=self.finger.name,
-                index=i,
-                p_object=pts[i].copy(),
-                n_object=normals[i].copy(),
-                q_arrive=self.manifold.q[self.ka, i].copy(),
-                t_arrive_s=float(self.manifold.times_s[self.ka]),
-                exit_time_s=float(ranked.t_exit[j]),
-                margin_rad=float(ranked.margin[j]),
-                distance_from_P_m=float(ranked.dist[j]),
-                epsilon=float(e),
-                epsilon_with_P=float(eps_P),
-                quality_kept=kept_quality(e, eps_P),
-                n_candidates=int(idx.size),
-                rank=position,
-            )
             r = self.removable(pts[i], normals[i]) if self.window > 1 else 0
-            passing.append((r, result.quality_kept, -position, result))
-            if (r == best_removable and result.quality_kept) or len(passing) >= self.window:
+            passing.append((r, position, int(j)))
+            if len(passing) >= self.window or (r == best_removable and kept(i)):
                 break
-        if passing:
-            return max(passing, key=lambda c: c[:3])[3]
-        raise self.failure(screened + self.rejected["link clearance"], idx.size, screened)
+        if not passing:
+            raise self.failure(screened + self.rejected["link clearance"], idx.size, screened)
+        most = max(r for r, _, _ in passing)
+        # among those after which most fingers could let go: the quality kept, then first
+        _, position, j = max(
+            (kept(int(idx[j])), -position, position, j) for r, position, j in passing if r == most
+        )[1:]
+        return self.new_contact(int(idx[j]), position, j, ranked, P, n_P)
+
+    def new_contact(
+        self, i: int, position: int, j: int, ranked: _Ranking, P: np.ndarray, n_P: np.ndarray
+    ) -> NewContact:
+        """The :class:`NewContact` of sample point ``i``, candidate ``j`` of ``ranked``,
+        at ``position`` in the order."""
+        pts, normals = self.sample.points, self.sample.normals
+        e, eps_P = self.eps(pts[i], normals[i]), self.eps(P, n_P)
+        return NewContact(
+            finger=self.finger.name,
+            index=i,
+            p_object=pts[i].copy(),
+            n_object=normals[i].copy(),
+            q_arrive=self.manifold.q[self.ka, i].copy(),
+            t_arrive_s=float(self.manifold.times_s[self.ka]),
+            exit_time_s=float(ranked.t_exit[j]),
+            margin_rad=float(ranked.margin[j]),
+            distance_from_P_m=float(ranked.dist[j]),
+            epsilon=float(e),
+            epsilon_with_P=float(eps_P),
+            quality_kept=kept_quality(e, eps_P),
+            n_candidates=int(ranked.idx.size),
+            rank=position,
+        )
 
     def failure(self, checked: int, n_candidates: int, screened: int) -> ContactError:
         """The error when none of ``checked`` candidates passes: the binding rejection,

@@ -80,6 +80,17 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
+_ALL = slice(None)  # every row or column of a manifold array
+
+
+def _block(rows: slice | np.ndarray, points: slice | np.ndarray) -> tuple:
+    """The index of the block ``rows`` x ``points`` of a ``(T, N)`` array (an outer
+    product when both are index arrays)."""
+    if isinstance(rows, slice) or isinstance(points, slice):
+        return rows, points
+    return np.ix_(np.asarray(rows), np.asarray(points))
+
+
 @dataclass(frozen=True)
 class Manifold:
     """One finger's manifold over a time grid.
@@ -122,16 +133,31 @@ class Manifold:
         """``(T, N)`` inside the limits and the pad facing the surface."""
         return self.inside & self.pad_ok
 
-    def usable(self, margin_rad: float) -> np.ndarray:
-        """``(T, N)`` feasible with at least ``margin_rad`` to every boundary plane."""
-        return self.feasible & (self.margin_rad >= margin_rad)
+    def usable(
+        self,
+        margin_rad: float,
+        *,
+        rows: slice | np.ndarray = _ALL,
+        points: slice | np.ndarray = _ALL,
+    ) -> np.ndarray:
+        """``(T, N)`` feasible with at least ``margin_rad`` to every boundary plane; with
+        ``rows`` (time indices) and ``points`` (sample indices), only that block."""
+        block = _block(rows, points)
+        return self.inside[block] & self.pad_ok[block] & (self.margin_rad[block] >= margin_rad)
 
-    def holdable(self, margin_rad: float) -> np.ndarray:
+    def holdable(
+        self,
+        margin_rad: float,
+        *,
+        rows: slice | np.ndarray = _ALL,
+        points: slice | np.ndarray = _ALL,
+    ) -> np.ndarray:
         """``(T, N)`` :meth:`usable` and, as far as the fingertip link's shape tells
         (:attr:`tip_clear`), held there without the link sinking into the face: what
-        a held contact's exit time is read from (a ranking; Coal decides)."""
-        usable = self.usable(margin_rad)
-        return usable if self.tip_clear is None else usable & self.tip_clear
+        a held contact's exit time is read from (a ranking; Coal decides). ``rows``,
+        ``points``: as in :meth:`usable`."""
+        usable = self.usable(margin_rad, rows=rows, points=points)
+        return usable if self.tip_clear is None else usable & self.tip_clear[_block(rows, points)]
 
     def time_index(self, t_s: float) -> int:
         """Index of the first grid time >= ``t_s`` (clamped to the last)."""

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..exceptions import InputError
 from ..model.clearance import LinkClearance
-from ..model.distances import object_gap_bound
+from ..model.distances import object_gap_bounds
 from ..model.hand import Hand
 from ..model.objects import ConvexObject
 from .contact import ContactModel
@@ -118,6 +118,9 @@ def closes_without(
 #: meets the requirement by this much [m] (Coal's GJK tolerance is 1e-9 m).
 BOUND_MARGIN_M = 1e-6
 
+#: The times :func:`held_clear` measures first for each point; the runs then double.
+HELD_FIRST_RUN = 4
+
 
 class ManifoldClearance:
     """The Coal distances [m] of one finger, held at its manifold's points, to the
@@ -129,7 +132,7 @@ class ManifoldClearance:
     for the same entries again and again (the same candidates at the next lift-off
     time, after a failed attempt, when backing up). Their readers compare them with the
     contact model's requirements only, so an entry whose lower bound
-    (:func:`~regrasp_pin.model.distances.object_gap_bound`) already meets the largest of
+    (:func:`~regrasp_pin.model.distances.object_gap_bounds`) already meets the largest of
     them by :data:`BOUND_MARGIN_M` keeps that bound instead of a Coal query: a distance
     below ``max(link_clearance_m, choice_link_clearance_m)`` (links) or
     ``-tip_penetration_m`` (fingertip link) is exact, one above may be a lower bound.
@@ -181,20 +184,27 @@ class ManifoldClearance:
             new_r, new_c = np.divmod(np.unique(r[unknown] * n + c[unknown]), n)
             full = self.hand.to_full(self.finger, self.manifold.q[new_r, new_c])
             T = self.manifold.T_palm_object[new_r]
-            for j, (m, below) in enumerate(
-                zip((self._links, self._tip), self._exact_below, strict=True)
-            ):
-                self._values[new_r, new_c, j] = self._measure(m, full, T, below)
+            clearances = (self._links, self._tip)
+            bounds = object_gap_bounds(
+                self.hand, [m.geometry_ids for m in clearances], self.obj, full, T
+            )
+            for j, (m, below) in enumerate(zip(clearances, self._exact_below, strict=True)):
+                self._values[new_r, new_c, j] = self._exact_where_low(m, bounds[j], full, T, below)
             self._known[new_r, new_c] = True
         out = self._values[r, c]
         return out[:, 0], out[:, 1]
 
-    def _measure(
-        self, clearance: LinkClearance, full: np.ndarray, T: np.ndarray, exact_below: float
+    def _exact_where_low(
+        self,
+        clearance: LinkClearance,
+        bound: np.ndarray,
+        full: np.ndarray,
+        T: np.ndarray,
+        exact_below: float,
     ) -> np.ndarray:
-        """The lower bounds of the configurations ``full``, replaced by Coal's distance
-        where a bound is below ``exact_below`` [m]."""
-        out = object_gap_bound(self.hand, clearance.geometry_ids, self.obj, full, T)
+        """The lower bounds ``bound`` of the configurations ``full``, replaced by Coal's
+        distance where a bound is below ``exact_below`` [m]."""
+        out = bound.copy()
         low = np.flatnonzero(out < exact_below)
         if low.size:
             out[low] = clearance(full[low], T[low])
@@ -287,18 +297,34 @@ def held_clear(
     ``contact.link_clearance_m`` from the object and its fingertip link sinks in by at
     most ``contact.tip_penetration_m`` (Coal), at that time and every one before it.
 
-    Only the times before a point's first exit from the usable set are measured: what
-    comes after cannot change the first False of a column. ``distances``: where the
-    distances are kept between calls (the finger's, on this manifold); None: measured
-    afresh."""
+    Only the times up to a column's first failure are measured (what comes after cannot
+    change it): the times before the point leaves the usable set, in runs that double
+    in length (:data:`HELD_FIRST_RUN` times first) until the column fails or ends.
+    ``distances``: where the distances are kept between calls (the finger's, on this
+    manifold); None: measured afresh."""
     if distances is None:
         distances = ManifoldClearance(hand, finger, obj, manifold, contact)
     else:
         check_kept_clearance(distances, finger, manifold, contact)
-    usable = manifold.usable(contact.limit_margin_rad)[ka:, points]
-    still = np.logical_and.accumulate(usable, axis=0)  # (K, C): not left yet
-    rows, cols = np.nonzero(still)
-    d, d_tip = distances(ka + rows, points[cols])  # finite where usable
-    ok = np.zeros_like(still)
-    ok[rows, cols] = (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
+    points = np.asarray(points, np.int64).reshape(-1)
+    usable = manifold.usable(contact.limit_margin_rad, rows=slice(ka, None), points=points)
+    # the times before each column first leaves the usable set: rows 0 .. n_rows - 1
+    n_rows = np.logical_and.accumulate(usable, axis=0).sum(axis=0)
+    ok = np.zeros(usable.shape, bool)
+    done = np.zeros(points.size, np.int64)  # rows measured so far, per column
+    open_cols = np.flatnonzero(n_rows > 0)
+    run = HELD_FIRST_RUN
+    while open_cols.size:
+        start = done[open_cols]
+        length = np.minimum(start + run, n_rows[open_cols]) - start
+        cols = np.repeat(open_cols, length)
+        rows = np.repeat(start - np.cumsum(length) + length, length) + np.arange(length.sum())
+        d, d_tip = distances(ka + rows, points[cols])
+        passed = (d >= contact.link_clearance_m) & (d_tip >= -contact.tip_penetration_m)
+        ok[rows, cols] = passed
+        failed = np.zeros(points.size, bool)
+        failed[cols[~passed]] = True
+        done[open_cols] = start + length
+        open_cols = open_cols[~failed[open_cols] & (done[open_cols] < n_rows[open_cols])]
+        run *= 2
     return np.logical_and.accumulate(ok, axis=0)

@@ -664,15 +664,36 @@ def object_gap_bound(
     ``q`` ``(N, nq)`` and object pose ``T_palm_object`` ``(N, 4, 4)`` (palm frame): the
     face-plane support bound of the broad phase, valid under penetration too. A bound at
     or above a requirement proves Coal's distance meets it (to Coal's tolerances)."""
+    return object_gap_bounds(hand, [ids], obj, q, T_palm_object)[0]
+
+
+def object_gap_bounds(
+    hand: Hand,
+    groups: Sequence[Sequence[int]],
+    obj: ConvexObject,
+    q: np.ndarray,
+    T_palm_object: np.ndarray,
+) -> np.ndarray:
+    """:func:`object_gap_bound` of each group of geometry ids (e.g. a finger's links and
+    its fingertip link), ``(len(groups), N)`` [m]: the same bits as one call per group,
+    with the geometries placed in one pass."""
     q = np.atleast_2d(np.asarray(q, float))
     T = np.broadcast_to(np.asarray(T_palm_object, float), (q.shape[0], 4, 4))
+    out = np.full((len(groups), q.shape[0]), np.inf)
+    ids = [g for group in groups for g in group]
     if not ids or q.shape[0] == 0:
-        return np.full(q.shape[0], np.inf)
+        return out
     geoms = [_geometry(hand, g) for g in ids]
     R, p = _placements(geoms, q)  # (N, G, 3, 3), (N, G, 3)
     c = _place(R, p, np.array([g.centre for g in geoms]).reshape(-1, 3))
     params = np.array([g.support for g in geoms]).reshape(-1, 6)
-    return _placed_object_bound(obj, c, R, T, params).min(axis=1)
+    bound = _placed_object_bound(obj, c, R, T, params)  # (N, G)
+    start = 0
+    for k, group in enumerate(groups):
+        if group:
+            out[k] = bound[:, start : start + len(group)].min(axis=1)
+        start += len(group)
+    return out
 
 
 def capsule_gap(
