@@ -506,6 +506,15 @@ class _Screen:
         if best is None or measured - required > best[0] - best[1]:
             self.closest[why] = (measured, required)
 
+    def _reject_links(self, links: np.ndarray, tip: np.ndarray) -> None:
+        """Count the candidates refused for their links, whose distances are ``links``
+        and ``tip`` [m], and keep the one nearest to passing
+        (:func:`closest_object_miss`, the first of equals)."""
+        self.rejected["link clearance"] += int(links.size)
+        miss = closest_object_miss(links, tip, self.contact)
+        if miss is not None:
+            self.closest["link clearance"] = miss
+
     def rejection(self, i: int, p: np.ndarray, n: np.ndarray) -> str | None:
         """Why sample point ``i`` at ``(p, n)`` (its links already clear of the object)
         is refused, or None; a refusal is counted (:attr:`rejected`, :attr:`closest`).
@@ -569,6 +578,7 @@ class _Screen:
         clear = np.zeros(order.size, bool)
         links, tip = np.zeros(order.size), np.zeros(order.size)  # [m]
         screened = tested = 0
+        refused: list[int] = []  # positions refused for their links (counted at the end)
         for position, j in enumerate(order):
             if tested >= max_checks:
                 break
@@ -576,8 +586,7 @@ class _Screen:
                 batch = slice(position, position + _LINK_BATCH)
                 clear[batch], links[batch], tip[batch] = self.links_clear(idx[order[batch]])
             if not clear[position]:
-                miss = closest_object_miss(links[position], tip[position], self.contact)
-                self._reject("link clearance", *(miss or (np.nan, np.nan)))
+                refused.append(position)
                 continue
             screened += 1
             i = int(idx[j])
@@ -591,6 +600,7 @@ class _Screen:
             if len(passing) >= self.window or (r == best_removable and kept(i)):
                 break
         if not passing:
+            self._reject_links(links[refused], tip[refused])
             raise self.failure(screened + self.rejected["link clearance"], idx.size, screened)
         most = max(r for r, _, _ in passing)
         # among those after which most fingers could let go: the quality kept, then first
