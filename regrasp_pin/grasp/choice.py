@@ -154,6 +154,7 @@ def choose_new_contact(
     epsilons: ScreeningEpsilons | None = None,
     landing_s: Callable[[np.ndarray], np.ndarray] | None = None,
     land_by_s: float = math.inf,
+    frees: Sequence[str] = (),
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -212,6 +213,9 @@ def choose_new_contact(
             land at each arrival configuration (e.g. from the joint velocity limits);
             candidates that would land after ``land_by_s`` [s] are not chosen.
         land_by_s: See ``landing_s`` [s].
+        frees: Fingers of ``others`` that Q must let go: with Q landed, the other
+            contacts without any one of them are still in force closure (a finger that
+            must let go, whose neighbours do not hold without it now).
 
     Returns:
         The :class:`NewContact`.
@@ -281,6 +285,9 @@ def choose_new_contact(
                 hand, finger.name, obj, manifold, idx[top], ka, contact, lasting, distances
             ),
         )
+    unknown = sorted(set(frees) - set(others))
+    if unknown:
+        raise InputError("frees", f"names {unknown}", f"fingers of others: {sorted(others)}")
     screen = _Screen(
         hand,
         finger,
@@ -297,6 +304,7 @@ def choose_new_contact(
         q_hand_arrive,
         finger_clearance_m,
         epsilons,
+        frees=[list(others).index(n) for n in frees],
     )
     return screen.first(order, ranked, P_object, n_P_object, max_checks)
 
@@ -453,6 +461,7 @@ class _Screen:
         q_hand_arrive: np.ndarray | None,
         finger_clearance_m: float,
         epsilons: ScreeningEpsilons | None = None,
+        frees: Sequence[int] = (),
     ) -> None:
         self.hand, self.finger, self.manifold, self.sample = hand, finger, manifold, sample
         self.ka = ka
@@ -474,7 +483,13 @@ class _Screen:
             FingerClearance.shared(hand, finger.name) if q_hand_arrive is not None else None
         )
         self.finger_clearance_m = finger_clearance_m
-        self.rejected = {"force closure": 0, "link clearance": 0, "finger clearance": 0}
+        self.frees = tuple(frees)  # rows of the other contacts that Q must let go
+        self.rejected = {
+            "force closure": 0,
+            "link clearance": 0,
+            "finger clearance": 0,
+            "not freeing": 0,
+        }
         # per reason, the rejected candidate nearest to passing: (measured, required)
         self.closest: dict[str, tuple[float, float]] = {}
         self.window = _REMOVABLE_WINDOW
@@ -520,8 +535,9 @@ class _Screen:
         is refused, or None; a refusal is counted (:attr:`rejected`, :attr:`closest`).
         The finger clearance is tested first: one Coal pass, where the epsilon is a 6-D
         hull; a candidate that fails both counts as a finger-clearance rejection. Force
-        closure is decided by :meth:`ScreeningEpsilons.closes` (mostly without the hull);
-        a refusal measures the epsilon, for the failure's numbers."""
+        closure is decided by :meth:`ScreeningEpsilons.closes` (mostly without the hull),
+        with the other contacts, then without each of :attr:`frees` in turn ("not
+        freeing"); a refusal measures the epsilon, for the failure's numbers."""
         if self.finger_clear is not None:
             q_all = np.array(self.q_hand_arrive, float)
             q_all[self.finger.q_indices] = self.manifold.q[self.ka, i]
@@ -533,6 +549,11 @@ class _Screen:
         if not self.epsilons.closes(p_all, n_all):
             self._reject("force closure", self.epsilons(p_all, n_all), FORCE_CLOSURE_TOL)
             return "force closure"
+        for row in self.frees:
+            p_rest, n_rest = np.delete(p_all, row, 0), np.delete(n_all, row, 0)
+            if not self.epsilons.closes(p_rest, n_rest):
+                self._reject("not freeing", self.epsilons(p_rest, n_rest), FORCE_CLOSURE_TOL)
+                return "not freeing"
         return None
 
     def removable(self, p: np.ndarray, n: np.ndarray) -> int:
@@ -649,7 +670,8 @@ class _Screen:
         measured, required = self.closest.get(main, (None, None))
         nearest = ""
         if measured is not None and required is not None:
-            scale, unit = (1.0, "") if main == "force closure" else (1e3, " mm")
+            epsilon = main in ("force closure", "not freeing")
+            scale, unit = (1.0, "") if epsilon else (1e3, " mm")
             nearest = (
                 f"; the nearest to passing the {main}: {measured * scale:.3g}{unit}, "
                 f"need {required * scale:.3g}{unit}"
@@ -663,6 +685,7 @@ class _Screen:
                 "force closure": FailureKind.FORCE_CLOSURE,
                 "link clearance": FailureKind.OBJECT_CLEARANCE,
                 "finger clearance": FailureKind.FINGER_COLLISION,
+                "not freeing": FailureKind.FORCE_CLOSURE,
             }[main],
             measured=measured,
             required=required,

@@ -114,9 +114,11 @@ def advance(
     exclude: list[np.ndarray] | None = None,
     reserved: tuple[tuple[np.ndarray, float], ...] = (),
     may_hold: bool = True,
+    frees: tuple[str, ...] = (),
 ) -> PlanState:
     """The state after ``trig``: one verified regrasp (landing by ``end_by_s``, away
-    from the ``exclude`` points and out of the ``reserved`` room: see
+    from the ``exclude`` points, out of the ``reserved`` room and, with ``frees``, on a
+    contact without which those fingers could let go: see
     :meth:`RegraspSearch.find`), a let-go, or its finger held to the end: when it is
     too late for a regrasp, or (``may_hold``: False for a regrasp whose point is to
     move the finger) when no regrasp or let-go is found, if its contact lasts to the
@@ -128,7 +130,9 @@ def advance(
         if held is not None:
             return held
     try:
-        return _advance(ctx, state, trig, triggers, steps, (win, why), end_by_s, exclude, reserved)
+        return _advance(
+            ctx, state, trig, triggers, steps, (win, why), end_by_s, exclude, reserved, frees
+        )
     except PlanningError as exc:
         held = _held_to_end(ctx, state, trig, f"no regrasp ({exc.kind.value})")
         if held is None or not may_hold:
@@ -146,6 +150,7 @@ def _advance(
     end_by_s: float | None,
     exclude: list[np.ndarray] | None,
     reserved: tuple[tuple[np.ndarray, float], ...],
+    frees: tuple[str, ...] = (),
 ) -> PlanState:
     """:func:`advance` before its last resort (holding to the end); ``window_why``:
     the finger's lift-off window and why (:func:`window`)."""
@@ -166,7 +171,7 @@ def _advance(
     starts = start_times(win, latest_s=end_by - D, step_s=p.start_step_s, max_starts=p.max_starts)
     if not starts:
         busy = win.empty
-        released = None if busy else let_go(ctx, state, trig, win, stay, why)
+        released = None if busy or frees else let_go(ctx, state, trig, win, stay, why)
         if released is not None:
             return released
         raise PlanningError(
@@ -201,6 +206,7 @@ def _advance(
             landing_check=lambda res: _check_landing(ctx, name, res, landed, triggers),
             reserved=reserved,
             shortest_s=D,
+            frees=frees,
         )
 
     tries = (starts, end_by_s)
@@ -220,7 +226,8 @@ def _advance(
     try:
         found = search(*tries)
     except PlanningError as exc:
-        released = let_go(ctx, state, trig, win, stay, why)
+        # a finger that moves to free another must land (letting go frees nothing)
+        released = None if frees else let_go(ctx, state, trig, win, stay, why)
         if released is not None:
             return released
         if rush is not None:  # the dead end stands: no faster regrasp either

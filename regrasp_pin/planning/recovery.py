@@ -1,7 +1,9 @@
 """Backing up when a finger finds no regrasp (:func:`recover`): another decision than
 the one that failed.
 
-In order: another finger due soon goes first (:func:`_another_first`); a neighbour
+In order: another finger due soon goes first (:func:`_another_first`); when the
+other fingers do not hold without the finger, one of them regrasps first, onto a
+contact with which they would (:func:`_free_first`); a neighbour
 whose contact or links take the room of the finger's best new contact regrasps first,
 out of that room, now or before one of the last regrasps (:func:`_make_room`); where
 the finger can only let go with an idle finger joining in its place, a neighbour that
@@ -47,6 +49,8 @@ def recover(
     success ``steps`` holds the regrasps of the new state."""
     trig = contenders[0]
     redone = _another_first(ctx, state, contenders, triggers, steps)
+    if redone is None:
+        redone = _free_first(ctx, state, trig, triggers, steps, failure)
     if redone is None:
         redone = _make_room(ctx, state, trig, triggers, steps, failure)
     if redone is None:
@@ -143,6 +147,65 @@ def _make_room(
             )
             if new_state is not None:
                 return new_state
+    return None
+
+
+def _free_first(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    triggers: list[Trigger],
+    steps: list[Step],
+    failure: PlanningError,
+) -> PlanState | None:
+    """When ``trig.finger`` must let go but the other fingers are not in force closure
+    without it (a ``force-closure`` failure), let one of them regrasp first, onto a
+    contact with which the others would hold without ``trig.finger``
+    (:meth:`RegraspSearch.find`'s ``frees``); None if none can.
+
+    As in :func:`_make_room`, the neighbour goes now or before one of the last
+    regrasps (the finger holding the same contact), and lands before the finger's
+    lift-off window closes; what follows is planned again after it."""
+    if failure.kind != FailureKind.FORCE_CLOSURE:
+        return None
+    name, h = trig.finger, state.holding[trig.finger]
+    win, _ = window(ctx, state, trig, triggers)
+    bases = _room_bases(ctx, state, triggers, steps, name, h.t_from, win.latest_s)
+    holding = [n for n in ctx.scene.hand.finger_names if n != name and n in state.holding]
+    for other in holding:
+        for base, base_triggers, k in bases:
+            if ctx.budget.exhausted:
+                return None
+            if other not in base.holding:
+                continue
+            key = (_signature(base), f"{other} frees {name}")
+            if key in ctx.tried:
+                continue
+            ctx.tried.add(key)
+            log.info("%s cannot let go (force closure): %s regrasps to free it", name, other)
+            lost = {e.finger: e.lost_s for e in base_triggers}
+            go = Trigger(
+                time_s=max(base.now, base.holding[other].t_from),
+                finger=other,
+                reason=f"moves so that {name} can let go",
+                lost_s=lost.get(other, ctx.scene.motion.t_end),
+            )
+            trial = list(steps[:k])
+            try:
+                new_state = advance(
+                    ctx,
+                    base,
+                    go,
+                    base_triggers,
+                    trial,
+                    end_by_s=win.latest_s,
+                    may_hold=False,
+                    frees=(name,),
+                )
+            except PlanningError:
+                continue
+            steps[:] = trial
+            return new_state
     return None
 
 

@@ -127,6 +127,7 @@ class _Call:
     exclude: list[np.ndarray]
     landing_check: Callable[[RegraspResult], Attempt | None] | None
     reserved: Sequence[tuple[np.ndarray, float]]
+    frees: tuple[str, ...] = ()
     attempts: list[Attempt] = field(default_factory=list)
     failed: dict[tuple, PlanningError] = field(default_factory=dict)
     out_of_budget: bool = False
@@ -186,6 +187,7 @@ class RegraspSearch:
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
         reserved: Sequence[tuple[np.ndarray, float]] = (),
         shortest_s: float | None = None,
+        frees: Sequence[str] = (),
     ) -> Found:
         """Search a verified regrasp of ``finger`` (see the module docstring).
 
@@ -207,6 +209,7 @@ class RegraspSearch:
             reserved: ``(point, radius)`` pairs (object frame, [m]): room Q must leave
                 free for another finger's landing.
             shortest_s: The shortest regrasp [s] (default ``regrasp.duration_s``).
+            frees: Fingers of ``others`` that Q must let go (see :meth:`choose`).
 
         Raises:
             PlanningError: nothing verified; its ``kind`` is the dominant cause, its
@@ -230,6 +233,7 @@ class RegraspSearch:
             exclude=list(exclude or []),
             landing_check=landing_check,
             reserved=reserved,
+            frees=tuple(frees),
         )
         for start in starts:
             if start + d_min > end_by + TIME_TOL_S:
@@ -276,6 +280,7 @@ class RegraspSearch:
         excluded: list[np.ndarray],
         reserved: Sequence[tuple[np.ndarray, float]] = (),
         landing: tuple[Callable[[np.ndarray], np.ndarray], float] | None = None,
+        frees: Sequence[str] = (),
     ) -> NewContact:
         """The best new contact Q for ``finger`` landing at ``t_arrive`` [s]
         (:func:`~regrasp_pin.grasp.choice.choose_new_contact`: the paper's criterion, Q
@@ -283,7 +288,8 @@ class RegraspSearch:
         ``q_hand``), away from ``P``, from the ``excluded`` points (object frame) and
         out of the ``reserved`` room. With ``landing`` ``(landing_s, land_by_s)``: only
         a Q whose earliest landing (``landing_s`` of its arrival configurations, e.g.
-        :meth:`flight_landing`) is by ``land_by_s`` [s].
+        :meth:`flight_landing`) is by ``land_by_s`` [s]. With ``frees``: only a Q with
+        which the ``others`` without any one of those fingers are in force closure.
 
         Raises:
             ContactError: no candidate (``too-late``: none that lands in time).
@@ -313,6 +319,7 @@ class RegraspSearch:
             epsilons=self._screening_epsilons(),
             landing_s=landing_s,
             land_by_s=land_by_s,
+            frees=frees,
         )
 
     def flight_landing(
@@ -423,6 +430,7 @@ class RegraspSearch:
                 excluded,
                 call.reserved,
                 landing,
+                call.frees,
             )
         except ContactError as exc:
             attempts.append(exc.as_attempt(where))
@@ -463,6 +471,7 @@ class RegraspSearch:
                         excluded,
                         call.reserved,
                         landing,
+                        call.frees,
                     )
                 except ContactError as exc:
                     attempts.append(exc.as_attempt(what))
