@@ -1505,3 +1505,42 @@ def test_a_new_contact_is_apart_when_the_fingertip_spheres_resting_there_are():
     # an explicit separation is the points' distance, as before
     by_points = choice_module._apart_from(hand, f, sample, others, 2 * r + 0.001)
     np.testing.assert_array_equal(by_points, ~near)
+
+
+def test_q_that_frees_a_finger_lets_the_others_hold_without_it(five):
+    """With ``frees``, Q is one with which the other contacts without that finger are in
+    force closure (the screening epsilon, as the choice computes it), also for a finger
+    that the plain choice does not free; where no candidate does, the failure is a
+    force-closure one that says so. A name not among the others is refused."""
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P, others = _regrasp_of(grasp, "thumb")
+    kw = dict(P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False)
+    m = manifolds["thumb"]
+    plain = choose_new_contact(hand, box, m, sample, 0.5, **kw)
+    freed = 0
+    for name in others:
+        rest = [n for n in others if n != name]
+        p_rest = np.array([others[n][0] for n in rest])
+        n_rest = np.array([others[n][1] for n in rest])
+
+        def eps_without(q, p_rest=p_rest, n_rest=n_rest):
+            return ferrari_canny_epsilon(
+                np.vstack([p_rest, q.p_object]),
+                np.vstack([n_rest, q.n_object]),
+                MU,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=box.radius_m,
+            )
+
+        try:
+            q = choose_new_contact(hand, box, m, sample, 0.5, frees=(name,), **kw)
+        except ContactError as e:
+            assert e.kind == FailureKind.FORCE_CLOSURE and "not freeing" in str(e), name
+            assert eps_without(plain) <= FORCE_CLOSURE_TOL
+            continue
+        assert eps_without(q) > FORCE_CLOSURE_TOL, name
+        # a finger the plain choice does not free: the constraint chose another Q
+        freed += eps_without(plain) <= FORCE_CLOSURE_TOL
+    assert freed >= 1
+    with pytest.raises(InputError, match="frees"):
+        choose_new_contact(hand, box, m, sample, 0.5, frees=("thumb",), **kw)

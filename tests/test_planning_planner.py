@@ -19,6 +19,8 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Plan, make_scenario, plan_manipulation
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
+from regrasp_pin.grasp.quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon
+from regrasp_pin.grasp.screening import SCREEN_EDGES
 from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.plan import ContactPhase
 from regrasp_pin.planning.planner import PlannerParams
@@ -469,6 +471,54 @@ def test_a_neighbour_makes_room_for_a_crowded_finger(tmp_path):
     assert np.linalg.norm(then.Q_object - first.P_object) < sep
     # ... and the neighbour's new contact is out of the index's way
     assert np.linalg.norm(then.Q_object - first.Q_object) >= sep
+    check = recheck_plan(plan, max_step_rad=1e-3)
+    assert check.ok, check.problems
+
+
+def test_a_neighbour_regrasps_first_to_free_a_finger_that_must_let_go(tmp_path):
+    """Suite spec 95 (the Allegro hand turning a random convex mesh by -141 deg while it
+    moves): a finger whose hold is about to end cannot let go, the others not being in
+    force closure without it (the middle finger once failed so at t=5.36 s). Another
+    finger regrasps first, onto a contact with which the others hold without it (the
+    screening epsilon, recomputed here from the plan file), and the freed finger
+    regrasps after that landing: a full plan that passes the independent re-check."""
+    scen = build_scenario(generate_specs(96, seed=0)[95])
+    result = plan_manipulation(
+        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
+    )
+    plan = Plan.load(result.plan.save(tmp_path / "plan.json"))
+    moves = plan.regrasps()
+    freeing = [i for i, r in enumerate(moves) if r.reason.startswith("moves so that ")]
+    assert freeing, [r.reason for r in moves]
+    for i in freeing:
+        first = moves[i]
+        freed = first.reason.split()[3]
+        # the contacts held as it lands (its own from then on), but the freed finger's
+        t = first.t_end
+
+        def holds(c, n, t=t, first=first):
+            if n == first.finger:
+                return abs(c.t_start - t) < 1e-9
+            return c.t_start <= t + 1e-9 and t < c.t_end - 1e-9
+
+        held = [
+            c
+            for n, phases in plan.phases.items()
+            if n != freed
+            for c in phases
+            if isinstance(c, ContactPhase) and holds(c, n)
+        ]
+        assert len(held) >= 3
+        eps = ferrari_canny_epsilon(
+            np.array([c.p_object for c in held]),
+            np.array([c.n_object for c in held]),
+            scen.params.mu,
+            n_edges=SCREEN_EDGES,
+            torque_scale_m=scen.obj.radius_m,
+        )
+        assert eps > FORCE_CLOSURE_TOL, (first.finger, freed, eps)
+        later = [r for r in moves[i + 1 :] if r.finger == freed]
+        assert later and later[0].t_start >= first.t_end - 1e-9
     check = recheck_plan(plan, max_step_rad=1e-3)
     assert check.ok, check.problems
 
