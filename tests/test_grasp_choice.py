@@ -1509,9 +1509,10 @@ def test_a_new_contact_is_apart_when_the_fingertip_spheres_resting_there_are():
 
 def test_q_that_frees_a_finger_lets_the_others_hold_without_it(five):
     """With ``frees``, Q is one with which the other contacts without that finger are in
-    force closure (the screening epsilon, as the choice computes it), also for a finger
-    that the plain choice does not free; where no candidate does, the failure is a
-    force-closure one that says so. A name not among the others is refused."""
+    force closure (the planner's test before a finger lifts off, is_force_closure), also
+    for a finger that the plain choice does not free; where no candidate does, the
+    failure is a force-closure one that says so. A name not among the others, or a
+    string, is refused."""
     hand, box, _, sample, manifolds, grasp = five
     P, n_P, others = _regrasp_of(grasp, "thumb")
     kw = dict(P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False)
@@ -1520,15 +1521,12 @@ def test_q_that_frees_a_finger_lets_the_others_hold_without_it(five):
     freed = 0
     for name in others:
         rest = [n for n in others if n != name]
-        p_rest = np.array([others[n][0] for n in rest])
-        n_rest = np.array([others[n][1] for n in rest])
 
-        def eps_without(q, p_rest=p_rest, n_rest=n_rest):
-            return ferrari_canny_epsilon(
-                np.vstack([p_rest, q.p_object]),
-                np.vstack([n_rest, q.n_object]),
+        def frees(q, rest=rest):
+            return is_force_closure(
+                np.vstack([[others[n][0] for n in rest], q.p_object]),
+                np.vstack([[others[n][1] for n in rest], q.n_object]),
                 MU,
-                n_edges=SCREEN_EDGES,
                 torque_scale_m=box.radius_m,
             )
 
@@ -1536,11 +1534,30 @@ def test_q_that_frees_a_finger_lets_the_others_hold_without_it(five):
             q = choose_new_contact(hand, box, m, sample, 0.5, frees=(name,), **kw)
         except ContactError as e:
             assert e.kind == FailureKind.FORCE_CLOSURE and "not freeing" in str(e), name
-            assert eps_without(plain) <= FORCE_CLOSURE_TOL
+            assert not frees(plain)
             continue
-        assert eps_without(q) > FORCE_CLOSURE_TOL, name
-        # a finger the plain choice does not free: the constraint chose another Q
-        freed += eps_without(plain) <= FORCE_CLOSURE_TOL
+        assert frees(q), name
+        freed += not frees(plain)  # the constraint chose another Q
     assert freed >= 1
-    with pytest.raises(InputError, match="frees"):
-        choose_new_contact(hand, box, m, sample, 0.5, frees=("thumb",), **kw)
+    for bad in (("thumb",), "index"):
+        with pytest.raises(InputError, match="frees"):
+            choose_new_contact(hand, box, m, sample, 0.5, frees=bad, **kw)
+
+
+def test_no_q_frees_a_finger_that_would_leave_two_contacts(five):
+    """Two point contacts cannot resist a torque about the line through them: with only
+    two others, no Q frees either, and the failure is a force-closure one whose numbers
+    are the largest epsilon (8 cone edges, the planner's) among the sets refused, below
+    the tolerance."""
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P, others = _regrasp_of(grasp, "middle")
+    two = {n: others[n] for n in ("thumb", "index")}
+    with pytest.raises(ContactError) as e:
+        choose_new_contact(
+            hand, box, manifolds["middle"], sample, 1.5, P_object=P, n_P_object=n_P,
+            others=two, contact=CONTACT, mu=MU, link_check=False, frees=("index",),
+        )  # fmt: skip
+    err = e.value
+    counts = {k: int(n) for n, k in re.findall(r"(\d+) (force closure|not freeing)", str(err))}
+    assert err.kind == FailureKind.FORCE_CLOSURE and counts["not freeing"] > 0
+    assert err.required == FORCE_CLOSURE_TOL and 0.0 <= err.measured <= FORCE_CLOSURE_TOL

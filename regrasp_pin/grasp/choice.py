@@ -43,7 +43,7 @@ from ..model.hand import Finger, Hand
 from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
 from .manifold import Manifold
-from .quality import FORCE_CLOSURE_TOL, kept_quality
+from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon, is_force_closure, kept_quality
 from .screening import (
     ManifoldClearance,
     ScreeningEpsilons,
@@ -213,21 +213,28 @@ def choose_new_contact(
             land at each arrival configuration (e.g. from the joint velocity limits);
             candidates that would land after ``land_by_s`` [s] are not chosen.
         land_by_s: See ``landing_s`` [s].
-        frees: Fingers of ``others`` that Q must let go: with Q landed, the other
-            contacts without any one of them are still in force closure (a finger that
-            must let go, whose neighbours do not hold without it now).
+        frees: Fingers of ``others`` that Q must free: with Q landed, the other
+            contacts without any one of them are still in force closure
+            (:func:`~.quality.is_force_closure`, the planner's test before a finger
+            lifts off), for a finger whose neighbours do not hold without it now.
 
     Returns:
         The :class:`NewContact`.
 
     Raises:
         ContactError: no candidate satisfies condition (a), or none keeps the other
-            fingers' grasp in force closure, or every one would land too late
+            fingers' grasp in force closure or frees the ``frees`` fingers
+            (``force-closure``, "not freeing"), or every one would land too late
             (``too-late``); the message says which finger, when, why.
-        InputError: ``t_arrive_s`` is NaN or outside the manifold's times.
+        InputError: ``t_arrive_s`` is NaN or outside the manifold's times; ``frees``
+            is a string or names a finger not in ``others``.
     """
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
+    if isinstance(frees, str) or not set(frees) <= set(others):
+        raise InputError(
+            "frees", f"is {frees!r}", f"a sequence of names of others: {sorted(others)}"
+        )
     ka, kb = _arrival_indices(manifold, t_arrive_s)
     # the landing falls between two manifold times: Q must be usable at both
     cand = manifold.usable(contact.choice_margin_rad, rows=np.array([ka, min(kb, ka)])).all(0)
@@ -285,9 +292,6 @@ def choose_new_contact(
                 hand, finger.name, obj, manifold, idx[top], ka, contact, lasting, distances
             ),
         )
-    unknown = sorted(set(frees) - set(others))
-    if unknown:
-        raise InputError("frees", f"names {unknown}", f"fingers of others: {sorted(others)}")
     screen = _Screen(
         hand,
         finger,
@@ -483,7 +487,13 @@ class _Screen:
             FingerClearance.shared(hand, finger.name) if q_hand_arrive is not None else None
         )
         self.finger_clearance_m = finger_clearance_m
-        self.frees = tuple(frees)  # rows of the other contacts that Q must let go
+        self.frees = tuple(frees)  # rows of the other contacts that Q must free
+        # the contact sets refused for force closure and for not freeing a finger: their
+        # epsilons (6-D hulls) are computed only if the choice fails for that reason
+        self.refused: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {
+            "force closure": [],
+            "not freeing": [],
+        }
         self.rejected = {
             "force closure": 0,
             "link clearance": 0,
@@ -537,7 +547,8 @@ class _Screen:
         hull; a candidate that fails both counts as a finger-clearance rejection. Force
         closure is decided by :meth:`ScreeningEpsilons.closes` (mostly without the hull),
         with the other contacts, then without each of :attr:`frees` in turn ("not
-        freeing"); a refusal measures the epsilon, for the failure's numbers."""
+        freeing", :func:`~.quality.is_force_closure`); a refused contact set is kept
+        (:attr:`refused`) for the failure's numbers."""
         if self.finger_clear is not None:
             q_all = np.array(self.q_hand_arrive, float)
             q_all[self.finger.q_indices] = self.manifold.q[self.ka, i]
@@ -547,14 +558,30 @@ class _Screen:
                 return "finger clearance"
         p_all, n_all = self.with_others(p, n)
         if not self.epsilons.closes(p_all, n_all):
-            self._reject("force closure", self.epsilons(p_all, n_all), FORCE_CLOSURE_TOL)
+            self.rejected["force closure"] += 1
+            self.refused["force closure"].append((p_all, n_all))
             return "force closure"
         for row in self.frees:
             p_rest, n_rest = np.delete(p_all, row, 0), np.delete(n_all, row, 0)
-            if not self.epsilons.closes(p_rest, n_rest):
-                self._reject("not freeing", self.epsilons(p_rest, n_rest), FORCE_CLOSURE_TOL)
+            if not is_force_closure(p_rest, n_rest, self.mu, torque_scale_m=self.scale):
+                self.rejected["not freeing"] += 1
+                self.refused["not freeing"].append((p_rest, n_rest))
                 return "not freeing"
         return None
+
+    def _closest_refused(self, why: str) -> None:
+        """Of the contact sets refused for ``why`` (force closure or not freeing), the
+        one nearest to passing, by its epsilon (the test's own: the screening epsilon,
+        or the planner's with 8 cone edges), kept in :attr:`closest` (the first of
+        equals); computed only for a failure that this refusal binds."""
+        sets = self.refused.get(why, [])
+        if not sets:
+            return
+        if why == "force closure":
+            eps = [self.epsilons(p, n) for p, n in sets]
+        else:
+            eps = [ferrari_canny_epsilon(p, n, self.mu, torque_scale_m=self.scale) for p, n in sets]
+        self.closest[why] = (max(eps), FORCE_CLOSURE_TOL)  # max: the first of equals
 
     def removable(self, p: np.ndarray, n: np.ndarray) -> int:
         """How many of the other contacts could let go, with ``(p, n)`` landed, the rest
@@ -667,6 +694,7 @@ class _Screen:
             main = max(later, key=lambda k: later[k])  # dict order breaks ties
         else:
             main = max(rejected, key=lambda k: rejected[k])
+        self._closest_refused(main)
         measured, required = self.closest.get(main, (None, None))
         nearest = ""
         if measured is not None and required is not None:

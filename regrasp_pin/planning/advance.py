@@ -20,7 +20,7 @@ import numpy as np
 
 from ..exceptions import Attempt, FailureKind, PlanningError
 from ..grasp.holding import Holding, holding_q, holds_to_end
-from ..grasp.quality import ferrari_canny_epsilon
+from ..grasp.quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon, is_force_closure
 from ..plan import RegraspPhase
 from .feasibility import longest_start_hold
 from .letgo import let_go
@@ -118,7 +118,8 @@ def advance(
 ) -> PlanState:
     """The state after ``trig``: one verified regrasp (landing by ``end_by_s``, away
     from the ``exclude`` points, out of the ``reserved`` room and, with ``frees``, on a
-    contact without which those fingers could let go: see
+    contact with which the others would hold without those fingers, held long enough
+    for one of them to regrasp and then this finger: see
     :meth:`RegraspSearch.find`), a let-go, or its finger held to the end: when it is
     too late for a regrasp, or (``may_hold``: False for a regrasp whose point is to
     move the finger) when no regrasp or let-go is found, if its contact lasts to the
@@ -203,7 +204,9 @@ def _advance(
             ctx.budget,
             end_by_s=_earliest(end_by, others_lost),  # landing later: a dead end
             exclude=exclude,
-            landing_check=lambda res: _check_landing(ctx, name, res, landed, triggers),
+            landing_check=lambda res: _check_landing(
+                ctx, name, res, landed, triggers, turns=2 if frees else 1
+            ),
             reserved=reserved,
             shortest_s=D,
             frees=frees,
@@ -305,7 +308,9 @@ def _fingers_that_stay(
     ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow
 ) -> list[str]:
     """The fingers that hold while ``trig.finger`` is in the air; PlanningError if they
-    are fewer than ``min_holding`` or not in force closure without it."""
+    are fewer than ``min_holding`` or not in force closure without it
+    (:func:`~regrasp_pin.grasp.quality.is_force_closure`, the test a regrasp that frees
+    a finger passes: ``choose_new_contact``'s ``frees``)."""
     p, name = ctx.params, trig.finger
     stay = [n for n in ctx.scene.hand.finger_names if n != name and n in state.holding]
     if len(stay) < p.min_holding:
@@ -319,8 +324,9 @@ def _fingers_that_stay(
         )
     p_stay = np.array([state.holding[n].p for n in stay])
     n_stay = np.array([state.holding[n].n for n in stay])
-    eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=ctx.scene.obj.radius_m)
-    if eps_stay <= 0.0:
+    scale = ctx.scene.obj.radius_m
+    if not is_force_closure(p_stay, n_stay, p.mu, torque_scale_m=scale):
+        eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=scale)
         raise PlanningError(
             f"{trig.reason} at t={trig.time_s:.3f} s, but without it the other fingers are "
             f"not in force closure{_must_let_go_note(ctx, state, name)}",
@@ -328,7 +334,7 @@ def _fingers_that_stay(
             time_s=win.preferred_s,
             kind=FailureKind.FORCE_CLOSURE,
             measured=eps_stay,
-            required=0.0,
+            required=FORCE_CLOSURE_TOL,
         )
     return stay
 
@@ -339,11 +345,13 @@ def _check_landing(
     res: RegraspResult,
     landed: dict[int, Holding],
     triggers: list[Trigger],
+    turns: int = 1,
 ) -> Attempt | None:
     """Follow the contact a verified regrasp lands on (kept in ``landed``) and judge
     what it leaves: a ``short-hold`` attempt if it is lost sooner after landing than
-    the shortest regrasp takes (no other finger could take its turn before this one
-    must go again), unless it is held to the end of the motion; a ``finger-busy``
+    ``turns`` shortest regrasps take (1: another finger could take its turn before
+    this one must go again; 2 for a regrasp that frees a finger: that one's regrasp and
+    then this one's), unless it is held to the end of the motion; a ``finger-busy``
     attempt if, with it, the holds of the fingers (``triggers``: the others' losses)
     can no longer be regrasped in turn (:func:`regrasp_chain` must start before the
     landing) while without it they could."""
@@ -352,7 +360,7 @@ def _check_landing(
     landed[id(res)] = hold
     lost = held_until(hold.track, p.contact)
     end = ctx.scene.motion.t_end
-    need = min(res.t_end + p.regrasp.duration_s, end)
+    need = min(res.t_end + turns * p.regrasp.duration_s, end)
     where = f"start {res.t_start:.2f} s, Q={np.round(res.Q_object, 4).tolist()}"
     if lost < need - TIME_TOL_S:
         return Attempt(

@@ -161,7 +161,8 @@ def _free_first(
     """When ``trig.finger`` must let go but the other fingers are not in force closure
     without it (a ``force-closure`` failure), let one of them regrasp first, onto a
     contact with which the others would hold without ``trig.finger``
-    (:meth:`RegraspSearch.find`'s ``frees``); None if none can.
+    (:meth:`RegraspSearch.find`'s ``frees``), held for two regrasps after it lands
+    (``trig.finger``'s, then its own); None if none can.
 
     As in :func:`_make_room`, the neighbour goes now or before one of the last
     regrasps (the finger holding the same contact), and lands before the finger's
@@ -187,7 +188,7 @@ def _free_first(
             go = Trigger(
                 time_s=max(base.now, base.holding[other].t_from),
                 finger=other,
-                reason=f"moves so that {name} can let go",
+                reason=f"moves so that {name} can lift off",
                 lost_s=lost.get(other, ctx.scene.motion.t_end),
             )
             trial = list(steps[:k])
