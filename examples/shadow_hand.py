@@ -47,7 +47,7 @@ def main(out: Path = Path("out/examples")) -> Path:
             f"{1e3 * r.path_length_m:.1f} mm, min clearance {1e3 * r.min_clearance_m:.2f} mm"
         )
     path = plan.plan.save(out / "shadow_hand_plan.json")
-    check = recheck_plan(Plan.load(path))
+    check = recheck_plan(Plan.load(path), mu=scen.params.mu)
     print(
         f"{len(plan.regrasps)} regrasps; saved {path}; independent re-check: "
         f"{'passed' if check.ok else check.problems}"

@@ -17,9 +17,11 @@ from regrasp_pin import ContactPhase, Plan, RegraspPhase, make_scenario
 from regrasp_pin.exceptions import InputError, ModelFileError
 from regrasp_pin.grasp.contact import tip_targets
 from regrasp_pin.grasp.holding import holding_hand, rest_configuration
+from regrasp_pin.grasp.quality import ferrari_canny_epsilon
 from regrasp_pin.model.clearance import LinkClearance
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.plan import IdlePhase
+from regrasp_pin.verify._closure import epsilon as closure_epsilon
 from regrasp_pin.verify.plan_check import recheck_plan
 
 T_END = 0.6
@@ -374,3 +376,61 @@ def test_exact_min_is_the_minimum_with_few_evaluations():
     d, (k, j) = _exact_min(loose, exact)  # the loose bound alone: more calls
     assert d == -0.05 and (k, j) in {(123, 7), (321, 9)}
     assert len(seen) > 100
+
+
+def test_force_closure_of_the_held_contacts_is_checked_given_mu(clean, tmp_path):
+    """With ``mu``, the contacts held at once must be in force closure: while the ring
+    is in the air the thumb, index and middle hold, and the weakest epsilon is theirs
+    (the planner's own ferrari_canny_epsilon of those contacts, to rounding); without
+    friction point contacts cannot hold, which is reported with the time and the
+    fingers. Without ``mu`` nothing is checked."""
+    plan, _, _ = clean
+    loaded = Plan.load(plan.save(tmp_path / "plan.json"))
+    chk = recheck_plan(loaded, mu=0.8)
+    assert chk.ok, chk.problems
+    assert chk.closure_fingers == ("index", "middle", "thumb")
+    assert LIFT[0] < chk.t_min_closure_s < LIFT[1]
+    held = [loaded.phases[n][0] for n in chk.closure_fingers]
+    radius = float(np.max(np.linalg.norm(np.asarray(loaded.object["vertices"]), axis=1)))
+    expected = ferrari_canny_epsilon(
+        np.array([c.p_object for c in held]),
+        np.array([c.n_object for c in held]),
+        0.8,
+        torque_scale_m=radius,
+    )
+    assert expected > 1e-3
+    assert chk.min_closure_epsilon == pytest.approx(expected, abs=1e-12)
+    frictionless = recheck_plan(loaded, mu=0.0)
+    assert not frictionless.ok and frictionless.min_closure_epsilon == 0.0
+    # every hold is 0 then: the first, all four fingers holding, is reported
+    assert frictionless.t_min_closure_s < LIFT[0]
+    assert any(
+        "not in force closure" in p and "index, middle, ring, thumb" in p
+        for p in frictionless.problems
+    )
+    assert recheck_plan(loaded).min_closure_epsilon is None
+    with pytest.raises(InputError, match="mu"):
+        recheck_plan(loaded, mu=-0.1)
+
+
+def test_the_recheck_epsilon_is_the_planners_and_zero_where_no_grasp_holds():
+    """The re-check's own wrench model gives the planner's epsilon on random contact
+    sets (to rounding, whatever their order); two antipodal contacts, or contacts
+    on one face, are never in force closure (0)."""
+    rng = np.random.default_rng(12)
+    for _ in range(20):
+        k = int(rng.integers(3, 6))
+        n = rng.normal(size=(k, 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        p = -0.02 * n + rng.normal(scale=0.003, size=(k, 3))  # roughly on a sphere
+        mu = float(rng.uniform(0.3, 1.0))
+        mine = closure_epsilon(p, n, mu, 0.03)
+        assert mine == pytest.approx(
+            ferrari_canny_epsilon(p, n, mu, torque_scale_m=0.03), abs=1e-12
+        )
+        order = rng.permutation(k)
+        assert closure_epsilon(p[order], n[order], mu, 0.03) == pytest.approx(mine, abs=1e-12)
+    z = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    assert closure_epsilon(0.02 * z, z, 0.8, 0.03) == 0.0
+    face = np.array([[0.01, 0.0, 0.02], [-0.01, 0.01, 0.02], [0.0, -0.01, 0.02]])
+    assert closure_epsilon(face, np.tile([0.0, 0.0, 1.0], (3, 1)), 0.8, 0.03) == 0.0

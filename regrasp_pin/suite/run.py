@@ -257,7 +257,7 @@ def run_scenario(
         if out_dir is not None:
             result.plan_path = str(path)
         try:
-            check = recheck_plan(Plan.load(path))
+            check = recheck_plan(Plan.load(path), mu=params.mu)
             result.recheck_ok = check.ok
             result.recheck_problems = list(check.problems)
         except Exception as exc:  # a plan file the re-check cannot read is a problem too

@@ -27,7 +27,8 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
   it between every two samples (the interpolated motion's speed is constant between
   them, so the samples are exact);
 * the fewest fingers holding a contact at any instant (exact: the count is constant
-  between phase boundaries);
+  between phase boundaries), and, given the friction coefficient ``mu``, that the
+  contacts held at once are in force closure (:mod:`._closure`, its own wrench model);
 * during every contact phase, the fingertip centre at ``p + r n`` of its contact (in
   the object frame, moved by the object's pose) within ``contact_tol_m``;
 * every finger's phases follow each other without gap or overlap over the plan.
@@ -54,6 +55,7 @@ from .._validate import positive, positive_int
 from ..exceptions import InputError
 from ..plan import ContactPhase
 from ._bounds import Shapes, hull_planes, object_bound, pair_bound, sphere_bound
+from ._closure import CLOSURE_TOL, weakest_hold
 
 if TYPE_CHECKING:
     from ..plan import IdlePhase, JoinPhase, Plan, RegraspPhase, ReleasePhase
@@ -185,6 +187,11 @@ class PlanCheck:
         object_geometry_samples: The finger geometry of that distance ("" without one).
         t_min_object_samples_s: When it occurs [s].
         problems: Every problem found, in plain words.
+        min_closure_epsilon: With ``mu`` given to :func:`recheck_plan`, the smallest
+            Ferrari-Canny epsilon of the contacts held at once over the plan (inf
+            without contacts); None without ``mu``.
+        t_min_closure_s: When it occurs [s] (None without ``mu``).
+        closure_fingers: The fingers holding then.
     """
 
     ok: bool
@@ -207,6 +214,9 @@ class PlanCheck:
     object_geometry_samples: str
     t_min_object_samples_s: float
     problems: tuple[str, ...]
+    min_closure_epsilon: float | None = None
+    t_min_closure_s: float | None = None
+    closure_fingers: tuple[str, ...] = ()
 
     @property
     def worst_penetration_m(self) -> float:
@@ -221,9 +231,15 @@ class PlanCheck:
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary (infinite distances become None)."""
         d = asdict(self)
-        for k in ("max_contact_error_m", "min_finger_distance_samples_m", "min_palm_distance_m"):
-            if not math.isfinite(d[k]):
+        for k in (
+            "max_contact_error_m",
+            "min_finger_distance_samples_m",
+            "min_palm_distance_m",
+            "min_closure_epsilon",
+        ):
+            if d[k] is not None and not math.isfinite(d[k]):
                 d[k] = None
+        d["closure_fingers"] = list(d["closure_fingers"])
         d["finger_pair_samples"] = list(d["finger_pair_samples"])
         for r in d["regrasps"]:
             for k in ("min_object_distance_m", "min_finger_distance_m"):
@@ -241,6 +257,7 @@ def recheck_plan(
     penetration_tol_m: float = 1e-4,
     contact_tol_m: float = 1e-4,
     min_holding: int = 3,
+    mu: float | None = None,
 ) -> PlanCheck:
     """Re-check a plan file with Pinocchio and Coal only (see the module docstring).
 
@@ -251,6 +268,10 @@ def recheck_plan(
             object [m].
         contact_tol_m: Largest accepted fingertip-to-contact error while holding [m].
         min_holding: Fewest fingers that must hold at every instant.
+        mu: The friction coefficient the plan was made for; when given, the contacts
+            held at once must be in force closure at every instant (their Ferrari-Canny
+            epsilon above 1e-9, computed here apart from the planner's: the plan file
+            does not store ``mu``). None: not checked.
 
     Returns:
         A :class:`PlanCheck`; ``ok`` is False when any check fails, with one line per
@@ -286,6 +307,7 @@ def recheck_plan(
     n_hold, t_hold = _min_holding(plan)
     if n_hold < need:
         problems.append(f"only {n_hold} fingers hold at t={t_hold:.3f} s (need {need})")
+    closure = _closure(plan, mu, problems)
 
     R_geom, x_geom = scene.kinematics(plan.q)
     err, err_finger, err_t = _contact_error(scene, scene.tips(plan.q))
@@ -364,6 +386,9 @@ def recheck_plan(
         object_geometry_samples=obj_geom,
         t_min_object_samples_s=float(plan.t[k_obj]),
         problems=tuple(problems),
+        min_closure_epsilon=closure[0],
+        t_min_closure_s=closure[1],
+        closure_fingers=closure[2],
     )
 
 
@@ -566,6 +591,22 @@ def _joint_name_of_q(model: Any, iq: int) -> str:
         if jm.idx_q <= iq < jm.idx_q + jm.nq:
             return str(model.names[j])
     return f"q[{iq}]"
+
+
+def _closure(
+    plan: Plan, mu: float | None, problems: list[str]
+) -> tuple[float | None, float | None, tuple[str, ...]]:
+    """With ``mu``, the weakest hold of the plan (:func:`._closure.weakest_hold`), and a
+    problem appended when it is not in force closure; ``(None, None, ())`` without."""
+    if mu is None:
+        return None, None, ()
+    eps, t_eps, holders = weakest_hold(plan, positive(mu, "mu", allow_zero=True))
+    if eps <= CLOSURE_TOL:
+        problems.append(
+            f"the contacts held at t={t_eps:.3f} s ({', '.join(holders)}) are not in "
+            f"force closure (epsilon {eps:.3g}, mu={mu})"
+        )
+    return eps, t_eps, holders
 
 
 def _min_holding(plan: Plan) -> tuple[int, float]:
