@@ -12,11 +12,12 @@ from regrasp_pin.grasp.initial import Grasp
 from regrasp_pin.grasp.manifold import Manifold
 from regrasp_pin.grasp.necessity import (
     MustHold,
+    closure_possible_with,
     closure_possible_without,
     first_infeasibility,
     must_hold,
 )
-from regrasp_pin.grasp.quality import ferrari_canny_epsilon
+from regrasp_pin.grasp.quality import ferrari_canny_epsilon, is_force_closure
 from regrasp_pin.model.objects import Box
 from regrasp_pin.planning.planner import plan_manipulation
 
@@ -97,6 +98,49 @@ def test_bound_holds_for_every_grasp_of_the_other_fingers(box):
                 found_closure += 1
                 assert free[k], f"time {k}: a grasp without the thumb exists"
     assert found_closure > 0  # the test exercised the bound
+
+
+def test_closure_possible_with_one_more_contact_is_an_upper_bound(box):
+    """closure_possible_with: where fixed contacts plus one usable contact of a finger
+    (exact epsilon, the planner's test) are in force closure at a time, the bound says
+    so at that time; two contacts on the top face plus a finger that reaches only the
+    top face never are (one face pushes one way), and with the bottom face in reach at
+    one time they could be, at that time only."""
+    obj, sample = box
+    rng = np.random.default_rng(5)
+    times = np.linspace(0.0, 1.0, 4)
+    top = np.flatnonzero(sample.normals[:, 2] > 0.99)
+    bottom = np.flatnonzero(sample.normals[:, 2] < -0.99)
+    fixed = sample.points[top[[0, -1]]], sample.normals[top[[0, -1]]]
+    only_top = np.zeros((4, len(sample)), bool)
+    only_top[:, top] = True
+    assert not closure_possible_with(
+        *fixed, _manifold("a", only_top, times), sample, obj, MU, np.arange(4)
+    )
+    reach = only_top.copy()
+    reach[2, bottom] = True
+    m = _manifold("a", reach, times)
+    assert [closure_possible_with(*fixed, m, sample, obj, MU, np.array([k])) for k in range(4)] == [
+        False, False, True, False,
+    ]  # fmt: skip
+    assert not closure_possible_with(*fixed, m, sample, obj, MU, np.array([], int))
+    # the bound against exact grasps: random fixed pairs and a random usable set
+    found = 0
+    for _ in range(30):
+        two = rng.choice(len(sample), size=2, replace=False)
+        usable = rng.random((1, len(sample))) < 0.2
+        m = _manifold("b", usable, times[:1])
+        bound = closure_possible_with(
+            sample.points[two], sample.normals[two], m, sample, obj, MU, np.array([0])
+        )
+        for q in np.flatnonzero(usable[0])[:40]:
+            ii = [*two, q]
+            if is_force_closure(
+                sample.points[ii], sample.normals[ii], MU, torque_scale_m=obj.radius_m
+            ):
+                found += 1
+                assert bound, (two, q)
+    assert found > 0  # the test exercised the bound
 
 
 def test_runs_lasting_contacts_and_first_infeasibility(box):

@@ -66,6 +66,7 @@ __all__ = [
 TIP_GAP_M = 0.001
 _REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
 _LINK_BATCH = 64  # candidates whose link clearance is measured at once (Coal)
+_NEAREST_SETS = 8  # refused contact sets whose epsilons a force-closure failure reads
 
 
 @dataclass(frozen=True)
@@ -570,11 +571,13 @@ class _Screen:
         return None
 
     def _closest_refused(self, why: str) -> None:
-        """Of the contact sets refused for ``why`` (force closure or not freeing), the
-        one nearest to passing, by its epsilon (the test's own: the screening epsilon,
-        or the planner's with 8 cone edges), kept in :attr:`closest` (the first of
-        equals); computed only for a failure that this refusal binds."""
-        sets = self.refused.get(why, [])
+        """Of the first :data:`_NEAREST_SETS` contact sets refused for ``why`` (force
+        closure or not freeing), in the order of the ranking, the one nearest to
+        passing, by its epsilon (the test's own: the screening epsilon, or the
+        planner's with 8 cone edges), kept in :attr:`closest` (the first of equals);
+        computed only for a failure that this refusal binds (each is a 6-D hull, and
+        every refused set's epsilon is at most the tolerance)."""
+        sets = self.refused.get(why, [])[:_NEAREST_SETS]
         if not sets:
             return
         if why == "force closure":
@@ -700,8 +703,13 @@ class _Screen:
         if measured is not None and required is not None:
             epsilon = main in ("force closure", "not freeing")
             scale, unit = (1.0, "") if epsilon else (1e3, " mm")
+            among = (
+                f" (of the first {_NEAREST_SETS})"
+                if len(self.refused.get(main, [])) > _NEAREST_SETS
+                else ""
+            )
             nearest = (
-                f"; the nearest to passing the {main}: {measured * scale:.3g}{unit}, "
+                f"; the nearest to passing the {main}{among}: {measured * scale:.3g}{unit}, "
                 f"need {required * scale:.3g}{unit}"
             )
         return ContactError(

@@ -52,6 +52,7 @@ from .quality import contact_wrenches
 
 __all__ = [
     "MustHold",
+    "closure_possible_with",
     "closure_possible_without",
     "first_infeasibility",
     "must_hold",
@@ -205,6 +206,46 @@ def closure_possible_without(
             memo[key] = _positively_spanning(wrenches[bounds[row] : bounds[row + 1]].reshape(-1, 6))
         out[k] = memo[key]
     return out
+
+
+def closure_possible_with(
+    points: np.ndarray,
+    normals: np.ndarray,
+    manifold: Manifold,
+    sample: SurfaceSample,
+    obj: ConvexObject,
+    mu: float,
+    rows: np.ndarray,
+) -> bool:
+    """Whether the contacts ``points``, ``normals`` ``(F, 3)`` (object frame) plus one
+    contact that ``manifold``'s finger could use at one of the manifold times ``rows``
+    could be in force closure: an upper bound, as :func:`closure_possible_without`'s
+    (circumscribed cones; each face's usable points replaced by their bounding box's
+    corners, all of the finger's faces at once). False proves that no contact of that
+    finger landed at those times puts them in force closure (e.g. frees a finger whose
+    neighbours do not hold without it)."""
+    rows = np.asarray(rows, int)
+    if rows.size == 0:
+        return False
+    corners, face_normals, present = _face_corners(obj, sample, manifold.usable(0.0, rows=rows))
+    mu_out = mu / np.cos(np.pi / CONE_EDGES)
+
+    def wrenches(p: np.ndarray, n: np.ndarray) -> np.ndarray:
+        return contact_wrenches(
+            p, n, mu_out, n_edges=CONE_EDGES, torque_scale_m=obj.radius_m
+        ).reshape(-1, 6)
+
+    fixed = wrenches(
+        np.asarray(points, float).reshape(-1, 3), np.asarray(normals, float).reshape(-1, 3)
+    )
+    for k in range(rows.size):
+        faces = np.flatnonzero(present[k])
+        if faces.size == 0:
+            continue
+        mine = wrenches(corners[k, faces].reshape(-1, 3), np.repeat(face_normals[faces], 4, 0))
+        if _positively_spanning(np.vstack([fixed, mine])):
+            return True
+    return False
 
 
 def must_hold(

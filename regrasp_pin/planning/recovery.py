@@ -24,6 +24,7 @@ import numpy as np
 
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..grasp.choice import TIP_GAP_M, NewContact, tip_gap
+from ..grasp.necessity import closure_possible_with
 from ..model.clearance import FingerClearance
 from .advance import Step, advance, window
 from .letgo import idle_fingers, join_origin
@@ -177,7 +178,7 @@ def _free_first(
         for base, base_triggers, k in bases:
             if ctx.budget.exhausted:
                 return None
-            if other not in base.holding:
+            if other not in base.holding or not _may_free(ctx, base, other, name, win):
                 continue
             key = (_signature(base), f"{other} frees {name}")
             if key in ctx.tried:
@@ -208,6 +209,29 @@ def _free_first(
             steps[:] = trial
             return new_state
     return None
+
+
+def _may_free(ctx: PlanContext, base: PlanState, other: str, name: str, win: LiftOffWindow) -> bool:
+    """Whether ``other``, regrasping from ``base`` and landing by ``win.latest_s``,
+    could free ``name`` at all: the contacts held in ``base`` but theirs, plus one that
+    ``other`` could use at a manifold time of that landing window, could be in force
+    closure (:func:`~regrasp_pin.grasp.necessity.closure_possible_with`, an upper
+    bound: False proves that no such regrasp frees it, and its search is skipped)."""
+    rest = [n for n in ctx.scene.hand.finger_names if n in base.holding and n not in (name, other)]
+    manifold = ctx.search.manifolds[other]
+    times = manifold.times_s
+    first = max(base.now, base.holding[other].t_from) + ctx.params.regrasp.duration_s
+    step = float(times[1] - times[0]) if times.size > 1 else 0.0
+    rows = np.flatnonzero((times >= first - step) & (times <= win.latest_s + step))
+    return closure_possible_with(
+        np.array([base.holding[n].p for n in rest]),
+        np.array([base.holding[n].n for n in rest]),
+        manifold,
+        ctx.search.sample,
+        ctx.scene.obj,
+        ctx.params.mu,
+        rows,
+    )
 
 
 def _neighbour_first(
