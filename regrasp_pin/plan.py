@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._validate import as_array
+from ._validate import as_array, positive
 from .exceptions import InputError, ModelFileError
 from .model.objects import OBJECT_KINDS
 
@@ -322,6 +322,8 @@ class Plan:
         T_palm_object: Object poses ``(S, 7)`` as ``[x, y, z, qx, qy, qz, qw]``.
         phases: Per finger, its phases in time order.
         summary: Free-form summary (totals, timings).
+        mu: The friction coefficient the plan was made for (None: not recorded, as in
+            older plans); the re-check verifies force closure with it.
     """
 
     hand: dict[str, Any]
@@ -331,6 +333,7 @@ class Plan:
     T_palm_object: np.ndarray
     phases: dict[str, list[Phase]]
     summary: dict[str, Any] = field(default_factory=dict)
+    mu: float | None = None
 
     def __repr__(self) -> str:
         phases = {f: len(ps) for f, ps in self.phases.items()}
@@ -345,6 +348,8 @@ class Plan:
             raise InputError("t", "is not strictly increasing with >= 2 samples", "times [s]")
         self.q = as_array(self.q, "q", (self.t.size, None))
         self.T_palm_object = as_array(self.T_palm_object, "T_palm_object", (self.t.size, 7))
+        if self.mu is not None:
+            self.mu = positive(self.mu, "mu", allow_zero=True)
 
     # ------------------------------------------------------------------ I/O
     def to_dict(self) -> dict[str, Any]:
@@ -358,6 +363,7 @@ class Plan:
             "T_palm_object": self.T_palm_object.tolist(),
             "phases": {f: [p.to_dict() for p in ps] for f, ps in self.phases.items()},
             "summary": self.summary,
+            **({} if self.mu is None else {"mu": self.mu}),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -394,6 +400,7 @@ class Plan:
                 T_palm_object=np.asarray(d["T_palm_object"], float),
                 phases=phases,
                 summary=d.get("summary", {}),
+                mu=d.get("mu"),
             )
         except KeyError as exc:
             raise InputError(

@@ -114,6 +114,16 @@ def recheck(demo):
     return recheck_plan(plan, max_step_rad=1e-3, penetration_tol_m=1e-4, contact_tol_m=1e-4)
 
 
+def test_the_plan_records_its_mu_and_holds_in_force_closure_at_every_instant(demo, recheck):
+    """The plan file records the friction coefficient it was made for, and the
+    re-check (its own wrench model) finds the contacts held at once in force closure
+    at every instant, while a finger is in the air too."""
+    _, plan, _, scen = demo
+    assert plan.mu == scen.params.mu
+    assert recheck.min_closure_epsilon is not None and recheck.min_closure_epsilon > 1e-9
+    assert len(recheck.closure_fingers) >= 3
+
+
 def test_every_finger_has_phases_over_the_whole_plan(demo, recheck):
     """The little finger takes no part: one idle phase over the whole plan, re-checked
     clear of the object; the others' phases start at 0 and end at the end."""

@@ -383,7 +383,7 @@ def test_force_closure_of_the_held_contacts_is_checked_given_mu(clean, tmp_path)
     is in the air the thumb, index and middle hold, and the weakest epsilon is theirs
     (the planner's own ferrari_canny_epsilon of those contacts, to rounding); without
     friction point contacts cannot hold, which is reported with the time and the
-    fingers. Without ``mu`` nothing is checked."""
+    fingers. Without ``mu``, given or recorded in the plan, nothing is checked."""
     plan, _, _ = clean
     loaded = Plan.load(plan.save(tmp_path / "plan.json"))
     chk = recheck_plan(loaded, mu=0.8)
@@ -408,7 +408,13 @@ def test_force_closure_of_the_held_contacts_is_checked_given_mu(clean, tmp_path)
         "not in force closure" in p and "index, middle, ring, thumb" in p
         for p in frictionless.problems
     )
-    assert recheck_plan(loaded).min_closure_epsilon is None
+    assert recheck_plan(loaded).min_closure_epsilon is None  # the plan records no mu
+    # a plan that records its mu is checked with it, and keeps it through the file
+    loaded.mu = 0.8
+    again = Plan.load(loaded.save(tmp_path / "with_mu.json"))
+    assert again.mu == 0.8
+    assert recheck_plan(again).min_closure_epsilon == chk.min_closure_epsilon
+    assert not recheck_plan(again, mu=0.0).ok  # the argument overrides it
     with pytest.raises(InputError, match="mu"):
         recheck_plan(loaded, mu=-0.1)
 

@@ -109,6 +109,7 @@ def _assemble(
         T_palm_object=motion.as_xyzquat(times),
         phases=_with_idle(hand, phases, float(times[0]), float(times[-1])),
         summary={},
+        mu=params.mu,
     )
 
 

@@ -27,8 +27,9 @@ object position, slerp of its rotation, as ``docs/plan_format.md`` says):
   it between every two samples (the interpolated motion's speed is constant between
   them, so the samples are exact);
 * the fewest fingers holding a contact at any instant (exact: the count is constant
-  between phase boundaries), and, given the friction coefficient ``mu``, that the
-  contacts held at once are in force closure (:mod:`._closure`, its own wrench model);
+  between phase boundaries), and, with the friction coefficient the plan records (or
+  the ``mu`` given), that the contacts held at once are in force closure
+  (:mod:`._closure`, its own wrench model);
 * during every contact phase, the fingertip centre at ``p + r n`` of its contact (in
   the object frame, moved by the object's pose) within ``contact_tol_m``;
 * every finger's phases follow each other without gap or overlap over the plan.
@@ -187,10 +188,10 @@ class PlanCheck:
         object_geometry_samples: The finger geometry of that distance ("" without one).
         t_min_object_samples_s: When it occurs [s].
         problems: Every problem found, in plain words.
-        min_closure_epsilon: With ``mu`` given to :func:`recheck_plan`, the smallest
-            Ferrari-Canny epsilon of the contacts held at once over the plan (inf
-            without contacts); None without ``mu``.
-        t_min_closure_s: When it occurs [s] (None without ``mu``).
+        min_closure_epsilon: With a friction coefficient (the plan's or the one
+            given to :func:`recheck_plan`), the smallest Ferrari-Canny epsilon of the
+            contacts held at once over the plan (inf without contacts); None without.
+        t_min_closure_s: When it occurs [s] (None without a friction coefficient).
         closure_fingers: The fingers holding then.
     """
 
@@ -268,10 +269,11 @@ def recheck_plan(
             object [m].
         contact_tol_m: Largest accepted fingertip-to-contact error while holding [m].
         min_holding: Fewest fingers that must hold at every instant.
-        mu: The friction coefficient the plan was made for; when given, the contacts
-            held at once must be in force closure at every instant (their Ferrari-Canny
-            epsilon above 1e-9, computed here apart from the planner's: the plan file
-            does not store ``mu``). None: not checked.
+        mu: The friction coefficient to check force closure with: the contacts held
+            at once must be in force closure at every instant (their Ferrari-Canny
+            epsilon above 1e-9, computed here apart from the planner's). None: the
+            plan's own ``mu`` (what it was made for); not checked for a plan that
+            records none.
 
     Returns:
         A :class:`PlanCheck`; ``ok`` is False when any check fails, with one line per
@@ -307,7 +309,7 @@ def recheck_plan(
     n_hold, t_hold = _min_holding(plan)
     if n_hold < need:
         problems.append(f"only {n_hold} fingers hold at t={t_hold:.3f} s (need {need})")
-    closure = _closure(plan, mu, problems)
+    closure = _closure(plan, plan.mu if mu is None else mu, problems)
 
     R_geom, x_geom = scene.kinematics(plan.q)
     err, err_finger, err_t = _contact_error(scene, scene.tips(plan.q))
