@@ -144,7 +144,7 @@ def _make_room(
             log.info("%s failed (%s): %s makes room first", name, failure.kind.value, other)
             why = f"makes room for {name} (its {failure.kind.value} failure)"
             new_state = _neighbour_first(
-                ctx, (base, base_triggers, k), other, why, win.latest_s, wanted, steps
+                ctx, (base, base_triggers, k), other, why, win.latest_s, steps, room=wanted
             )
             if new_state is not None:
                 return new_state
@@ -185,29 +185,12 @@ def _free_first(
                 continue
             ctx.tried.add(key)
             log.info("%s cannot let go (force closure): %s regrasps to free it", name, other)
-            lost = {e.finger: e.lost_s for e in base_triggers}
-            go = Trigger(
-                time_s=max(base.now, base.holding[other].t_from),
-                finger=other,
-                reason=f"moves so that {name} can lift off",
-                lost_s=lost.get(other, ctx.scene.motion.t_end),
+            why = f"moves so that {name} can lift off"
+            new_state = _neighbour_first(
+                ctx, (base, base_triggers, k), other, why, win.latest_s, steps, frees=(name,)
             )
-            trial = list(steps[:k])
-            try:
-                new_state = advance(
-                    ctx,
-                    base,
-                    go,
-                    base_triggers,
-                    trial,
-                    end_by_s=win.latest_s,
-                    may_hold=False,
-                    frees=(name,),
-                )
-            except PlanningError:
-                continue
-            steps[:] = trial
-            return new_state
+            if new_state is not None:
+                return new_state
     return None
 
 
@@ -240,12 +223,15 @@ def _neighbour_first(
     other: str,
     why: str,
     end_by_s: float,
-    room: tuple[np.ndarray, float],
     steps: list[Step],
+    *,
+    room: tuple[np.ndarray, float] | None = None,
+    frees: tuple[str, ...] = (),
 ) -> PlanState | None:
     """The state after the holding finger ``other`` regrasps from ``base`` (a state,
     its triggers and how many of ``steps`` it keeps, :func:`_room_bases`), landing by
-    ``end_by_s`` [s] out of ``room`` (``(point, radius)``, object frame [m]) and not
+    ``end_by_s`` [s], out of ``room`` (``(point, radius)``, object frame [m]) if given,
+    on a contact that frees the ``frees`` fingers (:func:`~.advance.advance`), and not
     held on instead (moving it is the point); None if no such regrasp verifies. On
     success ``steps`` holds the regrasps of the new state."""
     state, triggers, k = base
@@ -259,7 +245,15 @@ def _neighbour_first(
     trial = list(steps[:k])
     try:
         new_state = advance(
-            ctx, state, go, triggers, trial, end_by_s=end_by_s, reserved=(room,), may_hold=False
+            ctx,
+            state,
+            go,
+            triggers,
+            trial,
+            end_by_s=end_by_s,
+            reserved=() if room is None else (room,),
+            may_hold=False,
+            frees=frees,
         )
     except PlanningError:
         return None
@@ -313,7 +307,7 @@ def _make_room_for_join(
                 joining,
             )
             why = f"makes room for {joining} to join in place of {name}"
-            new_state = _neighbour_first(ctx, b, other, why, win.latest_s, room, steps)
+            new_state = _neighbour_first(ctx, b, other, why, win.latest_s, steps, room=room)
             if new_state is not None:
                 return new_state
     return None
