@@ -1561,3 +1561,41 @@ def test_no_q_frees_a_finger_that_would_leave_two_contacts(five):
     counts = {k: int(n) for n, k in re.findall(r"(\d+) (force closure|not freeing)", str(err))}
     assert err.kind == FailureKind.FORCE_CLOSURE and counts["not freeing"] > 0
     assert err.required == FORCE_CLOSURE_TOL and 0.0 <= err.measured <= FORCE_CLOSURE_TOL
+
+
+def test_an_absent_finger_is_left_out_of_the_finger_clearance(five, monkeypatch):
+    """With ``absent``, the clearance of each candidate at arrival is its Coal distance
+    to the other fingers but the absent one (which stands in ``q_hand_arrive`` where it
+    does not hold): the distances measured equal a FingerClearance without it, and the
+    choice is the one whose clearance is met without it. A string, a holding finger,
+    the finger itself or an unknown name is refused."""
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P, others = _regrasp_of(grasp, "middle")
+    away = {n: v for n, v in others.items() if n != "ring"}  # the ring makes room
+    q_hand = _grasp_configuration(hand, grasp)  # ... but stands at its contact
+    kw = dict(
+        P_object=P, n_P_object=n_P, others=away, contact=CONTACT, mu=MU, link_check=False,
+        q_hand_arrive=q_hand,
+    )  # fmt: skip
+    seen = []
+    real_gap = FingerClearance.__call__
+    monkeypatch.setattr(
+        FingerClearance, "__call__", lambda self, q: seen.append((q.copy(), real_gap(self, q))) or seen[-1][1]
+    )  # fmt: skip
+    m = manifolds["middle"]
+    q = choose_new_contact(
+        hand, box, m, sample, 1.5, finger_clearance_m=0.001, absent=("ring",), **kw
+    )
+    present = FingerClearance(hand, "middle", [n for n in away if n != "middle"])
+    everyone = FingerClearance(hand, "middle")
+    assert seen
+    for q_all, d in seen:
+        assert d == pytest.approx(real_gap(present, q_all), abs=1e-12)
+    q_all = hand.to_full("middle", q.q_arrive, q_hand)
+    assert real_gap(present, q_all) >= 0.001
+    # the ring, where it stands, is the nearest finger of some candidates measured:
+    # without ``absent`` their clearance would have been smaller
+    assert any(real_gap(everyone, q_all) < d - 1e-6 for q_all, d in seen)
+    for bad in ("ring", ("index",), ("middle",), ("sixth",)):
+        with pytest.raises(InputError, match="absent"):
+            choose_new_contact(hand, box, m, sample, 1.5, absent=bad, **kw)

@@ -156,6 +156,7 @@ def choose_new_contact(
     landing_s: Callable[[np.ndarray], np.ndarray] | None = None,
     land_by_s: float = math.inf,
     frees: Sequence[str] = (),
+    absent: Sequence[str] = (),
 ) -> NewContact:
     """Choose Q for ``manifold.finger`` (see the module docstring).
 
@@ -218,6 +219,9 @@ def choose_new_contact(
             contacts without any one of them are still in force closure
             (:func:`~.quality.is_force_closure`, the planner's test before a finger
             lifts off), for a finger whose neighbours do not hold without it now.
+        absent: Fingers left out of the finger-clearance test (``q_hand_arrive``):
+            fingers supposed elsewhere at arrival, e.g. a neighbour asked to make room
+            (in ``q_hand_arrive`` such a finger stands where it does not hold).
 
     Returns:
         The :class:`NewContact`.
@@ -228,13 +232,19 @@ def choose_new_contact(
             (``force-closure``, "not freeing"), or every one would land too late
             (``too-late``); the message says which finger, when, why.
         InputError: ``t_arrive_s`` is NaN or outside the manifold's times; ``frees``
-            is a string or names a finger not in ``others``.
+            is a string or names a finger not in ``others``; ``absent`` is a string,
+            names a finger of ``others``, the finger itself or no finger of the hand.
     """
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
     if isinstance(frees, str) or not set(frees) <= set(others):
         raise InputError(
             "frees", f"is {frees!r}", f"a sequence of names of others: {sorted(others)}"
+        )
+    away = sorted(set(hand.finger_names) - set(others) - {finger.name})
+    if isinstance(absent, str) or not set(absent) <= set(away):
+        raise InputError(
+            "absent", f"is {absent!r}", f"a sequence of names of fingers not holding: {away}"
         )
     ka, kb = _arrival_indices(manifold, t_arrive_s)
     # the landing falls between two manifold times: Q must be usable at both
@@ -310,6 +320,7 @@ def choose_new_contact(
         finger_clearance_m,
         epsilons,
         frees=[list(others).index(n) for n in frees],
+        absent=absent,
     )
     return screen.first(order, ranked, P_object, n_P_object, max_checks)
 
@@ -467,6 +478,7 @@ class _Screen:
         finger_clearance_m: float,
         epsilons: ScreeningEpsilons | None = None,
         frees: Sequence[int] = (),
+        absent: Sequence[str] = (),
     ) -> None:
         self.hand, self.finger, self.manifold, self.sample = hand, finger, manifold, sample
         self.ka = ka
@@ -484,8 +496,11 @@ class _Screen:
         self.epsilons = epsilons
         self.link_clear, self.contact = link_clear, contact
         self.q_hand_arrive = q_hand_arrive
+        present = [n for n in hand.finger_names if n not in absent] if absent else None
         self.finger_clear = (
-            FingerClearance.shared(hand, finger.name) if q_hand_arrive is not None else None
+            FingerClearance.shared(hand, finger.name, present)
+            if q_hand_arrive is not None
+            else None
         )
         self.finger_clearance_m = finger_clearance_m
         self.frees = tuple(frees)  # rows of the other contacts that Q must free

@@ -348,6 +348,7 @@ def _join_blockers(
                     {n: (base.holding[n].p, base.holding[n].n) for n in rest},
                     q_hand_of(ctx, base, rest),
                     [],
+                    absent=(other,),
                 )
             except ContactError:
                 continue  # no room for the joining finger even without this neighbour
@@ -411,6 +412,7 @@ def _blockers(
                 {n: (state.holding[n].p, state.holding[n].n) for n in rest},
                 q_hand_of(ctx, state, rest),
                 [],
+                absent=(other,),
             )
         except ContactError:
             continue  # no room for the finger even without this neighbour

@@ -281,6 +281,7 @@ class RegraspSearch:
         reserved: Sequence[tuple[np.ndarray, float]] = (),
         landing: tuple[Callable[[np.ndarray], np.ndarray], float] | None = None,
         frees: Sequence[str] = (),
+        absent: Sequence[str] = (),
     ) -> NewContact:
         """The best new contact Q for ``finger`` landing at ``t_arrive`` [s]
         (:func:`~regrasp_pin.grasp.choice.choose_new_contact`: the paper's criterion, Q
@@ -290,6 +291,8 @@ class RegraspSearch:
         a Q whose earliest landing (``landing_s`` of its arrival configurations, e.g.
         :meth:`flight_landing`) is by ``land_by_s`` [s]. With ``frees``: only a Q with
         which the ``others`` without any one of those fingers are in force closure.
+        The ``absent`` fingers (not holding) are left out of the finger-clearance test:
+        they are supposed elsewhere at arrival.
 
         Raises:
             ContactError: no candidate (``too-late``: none that lands in time).
@@ -320,6 +323,7 @@ class RegraspSearch:
             landing_s=landing_s,
             land_by_s=land_by_s,
             frees=frees,
+            absent=absent,
         )
 
     def flight_landing(
