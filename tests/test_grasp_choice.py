@@ -1579,9 +1579,12 @@ def test_an_absent_finger_is_left_out_of_the_finger_clearance(five, monkeypatch)
     )  # fmt: skip
     seen = []
     real_gap = FingerClearance.__call__
-    monkeypatch.setattr(
-        FingerClearance, "__call__", lambda self, q: seen.append((q.copy(), real_gap(self, q))) or seen[-1][1]
-    )  # fmt: skip
+
+    def record(self, q):
+        seen.append((q.copy(), real_gap(self, q)))
+        return seen[-1][1]
+
+    monkeypatch.setattr(FingerClearance, "__call__", record)
     m = manifolds["middle"]
     q = choose_new_contact(
         hand, box, m, sample, 1.5, finger_clearance_m=0.001, absent=("ring",), **kw
