@@ -102,16 +102,18 @@ def _start_candidates(
     q_rows = hand.to_full(name, man.q[t_index, idx])
     T0 = man.T_palm_object[t_index]
 
+    # held at least until the next grid time (a contact the tracking loses at once is
+    # no start) or, for a finger that cannot let go, for as long as it must hold
+    k_held = 1 if hold is None else max(hold.k_to - t_index, 1)
+
     def link_clear(j: int) -> bool:
-        # clear of the object at the start and, for a finger that cannot let go, for
-        # as long as it must hold: its other links and fingertip link as the tracking
-        # will see them (the manifold knows nothing of them)
+        # clear of the object at the start and then held: its other links and
+        # fingertip link as the tracking will see them (Coal; the manifold knows only
+        # the fingertip link's shape)
         if not clear(q_rows[j : j + 1], T0)[0]:
             return False
-        if hold is None:
-            return True
         ok = held_clear(hand, name, obj, man, idx[j : j + 1], t_index, contact)[:, 0]
-        return bool(ok[: hold.k_to - t_index + 1].all())
+        return bool(ok[: k_held + 1].all())
 
     chosen = _spread_out(
         pts[idx],
