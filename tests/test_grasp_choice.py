@@ -34,6 +34,7 @@ from hypothesis import strategies as st
 from regrasp_pin.exceptions import ContactError, FailureKind, InputError
 from regrasp_pin.grasp import screening as screening_module
 from regrasp_pin.grasp.choice import (
+    Room,
     _link_exit,
     _Ranking,
     _rerank,
@@ -1670,3 +1671,38 @@ def test_an_absent_finger_is_left_out_of_the_finger_clearance(five, monkeypatch)
     for bad in ("ring", ("index",), ("middle",), ("sixth",)):
         with pytest.raises(InputError, match="absent"):
             choose_new_contact(hand, box, m, sample, 1.5, absent=bad, **kw)
+
+
+def test_a_room_with_a_posture_keeps_the_finger_clear_of_that_finger(five):
+    """A room with a finger posture (the middle standing where the index would have
+    landed, at the index's arrival) refuses the candidates whose finger, at its own
+    configuration then, comes nearer that finger than the clearance (Coal): the plain
+    choice is refused and the one made instead clears it. A posture of the choosing
+    finger itself, of the wrong size or at no time is refused."""
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P, others = _regrasp_of(grasp, "index")
+    others.pop("middle")  # the middle is to land in the room
+    kw = dict(P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False)
+    m, t = manifolds["index"], 1.5
+    plain = choose_new_contact(hand, box, m, sample, t, **kw)
+    q_middle = manifolds["middle"].q[manifolds["middle"].time_index(t), plain.index]
+    room = Room(plain.p_object, 0.0, "middle", q_middle, t)
+    q = choose_new_contact(hand, box, m, sample, t, reserved=[room], finger_clearance_m=0.001, **kw)
+    clear = FingerClearance(hand, "index", ["middle"])
+
+    def gap(i: int) -> float:
+        at = hand.to_full("index", m.q[m.time_index(t), i], hand.to_full("middle", q_middle))
+        return clear(at)
+
+    assert gap(plain.index) < 0.001 <= gap(q.index)
+    assert q.rank > plain.rank
+    # a (point, radius) pair is a room without a posture: the plain choice stands
+    again = choose_new_contact(hand, box, m, sample, t, reserved=[(plain.p_object, 0.0)], **kw)
+    assert again.index == plain.index
+    for bad in (
+        Room(plain.p_object, 0.0, "index", plain.q_arrive, t),
+        Room(plain.p_object, 0.0, "middle", q_middle[:2], t),
+        Room(plain.p_object, 0.0, "middle", q_middle, float("nan")),
+    ):
+        with pytest.raises(InputError, match="reserved"):
+            choose_new_contact(hand, box, m, sample, t, reserved=[bad], **kw)

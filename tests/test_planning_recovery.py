@@ -75,24 +75,32 @@ def _wanted(p_object, q_arrive, t):
     )
 
 
+def _is_room(room, wanted, sep):
+    """The room of ``wanted`` (the ring's new contact): contacts kept ``sep`` away, and
+    the ring's posture there, at its arrival, kept clear."""
+    assert room.point is wanted.p_object and room.radius_m == sep
+    assert room.finger == "ring" and room.t_s == wanted.t_arrive_s
+    np.testing.assert_array_equal(room.q_finger, wanted.q_arrive)
+
+
 def test_a_neighbour_whose_contact_is_within_the_separation_takes_the_room(crowded):
     ctx, state, hold, _, clear, t = crowded
     sep = 0.017
     near = hold.p + np.array([0.01, 0.0, 0.0])  # 10 mm from the middle's contact
-    assert _room_taken(ctx, state, "ring", "middle", _wanted(near, clear, t), sep) == sep
+    wanted = _wanted(near, clear, t)
+    _is_room(_room_taken(ctx, state, "ring", "middle", wanted, sep), wanted, sep)
 
 
-def test_a_neighbour_whose_links_meet_the_finger_takes_the_room_beyond_its_contact(crowded):
+def test_a_neighbour_whose_links_meet_the_finger_takes_the_room_of_its_posture(crowded):
     """Contacts 30 mm apart, but the ring at the wanted contact would come within the
-    landing clearance of the middle finger: the middle must land farther from the
-    wanted contact than its contact is now (by a tip radius)."""
+    landing clearance of the middle finger: the middle must leave the room, its finger
+    clear of the ring standing at the wanted contact."""
     ctx, state, hold, meet, clear, t = crowded
     sep = 0.017
     far = hold.p + np.array([0.0, 0.03, 0.0])
-    r = ctx.scene.hand.finger("ring").tip_radius
-    got = _room_taken(ctx, state, "ring", "middle", _wanted(far, meet, t), sep)
-    assert got == pytest.approx(0.03 + r, abs=1e-12)
+    wanted = _wanted(far, meet, t)
+    _is_room(_room_taken(ctx, state, "ring", "middle", wanted, sep), wanted, sep)
     # not counting the links (a failure they cannot have caused), it leaves the room
-    assert _room_taken(ctx, state, "ring", "middle", _wanted(far, meet, t), sep, False) is None
+    assert _room_taken(ctx, state, "ring", "middle", wanted, sep, False) is None
     # the same contact with the fingers apart leaves the room
     assert _room_taken(ctx, state, "ring", "middle", _wanted(far, clear, t), sep) is None

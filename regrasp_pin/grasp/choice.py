@@ -57,6 +57,7 @@ from .screening import (
 __all__ = [
     "TIP_GAP_M",
     "NewContact",
+    "Room",
     "choose_new_contact",
     "exit_times",
     "tip_gap",
@@ -67,6 +68,37 @@ TIP_GAP_M = 0.001
 _REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
 _LINK_BATCH = 64  # candidates whose link clearance is measured at once (Coal)
 _NEAREST_SETS = 8  # refused contact sets whose epsilons a force-closure failure reads
+
+
+@dataclass(frozen=True)
+class Room:
+    """Room a new contact leaves for another finger's landing.
+
+    Attributes:
+        point: The other finger's contact to be, object frame ``(3,)`` [m].
+        radius_m: Candidates closer than this to ``point`` are not chosen [m].
+        finger: Optionally, that finger, standing at ``q_finger`` [rad] at ``t_s`` [s]
+            (e.g. its arrival configuration there): the choosing finger, held at a
+            candidate (its manifold's configuration at ``t_s``), must then stand at
+            least the choice's finger clearance from it (Coal), so that neither
+            finger's links take the other's place.
+        q_finger: See ``finger``, ``(k,)`` [rad].
+        t_s: See ``finger`` [s].
+    """
+
+    point: np.ndarray
+    radius_m: float
+    finger: str | None = None
+    q_finger: np.ndarray | None = None
+    t_s: float | None = None
+
+    @classmethod
+    def of(cls, room: Room | tuple[np.ndarray, float]) -> Room:
+        """``room``, or a ``(point, radius)`` pair as a Room."""
+        if isinstance(room, Room):
+            return room
+        point, radius = room
+        return cls(np.asarray(point, float), float(radius))
 
 
 @dataclass(frozen=True)
@@ -150,7 +182,7 @@ def choose_new_contact(
     exit_tolerance_s: float = 0.0,
     rerank: int = 12,
     lasting: Callable[[np.ndarray, int, np.ndarray], np.ndarray] | None = None,
-    reserved: Sequence[tuple[np.ndarray, float]] = (),
+    reserved: Sequence[Room | tuple[np.ndarray, float]] = (),
     distances: ManifoldClearance | None = None,
     epsilons: ScreeningEpsilons | None = None,
     landing_s: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -203,9 +235,10 @@ def choose_new_contact(
             contact (e.g. another holding finger comes too near); applied in the
             re-rank, where only each point's first ``horizon`` times are read (the
             times before its links or its limits end it; the rest may be anything).
-        reserved: ``(point, radius)`` pairs, object frame [m]: room kept free for
-            another finger's landing; candidates closer than the radius to the point
-            are ignored.
+        reserved: :class:`Room` s (or ``(point, radius)`` pairs, object frame [m])
+            kept free for another finger's landing: candidates closer than the radius
+            to the point are ignored, and with a room's finger posture, those whose
+            finger would stand nearer it than ``finger_clearance_m`` too.
         distances: The finger's link-object distances on ``manifold``, kept between
             calls (the searches of one plan ask for the same entries again); None:
             measured afresh. The same choice either way.
@@ -257,8 +290,10 @@ def choose_new_contact(
         r_ex = exclude_radius_m if exclude_points_radius_m is None else exclude_points_radius_m
         ex = np.asarray(exclude_points_object, float).reshape(-1, 3)
         cand &= _far_from(pts, list(ex), max(r_ex, 1e-12))
-    for point, radius in reserved:
-        cand &= _far_from(pts, [np.asarray(point, float)], float(radius))
+    rooms = [Room.of(r) for r in reserved]
+    postures = [_posture(hand, finger, manifold, r) for r in rooms if r.finger is not None]
+    for room in rooms:
+        cand &= _far_from(pts, [np.asarray(room.point, float)], float(room.radius_m))
     idx = np.flatnonzero(cand)
     if idx.size == 0:
         usable = manifold.usable(contact.limit_margin_rad, rows=np.array([ka]))[0]
@@ -321,6 +356,7 @@ def choose_new_contact(
         epsilons,
         frees=[list(others).index(n) for n in frees],
         absent=absent,
+        postures=postures,
     )
     return screen.first(order, ranked, P_object, n_P_object, max_checks)
 
@@ -421,6 +457,32 @@ def _apart_from(
     return ok
 
 
+def _posture(
+    hand: Hand, finger: Finger, manifold: Manifold, room: Room
+) -> tuple[FingerClearance, np.ndarray, int]:
+    """``(finger's clearance to room.finger, the hand at room.q_finger, time index)``
+    of a room with a finger posture; InputError for a posture that is not one of
+    another finger of the hand at a time."""
+    other = hand.finger(str(room.finger))  # UnknownNameError lists the names
+    q = np.asarray(room.q_finger, float) if room.q_finger is not None else None
+    t = float(room.t_s) if room.t_s is not None else math.nan
+    if (
+        other.name == finger.name
+        or q is None
+        or q.shape != (other.k,)
+        or not (np.isfinite(q).all() and math.isfinite(t))
+    ):
+        raise InputError(
+            "reserved",
+            f"holds a room of finger {room.finger!r} with q_finger {room.q_finger!r} "
+            f"at t_s {room.t_s!r}",
+            f"another finger than {finger.name!r}, its {other.k} finite joint "
+            "values [rad] and a finite time [s]",
+        )
+    clear = FingerClearance.shared(hand, finger.name, [other.name])
+    return clear, hand.to_full(other.name, q), manifold.time_index(t)
+
+
 def _far_from(pts: np.ndarray, centres: list[np.ndarray], radius_m: float) -> np.ndarray:
     """``(N,)`` True where a point is at least ``radius_m`` from every centre."""
     ok = np.ones(pts.shape[0], bool)
@@ -479,6 +541,7 @@ class _Screen:
         epsilons: ScreeningEpsilons | None = None,
         frees: Sequence[int] = (),
         absent: Sequence[str] = (),
+        postures: Sequence[tuple[FingerClearance, np.ndarray, int]] = (),
     ) -> None:
         self.hand, self.finger, self.manifold, self.sample = hand, finger, manifold, sample
         self.ka = ka
@@ -503,6 +566,8 @@ class _Screen:
             else None
         )
         self.finger_clearance_m = finger_clearance_m
+        # rooms' finger postures (:func:`_posture`): (clearance, hand there, time index)
+        self.postures = list(postures)
         self.frees = tuple(frees)  # rows of the other contacts that Q must free
         # the contact sets refused for force closure and for not freeing a finger: their
         # epsilons (6-D hulls) are computed only if the choice fails for that reason
@@ -569,6 +634,13 @@ class _Screen:
             q_all = np.array(self.q_hand_arrive, float)
             q_all[self.finger.q_indices] = self.manifold.q[self.ka, i]
             d = self.finger_clear(q_all)
+            if d < self.finger_clearance_m:
+                self._reject("finger clearance", d, self.finger_clearance_m)
+                return "finger clearance"
+        for clear_of, q_room, k in self.postures:
+            q_all = q_room.copy()
+            q_all[self.finger.q_indices] = self.manifold.q[k, i]
+            d = clear_of(q_all)
             if d < self.finger_clearance_m:
                 self._reject("finger clearance", d, self.finger_clearance_m)
                 return "finger clearance"

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..exceptions import Attempt, FailureKind, PlanningError
+from ..grasp.choice import Room
 from ..grasp.holding import Holding, holding_q, holds_to_end
 from ..grasp.quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon, is_force_closure
 from ..plan import RegraspPhase
@@ -112,7 +113,7 @@ def advance(
     *,
     end_by_s: float | None = None,
     exclude: list[np.ndarray] | None = None,
-    reserved: tuple[tuple[np.ndarray, float], ...] = (),
+    reserved: tuple[Room | tuple[np.ndarray, float], ...] = (),
     may_hold: bool = True,
     frees: tuple[str, ...] = (),
 ) -> PlanState:
@@ -150,7 +151,7 @@ def _advance(
     window_why: tuple[LiftOffWindow, str],
     end_by_s: float | None,
     exclude: list[np.ndarray] | None,
-    reserved: tuple[tuple[np.ndarray, float], ...],
+    reserved: tuple[Room | tuple[np.ndarray, float], ...],
     frees: tuple[str, ...] = (),
 ) -> PlanState:
     """:func:`advance` before its last resort (holding to the end); ``window_why``:

@@ -23,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..exceptions import ContactError, FailureKind, PlanningError
-from ..grasp.choice import TIP_GAP_M, NewContact, tip_gap
+from ..grasp.choice import TIP_GAP_M, NewContact, Room, tip_gap
 from ..grasp.necessity import closure_possible_with
 from ..model.clearance import FingerClearance
 from .advance import Step, advance, window
@@ -119,8 +119,9 @@ def _make_room(
     after a finger-collision failure, one at which the two fingers' links would meet
     (:func:`_room_taken`). The neighbour
     then regrasps (now, or before one of the last regrasps if there is no time left
-    now), lands before the finger's hold is lost, and keeps its new contact out of that
-    room (around the wanted contact); what follows is planned again after it."""
+    now), lands before the finger's hold is lost, and keeps out of that room: its new
+    contact away from the wanted one, its finger clear of the finger standing there;
+    what follows is planned again after it."""
     if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
         return None  # a matter of time, not of room
     name, h = trig.finger, state.holding[trig.finger]
@@ -131,7 +132,7 @@ def _make_room(
     if not bases:
         return None
     links = failure.kind == FailureKind.FINGER_COLLISION
-    for other, wanted in _blockers(ctx, state, trig, win, links):
+    for other, room in _blockers(ctx, state, trig, win, links):
         for base, base_triggers, k in bases:
             if ctx.budget.exhausted:
                 return None
@@ -144,7 +145,7 @@ def _make_room(
             log.info("%s failed (%s): %s makes room first", name, failure.kind.value, other)
             why = f"makes room for {name} (its {failure.kind.value} failure)"
             new_state = _neighbour_first(
-                ctx, (base, base_triggers, k), other, why, win.latest_s, steps, room=wanted
+                ctx, (base, base_triggers, k), other, why, win.latest_s, steps, room=room
             )
             if new_state is not None:
                 return new_state
@@ -225,12 +226,12 @@ def _neighbour_first(
     end_by_s: float,
     steps: list[Step],
     *,
-    room: tuple[np.ndarray, float] | None = None,
+    room: Room | None = None,
     frees: tuple[str, ...] = (),
 ) -> PlanState | None:
     """The state after the holding finger ``other`` regrasps from ``base`` (a state,
     its triggers and how many of ``steps`` it keeps, :func:`_room_bases`), landing by
-    ``end_by_s`` [s], out of ``room`` (``(point, radius)``, object frame [m]) if given,
+    ``end_by_s`` [s], out of ``room`` (:func:`_room_taken`) if given,
     on a contact that frees the ``frees`` fingers (:func:`~.advance.advance`), and not
     held on instead (moving it is the point); None if no such regrasp verifies. On
     success ``steps`` holds the regrasps of the new state."""
@@ -319,12 +320,11 @@ def _join_blockers(
     stay: list[str],
     idle: list[str],
     t_arrive: float,
-) -> Iterator[tuple[str, str, tuple[np.ndarray, float]]]:
+) -> Iterator[tuple[str, str, Room]]:
     """``(joining, neighbour, room)`` for each idle finger of ``base`` that could join
     at ``t_arrive`` [s] and each of the ``stay`` fingers, nearest its best contact
-    first, that takes that contact's room (:func:`_room_taken`; the room ``(point,
-    radius)``, object frame [m]), each pair not tried before from ``base``; stops when
-    the budget is spent."""
+    first, that takes that contact's room (:func:`_room_taken`), each pair not tried
+    before from ``base``; stops when the budget is spent."""
     near = [n for n in stay if n in base.holding]
     for joining in [n for n in idle if n not in base.phases]:
         _, P = join_origin(ctx, joining, t_arrive)
@@ -354,7 +354,7 @@ def _join_blockers(
                 continue  # no room for the joining finger even without this neighbour
             room = _room_taken(ctx, base, joining, other, wanted, sep)
             if room is not None:
-                yield joining, other, (wanted.p_object, room)
+                yield joining, other, room
 
 
 def _room_bases(
@@ -382,10 +382,10 @@ def _room_bases(
 
 def _blockers(
     ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow, links: bool
-) -> list[tuple[str, tuple[np.ndarray, float]]]:
+) -> list[tuple[str, Room]]:
     """The holding fingers whose contacts or links take the room of ``trig.finger``'s
-    best new contact, nearest first, each with that room: ``(point, radius)`` (object
-    frame [m], :func:`_room_taken`) around the contact :func:`choose_new_contact` would
+    best new contact, nearest first, each with that room (:func:`_room_taken`) around
+    the contact :func:`choose_new_contact` would
     choose, landing one regrasp after the neighbour's, were the neighbour not there
     (``links``: a neighbour's links count too; only after a finger-collision failure,
     the one failure they can cause)."""
@@ -418,7 +418,7 @@ def _blockers(
             continue  # no room for the finger even without this neighbour
         room = _room_taken(ctx, state, name, other, wanted, sep, links)
         if room is not None:
-            out.append((other, (wanted.p_object, room)))
+            out.append((other, room))
     return out
 
 
@@ -430,26 +430,27 @@ def _room_taken(
     wanted: NewContact,
     sep: float,
     links: bool = True,
-) -> float | None:
-    """The radius [m] of the room around ``wanted`` (``name``'s new contact) that the
-    holding finger ``other`` must leave, or None if its hold leaves ``name`` room there:
-    ``sep`` if the two fingertip spheres would stand nearer than
-    :data:`~regrasp_pin.grasp.choice.TIP_GAP_M` (the choice's own test); if the
-    fingers' links would meet (Coal, closer than
-    :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing), farther than its
-    contact is now by a tip radius (only with ``links``)."""
+) -> Room | None:
+    """The room around ``wanted`` (``name``'s new contact) that the holding finger
+    ``other`` must leave, or None if its hold leaves ``name`` room there: if the two
+    fingertip spheres would stand nearer than :data:`~regrasp_pin.grasp.choice.TIP_GAP_M`
+    (the choice's own test) or, only with ``links``, the fingers' links would meet (Coal,
+    closer than :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing). The room:
+    no contact within ``sep`` of ``wanted``, and ``other``'s finger clear of ``name``'s
+    standing at ``wanted`` at its arrival (a :class:`~regrasp_pin.grasp.choice.Room`
+    with that posture)."""
     h = state.holding[other]
-    d = float(np.linalg.norm(wanted.p_object - h.p))
+    room = Room(wanted.p_object, sep, name, wanted.q_arrive, wanted.t_arrive_s)
     gap = tip_gap(ctx.scene.hand, name, (wanted.p_object, wanted.n_object), other, (h.p, h.n))
     if gap < TIP_GAP_M:
-        return sep
+        return room
     if not links:
         return None
     hand = ctx.scene.hand
     q = q_hand_of(ctx, state, [other])(np.array([wanted.t_arrive_s]))[0]
     q[hand.finger(name).q_indices] = wanted.q_arrive
     if FingerClearance.shared(hand, name, [other])(q) < LANDING_FINGER_CLEARANCE_M:
-        return d + hand.finger(name).tip_radius
+        return room
     return None
 
 

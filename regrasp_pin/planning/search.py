@@ -38,7 +38,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
-from ..grasp.choice import NewContact, choose_new_contact
+from ..grasp.choice import NewContact, Room, choose_new_contact
 from ..grasp.contact import ContactModel
 from ..grasp.manifold import Manifold
 from ..grasp.screening import ManifoldClearance, ScreeningEpsilons
@@ -126,7 +126,7 @@ class _Call:
     shortest_s: float
     exclude: list[np.ndarray]
     landing_check: Callable[[RegraspResult], Attempt | None] | None
-    reserved: Sequence[tuple[np.ndarray, float]]
+    reserved: Sequence[Room | tuple[np.ndarray, float]]
     frees: tuple[str, ...] = ()
     attempts: list[Attempt] = field(default_factory=list)
     failed: dict[tuple, PlanningError] = field(default_factory=dict)
@@ -185,7 +185,7 @@ class RegraspSearch:
         end_by_s: float | None = None,
         exclude: list[np.ndarray] | None = None,
         landing_check: Callable[[RegraspResult], Attempt | None] | None = None,
-        reserved: Sequence[tuple[np.ndarray, float]] = (),
+        reserved: Sequence[Room | tuple[np.ndarray, float]] = (),
         shortest_s: float | None = None,
         frees: Sequence[str] = (),
     ) -> Found:
@@ -206,7 +206,8 @@ class RegraspSearch:
             landing_check: Judges a verified regrasp by what follows its landing (e.g.
                 how long the new contact is held): an :class:`Attempt` rejects it and
                 excludes its Q like any other failure; None accepts it.
-            reserved: ``(point, radius)`` pairs (object frame, [m]): room Q must leave
+            reserved: Rooms (:class:`~regrasp_pin.grasp.choice.Room`, or ``(point,
+                radius)`` pairs, object frame [m]) Q must leave
                 free for another finger's landing.
             shortest_s: The shortest regrasp [s] (default ``regrasp.duration_s``).
             frees: Fingers of ``others`` that Q must let go (see :meth:`choose`).
@@ -278,7 +279,7 @@ class RegraspSearch:
         others: Mapping[str, tuple[np.ndarray, np.ndarray]],
         q_hand: Callable[[np.ndarray], np.ndarray],
         excluded: list[np.ndarray],
-        reserved: Sequence[tuple[np.ndarray, float]] = (),
+        reserved: Sequence[Room | tuple[np.ndarray, float]] = (),
         landing: tuple[Callable[[np.ndarray], np.ndarray], float] | None = None,
         frees: Sequence[str] = (),
         absent: Sequence[str] = (),
