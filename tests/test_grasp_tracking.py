@@ -288,7 +288,7 @@ def test_bad_input_is_rejected(scene):
 def test_a_redundant_fingers_spare_joint_keeps_its_fingertip_link_off_the_face(monkeypatch):
     """Suite spec 25 (Allegro, a box turned and moved): the thumb's start contact leaves
     its distal box flush with the face, and plain warm-started IK lets the box sink in
-    within 0.1 s; turned by its spare joint (grasp.settle) the thumb holds to the end,
+    before the turn ends; turned by its spare joint (grasp.settle) the thumb holds to the end,
     its fingertip link off the face as Coal measures it. While any finger holds, no
     joint moves faster than its limit (the turn stays within a time step's reach of the
     time before)."""
@@ -328,7 +328,7 @@ def test_a_redundant_fingers_spare_joint_keeps_its_fingertip_link_off_the_face(m
     np.testing.assert_array_equal(settled.q[0], plain.q[0])
     assert np.any(settled.q[1:] != plain.q[1:])
     t_lost = plain.trigger()[0]
-    assert t_lost is not None and t_lost <= 0.1
+    assert t_lost is not None and t_lost < times[-1]
     i = plain.trigger_index()
     assert plain.tip_clearance_m[i] < -ContactModel().tip_penetration_m
 

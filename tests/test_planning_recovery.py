@@ -75,12 +75,16 @@ def _wanted(p_object, q_arrive, t):
     )
 
 
-def _is_room(room, wanted, sep):
-    """The room of ``wanted`` (the ring's new contact): contacts kept ``sep`` away, and
-    the ring's posture there, at its arrival, kept clear."""
-    assert room.point is wanted.p_object and room.radius_m == sep
-    assert room.finger == "ring" and room.t_s == wanted.t_arrive_s
-    np.testing.assert_array_equal(room.q_finger, wanted.q_arrive)
+def _is_room(rooms, wanted, sep, wider):
+    """The rooms of ``wanted`` (the ring's new contact), in order: contacts kept
+    ``sep`` away with the ring's posture there, at its arrival, kept clear; then
+    contacts kept ``wider`` away, without a posture."""
+    posture, plain = rooms
+    assert posture.point is wanted.p_object and posture.radius_m == sep
+    assert posture.finger == "ring" and posture.t_s == wanted.t_arrive_s
+    np.testing.assert_array_equal(posture.q_finger, wanted.q_arrive)
+    assert plain.point is wanted.p_object and plain.finger is None
+    assert plain.radius_m == pytest.approx(wider, abs=1e-12)
 
 
 def test_a_neighbour_whose_contact_is_within_the_separation_takes_the_room(crowded):
@@ -88,18 +92,20 @@ def test_a_neighbour_whose_contact_is_within_the_separation_takes_the_room(crowd
     sep = 0.017
     near = hold.p + np.array([0.01, 0.0, 0.0])  # 10 mm from the middle's contact
     wanted = _wanted(near, clear, t)
-    _is_room(_room_taken(ctx, state, "ring", "middle", wanted, sep), wanted, sep)
+    _is_room(_room_taken(ctx, state, "ring", "middle", wanted, sep), wanted, sep, sep)
 
 
 def test_a_neighbour_whose_links_meet_the_finger_takes_the_room_of_its_posture(crowded):
     """Contacts 30 mm apart, but the ring at the wanted contact would come within the
     landing clearance of the middle finger: the middle must leave the room, its finger
-    clear of the ring standing at the wanted contact."""
+    clear of the ring standing at the wanted contact, or else land farther from it than
+    its contact is now (by a tip radius)."""
     ctx, state, hold, meet, clear, t = crowded
     sep = 0.017
     far = hold.p + np.array([0.0, 0.03, 0.0])
     wanted = _wanted(far, meet, t)
-    _is_room(_room_taken(ctx, state, "ring", "middle", wanted, sep), wanted, sep)
+    r = ctx.scene.hand.finger("ring").tip_radius
+    _is_room(_room_taken(ctx, state, "ring", "middle", wanted, sep), wanted, sep, 0.03 + r)
     # not counting the links (a failure they cannot have caused), it leaves the room
     assert _room_taken(ctx, state, "ring", "middle", wanted, sep, False) is None
     # the same contact with the fingers apart leaves the room

@@ -16,6 +16,7 @@ a search).
 
 from __future__ import annotations
 
+import itertools
 import logging
 from collections.abc import Iterator
 from dataclasses import replace
@@ -132,13 +133,13 @@ def _make_room(
     if not bases:
         return None
     links = failure.kind == FailureKind.FINGER_COLLISION
-    for other, room in _blockers(ctx, state, trig, win, links):
-        for base, base_triggers, k in bases:
+    for other, rooms in _blockers(ctx, state, trig, win, links):
+        for (base, base_triggers, k), (j, room) in itertools.product(bases, enumerate(rooms)):
             if ctx.budget.exhausted:
                 return None
             if other not in base.holding:
                 continue
-            key = (_signature(base), f"{other} makes room for {name}")
+            key = (_signature(base), f"{other} makes room for {name}", j)
             if key in ctx.tried:
                 continue
             ctx.tried.add(key)
@@ -299,7 +300,7 @@ def _make_room_for_join(
             max(win.preferred_s, b[0].now + D) + p.release_back_off_s + D,
             motion.t_end - p.dt_s,
         )
-        for joining, other, room in _join_blockers(ctx, b[0], stay, idle, t_arrive):
+        for joining, other, rooms in _join_blockers(ctx, b[0], stay, idle, t_arrive):
             log.info(
                 "%s failed (%s): %s makes room for %s to join",
                 name,
@@ -308,9 +309,10 @@ def _make_room_for_join(
                 joining,
             )
             why = f"makes room for {joining} to join in place of {name}"
-            new_state = _neighbour_first(ctx, b, other, why, win.latest_s, steps, room=room)
-            if new_state is not None:
-                return new_state
+            for room in rooms:
+                new_state = _neighbour_first(ctx, b, other, why, win.latest_s, steps, room=room)
+                if new_state is not None:
+                    return new_state
     return None
 
 
@@ -320,8 +322,8 @@ def _join_blockers(
     stay: list[str],
     idle: list[str],
     t_arrive: float,
-) -> Iterator[tuple[str, str, Room]]:
-    """``(joining, neighbour, room)`` for each idle finger of ``base`` that could join
+) -> Iterator[tuple[str, str, tuple[Room, ...]]]:
+    """``(joining, neighbour, rooms)`` for each idle finger of ``base`` that could join
     at ``t_arrive`` [s] and each of the ``stay`` fingers, nearest its best contact
     first, that takes that contact's room (:func:`_room_taken`), each pair not tried
     before from ``base``; stops when the budget is spent."""
@@ -352,9 +354,9 @@ def _join_blockers(
                 )
             except ContactError:
                 continue  # no room for the joining finger even without this neighbour
-            room = _room_taken(ctx, base, joining, other, wanted, sep)
-            if room is not None:
-                yield joining, other, room
+            rooms = _room_taken(ctx, base, joining, other, wanted, sep)
+            if rooms is not None:
+                yield joining, other, rooms
 
 
 def _room_bases(
@@ -382,9 +384,9 @@ def _room_bases(
 
 def _blockers(
     ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow, links: bool
-) -> list[tuple[str, Room]]:
+) -> list[tuple[str, tuple[Room, ...]]]:
     """The holding fingers whose contacts or links take the room of ``trig.finger``'s
-    best new contact, nearest first, each with that room (:func:`_room_taken`) around
+    best new contact, nearest first, each with the rooms to leave (:func:`_room_taken`) around
     the contact :func:`choose_new_contact` would
     choose, landing one regrasp after the neighbour's, were the neighbour not there
     (``links``: a neighbour's links count too; only after a finger-collision failure,
@@ -416,9 +418,9 @@ def _blockers(
             )
         except ContactError:
             continue  # no room for the finger even without this neighbour
-        room = _room_taken(ctx, state, name, other, wanted, sep, links)
-        if room is not None:
-            out.append((other, room))
+        rooms = _room_taken(ctx, state, name, other, wanted, sep, links)
+        if rooms is not None:
+            out.append((other, rooms))
     return out
 
 
@@ -430,27 +432,32 @@ def _room_taken(
     wanted: NewContact,
     sep: float,
     links: bool = True,
-) -> Room | None:
-    """The room around ``wanted`` (``name``'s new contact) that the holding finger
-    ``other`` must leave, or None if its hold leaves ``name`` room there: if the two
-    fingertip spheres would stand nearer than :data:`~regrasp_pin.grasp.choice.TIP_GAP_M`
-    (the choice's own test) or, only with ``links``, the fingers' links would meet (Coal,
-    closer than :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing). The room:
-    no contact within ``sep`` of ``wanted``, and ``other``'s finger clear of ``name``'s
-    standing at ``wanted`` at its arrival (a :class:`~regrasp_pin.grasp.choice.Room`
-    with that posture)."""
+) -> tuple[Room, ...] | None:
+    """The rooms around ``wanted`` (``name``'s new contact) that the holding finger
+    ``other`` may leave, to be tried in order, or None if its hold leaves ``name`` room
+    there: if the two fingertip spheres would stand nearer than
+    :data:`~regrasp_pin.grasp.choice.TIP_GAP_M` (the choice's own test) or, only with
+    ``links``, the fingers' links would meet (Coal, closer than
+    :data:`~.search.LANDING_FINGER_CLEARANCE_M` at the landing).
+
+    First the room of ``name`` standing at ``wanted``: no contact within ``sep`` of it,
+    ``other``'s finger clear of ``name``'s there at its arrival (a
+    :class:`~regrasp_pin.grasp.choice.Room` with that posture). Then a room of that
+    contact alone, wider where the links met (farther from it than ``other``'s contact
+    is now, by a tip radius): it leaves room to ``name``'s other contacts near it."""
     h = state.holding[other]
-    room = Room(wanted.p_object, sep, name, wanted.q_arrive, wanted.t_arrive_s)
+    posture = Room(wanted.p_object, sep, name, wanted.q_arrive, wanted.t_arrive_s)
     gap = tip_gap(ctx.scene.hand, name, (wanted.p_object, wanted.n_object), other, (h.p, h.n))
     if gap < TIP_GAP_M:
-        return room
+        return posture, Room(wanted.p_object, sep)
     if not links:
         return None
     hand = ctx.scene.hand
     q = q_hand_of(ctx, state, [other])(np.array([wanted.t_arrive_s]))[0]
     q[hand.finger(name).q_indices] = wanted.q_arrive
     if FingerClearance.shared(hand, name, [other])(q) < LANDING_FINGER_CLEARANCE_M:
-        return room
+        d = float(np.linalg.norm(wanted.p_object - h.p))
+        return posture, Room(wanted.p_object, d + hand.finger(name).tip_radius)
     return None
 
 
