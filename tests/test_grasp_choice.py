@@ -1700,9 +1700,17 @@ def test_a_room_with_a_posture_keeps_the_finger_clear_of_that_finger(five):
     again = choose_new_contact(hand, box, m, sample, t, reserved=[(plain.p_object, 0.0)], **kw)
     assert again.index == plain.index
     for bad in (
-        Room(plain.p_object, 0.0, "index", plain.q_arrive, t),
-        Room(plain.p_object, 0.0, "middle", q_middle[:2], t),
-        Room(plain.p_object, 0.0, "middle", q_middle, float("nan")),
+        [Room(plain.p_object, 0.0, "index", plain.q_arrive, t)],
+        [Room(plain.p_object, 0.0, "middle", q_middle[:2], t)],
+        [Room(plain.p_object, 0.0, "middle", q_middle, float("nan"))],
+        [Room(plain.p_object, 0.0, "middle", q_middle, 99.0)],  # after the manifold
+        [Room(plain.p_object, 0.0, "sixth", q_middle, t)],
+        [Room(plain.p_object[:2], 0.0)],
+        [(plain.p_object, float("nan"))],
+        (plain.p_object, 0.01),  # one pair, not a sequence of them
+        Room(plain.p_object, 0.0),  # one room, not a sequence of them
     ):
         with pytest.raises(InputError, match="reserved"):
-            choose_new_contact(hand, box, m, sample, t, reserved=[bad], **kw)
+            choose_new_contact(hand, box, m, sample, t, reserved=bad, **kw)
+    with pytest.raises(InputError, match="absent"):
+        choose_new_contact(hand, box, m, sample, t, absent=None, **kw)

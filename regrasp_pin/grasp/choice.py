@@ -70,7 +70,7 @@ _LINK_BATCH = 64  # candidates whose link clearance is measured at once (Coal)
 _NEAREST_SETS = 8  # refused contact sets whose epsilons a force-closure failure reads
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Room:
     """Room a new contact leaves for another finger's landing.
 
@@ -266,7 +266,10 @@ def choose_new_contact(
             (``too-late``); the message says which finger, when, why.
         InputError: ``t_arrive_s`` is NaN or outside the manifold's times; ``frees``
             is a string or names a finger not in ``others``; ``absent`` is a string,
-            names a finger of ``others``, the finger itself or no finger of the hand.
+            names a finger of ``others``, the finger itself or no finger of the hand;
+            ``reserved`` is not a sequence of rooms (a point not ``(3,)``, a radius not
+            finite and >= 0, a posture not of another finger's joints at a time of the
+            manifold).
     """
     contact = contact or ContactModel()
     finger = hand.finger(manifold.finger)
@@ -275,11 +278,13 @@ def choose_new_contact(
             "frees", f"is {frees!r}", f"a sequence of names of others: {sorted(others)}"
         )
     away = sorted(set(hand.finger_names) - set(others) - {finger.name})
-    if isinstance(absent, str) or not set(absent) <= set(away):
+    if not isinstance(absent, Sequence) or isinstance(absent, str) or not set(absent) <= set(away):
         raise InputError(
             "absent", f"is {absent!r}", f"a sequence of names of fingers not holding: {away}"
         )
     ka, kb = _arrival_indices(manifold, t_arrive_s)
+    rooms = _rooms(reserved)
+    postures = [_posture(hand, finger, manifold, r, ka) for r in rooms if r.finger is not None]
     # the landing falls between two manifold times: Q must be usable at both
     cand = manifold.usable(contact.choice_margin_rad, rows=np.array([ka, min(kb, ka)])).all(0)
     pts = sample.points
@@ -290,8 +295,6 @@ def choose_new_contact(
         r_ex = exclude_radius_m if exclude_points_radius_m is None else exclude_points_radius_m
         ex = np.asarray(exclude_points_object, float).reshape(-1, 3)
         cand &= _far_from(pts, list(ex), max(r_ex, 1e-12))
-    rooms = [Room.of(r) for r in reserved]
-    postures = [_posture(hand, finger, manifold, r) for r in rooms if r.finger is not None]
     for room in rooms:
         cand &= _far_from(pts, [np.asarray(room.point, float)], float(room.radius_m))
     idx = np.flatnonzero(cand)
@@ -457,30 +460,54 @@ def _apart_from(
     return ok
 
 
+def _rooms(reserved: object) -> list[Room]:
+    """``reserved`` as Rooms; InputError unless it is a sequence of Rooms or ``(point,
+    radius)`` pairs with a finite point ``(3,)`` [m] and a finite radius >= 0 [m]."""
+    wanted = "a sequence of Rooms or (point (3,), radius >= 0) pairs [m]"
+    if isinstance(reserved, (Room, str)) or not isinstance(reserved, Sequence):
+        raise InputError("reserved", f"is {reserved!r}", wanted)
+    rooms = []
+    for r in reserved:
+        try:
+            room = Room.of(r)
+            point, radius = np.asarray(room.point, float), float(room.radius_m)
+        except (TypeError, ValueError) as exc:
+            raise InputError("reserved", f"holds {r!r}", wanted) from exc
+        if point.shape != (3,) or not np.isfinite(point).all() or not radius >= 0.0:
+            raise InputError("reserved", f"holds {r!r}", wanted)
+        rooms.append(room)
+    return rooms
+
+
 def _posture(
-    hand: Hand, finger: Finger, manifold: Manifold, room: Room
+    hand: Hand, finger: Finger, manifold: Manifold, room: Room, ka: int
 ) -> tuple[FingerClearance, np.ndarray, int]:
     """``(finger's clearance to room.finger, the hand at room.q_finger, time index)``
-    of a room with a finger posture; InputError for a posture that is not one of
-    another finger of the hand at a time."""
-    other = hand.finger(str(room.finger))  # UnknownNameError lists the names
+    of a room with a finger posture: the index of ``room.t_s``, not before the
+    arrival's ``ka`` (a candidate is read where the finger holds it); InputError for
+    a posture that is not one of another finger of the hand at a time of the
+    manifold."""
+    times = manifold.times_s
+    names = [n for n in hand.finger_names if n != finger.name]
     q = np.asarray(room.q_finger, float) if room.q_finger is not None else None
     t = float(room.t_s) if room.t_s is not None else math.nan
+    k = hand.finger(room.finger).k if room.finger in names else -1
     if (
-        other.name == finger.name
-        or q is None
-        or q.shape != (other.k,)
-        or not (np.isfinite(q).all() and math.isfinite(t))
+        q is None
+        or q.shape != (k,)
+        or not np.isfinite(q).all()
+        or not times[0] - 1e-9 <= t <= times[-1] + 1e-9  # also rejects NaN
     ):
         raise InputError(
             "reserved",
             f"holds a room of finger {room.finger!r} with q_finger {room.q_finger!r} "
             f"at t_s {room.t_s!r}",
-            f"another finger than {finger.name!r}, its {other.k} finite joint "
-            "values [rad] and a finite time [s]",
+            f"one of the fingers {names}, its finite joint values [rad] and a time in "
+            f"[{times[0]:.6g}, {times[-1]:.6g}] s",
         )
-    clear = FingerClearance.shared(hand, finger.name, [other.name])
-    return clear, hand.to_full(other.name, q), manifold.time_index(t)
+    clear = FingerClearance.shared(hand, finger.name, [str(room.finger)])
+    row = max(manifold.time_index(t), ka)
+    return clear, hand.to_full(str(room.finger), q), row
 
 
 def _far_from(pts: np.ndarray, centres: list[np.ndarray], radius_m: float) -> np.ndarray:

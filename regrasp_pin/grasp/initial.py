@@ -72,11 +72,12 @@ def _start_candidates(
     sample indices and lasting fractions, the longest-lasting first, spread over the
     surface (two tip radii apart first, then one, then the rest in that order, so that
     a finger whose usable contacts lie in one small patch is not thinned out to two or
-    three of them), links clear of the object; only those that last through ``hold``
-    (a run from the start in which the finger cannot let go) if it is given: inside
-    the joint limits and, held there, with the finger's other links clear of the
-    object and its fingertip link not sinking in at every manifold time of the run (as
-    the tracking will measure; :func:`held_clear`)."""
+    three of them), links clear of the object at the start and held until the next
+    manifold time, or, if ``hold`` (a run from the start in which the finger cannot
+    let go) is given, only those that last through it: inside the joint limits and,
+    held there, with the finger's other links clear of the object and its fingertip
+    link not sinking in at every manifold time of the run (as the tracking will
+    measure; :func:`held_clear`)."""
     name = man.finger
     finger = hand.finger(name)
     usable = man.usable(contact.limit_margin_rad)
@@ -125,7 +126,9 @@ def _start_candidates(
     if not chosen:
         lasting = "" if hold is None else f" that lasts until t={hold.t_to_s:.3f} s"
         raise ContactError(
-            f"every usable contact{lasting} makes a link touch the object", finger=name
+            f"every usable contact{lasting} makes a link touch the object or is not held "
+            "until the next manifold time",
+            finger=name,
         )
     return idx[chosen], frac[chosen]
 
