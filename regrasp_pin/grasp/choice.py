@@ -586,15 +586,15 @@ class _Screen:
         self.epsilons = epsilons
         self.link_clear, self.contact = link_clear, contact
         self.q_hand_arrive = q_hand_arrive
-        present = [n for n in hand.finger_names if n not in absent] if absent else None
-        self.finger_clear = (
-            FingerClearance.shared(hand, finger.name, present)
-            if q_hand_arrive is not None
-            else None
-        )
         self.finger_clearance_m = finger_clearance_m
-        # rooms' finger postures (:func:`_posture`): (clearance, hand there, time index)
-        self.postures = list(postures)
+        # the finger-clearance tests, (clearance, hand configuration, time index): the
+        # other fingers (but the absent) at arrival, then the rooms' finger postures
+        # (:func:`_posture`)
+        self.clearances = list(postures)
+        if q_hand_arrive is not None:
+            present = [n for n in hand.finger_names if n not in absent] if absent else None
+            arrival = FingerClearance.shared(hand, finger.name, present)
+            self.clearances.insert(0, (arrival, q_hand_arrive, ka))
         self.frees = tuple(frees)  # rows of the other contacts that Q must free
         # the contact sets refused for force closure and for not freeing a finger: their
         # epsilons (6-D hulls) are computed only if the choice fails for that reason
@@ -657,15 +657,8 @@ class _Screen:
         with the other contacts, then without each of :attr:`frees` in turn ("not
         freeing", :func:`~.quality.is_force_closure`); a refused contact set is kept
         (:attr:`refused`) for the failure's numbers."""
-        if self.finger_clear is not None:
-            q_all = np.array(self.q_hand_arrive, float)
-            q_all[self.finger.q_indices] = self.manifold.q[self.ka, i]
-            d = self.finger_clear(q_all)
-            if d < self.finger_clearance_m:
-                self._reject("finger clearance", d, self.finger_clearance_m)
-                return "finger clearance"
-        for clear_of, q_room, k in self.postures:
-            q_all = q_room.copy()
+        for clear_of, q_hand, k in self.clearances:
+            q_all = np.array(q_hand, float)
             q_all[self.finger.q_indices] = self.manifold.q[k, i]
             d = clear_of(q_all)
             if d < self.finger_clearance_m:

@@ -386,11 +386,11 @@ def _blockers(
     ctx: PlanContext, state: PlanState, trig: Trigger, win: LiftOffWindow, links: bool
 ) -> list[tuple[str, tuple[Room, ...]]]:
     """The holding fingers whose contacts or links take the room of ``trig.finger``'s
-    best new contact, nearest first, each with the rooms to leave (:func:`_room_taken`) around
-    the contact :func:`choose_new_contact` would
-    choose, landing one regrasp after the neighbour's, were the neighbour not there
-    (``links``: a neighbour's links count too; only after a finger-collision failure,
-    the one failure they can cause)."""
+    best new contact, nearest first, each with the rooms to leave (:func:`_room_taken`)
+    around the contact :func:`choose_new_contact` would choose, landing one regrasp
+    after the neighbour's, were the neighbour not there (``links``: a neighbour's links
+    count too; only after a finger-collision failure, the one failure they can
+    cause)."""
     hand, name = ctx.scene.hand, trig.finger
     h = state.holding[name]
     D = ctx.params.regrasp.duration_s
