@@ -148,7 +148,8 @@ class RegraspPhase:
 
 @dataclass(frozen=True)
 class ReleasePhase:
-    """A finger lets go of contact P at ``t_start`` and stays off to ``t_end`` [s].
+    """A finger lets go of contact P at ``t_start`` and stays off to ``t_end`` [s]: the
+    end of the plan, or the start of its ``join`` if it joins again.
 
     Its fingertip backs off along the contact normal and the finger then stays still
     (:mod:`~regrasp_pin.planning.release`); the other fingers hold the object.
@@ -156,7 +157,7 @@ class ReleasePhase:
     Attributes:
         finger: Finger name.
         t_start: Release time [s].
-        t_end: End of the plan [s].
+        t_end: End of the plan, or when the finger starts to join again [s].
         P_object: The contact let go, object frame ``(3,)`` [m].
         min_clearance_m: Smallest finger-object distance after the back-off [m].
         reason: Why the finger let go.
@@ -185,8 +186,9 @@ class ReleasePhase:
 
 @dataclass(frozen=True)
 class JoinPhase:
-    """A finger that took no part so far moves onto contact Q, from ``t_start`` to
-    ``t_end`` [s] (:mod:`~regrasp_pin.planning.join`); it holds Q from ``t_end``.
+    """A finger that does not hold (it took no part so far, or let go earlier) moves
+    onto contact Q, from ``t_start`` to ``t_end`` [s]
+    (:mod:`~regrasp_pin.planning.join`); it holds Q from ``t_end``.
 
     Attributes:
         finger: Finger name.

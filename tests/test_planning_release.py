@@ -124,6 +124,21 @@ def test_the_samples_reach_the_end_when_the_back_off_ends_within_a_step_of_it(sc
     assert rel.times_s[-2] == pytest.approx(T_RELEASE_S + 0.495)
 
 
+def test_a_release_planned_until_a_time_is_the_full_release_up_to_then(scene):
+    """A release planned to 0.6 s (a finger that joins again by then) ends there: the
+    full release's samples up to 0.6 s and one at 0.6 s, the same configurations."""
+    full = _release(scene)
+    until = _release(scene, until_s=0.6)
+    assert until.t_end == 0.6 and until.times_s[-1] == pytest.approx(0.6, abs=1e-9)
+    upto = full.times_s <= 0.6 + 1e-9
+    np.testing.assert_array_equal(until.times_s, full.times_s[upto])
+    np.testing.assert_array_equal(until.q, full.q[upto])
+    assert until.t_backed_off == full.t_backed_off
+    with pytest.raises(PlanningError) as info:
+        _release(scene, until_s=T_RELEASE_S)  # no time to back off by then
+    assert info.value.kind == FailureKind.TOO_LATE
+
+
 def test_a_back_off_lasts_as_long_as_the_joint_velocity_limits_need(scene):
     """Asked to back off 8 mm in 10 ms, the finger takes the time its joints need: the
     straight joint-space move's minimum-jerk duration at the velocity limits

@@ -42,7 +42,7 @@ def plan_until(ctx: PlanContext, state: PlanState, until: float, *, final: bool 
         state.history,
         state.holding,
         phases,
-        [*state.regrasps, *state.released.values(), *state.joined.values()],
+        [*state.regrasps, *state.ended, *state.released.values(), *state.joined.values()],
         until=until,
         params=ctx.params,
         base_q=ctx.base_q,

@@ -1,7 +1,8 @@
-"""An idle finger joins the grasp: from where it rests to a new contact Q.
+"""A finger that does not hold joins the grasp: from where it rests to a new contact Q.
 
 A finger whose contacts run out of its workspace (the object has turned away from it)
-lets go (:mod:`.release`); a finger that did not take part so far can take its place.
+lets go (:mod:`.release`); a finger that did not take part so far, or one that let go
+earlier and whose contacts are back within reach, can take its place.
 The joining finger moves in joint space (minimum jerk) from its configuration at
 ``t_start`` to a pre-landing configuration whose fingertip is ``clearance`` above Q
 along Q's normal, then approaches Q along that normal (the target moves with the

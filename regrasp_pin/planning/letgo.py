@@ -3,8 +3,11 @@
 A finger whose contact cannot be followed and that has no verified regrasp lets go
 for the rest of the motion (:func:`~.release.plan_release`, a ``release`` phase) if
 more than ``min_holding`` others remain to take turns, or if the others hold in force
-closure to the end; otherwise a finger that took no part so far may join in its place
-(:func:`~.join.plan_join`, a ``join`` phase) once it has let go: a hand-over. Either
+closure to the end; otherwise a finger that does not hold may join in its place
+(:func:`~.join.plan_join`, a ``join`` phase) once it has let go: a hand-over. The
+joining finger took no part so far, or let go earlier and stands still where it
+parked (its contacts may be back within reach: it joins again, and its ``release``
+phase ends where its ``join`` starts). Either
 moves the plan's time on (to the release, or to the joining finger's landing); one
 that would take it past the loss of another finger's hold is refused (a regrasp is
 refused when such a loss comes before its earliest landing).
@@ -13,6 +16,7 @@ refused when such a loss comes before its earliest landing).
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import replace
 from typing import TypeVar
@@ -23,7 +27,7 @@ from ..exceptions import ContactError, PlanningError
 from ..grasp.holding import Holding, holding_q, rest_configuration
 from ..grasp.manifold import build_manifold
 from ..plan import JoinPhase, ReleasePhase
-from .join import join_durations, plan_join
+from .join import Join, join_durations, plan_join
 from .release import Release, plan_release
 from .schedule import TIME_TOL_S, LiftOffWindow, held_until
 from .state import (
@@ -36,7 +40,7 @@ from .state import (
     q_hand_of,
 )
 
-__all__ = ["idle_fingers", "join_origin", "let_go"]
+__all__ = ["idle_fingers", "join_origin", "joinable", "let_go", "still_from"]
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +58,10 @@ def let_go(
     """The state after ``trig.finger``, which has no verified regrasp, lets go
     (:func:`_try_release`), or lets go with an idle finger joining in its place
     (:func:`_try_handover`); None if neither verifies."""
-    return _try_release(ctx, state, trig, win, stay, why) or _try_handover(
-        ctx, state, trig, win, stay, why
+    return (
+        _try_release(ctx, state, trig, win, stay, why)
+        or _try_handover(ctx, state, trig, win, stay, why)
+        or _try_rejoin(ctx, state, trig, win, stay, why)
     )
 
 
@@ -146,16 +152,18 @@ def _release_either(
     stay: list[str],
     q_hand: Callable[[np.ndarray], np.ndarray],
     tried: list[str],
+    until: float | None = None,
 ) -> Release | None:
     """A verified release of ``name`` at ``t_r`` [s] (``q_hand``: the ``stay`` fingers
-    holding): staying where it backed off, else moving to its parking posture
-    (:func:`_park`); None if neither verifies (the failures noted in ``tried``)."""
+    holding; ``until``: planned to then [s], None: to the motion's end): staying where
+    it backed off, else moving to its parking posture (:func:`_park`); None if neither
+    verifies (the failures noted in ``tried``)."""
     h = state.holding[name]
     q_r = holding_q(
         ctx.scene.hand, ctx.scene.motion, name, h, np.array([t_r]), ctx.params.contact.ik_tol_m
     )[0]
     for park in (None, _park(ctx, name)):
-        rel = _release_at(ctx, state, name, t_r, q_r, stay, q_hand, park, tried)
+        rel = _release_at(ctx, state, name, t_r, q_r, stay, q_hand, park, tried, until)
         if rel is not None:
             return rel
     return None
@@ -171,29 +179,37 @@ def _release_at(
     q_hand: Callable[[np.ndarray], np.ndarray],
     park: np.ndarray | None,
     tried: list[str],
+    until: float | None = None,
 ) -> Release | None:
-    """A verified release of ``name`` at ``t_r`` (``park``: see plan_release), or None
-    (the failure noted in ``tried``).
+    """A verified release of ``name`` at ``t_r`` (``park``, ``until``: see
+    plan_release), or None (the failure noted in ``tried``).
 
     The outcome is kept for the plan (``ctx.releases``), by what it depends on: the
-    finger, the time, parked or not, its hold and the holds and releases the others'
-    motion comes from. Backing up asks for the same release again from other
-    branches; it is answered, not planned or paid for again."""
+    finger, the time, parked or not, the time it is planned to, its hold and the holds
+    and releases the others' motion comes from. Backing up asks for the same release
+    again from other branches; it is answered, not planned or paid for again."""
     key = (
         name,
         round(t_r, 9),
         park is None,
+        None if until is None else round(until, 9),
         _hold_key(state.holding[name]),
         tuple((n, _hold_key(state.holding[n])) for n in sorted(stay)),
-        tuple((n, r.times_s.tobytes(), r.q.tobytes()) for n, r in sorted(state.released.items())),
+        _released_key(state),
     )
     outcome = ctx.releases.get(key)
     if outcome is None:
-        outcome = ctx.releases[key] = _plan_release(ctx, state, name, t_r, q_r, q_hand, park)
+        outcome = ctx.releases[key] = _plan_release(ctx, state, name, t_r, q_r, q_hand, park, until)
     if isinstance(outcome, PlanningError):
         tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {outcome.kind.value}")
         return None
     return outcome
+
+
+def _released_key(state: PlanState) -> tuple:
+    """What the fingers let go of ``state`` are, for the other fingers' moves: where
+    each moves and stands."""
+    return tuple((n, r.times_s.tobytes(), r.q.tobytes()) for n, r in sorted(state.released.items()))
 
 
 def _hold_key(h: Holding) -> tuple:
@@ -210,6 +226,7 @@ def _plan_release(
     q_r: np.ndarray,
     q_hand: Callable[[np.ndarray], np.ndarray],
     park: np.ndarray | None,
+    until: float | None = None,
 ) -> Release | PlanningError:
     """:func:`~.release.plan_release` of ``name`` at ``t_r``, or its failure."""
     p, h = ctx.params, state.holding[name]
@@ -232,6 +249,7 @@ def _plan_release(
             ik_tol_m=p.contact.ik_tol_m,
             q_park=park,
             park_s=p.regrasp.duration_s,
+            until_s=until,
         )
     except PlanningError as exc:
         return exc
@@ -269,8 +287,9 @@ def _try_handover(
     stay: list[str],
     why: str,
 ) -> PlanState | None:
-    """The state after ``trig.finger`` lets go and a finger that took no part so far
-    joins in its place (:mod:`.planning.join`), or None.
+    """The state after ``trig.finger`` lets go and a finger that does not hold (it took
+    no part so far, or let go before and stands still) joins in its place
+    (:mod:`.planning.join`), or None.
 
     Only when releases are allowed and such a finger exists. The release times tried
     are the latest in the window first; the joining fingers in the hand's order, each
@@ -280,8 +299,7 @@ def _try_handover(
     """
     p = ctx.params
     name = trig.finger
-    idle = idle_fingers(ctx, state)
-    if not p.release or not idle or win.empty:
+    if not p.release or win.empty or not [n for n in joinable(ctx, state, math.inf) if n != name]:
         return None
     q_hand = q_hand_of(ctx, state, stay)
     for t_r in _release_times(ctx, win):
@@ -292,7 +310,7 @@ def _try_handover(
         if rel is None:
             log.debug("%s cannot let go at %s", name, failed)
             continue
-        for other in idle:
+        for other in [n for n in joinable(ctx, state, rel.t_backed_off) if n != name]:
             note = f"{why}; no verified regrasp: let go, {other} joins in its place"
             after = _apply_release(state, name, rel, note)
             joined = _join(ctx, after, other, rel.t_backed_off, stay, name)
@@ -312,20 +330,84 @@ def _try_handover(
     return None
 
 
+def _try_rejoin(
+    ctx: PlanContext,
+    state: PlanState,
+    trig: Trigger,
+    win: LiftOffWindow,
+    stay: list[str],
+    why: str,
+) -> PlanState | None:
+    """The state after ``trig.finger`` lets go while the fingers that stay are too few
+    to take turns, and a finger joins later, before their first hold is lost: the
+    finger itself once its contacts are back within reach, or one that does not hold;
+    None if none does.
+
+    For a finger whose every contact leaves its joint limits for a while (the object
+    turns away from it), or that has no verified regrasp: the others hold alone
+    meanwhile (in force closure without it: the caller's test). Tried after a release
+    for good and a hand-over at once. The release is the first that verifies of the
+    window's release times (latest first), planned to the others' first loss; the
+    joins start from when the finger that let go stands still (or has backed off, for
+    another finger), every regrasp duration, earliest first, the joining fingers in
+    the hand's order; a join must land a regrasp duration before that loss, so that
+    the finger losing its hold first can still regrasp.
+    """
+    p, motion = ctx.params, ctx.scene.motion
+    name, D = trig.finger, p.regrasp.duration_s
+    if not p.release or win.empty or len(stay) > p.min_holding:
+        return None  # none allowed, or the others take turns without it (a release)
+    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
+    lost_by = min(
+        (
+            e.lost_s
+            for e in pending_triggers(ctx, without, gone=(name,))
+            if e.finger in stay and e.finger not in state.held_to_end
+        ),
+        default=math.inf,
+    )
+    if lost_by >= motion.t_end - TIME_TOL_S:
+        return None  # the others hold to the end: a release
+    q_hand = q_hand_of(ctx, state, stay)
+    for t_r in _release_times(ctx, win):
+        # planned to the others' first loss, by which a finger must have joined
+        rel = _release_either(ctx, state, name, t_r, stay, q_hand, [], until=lost_by)
+        if rel is None:
+            continue
+        note = f"{why}; no verified regrasp: let go until a finger joins"
+        after = _apply_release(state, name, rel, note)
+        # a join lands in time for the finger whose hold is lost first to regrasp after
+        t0 = rel.t_backed_off
+        while t0 + 2 * D <= lost_by + TIME_TOL_S and not ctx.budget.exhausted:
+            for other in joinable(ctx, after, t0):
+                joined = _join(ctx, after, other, t0, stay, name)
+                if (
+                    joined is not None
+                    and joined.now + D <= lost_by + TIME_TOL_S
+                    and _lost_before_now(ctx, joined) is None
+                ):
+                    log.info("%s lets go at t=%.3f s, %s joins at t=%.3f s", name, t_r, other, t0)
+                    return joined
+            t0 += D
+        return None  # the first release that verifies: later joins were all tried
+    return None
+
+
 def join_origin(
-    ctx: PlanContext, name: str, t_arrive: float
+    ctx: PlanContext, name: str, t_arrive: float, released: Release | None = None
 ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """Where the idle finger ``name`` joins from: its resting configuration ``(k,)``
-    [rad], and the surface sample nearest its resting fingertip at ``t_arrive`` [s]
-    ``(point, normal)`` (object frame [m]), the "P" its new contact is chosen away from.
-    Builds the finger's manifold on the plan's times if the plan has none yet."""
+    """Where the finger ``name`` joins from: where it rests ``(k,)`` [rad] (idle, or
+    where its ``released`` let-go left it), and the surface sample nearest that
+    fingertip at ``t_arrive`` [s] ``(point, normal)`` (object frame [m]), the "P" its
+    new contact is chosen away from. Builds the finger's manifold on the plan's times
+    if the plan has none yet."""
     f, motion = ctx.scene.hand.finger(name), ctx.scene.motion
     if name not in ctx.manifolds:
         m_times = ctx.manifolds[ctx.active[0]].times_s
         ctx.manifolds[name] = build_manifold(
             f, ctx.search.sample, motion, m_times, contact=ctx.params.contact
         )
-    q_from = ctx.base_q[f.q_indices]
+    q_from = ctx.base_q[f.q_indices] if released is None else released.q[-1]
     T = motion.pose(np.array([t_arrive]))[0]
     tip_obj = T[:3, :3].T @ (f.fk(q_from) - T[:3, 3])  # the resting tip, object frame
     k0 = int(np.argmin(np.linalg.norm(ctx.search.sample.points - tip_obj, axis=1)))
@@ -336,6 +418,40 @@ def idle_fingers(ctx: PlanContext, state: PlanState) -> list[str]:
     """The fingers that took no part in the plan so far (they may join), in the hand's
     order."""
     return [n for n in ctx.scene.hand.finger_names if n not in state.phases]
+
+
+def joinable(ctx: PlanContext, state: PlanState, t0: float) -> list[str]:
+    """The fingers that may join from ``t0`` [s], in the hand's order: those that took
+    no part so far, and those that let go and stand still by ``t0`` (backed off and
+    parked: :func:`still_from`)."""
+    return [
+        n
+        for n in ctx.scene.hand.finger_names
+        if n not in state.holding
+        and (
+            n not in state.phases
+            or (n in state.released and still_from(state.released[n]) <= t0 + TIME_TOL_S)
+        )
+    ]
+
+
+def still_from(rel: Release) -> float:
+    """When the finger of the let-go ``rel`` stops moving [s]: the first sample after
+    which its configuration no longer changes."""
+    moving = np.flatnonzero(np.any(np.diff(rel.q, axis=0) != 0.0, axis=1))
+    return float(rel.times_s[moving[-1] + 1]) if moving.size else float(rel.times_s[0])
+
+
+def _cut(rel: Release, t0: float) -> Release:
+    """The let-go ``rel`` up to ``t0`` [s], when the finger, standing still since
+    :func:`still_from`, starts to join again."""
+    keep = rel.times_s < t0 - TIME_TOL_S
+    return replace(
+        rel,
+        t_end=t0,
+        times_s=np.append(rel.times_s[keep], t0),
+        q=np.vstack([rel.q[keep], rel.q[-1:]]),
+    )
 
 
 _ARRIVAL_ROUNDS = 3
@@ -380,15 +496,58 @@ def join_duration_of(chosen_s: float, needed_s: float) -> float:
 def _join(
     ctx: PlanContext, state: PlanState, name: str, t0: float, stay: list[str], instead_of: str
 ) -> PlanState | None:
-    """The state after ``name`` (idle) joins from ``t0`` [s] with the ``stay`` fingers
-    holding; None if no new contact verifies or holds long enough."""
+    """The state after ``name`` (not holding) joins from ``t0`` [s] with the ``stay``
+    fingers holding, in place of ``instead_of``; None if no new contact verifies or
+    holds long enough.
+
+    The outcome is kept for the plan (``ctx.joins``), by what it depends on: the finger,
+    the time, the holds of the fingers that stay and the fingers let go (where they
+    move and stand). Backing up asks for the same join again from other branches; it
+    is answered, not planned or paid for again."""
+    key = (
+        name,
+        round(t0, 9),
+        tuple((n, _hold_key(state.holding[n])) for n in sorted(stay)),
+        _released_key(state),
+    )
+    if key in ctx.joins:
+        outcome = ctx.joins[key]
+    else:
+        outcome = _plan_join(ctx, state, name, t0, stay)
+        if not ctx.budget.exhausted:  # a search cut short is no outcome
+            ctx.joins[key] = outcome
+    if outcome is None:
+        return None
+    join, hold = outcome
+    phase = JoinPhase(
+        finger=name,
+        t_start=join.t_start,
+        t_end=join.t_end,
+        Q_object=join.Q_object,
+        min_clearance_m=join.min_clearance_m,
+        reason=("joins again" if name in state.released else "joins")
+        + (
+            f" in place of {instead_of}, which let go"
+            if name != instead_of
+            else ": its contacts are back within reach"
+        ),
+    )
+    return _apply_join(state, name, join, hold, phase)
+
+
+def _plan_join(
+    ctx: PlanContext, state: PlanState, name: str, t0: float, stay: list[str]
+) -> tuple[Join, Holding] | None:
+    """The verified join of ``name`` from ``t0`` [s] (its best new contacts tried in
+    turn, the ``stay`` fingers holding) and the hold it lands on; None if none verifies
+    or holds long enough."""
     p, hand, motion = ctx.params, ctx.scene.hand, ctx.scene.motion
     f = hand.finger(name)
     first_s = p.regrasp.duration_s
     t_arrive = t0 + first_s
     if t_arrive > motion.t_end - p.dt_s:
         return None
-    q_from, P = join_origin(ctx, name, t_arrive)
+    q_from, P = join_origin(ctx, name, t_arrive, state.released.get(name))
     others = {n: (state.holding[n].p, state.holding[n].n) for n in stay}
     q_hand = q_hand_of(ctx, state, stay)
     excluded: list[np.ndarray] = []
@@ -452,20 +611,32 @@ def _join(
         if lost < min(join.t_end + p.regrasp.duration_s, motion.t_end) - TIME_TOL_S:
             log.debug("%s cannot join: Q held only to t=%.3f s", name, lost)
             continue
-        phase = JoinPhase(
-            finger=name,
-            t_start=join.t_start,
-            t_end=join.t_end,
-            Q_object=join.Q_object,
-            min_clearance_m=join.min_clearance_m,
-            reason=f"joins in place of {instead_of}, which let go",
-        )
-        return replace(
-            state,
-            holding={**state.holding, name: hold},
-            history={**state.history, name: ()},
-            phases={**state.phases, name: (phase,)},
-            joined={**state.joined, name: join},
-            now=max(state.now, join.t_end),
-        )
+        return join, hold
     return None
+
+
+def _apply_join(
+    state: PlanState, name: str, join: Join, hold: Holding, phase: JoinPhase
+) -> PlanState:
+    """The state after a verified join of ``name``; a finger that let go before ends
+    its let-go where the join starts (its earlier moves kept in ``ended``)."""
+    phases = state.phases.get(name, ())
+    ended = state.ended
+    rel = state.released.get(name)
+    if rel is not None:
+        off = phases[-1]
+        assert isinstance(off, ReleasePhase), off
+        phases = (*phases[:-1], replace(off, t_end=join.t_start))
+        ended = (*ended, _cut(rel, join.t_start))
+    if name in state.joined:
+        ended = (*ended, state.joined[name])
+    return replace(
+        state,
+        holding={**state.holding, name: hold},
+        history={**state.history, name: state.history.get(name, ())},
+        phases={**state.phases, name: (*phases, phase)},
+        joined={**state.joined, name: join},
+        released={n: r for n, r in state.released.items() if n != name},
+        ended=ended,
+        now=max(state.now, join.t_end),
+    )

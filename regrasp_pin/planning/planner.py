@@ -26,7 +26,8 @@ that could not be backed out of because the budget was gone is a ``budget`` fail
 (its message names the failure). A hold that no regrasp can
 follow is let go (:mod:`.planning.letgo`: a verified back-off, a ``release`` phase, if
 the others are enough to go on taking turns (more than ``min_holding``) or hold in
-force closure to the end; or a hand-over to an idle finger, a ``join`` phase).
+force closure to the end; or a hand-over to a finger that does not hold, idle or let
+go before, a ``join`` phase).
 Where the plan stands and the triggers that follow from it are in
 :mod:`.planning.state`; one step (a trigger's regrasp, hold to the end or let-go) in
 :mod:`.planning.advance`; the parameters in :mod:`.planning.params`.

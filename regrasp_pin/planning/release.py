@@ -46,7 +46,8 @@ class Release:
         finger: Finger name.
         t_start: Release time [s] (the pad touches its contact there).
         t_backed_off: When the back-off ends [s].
-        t_end: End of the motion [s].
+        t_end: End of the release [s]: the motion's end, or the earlier time it was
+            planned to (``until_s`` of :func:`plan_release`).
         P_object: The contact let go, object frame ``(3,)`` [m].
         times_s: ``(S,)`` sample times [s].
         q: ``(S, k)`` the finger's configurations [rad].
@@ -82,6 +83,7 @@ def plan_release(
     ik_tol_m: float,
     q_park: np.ndarray | None = None,
     park_s: float = 0.4,
+    until_s: float | None = None,
 ) -> Release:
     """Plan and verify the release of ``finger`` at ``t_release_s`` (module docstring).
 
@@ -106,6 +108,8 @@ def plan_release(
         q_park: ``(k,)`` where the finger goes after the back-off (None: it stays).
         park_s: Shortest duration of the move to ``q_park`` [s] (longer when the joint
             velocity limits need it; cut short, unfinished, if the motion ends).
+        until_s: Plan and verify the release to this time [s] (None: to the motion's
+            end), for a finger that joins again by then.
 
     Returns:
         The verified :class:`Release`.
@@ -118,6 +122,8 @@ def plan_release(
     """
     f = hand.finger(finger)
     t_r, t_end = float(t_release_s), float(motion.t_end)
+    if until_s is not None:
+        t_end = min(t_end, float(until_s))
     if t_r >= t_end - 1e-9:
         raise PlanningError(
             f"a release at t={t_r:.3f} s leaves no time to back off before the motion ends",

@@ -53,6 +53,9 @@ class PlanState:
     held_to_end: dict[str, str]
     released: dict[str, Release] = field(default_factory=dict)
     joined: dict[str, Join] = field(default_factory=dict)
+    #: the earlier moves of fingers that let go and joined again: each release cut
+    #: where the finger's join starts, and a join it made before
+    ended: tuple[Release | Join, ...] = ()
 
 
 @dataclass
@@ -61,8 +64,8 @@ class PlanContext:
     grid of the holds, the parameters, the fingers that take part, the regrasp search,
     its budget, the idle fingers' configuration ``base_q``, the manifolds (an idle
     finger's built when it joins), the options already taken at a state
-    (``tried``), where let-go fingers park and the let-go outcomes already planned
-    (``releases``, see :func:`~.letgo.let_go`)."""
+    (``tried``), where let-go fingers park and the let-go and join outcomes already
+    planned (``releases``, ``joins``, see :func:`~.letgo.let_go`)."""
 
     scene: Scene
     grid: np.ndarray
@@ -75,6 +78,7 @@ class PlanContext:
     tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
     parks: dict[str, np.ndarray] = field(default_factory=dict)  # where let-go fingers go
     releases: dict[tuple, Release | PlanningError] = field(default_factory=dict)
+    joins: dict[tuple, tuple[Join, Holding] | None] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
