@@ -339,19 +339,19 @@ def _try_rejoin(
     why: str,
 ) -> PlanState | None:
     """The state after ``trig.finger`` lets go while the fingers that stay are too few
-    to take turns, and a finger joins later, before their first hold is lost: the
-    finger itself once its contacts are back within reach, or one that does not hold;
-    None if none does.
+    to take turns, and joins again, once its contacts are back within reach, before
+    their first hold is lost; None if it cannot.
 
     For a finger whose every contact leaves its joint limits for a while (the object
     turns away from it), or that has no verified regrasp: the others hold alone
     meanwhile (in force closure without it: the caller's test). Tried after a release
     for good and a hand-over at once. The release is the first that verifies of the
-    window's release times (latest first), planned to the others' first loss; the
-    joins start from when the finger that let go stands still (or has backed off, for
-    another finger), every regrasp duration, earliest first, the joining fingers in
-    the hand's order; a join must land a regrasp duration before that loss, so that
-    the finger losing its hold first can still regrasp.
+    window's release times (latest first), planned only to the others' first loss
+    (the finger joins before; another finger joining instead would leave it let go
+    for the rest of the motion, which this release does not cover); the joins start
+    every regrasp duration from when the finger stands still, earliest first, and must
+    land a regrasp duration before that loss, so that the finger losing its hold first
+    can still regrasp.
     """
     p, motion = ctx.params, ctx.scene.motion
     name, D = trig.finger, p.regrasp.duration_s
@@ -379,14 +379,14 @@ def _try_rejoin(
         # a join lands in time for the finger whose hold is lost first to regrasp after
         t0 = rel.t_backed_off
         while t0 + 2 * D <= lost_by + TIME_TOL_S and not ctx.budget.exhausted:
-            for other in joinable(ctx, after, t0):
-                joined = _join(ctx, after, other, t0, stay, name)
+            if name in joinable(ctx, after, t0):
+                joined = _join(ctx, after, name, t0, stay, name)
                 if (
                     joined is not None
                     and joined.now + D <= lost_by + TIME_TOL_S
                     and _lost_before_now(ctx, joined) is None
                 ):
-                    log.info("%s lets go at t=%.3f s, %s joins at t=%.3f s", name, t_r, other, t0)
+                    log.info("%s lets go at t=%.3f s, joins again at t=%.3f s", name, t_r, t0)
                     return joined
             t0 += D
         return None  # the first release that verifies: later joins were all tried
