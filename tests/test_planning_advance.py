@@ -213,6 +213,8 @@ def test_a_finger_the_others_cannot_hold_without_says_whether_any_grasp_could_ke
         ),
         params=SimpleNamespace(min_holding=3, mu=0.8, contact=contact),
         manifolds={"thumb": man},
+        # the fingers of the initial grasp; one that joined later is not among them
+        active=("index", "middle", "ring") + (() if case == "joined" else ("thumb",)),
     )
     holding = {
         n: SimpleNamespace(p=np.array([x, y, 0.02]), n=top)
@@ -220,6 +222,9 @@ def test_a_finger_the_others_cannot_hold_without_says_whether_any_grasp_could_ke
     }
     holding["thumb"] = SimpleNamespace(p=np.array([0.0, 0.0, -0.02]), n=-top)
     state = SimpleNamespace(holding=holding, joined={"thumb": object()} if case == "joined" else {})
+    # a finger of the initial grasp that let go and joined again is judged by its start
+    if case == "lasting":
+        state.joined = {"thumb": object()}
     trig = Trigger(time_s=1.2, finger="thumb", reason="near its limit", lost_s=1.5)
     with pytest.raises(PlanningError) as err:
         advance._fingers_that_stay(ctx, state, trig, SimpleNamespace(preferred_s=1.2))

@@ -56,7 +56,7 @@ def test_a_let_go_leaves_every_other_hold_unlost(monkeypatch):
 
 
 class _Forgetful(dict):
-    """A ``PlanContext.releases`` that keeps nothing."""
+    """A ``PlanContext.releases`` or ``joins`` that keeps nothing."""
 
     def __setitem__(self, key, value):
         pass
@@ -220,7 +220,8 @@ def test_a_finger_that_let_go_joins_again_once_its_contacts_are_back(tmp_path):
     assert on.t_start == off.t_end and off.t_start < on.t_start
     assert on.reason.startswith("joins again")
     little = [ph for ph in plan.phases["little"] if ph.kind == "release"]
-    assert little and little[0].t_start <= on.t_start  # in the little finger's place
+    assert little and little[0].t_start <= on.t_start
+    assert on.reason == "joins again in place of little, which let go"
     # standing still the last 0.1 s before it starts to join
     f = scen.hand.fingers["index"]
     before = (plan.t >= on.t_start - 0.1 - 1e-9) & (plan.t <= on.t_start + 1e-9)

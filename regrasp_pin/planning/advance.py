@@ -279,11 +279,12 @@ def _tip_path_record(res: RegraspResult) -> list:
 
 def _must_let_go_note(ctx: PlanContext, state: PlanState, name: str) -> str:
     """What a finger that cannot let go (the others not in force closure without it)
-    tells the user, as ``"; ..."`` (empty for a finger that joined later, or without its
-    manifold): whether any start contact of it could have been held to the end, by its
-    manifold (:func:`~.feasibility.longest_start_hold`), and what to change."""
+    tells the user, as ``"; ..."`` (empty for a finger that was not in the initial
+    grasp and joined later, or without its manifold): whether any start contact of it
+    could have been held to the end, by its manifold
+    (:func:`~.feasibility.longest_start_hold`), and what to change."""
     man = ctx.manifolds.get(name)
-    if man is None or name in state.joined:
+    if man is None or name not in ctx.active:
         return ""
     motion, c = ctx.scene.motion, ctx.params.contact
     lasts = longest_start_hold(man, c.limit_margin_rad)

@@ -7,10 +7,11 @@ closure to the end; otherwise a finger that does not hold may join in its place
 (:func:`~.join.plan_join`, a ``join`` phase) once it has let go: a hand-over. The
 joining finger took no part so far, or let go earlier and stands still where it
 parked (its contacts may be back within reach: it joins again, and its ``release``
-phase ends where its ``join`` starts). Either
-moves the plan's time on (to the release, or to the joining finger's landing); one
-that would take it past the loss of another finger's hold is refused (a regrasp is
-refused when such a loss comes before its earliest landing).
+phase ends where its ``join`` starts). With the others too few to take turns, a
+finger may also let go while they hold alone and join again itself before their
+first hold is lost. Each moves the plan's time on (to the release, or to the joining
+finger's landing); one that would take it past the loss of another finger's hold is
+refused (a regrasp is refused when such a loss comes before its earliest landing).
 """
 
 from __future__ import annotations
@@ -56,8 +57,9 @@ def let_go(
     why: str,
 ) -> PlanState | None:
     """The state after ``trig.finger``, which has no verified regrasp, lets go
-    (:func:`_try_release`), or lets go with an idle finger joining in its place
-    (:func:`_try_handover`); None if neither verifies."""
+    (:func:`_try_release`), or lets go with a finger that does not hold joining in its
+    place (:func:`_try_handover`), or lets go and joins again itself
+    (:func:`_try_rejoin`); None if none verifies."""
     return (
         _try_release(ctx, state, trig, win, stay, why)
         or _try_handover(ctx, state, trig, win, stay, why)
@@ -113,6 +115,20 @@ def _try_release(
             return after
     log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
     return None
+
+
+def _first_loss(ctx: PlanContext, state: PlanState) -> float:
+    """When the first hold of ``state`` that ends before the motion does is lost [s]
+    (inf: none is)."""
+    end = ctx.scene.motion.t_end - TIME_TOL_S
+    return min(
+        (
+            e.lost_s
+            for e in pending_triggers(ctx, state)
+            if e.lost_s < end and e.finger not in state.held_to_end
+        ),
+        default=math.inf,
+    )
 
 
 def _lost_before_now(ctx: PlanContext, after: PlanState) -> Trigger | None:
@@ -349,9 +365,11 @@ def _try_rejoin(
     window's release times (latest first), planned only to the others' first loss
     (the finger joins before; another finger joining instead would leave it let go
     for the rest of the motion, which this release does not cover); the joins start
-    every regrasp duration from when the finger stands still, earliest first, and must
-    land a regrasp duration before that loss, so that the finger losing its hold first
-    can still regrasp.
+    every regrasp duration from the back-off, once the finger stands still (it may
+    park first), earliest first, and must
+    land a regrasp duration before the first hold is lost once it has joined (its own
+    approach may bring a neighbour's loss earlier), so that the finger losing its hold
+    first can still regrasp.
     """
     p, motion = ctx.params, ctx.scene.motion
     name, D = trig.finger, p.regrasp.duration_s
@@ -374,20 +392,16 @@ def _try_rejoin(
         rel = _release_either(ctx, state, name, t_r, stay, q_hand, [], until=lost_by)
         if rel is None:
             continue
-        note = f"{why}; no verified regrasp: let go until a finger joins"
+        note = f"{why}; no verified regrasp: let go, to join again"
         after = _apply_release(state, name, rel, note)
-        # a join lands in time for the finger whose hold is lost first to regrasp after
         t0 = rel.t_backed_off
         while t0 + 2 * D <= lost_by + TIME_TOL_S and not ctx.budget.exhausted:
-            if name in joinable(ctx, after, t0):
+            joined = None
+            if name in joinable(ctx, after, t0):  # standing still by then
                 joined = _join(ctx, after, name, t0, stay, name)
-                if (
-                    joined is not None
-                    and joined.now + D <= lost_by + TIME_TOL_S
-                    and _lost_before_now(ctx, joined) is None
-                ):
-                    log.info("%s lets go at t=%.3f s, joins again at t=%.3f s", name, t_r, t0)
-                    return joined
+            if joined is not None and _first_loss(ctx, joined) >= joined.now + D - TIME_TOL_S:
+                log.info("%s lets go at t=%.3f s, joins again at t=%.3f s", name, t_r, t0)
+                return joined
             t0 += D
         return None  # the first release that verifies: later joins were all tried
     return None
@@ -435,10 +449,14 @@ def joinable(ctx: PlanContext, state: PlanState, t0: float) -> list[str]:
     ]
 
 
+_STILL_RAD = 1e-12  # a let-go finger's joints moving less than this between samples: still
+
+
 def still_from(rel: Release) -> float:
     """When the finger of the let-go ``rel`` stops moving [s]: the first sample after
-    which its configuration no longer changes."""
-    moving = np.flatnonzero(np.any(np.diff(rel.q, axis=0) != 0.0, axis=1))
+    which its configuration no longer changes (by more than rounding: a minimum-jerk
+    move ends at 1 - 1e-16 of its way)."""
+    moving = np.flatnonzero(np.any(np.abs(np.diff(rel.q, axis=0)) > _STILL_RAD, axis=1))
     return float(rel.times_s[moving[-1] + 1]) if moving.size else float(rel.times_s[0])
 
 

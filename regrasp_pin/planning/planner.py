@@ -260,14 +260,23 @@ def plan_manipulation(
             "fingers_regrasped": sorted({r.finger for r in state.regrasps}),
             "initial_epsilon": grasp.epsilon,
             "held_to_end": dict(state.held_to_end),
-            "released": {n: r.t_start for n, r in state.released.items()},
-            "joined": {n: j.t_start for n, j in state.joined.items()},
+            # every let-go and join of each finger (one that joined again has several)
+            "released": _starts(plan.releases()),
+            "joined": _starts(plan.joins()),
             "backtracks": backtracks,
             "stage_s": stage,
         }
     )
     taking_part = {n: m for n, m in every.items() if n in manifolds or n in state.joined}
     return ManipulationPlan(plan, list(state.regrasps), grasp, taking_part, sample, stage)
+
+
+def _starts(phases: list) -> dict[str, list[float]]:
+    """The start times [s] of ``phases`` per finger, in time order."""
+    out: dict[str, list[float]] = {}
+    for ph in sorted(phases, key=lambda ph: (ph.t_start, ph.finger)):
+        out.setdefault(ph.finger, []).append(float(ph.t_start))
+    return out
 
 
 def _final_plan(ctx: PlanContext, state: PlanState) -> Plan:
