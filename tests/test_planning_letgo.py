@@ -190,6 +190,11 @@ def test_a_let_go_finger_is_still_from_its_last_change_and_is_cut_there_or_later
     rel = _release(times, q)
     assert letgo.still_from(rel) == 1.2  # the last sample that differs from the one before
     assert letgo.still_from(_release(times, np.zeros((6, 2)))) == 1.0
+    # a minimum-jerk move ends at 1 - 1e-16 of its way: rounding is no motion
+    noisy = q.copy()
+    noisy[3] = np.nextafter(noisy[3], 1.0)  # one ulp off the still configuration
+    assert np.any(noisy[3] != noisy[4])
+    assert letgo.still_from(_release(times, noisy)) == 1.2
     cut = letgo._cut(rel, 1.35)
     assert cut.t_end == 1.35
     np.testing.assert_array_equal(cut.times_s, [1.0, 1.05, 1.1, 1.2, 1.3, 1.35])
