@@ -203,6 +203,22 @@ def test_a_let_go_finger_is_still_from_its_last_change_and_is_cut_there_or_later
     np.testing.assert_array_equal(cut.times_s, [1.0, 1.05, 1.1, 1.2, 1.3])
 
 
+def _planned(spec, tmp_path):
+    """The scenario of a suite spec and its full plan, read back from its file."""
+    scen = build_scenario(spec)
+    result = plan_manipulation(
+        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
+    )
+    return scen, Plan.load(result.plan.save(tmp_path / "plan.json"))
+
+
+def _assert_rechecked(plan):
+    """The plan passes the independent re-check, at least three fingers always holding."""
+    check = recheck_plan(plan, max_step_rad=1e-3)
+    assert check.ok, check.problems
+    assert check.min_holding >= 3
+
+
 def test_a_finger_that_let_go_joins_again_once_its_contacts_are_back(tmp_path):
     """Suite scenario s0-068 (five-finger hand, a mesh turned +124 deg about the thumb's
     contact): the index's contacts leave its joint limits at once, so it lets go and the
@@ -214,11 +230,7 @@ def test_a_finger_that_let_go_joins_again_once_its_contacts_are_back(tmp_path):
     passes the independent re-check."""
     spec = generate_specs(69, seed=0)[68]
     assert spec.name.startswith("s0-068-five_finger")
-    scen = build_scenario(spec)
-    result = plan_manipulation(
-        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
-    )
-    plan = Plan.load(result.plan.save(tmp_path / "plan.json"))
+    scen, plan = _planned(spec, tmp_path)
     index = plan.phases["index"]
     assert [ph.kind for ph in index[:4]] == ["contact", "release", "join", "contact"]
     off, on = index[1], index[2]
@@ -232,9 +244,7 @@ def test_a_finger_that_let_go_joins_again_once_its_contacts_are_back(tmp_path):
     before = (plan.t >= on.t_start - 0.1 - 1e-9) & (plan.t <= on.t_start + 1e-9)
     q = plan.q[np.ix_(np.flatnonzero(before), f.q_indices)]
     assert len(q) >= 2 and np.all(q == q[0])
-    check = recheck_plan(plan, max_step_rad=1e-3)
-    assert check.ok, check.problems
-    assert check.min_holding >= 3
+    _assert_rechecked(plan)
 
 
 def test_a_finger_with_no_regrasp_lets_go_and_joins_again_on_its_own(tmp_path):
@@ -247,11 +257,7 @@ def test_a_finger_with_no_regrasp_lets_go_and_joins_again_on_its_own(tmp_path):
     fingers holding at every time."""
     spec = generate_specs(114, seed=0)[113]
     assert spec.name.startswith("s0-113-allegro")
-    scen = build_scenario(spec)
-    result = plan_manipulation(
-        scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
-    )
-    plan = Plan.load(result.plan.save(tmp_path / "plan.json"))
+    scen, plan = _planned(spec, tmp_path)
     ring = plan.phases["ring"]
     again = [
         k for k in range(1, len(ring)) if ring[k].kind == "join" and ring[k - 1].kind == "release"
@@ -261,6 +267,4 @@ def test_a_finger_with_no_regrasp_lets_go_and_joins_again_on_its_own(tmp_path):
     assert on.t_start == off.t_end and off.t_start < on.t_start
     assert on.reason == "joins again: its contacts are back within reach"
     assert ring[again[0] + 1].kind == "contact"
-    check = recheck_plan(plan, max_step_rad=1e-3)
-    assert check.ok, check.problems
-    assert check.min_holding >= 3
+    _assert_rechecked(plan)

@@ -88,12 +88,7 @@ def _try_release(
     end = motion.t_end - TIME_TOL_S
     if not p.release or win.empty or trig.lost_s >= end:
         return None
-    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
-    if len(stay) <= p.min_holding and any(
-        e.lost_s < end
-        for e in pending_triggers(ctx, without, gone=(name,))
-        if e.finger in stay and e.finger not in state.held_to_end
-    ):
+    if len(stay) <= p.min_holding and _first_loss_without(ctx, state, name, stay) < end:
         return None
     q_hand = q_hand_of(ctx, state, stay)
     tried: list[str] = []
@@ -115,6 +110,21 @@ def _try_release(
             return after
     log.info("%s cannot let go (%s)", name, "; ".join(tried) or "no time")
     return None
+
+
+def _first_loss_without(ctx: PlanContext, state: PlanState, name: str, stay: list[str]) -> float:
+    """When the first hold of the ``stay`` fingers is lost once ``name`` has gone [s]
+    (a neighbour it was closing in on no longer ends their hold; inf: none is; holds
+    kept to the end count as never lost)."""
+    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
+    return min(
+        (
+            e.lost_s
+            for e in pending_triggers(ctx, without, gone=(name,))
+            if e.finger in stay and e.finger not in state.held_to_end
+        ),
+        default=math.inf,
+    )
 
 
 def _first_loss(ctx: PlanContext, state: PlanState) -> float:
@@ -366,24 +376,15 @@ def _try_rejoin(
     (the finger joins before; another finger joining instead would leave it let go
     for the rest of the motion, which this release does not cover); the joins start
     every regrasp duration from the back-off, once the finger stands still (it may
-    park first), earliest first, and must
-    land a regrasp duration before the first hold is lost once it has joined (its own
-    approach may bring a neighbour's loss earlier), so that the finger losing its hold
-    first can still regrasp.
+    park first), earliest first, and must land a regrasp duration before the first
+    hold is lost once it has joined (its own approach may bring a neighbour's loss
+    earlier), so that the finger losing its hold first can still regrasp.
     """
     p, motion = ctx.params, ctx.scene.motion
     name, D = trig.finger, p.regrasp.duration_s
     if not p.release or win.empty or len(stay) > p.min_holding:
         return None  # none allowed, or the others take turns without it (a release)
-    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
-    lost_by = min(
-        (
-            e.lost_s
-            for e in pending_triggers(ctx, without, gone=(name,))
-            if e.finger in stay and e.finger not in state.held_to_end
-        ),
-        default=math.inf,
-    )
+    lost_by = _first_loss_without(ctx, state, name, stay)
     if lost_by >= motion.t_end - TIME_TOL_S:
         return None  # the others hold to the end: a release
     q_hand = q_hand_of(ctx, state, stay)
