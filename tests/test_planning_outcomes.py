@@ -65,7 +65,10 @@ def test_failure_summary_gives_the_nearest_miss_and_advice_by_its_sign():
     assert "the nearest -13.30 mm, need 3.00 mm" in text and text.endswith(INSIDE)
     sinks = [*inside, Attempt(K.OBJECT_CLEARANCE, measured=-0.0008, required=-5e-5)]
     text = failure_summary(sinks, K.BUDGET)
-    assert "the nearest -0.80 mm, need -0.05 mm" in text and text.endswith(SINKS_IN)
+    assert "the nearest -0.80 mm, need -0.05 mm" in text
+    # the penetration the fingertip would have to allow, the depth the nearest one sank
+    assert "tip_penetration_m (to 0.80 mm)" in text
+    assert text.endswith(SINKS_IN.format(depth_mm=0.8))
     assert failure_summary([Attempt(K.OBJECT_CLEARANCE)], K.BUDGET).endswith(
         ADVICE[K.OBJECT_CLEARANCE]
     )

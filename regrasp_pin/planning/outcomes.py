@@ -26,8 +26,8 @@ DISTANCE_KINDS = (FailureKind.OBJECT_CLEARANCE, FailureKind.FINGER_COLLISION)
 # clearance with the finger inside the object (which no clearance setting meets)
 SINKS_IN = (
     "the fingertip link sinks into the face the tip rests on: raise "
-    "ContactModel.tip_penetration_m if the fingertip is soft, or place the object where "
-    "the finger meets its faces squarely"
+    "ContactModel.tip_penetration_m (to {depth_mm:.2f} mm) if the fingertip is that soft, "
+    "or place the object where the finger meets its faces squarely"
 )
 INSIDE = (
     "every contact or path tried puts a link of the finger into the object: place the "
@@ -90,7 +90,7 @@ def _advice(near: Attempt) -> str:
     """What to change, by the numbers of the attempt nearest to passing."""
     assert near.measured is not None and near.required is not None
     if near.kind == FailureKind.OBJECT_CLEARANCE and near.required < 0.0:
-        return SINKS_IN
+        return SINKS_IN.format(depth_mm=-near.measured * 1e3)
     if near.kind == FailureKind.OBJECT_CLEARANCE and near.measured < 0.0:
         return INSIDE
     if near.kind == FailureKind.FINGER_COLLISION and near.measured < 0.0:
