@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -11,8 +12,10 @@ from regrasp_pin import make_scenario
 from regrasp_pin.grasp.choice import NewContact
 from regrasp_pin.grasp.holding import start_holding
 from regrasp_pin.model.clearance import FingerClearance
-from regrasp_pin.planning.recovery import _room_taken
+from regrasp_pin.planning.recovery import _room_taken, _signature
+from regrasp_pin.planning.release import Release
 from regrasp_pin.planning.search import LANDING_FINGER_CLEARANCE_M
+from regrasp_pin.planning.state import PlanState
 
 
 @pytest.fixture(scope="module")
@@ -110,3 +113,27 @@ def test_a_neighbour_whose_links_meet_the_finger_takes_the_room_of_its_posture(c
     assert _room_taken(ctx, state, "ring", "middle", wanted, sep, False) is None
     # the same contact with the fingers apart leaves the room
     assert _room_taken(ctx, state, "ring", "middle", _wanted(far, clear, t), sep) is None
+
+
+def _released(t_start: float, q_end: float) -> Release:
+    times = np.array([t_start, t_start + 0.1, 1.0])
+    q = np.array([[0.2, 0.3], [q_end, 0.3], [q_end, 0.3]])
+    return Release("index", t_start, t_start + 0.1, 1.0, np.zeros(3), times, q, 0.004)
+
+
+def _state(**released: Release) -> PlanState:
+    return PlanState(
+        holding={}, history={}, phases={}, regrasps=(), now=0.5, held_to_end={}, released=released
+    )
+
+
+def test_states_whose_let_go_fingers_differ_are_not_the_same_for_the_backtracking():
+    # an option tried from one state is skipped from another only if they are the same:
+    # a finger let go at another time, or parked elsewhere, makes another state
+    same = _signature(_state(index=_released(0.2, 0.5)))
+    assert _signature(_state(index=_released(0.2, 0.5))) == same
+    assert _signature(_state(index=_released(0.3, 0.5))) != same
+    assert _signature(_state(index=_released(0.2, 0.6))) != same
+    assert _signature(_state()) != same
+    ended = replace(_state(index=_released(0.2, 0.5)), ended=(_released(0.1, 0.4),))
+    assert _signature(ended) != same

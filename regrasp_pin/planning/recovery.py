@@ -63,7 +63,8 @@ def recover(
 
 
 def _signature(state: PlanState) -> tuple:
-    """What identifies a state for the backtracking: who holds what since when."""
+    """What identifies a state for the backtracking: who holds what since when, and
+    who let go when and where to (with how many moves have ended before)."""
     return (
         round(state.now, 9),
         tuple(
@@ -71,7 +72,11 @@ def _signature(state: PlanState) -> tuple:
             for n, h in sorted(state.holding.items())
         ),
         tuple(sorted(state.held_to_end)),
-        tuple(sorted(state.released)),
+        tuple(
+            (n, round(r.t_start, 9), tuple(np.round(r.q[-1], 6)))
+            for n, r in sorted(state.released.items())
+        ),
+        len(state.ended),
     )
 
 
