@@ -17,8 +17,14 @@ $(STAMP): pyproject.toml | $(PY)
 demo: $(STAMP)
 	$(VENV)/bin/regrasp-pin demo --out out
 
+# The suite runs on one pytest-xdist worker per logical core (`make test PYTEST_WORKERS=0`:
+# in one process). worksteal gives each worker a contiguous share of the tests, so that a
+# module's fixtures are mostly built once, and lets an idle worker take over the end of
+# another's share.
+PYTEST_WORKERS ?= logical
+
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist worksteal
 
 bench: $(STAMP)
 	$(PY) bench/ik.py

@@ -142,10 +142,42 @@ def test_version_text(capsys):
     assert capsys.readouterr().out.strip() == f"regrasp-pin {__version__}"
 
 
-def test_no_plan_exits_1_with_json_on_stdout(tmp_path, capsys):
+def _planned_once(monkeypatch):
+    """The planner, planning once: a second call for the same scenario (the same poses,
+    grasp and parameters; asserted) raises the PlanningError that the first one ended in,
+    without planning it again."""
+    import numpy as np
+
+    from regrasp_pin.exceptions import PlanningError
+    from regrasp_pin.planning import planner
+
+    plan, failed = planner.plan_manipulation, []
+
+    def scenario(motion, grasp, params):
+        times = np.linspace(motion.t_start, motion.t_end, 101)
+        return motion.pose(times).tobytes(), sorted(grasp.indices.items()), repr(params)
+
+    def planned_once(hand, obj, motion, *, grasp, params, **kw):
+        if failed:
+            asked, exc = failed[0]
+            assert scenario(motion, grasp, params) == asked, "not the scenario planned"
+            raise exc
+        try:
+            return plan(hand, obj, motion, grasp=grasp, params=params, **kw)
+        except PlanningError as exc:
+            failed.append((scenario(motion, grasp, params), exc))
+            raise
+
+    monkeypatch.setattr(planner, "plan_manipulation", planned_once)
+    return failed
+
+
+def test_no_plan_exits_1_with_json_on_stdout(tmp_path, capsys, monkeypatch):
     """A turn the five-finger hand cannot follow (-100 deg at 40 deg/s: two holds end
     together at the start): exit code 1, the failure as JSON with its kind, and the
-    partial plan written."""
+    partial plan written. (Planned once: the second command is given the failure the
+    first planned, the same scenario; what it makes of it is checked.)"""
+    failed = _planned_once(monkeypatch)
     argv = ["demo", "--angle", "-100", "--rate", "40", "--no-plots", "--out", str(tmp_path)]
     assert main([*argv, "--json"]) == 1
     captured = capsys.readouterr()
@@ -156,6 +188,7 @@ def test_no_plan_exits_1_with_json_on_stdout(tmp_path, capsys):
     assert main([*argv, "--quiet"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("regrasp-pin demo: no plan: ") and "Traceback" not in err
+    assert len(failed) == 1
 
 
 @pytest.mark.parametrize(

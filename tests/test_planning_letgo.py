@@ -9,6 +9,7 @@ middle finger's IK could no longer reach its contact, yet the plan went on from 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from regrasp_pin import plan_manipulation
 from regrasp_pin.exceptions import PlanningError
@@ -20,27 +21,23 @@ from regrasp_pin.suite import build_scenario, generate_specs
 from regrasp_pin.suite.specs import neighbour_specs
 from regrasp_pin.verify.plan_check import recheck_plan
 
+#: a neighbour of the demo that lets fingers go, joins them again, and backs up over both
+LETS_GO = "five_finger-hexagon--100deg-40dps"
 
-def test_a_let_go_leaves_every_other_hold_unlost(monkeypatch):
-    name = "five_finger-hexagon--100deg-40dps"
-    spec = next(s for s in neighbour_specs(("five_finger",)) if s.name == name)
-    scen = build_scenario(spec)
-    calls, results = [], []
-    real = advance.let_go
 
-    def recorded(ctx, state, trig, win, stay, why):
-        calls.append(trig.finger)
-        after = real(ctx, state, trig, win, stay, why)
-        if after is not None:
-            results.append(after)
-        return after
+@pytest.fixture(scope="module")
+def lets_go_planned():
+    """:func:`_plan_recording` of :data:`LETS_GO`, keeping what it planned: one planning
+    that two tests read (each of them planned this same scenario in full before)."""
+    with pytest.MonkeyPatch.context() as mp:
+        return _plan_recording(mp, LETS_GO, forget=False)
 
-    monkeypatch.setattr(advance, "let_go", recorded)
-    try:
-        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
-    except PlanningError:
-        pass  # the outcome is not the point here
-    assert calls  # the scenario lets fingers go (or tries to)
+
+def test_a_let_go_leaves_every_other_hold_unlost(lets_go_planned):
+    # the outcome is not the point here: every let-go the plan tried, planned or not
+    *_, let_gos, scen = lets_go_planned
+    assert let_gos  # the scenario lets fingers go (or tries to)
+    results = [after for _, after in let_gos if after is not None]
     c = scen.params.contact
     for after in results:
         for name, h in after.holding.items():
@@ -64,10 +61,11 @@ class _Forgetful(dict):
 
 def _plan_recording(monkeypatch, name, forget):
     """The releases and joins a plan of the neighbour ``name`` plans, each as what it
-    depends on, and its outcome; ``forget``: the plan keeps none it planned."""
+    depends on, its outcome, every let-go it tried (the finger and the state after, None
+    if none was planned) and the scenario; ``forget``: the plan keeps none it planned."""
     spec = next(s for s in neighbour_specs(("five_finger",)) if s.name == name)
     scen = build_scenario(spec)
-    releases, joins = [], []
+    releases, joins, let_gos = [], [], []
 
     def recorded_release(hand, obj, motion, finger, t_r, P, q_r, q_hand, **kw):
         until = kw.get("until_s")  # a release planned to a join, or to the end
@@ -97,10 +95,12 @@ def _plan_recording(monkeypatch, name, forget):
         )
         return plan_join(hand, obj, motion, finger, t0, q_from, Q, q_arrive, q_hand, **kw)
 
-    def let_go(ctx, *args):
+    def let_go(ctx, state, trig, *args):
         if forget:
             ctx.releases, ctx.joins = _Forgetful(), _Forgetful()
-        return letgo.let_go(ctx, *args)
+        after = letgo.let_go(ctx, state, trig, *args)
+        let_gos.append((trig.finger, after))
+        return after
 
     monkeypatch.setattr(letgo, "plan_release", recorded_release)
     monkeypatch.setattr(letgo, "plan_join", recorded_join)
@@ -108,18 +108,19 @@ def _plan_recording(monkeypatch, name, forget):
     try:
         plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
     except PlanningError as exc:
-        return releases, joins, (exc.kind, exc.finger, exc.time_s, len(exc.partial.regrasps()))
-    return releases, joins, "full plan"
+        outcome = (exc.kind, exc.finger, exc.time_s, len(exc.partial.regrasps()))
+    else:
+        outcome = "full plan"
+    return releases, joins, outcome, let_gos, scen
 
 
-def test_a_release_or_a_join_is_planned_once_for_a_plan(monkeypatch):
+def test_a_release_or_a_join_is_planned_once_for_a_plan(lets_go_planned, monkeypatch):
     """Backing up asks for the same release (the finger, the time, its hold and the
     others' motion) or join (the finger, the time, where it starts, the others' holds
     and let-gos) again from other branches: each is planned once. A plan that forgets
     the ones it planned asks for some twice, and ends the same way."""
-    name = "five_finger-hexagon--100deg-40dps"
-    released, joined, outcome = _plan_recording(monkeypatch, name, forget=False)
-    released_again, joined_again, outcome_forgot = _plan_recording(monkeypatch, name, True)
+    released, joined, outcome, *_ = lets_go_planned
+    released_again, joined_again, outcome_forgot, *_ = _plan_recording(monkeypatch, LETS_GO, True)
     for kept, forgot in ((released, released_again), (joined, joined_again)):
         assert kept and len(set(kept)) == len(kept)
         assert len(set(forgot)) < len(forgot)  # the repeats the plan no longer makes
