@@ -126,7 +126,7 @@ def test_an_existing_cluster_by_its_scheduler_address(tmp_path):
     with (
         dask.config.set({"distributed.worker.daemon": False}),
         distributed.LocalCluster(
-            n_workers=2, threads_per_worker=1, dashboard_address=None
+            n_workers=2, threads_per_worker=1, dashboard_address=":0"
         ) as cluster,
     ):
         done = run_suite(

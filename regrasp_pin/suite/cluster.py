@@ -187,7 +187,7 @@ def _client(workers: int | None, scheduler: str | None) -> Any:
                 client.close()
             return
         cluster = distributed.LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None
+            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0"
         )
         client = distributed.Client(cluster)
         try:
