@@ -88,7 +88,7 @@ def _try_release(
     end = motion.t_end - TIME_TOL_S
     if not p.release or win.empty or trig.lost_s >= end:
         return None
-    if len(stay) <= p.min_holding and _first_loss_without(ctx, state, name, stay) < end:
+    if len(stay) <= p.min_holding and _first_loss(ctx, state, gone=name) < end:
         return None
     q_hand = q_hand_of(ctx, state, stay)
     tried: list[str] = []
@@ -112,29 +112,17 @@ def _try_release(
     return None
 
 
-def _first_loss_without(ctx: PlanContext, state: PlanState, name: str, stay: list[str]) -> float:
-    """When the first hold of the ``stay`` fingers is lost once ``name`` has gone [s]
-    (a neighbour it was closing in on no longer ends their hold; inf: none is; holds
-    kept to the end count as never lost)."""
-    without = replace(state, holding={n: h for n, h in state.holding.items() if n != name})
-    return min(
-        (
-            e.lost_s
-            for e in pending_triggers(ctx, without, gone=(name,))
-            if e.finger in stay and e.finger not in state.held_to_end
-        ),
-        default=math.inf,
-    )
-
-
-def _first_loss(ctx: PlanContext, state: PlanState) -> float:
+def _first_loss(ctx: PlanContext, state: PlanState, gone: str | None = None) -> float:
     """When the first hold of ``state`` that ends before the motion does is lost [s]
-    (inf: none is)."""
+    (inf: none is; holds kept to the end count as never lost); with ``gone``, once that
+    finger has let go (a neighbour it was closing in on no longer ends their hold)."""
+    if gone is not None:
+        state = replace(state, holding={n: h for n, h in state.holding.items() if n != gone})
     end = ctx.scene.motion.t_end - TIME_TOL_S
     return min(
         (
             e.lost_s
-            for e in pending_triggers(ctx, state)
+            for e in pending_triggers(ctx, state, gone=() if gone is None else (gone,))
             if e.lost_s < end and e.finger not in state.held_to_end
         ),
         default=math.inf,
@@ -384,7 +372,7 @@ def _try_rejoin(
     name, D = trig.finger, p.regrasp.duration_s
     if not p.release or win.empty or len(stay) > p.min_holding:
         return None  # none allowed, or the others take turns without it (a release)
-    lost_by = _first_loss_without(ctx, state, name, stay)
+    lost_by = _first_loss(ctx, state, gone=name)
     if lost_by >= motion.t_end - TIME_TOL_S:
         return None  # the others hold to the end: a release
     q_hand = q_hand_of(ctx, state, stay)
