@@ -25,7 +25,7 @@ one worker, the speed-up over one worker is first measured on the first ``--spee
 scenarios (both runs in this run, one after the other) and printed.
 
 Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
-[--out out/suite] [--jobs 1] [--speedup K] [--max-steps 800] [--budget S]
+[--out out/suite] [--jobs 1] [--speedup K] [--max-steps 800] [--grasp-backups 1] [--budget S]
 [--baseline old/results.jsonl]``.
 """
 
@@ -132,6 +132,13 @@ def parse_args() -> argparse.Namespace:
         help="the planner's search budget in steps (default: PlannerParams.max_steps)",
     )
     parser.add_argument(
+        "--grasp-backups",
+        type=int,
+        default=1,
+        metavar="K",
+        help="initial grasps a failed scenario backs up to (run_scenario; default 1, 0: none)",
+    )
+    parser.add_argument(
         "--budget",
         type=float,
         help="an optional wall-clock limit of each planning [s] (default: none; the step "
@@ -148,6 +155,8 @@ def parse_args() -> argparse.Namespace:
             parser.error(f"--baseline: no such file {args.baseline} (a results.jsonl)")
     if args.jobs < 1:
         parser.error("--jobs: at least 1")
+    if args.grasp_backups < 0:
+        parser.error("--grasp-backups: at least 0")
 
     hands = tuple(str(Path(h).resolve()) if h.endswith(".json") else h for h in args.hands or HANDS)
     for h in hands:
@@ -173,7 +182,12 @@ def main() -> None:
         what = f"suite seed {args.seed}: {n} scenarios with an initial grasp"
     steps = args.max_steps or PlannerParams.max_steps
     limit = "" if args.budget is None else f" and {args.budget:g} s"
-    kw = {"skip_no_grasp": skip, "max_steps": args.max_steps, "budget_s": args.budget}
+    kw = {
+        "skip_no_grasp": skip,
+        "max_steps": args.max_steps,
+        "budget_s": args.budget,
+        "grasp_backups": args.grasp_backups,
+    }
     k = args.speedup if args.speedup is not None else (8 if args.jobs > 1 else 0)
     measured = None
     if k > 0:

@@ -381,6 +381,7 @@ def grasp_for_motion(
     track_start: bool = True,
     room_fingers: Sequence[str] = (),
     room_after_s: float = 0.25,
+    avoid: Mapping[str, np.ndarray] | None = None,
 ) -> Grasp:
     """The initial grasp chosen for ``motion`` (:func:`~regrasp_pin.grasp.initial.initial_grasp`).
 
@@ -425,12 +426,18 @@ def grasp_for_motion(
             the best score. Empty (default): the score alone.
         room_after_s: A regrasp's duration [s] (the second time at which the room is
             counted: where a finger that must let go at once lands).
+        avoid: Contacts not to start on again: finger -> ``(K, 3)`` points (object
+            frame) [m]; the finger's sample points within two of its tip radii of any
+            of them are left out (e.g. the start contact of a grasp whose plan failed
+            while that finger still held it).
 
     Returns:
         The :class:`~regrasp_pin.grasp.initial.Grasp` at the motion's start.
 
     Raises:
-        InputError: non-positive ``grasp_dt_s`` or ``horizon_s``.
+        InputError: non-positive ``grasp_dt_s`` or ``horizon_s``, a ``keep`` index or
+            ``avoid`` points of the wrong form.
+        UnknownNameError: a ``keep`` or ``avoid`` finger that is not in ``fingers``.
         ContactError: no force-closure grasp (kind ``infeasible`` when a finger cannot
             let go longer than any of its contacts lasts).
     """
@@ -463,6 +470,13 @@ def grasp_for_motion(
         only[index] = True
         m = manifolds[name]
         manifolds[name] = replace(m, inside=m.inside & only[None, :])
+    for name, points in (avoid or {}).items():
+        if name not in manifolds:
+            raise UnknownNameError("avoid", name, list(manifolds))
+        away = as_array(points, f"avoid[{name!r}]", (None, 3))
+        gone = _near_any(sample.points, away, 2.0 * hand.finger(name).tip_radius)
+        m = manifolds[name]
+        manifolds[name] = replace(m, inside=m.inside & ~gone[None, :])
     rank = _room_rank(hand, obj, manifolds, sample, room_fingers, room_after_s, contact)
     return initial_grasp(
         hand,
@@ -478,6 +492,15 @@ def grasp_for_motion(
         must_hold=runs,
         rank=rank,
     )
+
+
+def _near_any(points: np.ndarray, centres: np.ndarray, radius_m: float) -> np.ndarray:
+    """``(N,)`` whether each of ``points`` ``(N, 3)`` is within ``radius_m`` of one of
+    ``centres`` ``(K, 3)``."""
+    near = np.zeros(len(points), bool)
+    for c in centres:  # a few centres
+        near |= np.linalg.norm(points - c, axis=1) <= radius_m
+    return near
 
 
 def _room_rank(

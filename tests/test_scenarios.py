@@ -161,6 +161,61 @@ def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
         grasp_for_motion(h, obj, turn, fingers, room_fingers=["pinky"], **kw)
 
 
+def _five_finger_turn():
+    from regrasp_pin.model.motion import ObjectMotion
+    from regrasp_pin.scenarios import hand_model, setup_pose
+
+    h = hand_model("five_finger")
+    obj = setup_objects("five_finger")["hexagon"]()
+    T0 = setup_pose("five_finger")
+    turn = ObjectMotion.constant_twist(
+        T0,
+        axis_palm=T0[:3, 2],
+        point_palm=T0[:3, 3],
+        rate_rad_s=np.radians(40.0),
+        duration_s=1.5,
+        dt_s=0.01,
+    )
+    return h, obj, turn
+
+
+def test_a_grasp_that_avoids_a_start_contact_keeps_the_finger_two_tip_radii_away():
+    # the grasp chosen again after a failure (suite backups): the avoided finger's new
+    # contact is more than two tip radii from the avoided point (which the first grasp
+    # held), and the grasp is a force-closure grasp as any other
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.grasp.quality import ferrari_canny_epsilon
+    from regrasp_pin.scenarios import grasp_for_motion
+
+    h, obj, turn = _five_finger_turn()
+    fingers = setup_fingers("five_finger")
+    kw = dict(contact=ContactModel(), grasp_dt_s=0.1, seed=0)
+    first = grasp_for_motion(h, obj, turn, fingers, **kw)
+    avoided = first.points_object["index"]
+    again = grasp_for_motion(h, obj, turn, fingers, avoid={"index": avoided[None]}, **kw)
+    assert (
+        np.linalg.norm(again.points_object["index"] - avoided) > 2.0 * h.finger("index").tip_radius
+    )
+    pts = np.array([again.points_object[n] for n in fingers])
+    nrm = np.array([again.normals_object[n] for n in fingers])
+    assert ferrari_canny_epsilon(pts, nrm, 0.8, torque_scale_m=obj.radius_m) > 0.0
+
+
+def test_bad_avoid_names_the_argument():
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.scenarios import grasp_for_motion
+
+    h, obj, turn = _five_finger_turn()
+    fingers = setup_fingers("five_finger")
+    kw = dict(contact=ContactModel(), grasp_dt_s=0.25, seed=0)
+    with pytest.raises(UnknownNameError, match="avoid"):
+        grasp_for_motion(h, obj, turn, fingers, avoid={"little": np.zeros((1, 3))}, **kw)
+    with pytest.raises(InputError, match=r"avoid\['index'\].*shape \(\?, 3\)|avoid\['index'\]"):
+        grasp_for_motion(h, obj, turn, fingers, avoid={"index": np.zeros(2)}, **kw)
+    with pytest.raises(InputError, match=r"avoid\['index'\].*NaN"):
+        grasp_for_motion(h, obj, turn, fingers, avoid={"index": np.full((1, 3), np.nan)}, **kw)
+
+
 def test_the_shadow_hands_grasp_leaves_every_walking_finger_room_to_regrasp():
     # the real Shadow Hand (third-party models, skipped when absent): with the score
     # alone, no usable contact of the little finger cleared the middle finger's body;

@@ -66,6 +66,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-steps", type=int, default=None,
         help="the planner's search budget in steps (default: PlannerParams.max_steps)",
     )  # fmt: skip
+    where.add_argument(
+        "--grasp-backups", type=int, default=1, metavar="K",
+        help="a scenario whose plan fails at a finger still on its start contact is "
+        "planned again from another initial grasp, up to K times, on the rest of the "
+        "step budget (default: 1; 0: never)",
+    )  # fmt: skip
     report = parser.add_argument_group("report")
     report.add_argument(
         "--report", metavar="DIR", type=Path, default=None,
@@ -151,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
             resume=args.resume,
             skip_no_grasp=skip,
             max_steps=args.max_steps,
+            grasp_backups=args.grasp_backups,
             on_result=progress,
         )
     except KeyboardInterrupt:

@@ -123,7 +123,8 @@ def plan_manipulation(
         ContactError: no initial grasp.
         PlanningError: the motion cannot be achieved; ``kind`` says why, ``attempts``
             holds every failed attempt of the last search and ``partial`` the plan up
-            to the failure.
+            to the failure (its summary: the search steps spent, ``"search_steps"``,
+            and the backtracks).
     """
     scene = Scene(hand, obj, motion)  # checks types and scale before any work
     params = params or PlannerParams()
@@ -229,6 +230,9 @@ def plan_manipulation(
                 when = exc.time_s if exc.time_s is not None else trig.time_s
                 until = min(max(min(when, trig.time_s), state.now), motion.t_end)
                 cut_short = may_back_up and ctx.budget.exhausted
+                partial = plan_until(ctx, state, until)
+                # what the search spent, for a caller that shares a budget with it
+                partial.summary.update({"search_steps": ctx.budget.steps, "backtracks": backtracks})
                 raise PlanningError(
                     (
                         f"the search budget ran out while backing up from a "
@@ -238,7 +242,7 @@ def plan_manipulation(
                     ),
                     finger=exc.finger or trig.finger,
                     time_s=when,
-                    partial=plan_until(ctx, state, until),
+                    partial=partial,
                     kind=FailureKind.BUDGET if cut_short else exc.kind,
                     measured=exc.measured,
                     required=exc.required,
@@ -264,6 +268,7 @@ def plan_manipulation(
             "released": _starts(plan.releases()),
             "joined": _starts(plan.joins()),
             "backtracks": backtracks,
+            "search_steps": ctx.budget.steps,
             "stage_s": stage,
         }
     )

@@ -224,6 +224,7 @@ def run_suite(
     skip_no_grasp: bool = True,
     max_steps: int | None = None,
     budget_s: float | None = None,
+    grasp_backups: int = 1,
     on_result: Callable[[ScenarioResult, int, int], None] | None = None,
     task: Task = run_scenario,
 ) -> SuiteRun:
@@ -248,27 +249,37 @@ def run_suite(
         skip_no_grasp: Specs without an initial grasp do not count (the suite's rule).
         max_steps: The planner's step budget (None: the scenario's own).
         budget_s: An optional wall-clock limit of each planning [s].
+        grasp_backups: Most initial grasps a failed scenario backs up to
+            (:func:`~.run.run_scenario`; 0: none).
         on_result: Called with ``(result, counted, n)`` as each result arrives
             (skipped ones included, ``counted`` unchanged); it may raise
             KeyboardInterrupt to stop the run, as Ctrl-C does.
-        task: ``task(spec, out_dir=, max_steps=, budget_s=) -> ScenarioResult``, a
+        task: ``task(spec, out_dir=, max_steps=, budget_s=, grasp_backups=) ->
+            ScenarioResult``, a
             module-level function; default :func:`~.run.run_scenario`.
 
     Returns:
         The :class:`SuiteRun`.
 
     Raises:
-        InputError: bad ``n``, ``workers`` or ``timeout_s``; dask not installed.
+        InputError: bad ``n``, ``workers``, ``timeout_s`` or ``grasp_backups``; dask not
+            installed.
         KeyboardInterrupt: the run was stopped; the finished results are on disk.
     """
     specs = list(specs)
     total = len(specs) if n is None else positive_int(n, "n", minimum=0)
     if workers is not None:
         positive_int(workers, "workers")
+    positive_int(grasp_backups, "grasp_backups", minimum=0)
     limit = None if timeout_s is None else positive(timeout_s, "timeout_s")
     ledger = _Ledger(Path(out), specs, resume=resume, skip_no_grasp=skip_no_grasp)
     run = SuiteRun([], [], 0.0, 0, ledger.size)
-    kwargs = {"out_dir": str(ledger.folder), "max_steps": max_steps, "budget_s": budget_s}
+    kwargs = {
+        "out_dir": str(ledger.folder),
+        "max_steps": max_steps,
+        "budget_s": budget_s,
+        "grasp_backups": grasp_backups,
+    }
     t_start = time.perf_counter()
     try:
         with _client(workers, scheduler) as client:

@@ -51,7 +51,8 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
     """A plain-text report of a suite's results.
 
     Success rates per hand x object kind and per motion kind, failures by kind (with
-    the stage and the fingers), planning time per regrasp and per scenario (median and
+    the stage and the fingers), how many scenarios backed up to another initial grasp
+    and planned fully then, planning time per regrasp and per scenario (median and
     95th percentile), and how many full plans passed the independent re-check.
 
     Args:
@@ -93,20 +94,7 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
     for m in motions:
         lines.append(f"  {m:18}{_rate([r for r in res if r.motion_kind == m]):>12}")
     failed = [r for r in res if not r.ok]
-    lines.append(f"failures by kind: {len(failed)}")
-    for kind, count in Counter(r.failure_kind for r in failed).most_common():
-        group = [r for r in failed if r.failure_kind == kind]
-        stages = Counter(r.failed_stage for r in group)
-        fingers = Counter(r.finger for r in group if r.finger)
-        detail = ", ".join(f"{s} {c}" for s, c in sorted(stages.items(), key=str))
-        if fingers:
-            detail += "; " + ", ".join(f"{f} {c}" for f, c in fingers.most_common())
-        detail += _missed_by(kind, group)
-        lines.append(f"  {kind!s:24}{count:4d}   ({detail})")
-    in_plan = [r for r in failed if r.failed_stage == "plan"]
-    if in_plan:
-        first = sum(r.n_regrasps == 0 for r in in_plan)
-        lines.append(f"planning failures before any verified regrasp: {first}/{len(in_plan)}")
+    lines += _failure_lines(res, failed)
     planned = [r for r in res if r.plan_s is not None]
     lines.append(
         "planning time per regrasp: " + _stats((ms for r in planned for ms in r.regrasp_ms), "ms")
@@ -140,6 +128,35 @@ def summarize(results: Sequence[ScenarioResult]) -> str:
     return "\n".join(lines)
 
 
+def _failure_lines(res: list[ScenarioResult], failed: list[ScenarioResult]) -> list[str]:
+    """The failures by kind, the backups to another initial grasp, and the failures
+    that came before any verified regrasp."""
+    lines: list[str] = []
+    lines.append(f"failures by kind: {len(failed)}")
+    for kind, count in Counter(r.failure_kind for r in failed).most_common():
+        group = [r for r in failed if r.failure_kind == kind]
+        stages = Counter(r.failed_stage for r in group)
+        fingers = Counter(r.finger for r in group if r.finger)
+        detail = ", ".join(f"{s} {c}" for s, c in sorted(stages.items(), key=str))
+        if fingers:
+            detail += "; " + ", ".join(f"{f} {c}" for f, c in fingers.most_common())
+        detail += _missed_by(kind, group)
+        lines.append(f"  {kind!s:24}{count:4d}   ({detail})")
+    backed = [r for r in res if r.backups]
+    if backed:
+        won = sum(r.ok for r in backed)
+        tries = sum(len(r.backups) for r in backed)
+        lines.append(
+            f"backed up to another initial grasp (a finger failed on its start contact): "
+            f"{len(backed)} scenarios, {tries} grasps; full plans after it: {won}"
+        )
+    in_plan = [r for r in failed if r.failed_stage == "plan"]
+    if in_plan:
+        first = sum(r.n_regrasps == 0 for r in in_plan)
+        lines.append(f"planning failures before any verified regrasp: {first}/{len(in_plan)}")
+    return lines
+
+
 def result_line(r: ScenarioResult, done: int, total: int) -> str:
     """One line per scenario as it finishes (and a failure's reason on a second line)."""
     plan = "     -  " if r.plan_s is None else f"{r.plan_s:6.1f} s"
@@ -148,6 +165,10 @@ def result_line(r: ScenarioResult, done: int, total: int) -> str:
     c0 = r.initial_finger_clearance_m
     if c0 is not None and c0 <= 0.0:
         times += f"  (starts with fingers {-c0 * 1e3:.1f} mm inside each other)"
+    if r.backups:
+        times += "  backed up: " + ", ".join(
+            f"{b['finger']} after {b['after']} -> {b.get('outcome')}" for b in r.backups
+        )
     if r.ok:
         check = {True: "re-check ok", False: "RE-CHECK FAILED", None: "not re-checked"}
         status = f"ok   {r.n_regrasps:2d} regrasps  {check[r.recheck_ok]:15}"

@@ -19,12 +19,18 @@ from .._validate import known_fields, positive, positive_int
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
 from ..planning.planner import plan_manipulation
-from ..scenarios import hand_label
+from ..scenarios import hand_label, is_hand_file
 from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
 from .specs import ScenarioSpec
 
 __all__ = ["ScenarioResult", "load_results", "outcome_template", "run_scenario"]
+
+#: Failures that another start contact of the failing finger does not address:
+#: ``infeasible`` is proven for every grasp, and ``force-closure`` says that the
+#: *other* fingers do not hold without it (in the default suite, 0 of 20 such backups
+#: planned fully)
+_NOT_THE_START = frozenset({FailureKind.INFEASIBLE, FailureKind.FORCE_CLOSURE})
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +77,11 @@ class ScenarioResult:
         plan_path: Where the plan (or partial plan) was saved, if it was.
         stage_s: The planner's time per stage [s] (full plans).
         spec: The spec (``ScenarioSpec.to_dict()``), to rebuild the scenario.
+        backups: The initial grasps backed up to after a failure (:func:`run_scenario`),
+            in order: the failure's kind (``"after"``), the finger whose start contact
+            was avoided and that contact (object frame [m]), and the outcome (``"ok"``,
+            a failure kind, ``"no-grasp:<kind>"`` or ``"no-time"``). ``plan_s`` and
+            ``build_s`` include theirs.
     """
 
     name: str
@@ -100,6 +111,7 @@ class ScenarioResult:
     plan_path: str | None = None
     stage_s: dict[str, float] = field(default_factory=dict)
     spec: dict[str, Any] = field(default_factory=dict)
+    backups: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON values (non-finite numbers become None)."""
@@ -176,8 +188,22 @@ def run_scenario(
     out_dir: str | Path | None = None,
     max_steps: int | None = None,
     budget_s: float | None = None,
+    grasp_backups: int = 1,
 ) -> ScenarioResult:
     """Build and plan one spec; re-check a full plan from its saved file.
+
+    When the plan fails at a finger that still holds the contact it started on, that
+    start was the decision that led there: the scenario is built again with an initial
+    grasp that keeps the finger away from that contact (two tip radii;
+    ``build_scenario(avoid=...)``) and planned again, up to ``grasp_backups`` times,
+    on what is left of the search budget. Not after a proof that no plan exists
+    (``infeasible``, for any grasp) or a ``force-closure`` failure (the others do not
+    hold without the finger, wherever it started), nor for the thumb of a
+    ``"contact-axis"`` spec
+    (its contact places the turn: the others' contacts change, the thumb's is kept)
+    or a hand file's (:func:`~regrasp_pin.scenarios.scenario_for_hand` grasps it).
+    A backup that plans fully is the result; otherwise the first failure is, and
+    every backup is listed in ``backups``.
 
     Never raises for an outcome: a :class:`~regrasp_pin.exceptions.ContactError`
     while building (no initial grasp) or a :class:`~regrasp_pin.exceptions.PlanningError`
@@ -191,15 +217,18 @@ def run_scenario(
             (the plan up to a failure); default: a temporary folder for the re-check
             only, removed afterwards.
         max_steps: The planner's search budget in steps (``PlannerParams.max_steps``;
-            None: the scenario's own), the same on every machine.
+            None: the scenario's own), the same on every machine; shared by the
+            backups.
         budget_s: An optional wall-clock limit of the planning [s]
-            (``PlannerParams.budget_s``; None: none).
+            (``PlannerParams.budget_s``; None: none), shared by the backups.
+        grasp_backups: Most initial grasps to back up to (0: none).
 
     Returns:
         The :class:`ScenarioResult`.
     """
     steps = None if max_steps is None else positive_int(max_steps, "max_steps")
     budget = None if budget_s is None else positive(budget_s, "budget_s")
+    backups = positive_int(grasp_backups, "grasp_backups", minimum=0)
     result = outcome_template(spec)
     t0 = time.perf_counter()
     try:
@@ -223,26 +252,155 @@ def run_scenario(
     )
 
     t0 = time.perf_counter()
-    try:
-        planned = plan_manipulation(
-            scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=params
-        )
-    except Exception as exc:  # every outcome is data; see the docstring
-        result.plan_s = time.perf_counter() - t0
-        _record_failure(result, exc, "plan")
-        partial = getattr(exc, "partial", None)
-        if isinstance(partial, Plan):
-            phases = partial.regrasps()
-            result.n_regrasps = len(phases)
-            result.regrasp_ms = [float(p.planning_ms) for p in phases]
-            result.min_clearance_m = min((p.min_clearance_m for p in phases), default=None)
-            result.planned_until_s = float(partial.t[-1])
-            if out_dir is not None:
-                path = partial.save(Path(out_dir) / f"{spec.name}.partial.json")
-                result.plan_path = str(path)
-        log.info("suite: %s failed: %s", spec.name, result.failure)
-        return result
+    planned, exc = _plan(scen, params)
     result.plan_s = time.perf_counter() - t0
+    if exc is not None:
+        _record_failure(result, exc, "plan")
+        _record_partial(result, spec, exc, out_dir)
+        planned = _back_up(result, spec, scen, params, exc, backups, out_dir)
+        if planned is None:
+            log.info("suite: %s failed: %s", spec.name, result.failure)
+            return result
+    _record_plan(result, spec, planned, params, out_dir)
+    return result
+
+
+def _plan(scen: Any, params: Any) -> tuple[Any, Exception | None]:
+    """The scenario planned with ``params``: ``(ManipulationPlan, None)`` or
+    ``(None, the exception)`` (every outcome is data; see :func:`run_scenario`)."""
+    try:
+        return plan_manipulation(
+            scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=params
+        ), None
+    except Exception as exc:
+        return None, exc
+
+
+def _steps_spent(exc: Exception) -> int:
+    """The search steps a failed planning spent (its partial plan's summary)."""
+    partial = getattr(exc, "partial", None)
+    return int(partial.summary.get("search_steps", 0)) if isinstance(partial, Plan) else 0
+
+
+def _backup_finger(spec: ScenarioSpec, scen: Any, exc: Exception) -> str | None:
+    """The finger whose start contact to avoid after the failure ``exc``, or None: a
+    planning failure (not of a kind in :data:`_NOT_THE_START`) at a finger of the
+    initial grasp that still holds its start contact in the partial plan (no other
+    phase), not the thumb of a contact-axis spec, and no hand file's contact-axis
+    spec."""
+    partial = getattr(exc, "partial", None)
+    finger = getattr(exc, "finger", None)
+    if (
+        not isinstance(exc, PlanningError)
+        or exc.kind in _NOT_THE_START
+        or not isinstance(partial, Plan)
+        or finger not in scen.grasp.points_object
+    ):
+        return None
+    if spec.motion.kind == "contact-axis" and (finger == "thumb" or is_hand_file(spec.hand)):
+        return None
+    phases = partial.phases.get(finger, [])
+    return finger if all(ph.kind == "contact" for ph in phases) else None
+
+
+def _back_up(
+    result: ScenarioResult,
+    spec: ScenarioSpec,
+    scen: Any,
+    params: Any,
+    exc: Exception,
+    backups: int,
+    out_dir: str | Path | None,
+) -> Any:
+    """Plan again from other initial grasps after ``exc`` (see :func:`run_scenario`),
+    recording each in ``result.backups`` and their times in ``result.build_s`` and
+    ``result.plan_s``; the first full plan (its scenario's grasp then replaces the
+    result's start), or None."""
+    avoid: dict[str, list[np.ndarray]] = {}
+    spent = _steps_spent(exc)
+    keep = (
+        {"thumb": int(scen.grasp.indices["thumb"])}
+        if spec.motion.kind == "contact-axis" and "thumb" in scen.grasp.indices
+        else None
+    )
+    while len(result.backups) < backups:
+        finger = _backup_finger(spec, scen, exc)
+        left = params.max_steps - spent
+        if finger is None or left <= 0:
+            return None
+        point = np.asarray(scen.grasp.points_object[finger], float)
+        avoid.setdefault(finger, []).append(point)
+        entry: dict[str, Any] = {
+            "after": getattr(getattr(exc, "kind", None), "value", None),
+            "finger": finger,
+            "avoid_m": [float(v) for v in point],
+        }
+        result.backups.append(entry)
+        t0 = time.perf_counter()
+        try:
+            scen = build_scenario(spec, avoid={n: np.array(p) for n, p in avoid.items()}, keep=keep)
+        except ContactError as no_grasp:
+            entry["outcome"] = f"no-grasp:{no_grasp.kind.value}"
+            return None
+        finally:
+            result.build_s = (result.build_s or 0.0) + time.perf_counter() - t0
+        remaining_s = None
+        if params.budget_s is not None:  # the planning's wall-clock budget, shared
+            remaining_s = params.budget_s - (result.plan_s or 0.0)
+            if remaining_s <= 0:
+                entry["outcome"] = "no-time"
+                return None
+        again = dataclasses.replace(params, max_steps=left, budget_s=remaining_s)
+        t0 = time.perf_counter()
+        planned, exc = _plan(scen, again)
+        result.plan_s = (result.plan_s or 0.0) + time.perf_counter() - t0
+        if exc is None:
+            entry["outcome"] = "ok"
+            for name in ("failure_kind", "failure", "failed_stage", "finger", "time_s"):
+                setattr(result, name, None)
+            result.measured = result.required = None
+            result.attempts = []
+            result.initial_finger_clearance_m = float(
+                finger_clearance(scen.hand, scen.obj, scen.motion, tuple(scen.grasp.q), 0.0)(
+                    scen.grasp.q
+                )
+            )
+            if out_dir is not None and result.plan_path is not None:
+                Path(result.plan_path).unlink(missing_ok=True)  # the first failure's
+                result.plan_path = None
+            return planned
+        kind = getattr(exc, "kind", None)
+        entry["outcome"] = kind.value if isinstance(kind, FailureKind) else type(exc).__name__
+        entry["time_s"] = getattr(exc, "time_s", None)
+        spent += _steps_spent(exc)
+    return None
+
+
+def _record_partial(
+    result: ScenarioResult, spec: ScenarioSpec, exc: Exception, out_dir: str | Path | None
+) -> None:
+    """The failure's partial plan in ``result`` (and saved into ``out_dir``)."""
+    partial = getattr(exc, "partial", None)
+    if not isinstance(partial, Plan):
+        return
+    phases = partial.regrasps()
+    result.n_regrasps = len(phases)
+    result.regrasp_ms = [float(p.planning_ms) for p in phases]
+    result.min_clearance_m = min((p.min_clearance_m for p in phases), default=None)
+    result.planned_until_s = float(partial.t[-1])
+    if out_dir is not None:
+        path = partial.save(Path(out_dir) / f"{spec.name}.partial.json")
+        result.plan_path = str(path)
+
+
+def _record_plan(
+    result: ScenarioResult,
+    spec: ScenarioSpec,
+    planned: Any,
+    params: Any,
+    out_dir: str | Path | None,
+) -> None:
+    """A full plan in ``result``: saved, reloaded and re-checked."""
     result.ok = True
     result.n_regrasps = len(planned.regrasps)
     result.regrasp_ms = [float(r.planning_ms) for r in planned.regrasps]
@@ -264,7 +422,6 @@ def run_scenario(
             result.recheck_ok = False
             result.recheck_problems = [f"the re-check raised {type(exc).__name__}: {exc}"]
     result.recheck_s = time.perf_counter() - t0
-    return result
 
 
 def load_results(path: str | Path) -> list[ScenarioResult]:

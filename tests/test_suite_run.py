@@ -1,0 +1,98 @@
+"""Running one suite spec (regrasp_pin.suite.run): backing up to another initial grasp.
+
+Scenes: scenarios of the default suite (seed 0) whose plans fail at a finger that
+still holds the contact it started on:
+
+* s0-034, the five-finger hand, a box turned -71 deg about its own axis: no regrasp of
+  the index reaches its new contacts by IK at 0.03 s (ik-unreachable); from a grasp
+  with the index elsewhere, the plan fails too;
+* s0-008, the five-finger hand, a random convex mesh turned +161 deg about its own
+  axis: the thumb cannot let go at 2.0 s (force-closure: the others do not hold
+  without it), which no other start contact of the thumb addresses;
+* s0-031, the Allegro hand, a box turned -94 deg about its own axis: no new contact of
+  the index at 2.4 s keeps its fingertip link out of the box (object-clearance); from
+  a grasp with the index away from where it started, the plan is full.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from regrasp_pin.exceptions import InputError
+from regrasp_pin.plan import Plan
+from regrasp_pin.suite import build_scenario, generate_specs, run_scenario, summarize
+from regrasp_pin.verify.plan_check import recheck_plan
+
+
+def _spec(i, hand):
+    spec = generate_specs(i + 1, seed=0)[i]
+    assert spec.name.startswith(f"s0-{i:03d}-{hand}")
+    return spec
+
+
+@pytest.fixture(scope="module")
+def s034(tmp_path_factory):
+    spec = _spec(34, "five_finger")
+    out = tmp_path_factory.mktemp("s034")
+    return spec, run_scenario(spec, out_dir=out, grasp_backups=0), out
+
+
+def test_a_failure_on_a_start_contact_backs_up_once_and_keeps_the_first_failure(s034):
+    spec, alone, _ = s034
+    assert alone.failure_kind == "ik-unreachable" and alone.finger == "index"
+    assert alone.n_regrasps == 0 and alone.backups == []
+    backed = run_scenario(spec)
+    # the result is the first failure's, and the backup is listed with what it avoided
+    for name in ("ok", "failure_kind", "finger", "time_s", "failure", "n_regrasps"):
+        assert getattr(backed, name) == getattr(alone, name), name
+    assert len(backed.backups) == 1
+    b = backed.backups[0]
+    assert b["after"] == "ik-unreachable" and b["finger"] == "index"
+    start = build_scenario(spec).grasp.points_object["index"]
+    assert np.array_equal(b["avoid_m"], start)
+    assert b["outcome"] not in ("ok", None)
+    text = summarize([backed])
+    assert "backed up to another initial grasp" in text and "full plans after it: 0" in text
+
+
+def test_backups_share_the_step_budget(s034):
+    # given only the steps the first plan spent, nothing is left for a backup
+    spec, _, out = s034
+    partial = Plan.load(out / f"{spec.name}.partial.json")
+    spent = partial.summary["search_steps"]
+    assert 0 < spent < 800
+    starved = run_scenario(spec, max_steps=spent)
+    assert starved.backups == [] and not starved.ok
+
+
+def test_no_backup_after_a_force_closure_failure():
+    # the others do not hold without the thumb: its start contact is not the cause
+    r = run_scenario(_spec(8, "five_finger"))
+    assert r.failure_kind == "force-closure" and r.finger == "thumb"
+    assert r.n_regrasps >= 0 and r.backups == []
+
+
+def test_a_backup_that_plans_fully_is_the_result(tmp_path):
+    spec = _spec(31, "allegro")
+    scen = build_scenario(spec)
+    first, radius = scen.grasp, scen.hand.finger("index").tip_radius
+    r = run_scenario(spec, out_dir=tmp_path)
+    assert r.ok and r.failure_kind is None and r.finger is None and r.attempts == []
+    assert [b["outcome"] for b in r.backups] == ["ok"]
+    assert r.backups[0]["finger"] == "index"
+    assert r.backups[0]["after"] == "object-clearance"
+    # the full plan file only (the first failure's partial plan removed), re-checked
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{spec.name}.json"]
+    plan = Plan.load(tmp_path / f"{spec.name}.json")
+    assert r.recheck_ok and recheck_plan(plan).ok
+    # it starts the index two tip radii or more from where the first grasp did
+    index = plan.phases["index"][0]
+    assert index.kind == "contact" and index.t_start == pytest.approx(plan.t[0])
+    assert np.linalg.norm(index.p_object - first.points_object["index"]) > 2 * radius
+
+
+def test_bad_backups_name_the_argument():
+    spec = _spec(34, "five_finger")
+    with pytest.raises(InputError, match="grasp_backups"):
+        run_scenario(spec, grasp_backups=-1)
