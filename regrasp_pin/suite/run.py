@@ -252,12 +252,12 @@ def run_scenario(
     )
 
     t0 = time.perf_counter()
-    planned, exc = _plan(scen, params)
+    planned, failed = _plan(scen, params)
     result.plan_s = time.perf_counter() - t0
-    if exc is not None:
-        _record_failure(result, exc, "plan")
-        _record_partial(result, spec, exc, out_dir)
-        planned = _back_up(result, spec, scen, params, exc, backups, out_dir)
+    if failed is not None:
+        _record_failure(result, failed, "plan")
+        _record_partial(result, spec, failed, out_dir)
+        planned = _back_up(result, spec, scen, params, failed, backups, out_dir)
         if planned is None:
             log.info("suite: %s failed: %s", spec.name, result.failure)
             return result
@@ -294,6 +294,7 @@ def _backup_finger(spec: ScenarioSpec, scen: Any, exc: Exception) -> str | None:
         not isinstance(exc, PlanningError)
         or exc.kind in _NOT_THE_START
         or not isinstance(partial, Plan)
+        or not isinstance(finger, str)
         or finger not in scen.grasp.points_object
     ):
         return None
@@ -352,9 +353,9 @@ def _back_up(
                 return None
         again = dataclasses.replace(params, max_steps=left, budget_s=remaining_s)
         t0 = time.perf_counter()
-        planned, exc = _plan(scen, again)
+        planned, again_failed = _plan(scen, again)
         result.plan_s = (result.plan_s or 0.0) + time.perf_counter() - t0
-        if exc is None:
+        if again_failed is None:
             entry["outcome"] = "ok"
             for name in ("failure_kind", "failure", "failed_stage", "finger", "time_s"):
                 setattr(result, name, None)
@@ -369,6 +370,7 @@ def _back_up(
                 Path(result.plan_path).unlink(missing_ok=True)  # the first failure's
                 result.plan_path = None
             return planned
+        exc = again_failed
         kind = getattr(exc, "kind", None)
         entry["outcome"] = kind.value if isinstance(kind, FailureKind) else type(exc).__name__
         entry["time_s"] = getattr(exc, "time_s", None)
