@@ -34,8 +34,9 @@ from .exceptions import (
 from .grasp.choice import exit_times
 from .grasp.contact import ContactModel
 from .grasp.initial import GAP_HORIZON_S, Grasp, initial_grasp
-from .grasp.manifold import Manifold, StartTracking, build_manifolds
+from .grasp.manifold import Manifold, StartTracking, build_manifold, build_manifolds
 from .grasp.necessity import MustHold, must_hold, with_idle_fingers
+from .grasp.screening import held_clear
 from .model.clearance import palm_clearance
 from .model.hand import Hand
 from .model.motion import ObjectMotion
@@ -47,6 +48,7 @@ __all__ = [
     "HANDS",
     "OBJECTS",
     "Scenario",
+    "contacts_held_through",
     "describe",
     "grasp_for_motion",
     "hand_label",
@@ -492,6 +494,48 @@ def grasp_for_motion(
         must_hold=runs,
         rank=rank,
     )
+
+
+def contacts_held_through(
+    hand: Hand,
+    obj: ConvexObject,
+    motion: ObjectMotion,
+    finger: str,
+    *,
+    contact: ContactModel,
+    grasp_dt_s: float = 0.05,
+) -> np.ndarray:
+    """The start contacts that ``finger`` holds to the motion's end, best first.
+
+    On the surface sampled every 2 mm and the times of :func:`grasp_for_motion` (the
+    indices are those of its ``keep``): usable at the start with the choice margin,
+    then, at every time, inside the joint limits with ``contact.limit_margin_rad``, the
+    pad facing, the fingertip link not sinking in (the manifold's estimate) and, held
+    there, the finger's links clear of the object (Coal:
+    :func:`~regrasp_pin.grasp.screening.held_clear`). Ordered by the smallest joint
+    margin over the motion, largest first (ties by index). For a finger that cannot
+    let go (the others do not hold without it), these are the contacts from which it
+    need not.
+
+    Returns:
+        ``(K,)`` sample indices (empty if none).
+
+    Raises:
+        UnknownNameError: ``finger`` is not one of the hand's.
+        InputError: non-positive ``grasp_dt_s``.
+    """
+    step = positive(grasp_dt_s, "grasp_dt_s")
+    f = hand.finger(finger)
+    sample = obj.sample_surface(0.002)
+    times = np.linspace(motion.t_start, motion.t_end, max(int(motion.duration_s / step), 1) + 1)
+    man = build_manifold(f, sample, motion, times, contact=contact)
+    start = np.flatnonzero(man.usable(contact.choice_margin_rad)[0])
+    lasting = start[man.holdable(contact.limit_margin_rad)[:, start].all(axis=0)]
+    if lasting.size == 0:
+        return lasting
+    lasting = lasting[held_clear(hand, finger, obj, man, lasting, 0, contact)[-1]]
+    worst = man.margin_rad[:, lasting].min(axis=0)
+    return lasting[np.lexsort((lasting, -np.round(worst, 9)))]
 
 
 def _near_any(points: np.ndarray, centres: np.ndarray, radius_m: float) -> np.ndarray:

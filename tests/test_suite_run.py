@@ -8,7 +8,9 @@ still holds the contact it started on:
   with the index elsewhere, the plan fails too;
 * s0-008, the five-finger hand, a random convex mesh turned +161 deg about its own
   axis: the thumb cannot let go at 2.0 s (force-closure: the others do not hold
-  without it), which no other start contact of the thumb addresses;
+  without it), and no contact of it lasts the turn;
+* s0-056, the five-finger hand, a random convex mesh turned +118 deg while drifting:
+  the thumb cannot let go at 3.47 s either, but it could hold a contact to the end;
 * s0-031, the Allegro hand, a box turned -94 deg about its own axis: no new contact of
   the index at 2.4 s keeps its fingertip link out of the box (object-clearance); from
   a grasp with the index away from where it started, the plan is full.
@@ -20,6 +22,7 @@ import numpy as np
 import pytest
 
 from regrasp_pin.exceptions import InputError
+from regrasp_pin.grasp.holding import holds_to_end, start_holding
 from regrasp_pin.plan import Plan
 from regrasp_pin.suite import build_scenario, generate_specs, run_scenario, summarize
 from regrasp_pin.verify.plan_check import recheck_plan
@@ -66,11 +69,39 @@ def test_backups_share_the_step_budget(s034):
     assert starved.backups == [] and not starved.ok
 
 
-def test_no_backup_after_a_force_closure_failure():
-    # the others do not hold without the thumb: its start contact is not the cause
+def test_a_force_closure_failure_backs_up_only_onto_a_contact_held_through():
+    # the others do not hold without the thumb: a backup would start it on a contact
+    # it holds to the end, and s0-008's thumb has none (every plan must let it go)
     r = run_scenario(_spec(8, "five_finger"))
     assert r.failure_kind == "force-closure" and r.finger == "thumb"
-    assert r.n_regrasps >= 0 and r.backups == []
+    assert [(b["how"], b["outcome"]) for b in r.backups] == [("held-through", "none-held-through")]
+
+
+def test_a_finger_that_cannot_let_go_backs_up_onto_a_contact_it_holds_through(tmp_path):
+    """s0-056 (five-finger hand, a mesh turned +118 deg while drifting): the thumb
+    cannot let go at 3.47 s (force-closure). It could hold a contact from the start
+    to the end; from a grasp that starts it there, the plan is full, and the tracking
+    (IK and Coal, not the manifold) holds that contact to the end."""
+    spec = _spec(56, "five_finger")
+    r = run_scenario(spec, out_dir=tmp_path)
+    assert r.ok and [(b["how"], b["outcome"]) for b in r.backups] == [("held-through", "ok")]
+    assert r.backups[0]["after"] == "force-closure" and r.backups[0]["finger"] == "thumb"
+    plan = Plan.load(tmp_path / f"{spec.name}.json")
+    assert recheck_plan(plan).ok
+    thumb = plan.phases["thumb"]
+    assert [ph.kind for ph in thumb] == ["contact"]  # never lets go
+    scen = build_scenario(spec)
+    m, c = scen.motion, scen.params.contact
+    grid = np.linspace(m.t_start, m.t_end, int(round(m.duration_s / 0.02)) + 1)
+    k = int(np.argmin(np.abs(plan.t - m.t_start)))
+    q0 = plan.q[k, scen.hand.finger("thumb").q_indices]
+    held = start_holding(
+        scen.hand, scen.obj, m, grid, "thumb", thumb[0].p_object, thumb[0].n_object, q0,
+        m.t_start, c,
+    )  # fmt: skip
+    assert holds_to_end(held.track, m.t_start, c)
+    away = np.linalg.norm(thumb[0].p_object - np.array(r.backups[0]["avoid_m"]))
+    assert away > 2 * scen.hand.finger("thumb").tip_radius
 
 
 def test_a_backup_that_plans_fully_is_the_result(tmp_path):

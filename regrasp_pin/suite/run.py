@@ -19,18 +19,17 @@ from .._validate import known_fields, positive, positive_int
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
 from ..planning.planner import plan_manipulation
-from ..scenarios import hand_label, is_hand_file
+from ..scenarios import contacts_held_through, hand_label, is_hand_file
 from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
 from .specs import ScenarioSpec
 
 __all__ = ["ScenarioResult", "load_results", "outcome_template", "run_scenario"]
 
-#: Failures that another start contact of the failing finger does not address:
-#: ``infeasible`` is proven for every grasp, and ``force-closure`` says that the
-#: *other* fingers do not hold without it (in the default suite, 0 of 20 such backups
-#: planned fully)
-_NOT_THE_START = frozenset({FailureKind.INFEASIBLE, FailureKind.FORCE_CLOSURE})
+#: A finger's failure of this kind means that the others do not hold without it: a
+#: backup starts it on a contact it holds to the end (if it has one) instead of
+#: anywhere else (in the default suite, 0 of 20 such backups to anywhere else planned)
+_HOLD_THROUGH = FailureKind.FORCE_CLOSURE
 
 log = logging.getLogger(__name__)
 
@@ -79,9 +78,11 @@ class ScenarioResult:
         spec: The spec (``ScenarioSpec.to_dict()``), to rebuild the scenario.
         backups: The initial grasps backed up to after a failure (:func:`run_scenario`),
             in order: the failure's kind (``"after"``), the finger whose start contact
-            was avoided and that contact (object frame [m]), and the outcome (``"ok"``,
-            a failure kind, ``"no-grasp:<kind>"`` or ``"no-time"``). ``plan_s`` and
-            ``build_s`` include theirs.
+            left and that contact (object frame [m]), how (``"elsewhere"``: that
+            contact avoided; ``"held-through"``: a contact held to the end), and the
+            outcome (``"ok"``, a failure kind, ``"no-grasp:<kind>"``,
+            ``"none-held-through"`` or ``"no-time"``). ``plan_s`` and ``build_s``
+            include theirs.
     """
 
     name: str
@@ -193,17 +194,18 @@ def run_scenario(
     """Build and plan one spec; re-check a full plan from its saved file.
 
     When the plan fails at a finger that still holds the contact it started on, that
-    start was the decision that led there: the scenario is built again with an initial
-    grasp that keeps the finger away from that contact (two tip radii;
-    ``build_scenario(avoid=...)``) and planned again, up to ``grasp_backups`` times,
-    on what is left of the search budget. Not after a proof that no plan exists
-    (``infeasible``, for any grasp) or a ``force-closure`` failure (the others do not
-    hold without the finger, wherever it started), nor for the thumb of a
-    ``"contact-axis"`` spec
-    (its contact places the turn: the others' contacts change, the thumb's is kept)
-    or a hand file's (:func:`~regrasp_pin.scenarios.scenario_for_hand` grasps it).
-    A backup that plans fully is the result; otherwise the first failure is, and
-    every backup is listed in ``backups``.
+    start was the decision that led there: the scenario is built again with another
+    start for that finger and planned again, up to ``grasp_backups`` times, on what
+    is left of the search budget. After a ``force-closure`` failure (the others do not
+    hold without the finger) the finger starts on a contact it holds to the end
+    (:func:`~regrasp_pin.scenarios.contacts_held_through`; none: no backup), after
+    any other failure anywhere more than two of its tip radii from where it started
+    (``build_scenario(avoid=...)``). Not after a proof that no plan exists
+    (``infeasible``, for any grasp), nor for the thumb of a ``"contact-axis"`` spec
+    (its contact places the turn: a backup for another finger keeps it) or a hand
+    file's (:func:`~regrasp_pin.scenarios.scenario_for_hand` grasps it). A backup that
+    plans fully is the result; otherwise the first failure is, and every backup is
+    listed in ``backups``.
 
     Never raises for an outcome: a :class:`~regrasp_pin.exceptions.ContactError`
     while building (no initial grasp) or a :class:`~regrasp_pin.exceptions.PlanningError`
@@ -283,16 +285,15 @@ def _steps_spent(exc: Exception) -> int:
 
 
 def _backup_finger(spec: ScenarioSpec, scen: Any, exc: Exception) -> str | None:
-    """The finger whose start contact to avoid after the failure ``exc``, or None: a
-    planning failure (not of a kind in :data:`_NOT_THE_START`) at a finger of the
-    initial grasp that still holds its start contact in the partial plan (no other
-    phase), not the thumb of a contact-axis spec, and no hand file's contact-axis
-    spec."""
+    """The finger whose start contact to change after the failure ``exc``, or None: a
+    planning failure (not a proof of infeasibility) at a finger of the initial grasp
+    that still holds its start contact in the partial plan (no other phase), not the
+    thumb of a contact-axis spec, and no hand file's contact-axis spec."""
     partial = getattr(exc, "partial", None)
     finger = getattr(exc, "finger", None)
     if (
         not isinstance(exc, PlanningError)
-        or exc.kind in _NOT_THE_START
+        or exc.kind == FailureKind.INFEASIBLE
         or not isinstance(partial, Plan)
         or not isinstance(finger, str)
         or finger not in scen.grasp.points_object
@@ -302,6 +303,19 @@ def _backup_finger(spec: ScenarioSpec, scen: Any, exc: Exception) -> str | None:
         return None
     phases = partial.phases.get(finger, [])
     return finger if all(ph.kind == "contact" for ph in phases) else None
+
+
+def _held_through(spec: ScenarioSpec, scen: Any, finger: str, away: np.ndarray) -> int | None:
+    """The best start contact (a 2 mm sample index) that ``finger`` holds to the
+    motion's end (:func:`~regrasp_pin.scenarios.contacts_held_through`) and that is
+    more than two of its tip radii from ``away`` (its start contact), or None."""
+    held = contacts_held_through(
+        scen.hand, scen.obj, scen.motion, finger, contact=scen.params.contact,
+        grasp_dt_s=spec.grasp_dt_s,
+    )  # fmt: skip
+    points = scen.obj.sample_surface(0.002).points[held]
+    far = held[np.linalg.norm(points - away, axis=1) > 2.0 * scen.hand.finger(finger).tip_radius]
+    return int(far[0]) if far.size else None
 
 
 def _back_up(
@@ -330,16 +344,28 @@ def _back_up(
         if finger is None or left <= 0:
             return None
         point = np.asarray(scen.grasp.points_object[finger], float)
-        avoid.setdefault(finger, []).append(point)
+        hold = getattr(exc, "kind", None) == _HOLD_THROUGH
         entry: dict[str, Any] = {
             "after": getattr(getattr(exc, "kind", None), "value", None),
             "finger": finger,
             "avoid_m": [float(v) for v in point],
+            "how": "held-through" if hold else "elsewhere",
         }
         result.backups.append(entry)
         t0 = time.perf_counter()
         try:
-            scen = build_scenario(spec, avoid={n: np.array(p) for n, p in avoid.items()}, keep=keep)
+            kept = dict(keep or {})
+            if hold:
+                index = _held_through(spec, scen, finger, point)
+                if index is None:
+                    entry["outcome"] = "none-held-through"
+                    return None
+                kept[finger] = index
+            else:
+                avoid.setdefault(finger, []).append(point)
+            scen = build_scenario(
+                spec, avoid={n: np.array(p) for n, p in avoid.items()} or None, keep=kept or None
+            )
         except ContactError as no_grasp:
             entry["outcome"] = f"no-grasp:{no_grasp.kind.value}"
             return None
