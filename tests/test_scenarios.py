@@ -216,6 +216,17 @@ def test_bad_avoid_names_the_argument():
         grasp_for_motion(h, obj, turn, fingers, avoid={"index": np.full((1, 3), np.nan)}, **kw)
 
 
+def test_bad_held_through_arguments_name_them():
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.scenarios import contacts_held_through
+
+    h, obj, turn = _five_finger_turn()
+    with pytest.raises(UnknownNameError, match="pinky"):
+        contacts_held_through(h, obj, turn, "pinky", contact=ContactModel())
+    with pytest.raises(InputError, match="grasp_dt_s"):
+        contacts_held_through(h, obj, turn, "thumb", contact=ContactModel(), grasp_dt_s=0.0)
+
+
 def test_the_shadow_hands_grasp_leaves_every_walking_finger_room_to_regrasp():
     # the real Shadow Hand (third-party models, skipped when absent): with the score
     # alone, no usable contact of the little finger cleared the middle finger's body;

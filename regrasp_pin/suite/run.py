@@ -77,8 +77,8 @@ class ScenarioResult:
         stage_s: The planner's time per stage [s] (full plans).
         spec: The spec (``ScenarioSpec.to_dict()``), to rebuild the scenario.
         backups: The initial grasps backed up to after a failure (:func:`run_scenario`),
-            in order: the failure's kind (``"after"``), the finger whose start contact
-            left and that contact (object frame [m]), how (``"elsewhere"``: that
+            in order: the failure's kind (``"after"``), the finger whose start changed
+            and the contact it started on (object frame [m]), how (``"elsewhere"``: that
             contact avoided; ``"held-through"``: a contact held to the end), and the
             outcome (``"ok"``, a failure kind, ``"no-grasp:<kind>"``,
             ``"none-held-through"`` or ``"no-time"``). ``plan_s`` and ``build_s``
