@@ -259,7 +259,7 @@ def run_scenario(
     if failed is not None:
         _record_failure(result, failed, "plan")
         _record_partial(result, spec, failed, out_dir)
-        planned = _back_up(result, spec, scen, params, failed, backups, out_dir)
+        planned = _back_up(result, spec, scen, params, failed, backups)
         if planned is None:
             log.info("suite: %s failed: %s", spec.name, result.failure)
             return result
@@ -325,7 +325,6 @@ def _back_up(
     params: Any,
     exc: Exception,
     backups: int,
-    out_dir: str | Path | None,
 ) -> Any:
     """Plan again from other initial grasps after ``exc`` (see :func:`run_scenario`),
     recording each in ``result.backups`` and their times in ``result.build_s`` and
@@ -383,18 +382,7 @@ def _back_up(
         result.plan_s = (result.plan_s or 0.0) + time.perf_counter() - t0
         if again_failed is None:
             entry["outcome"] = "ok"
-            for name in ("failure_kind", "failure", "failed_stage", "finger", "time_s"):
-                setattr(result, name, None)
-            result.measured = result.required = None
-            result.attempts = []
-            result.initial_finger_clearance_m = float(
-                finger_clearance(scen.hand, scen.obj, scen.motion, tuple(scen.grasp.q), 0.0)(
-                    scen.grasp.q
-                )
-            )
-            if out_dir is not None and result.plan_path is not None:
-                Path(result.plan_path).unlink(missing_ok=True)  # the first failure's
-                result.plan_path = None
+            _forget_failure(result, scen)
             return planned
         exc = again_failed
         kind = getattr(exc, "kind", None)
@@ -402,6 +390,23 @@ def _back_up(
         entry["time_s"] = getattr(exc, "time_s", None)
         spent += _steps_spent(exc)
     return None
+
+
+def _forget_failure(result: ScenarioResult, scen: Any) -> None:
+    """A failure in ``result`` that a backup's full plan (of ``scen``) replaces: its
+    kind, numbers and attempts cleared, its partial plan file removed, the start's
+    finger clearance that of the backup's grasp."""
+    for name in ("failure_kind", "failure", "failed_stage", "finger", "time_s"):
+        setattr(result, name, None)
+    result.measured = result.required = None
+    result.attempts = []
+    q = scen.grasp.q
+    result.initial_finger_clearance_m = float(
+        finger_clearance(scen.hand, scen.obj, scen.motion, tuple(q), 0.0)(q)
+    )
+    if result.plan_path is not None:
+        Path(result.plan_path).unlink(missing_ok=True)
+        result.plan_path = None
 
 
 def _record_partial(
