@@ -127,3 +127,21 @@ def test_bad_backups_name_the_argument():
     spec = _spec(34, "five_finger")
     with pytest.raises(InputError, match="grasp_backups"):
         run_scenario(spec, grasp_backups=-1)
+
+
+def test_an_error_while_building_a_backup_is_its_outcome(s034, monkeypatch):
+    # a bug in the backup's build does not lose the scenario's result
+    import regrasp_pin.suite.run as run_module
+
+    spec, alone, _ = s034
+    build = run_module.build_scenario
+
+    def broken(spec, contact=None, *, avoid=None, keep=None):
+        if avoid is not None or keep is not None:
+            raise RuntimeError("broken on purpose")
+        return build(spec, contact)
+
+    monkeypatch.setattr(run_module, "build_scenario", broken)
+    r = run_scenario(spec)
+    assert r.failure_kind == alone.failure_kind and r.time_s == alone.time_s
+    assert [b["outcome"] for b in r.backups] == ["exception:RuntimeError: broken on purpose"]

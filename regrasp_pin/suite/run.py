@@ -329,7 +329,8 @@ def _back_up(
     """Plan again from other initial grasps after ``exc`` (see :func:`run_scenario`),
     recording each in ``result.backups`` and their times in ``result.build_s`` and
     ``result.plan_s``; the first full plan (its scenario's grasp then replaces the
-    result's start), or None."""
+    result's start), or None. Never raises: an unexpected error while building a
+    backup is its outcome (``"exception:<Type>: <message>"``)."""
     avoid: dict[str, list[np.ndarray]] = {}
     spent = _steps_spent(exc)
     keep = (
@@ -367,6 +368,9 @@ def _back_up(
             )
         except ContactError as no_grasp:
             entry["outcome"] = f"no-grasp:{no_grasp.kind.value}"
+            return None
+        except Exception as bug:  # recorded; the first failure stands
+            entry["outcome"] = f"exception:{type(bug).__name__}: {bug}"
             return None
         finally:
             result.build_s = (result.build_s or 0.0) + time.perf_counter() - t0
