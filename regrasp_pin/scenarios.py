@@ -462,23 +462,19 @@ def grasp_for_motion(
         # up to the motion's end, its last sample included, as the planner's proof
         runs = must_hold(every, sample, obj, mu, list(fingers))
     for name, index in (keep or {}).items():
-        if name not in manifolds:
-            raise UnknownNameError("keep", name, list(manifolds))
         if not isinstance(index, (int, np.integer)) or not 0 <= index < len(sample):
             raise InputError(
                 f"keep[{name!r}]", f"{index!r}", f"an index into the {len(sample)} samples"
             )
         only = np.zeros(len(sample), bool)
         only[index] = True
-        m = manifolds[name]
-        manifolds[name] = replace(m, inside=m.inside & only[None, :])
+        _restrict(manifolds, name, only, "keep")
     for name, points in (avoid or {}).items():
-        if name not in manifolds:
-            raise UnknownNameError("avoid", name, list(manifolds))
         away = as_array(points, f"avoid[{name!r}]", (None, 3))
-        gone = _near_any(sample.points, away, 2.0 * hand.finger(name).tip_radius)
-        m = manifolds[name]
-        manifolds[name] = replace(m, inside=m.inside & ~gone[None, :])
+        near = np.linalg.norm(sample.points[:, None, :] - away[None, :, :], axis=-1)
+        _restrict(
+            manifolds, name, ~(near <= 2.0 * hand.finger(name).tip_radius).any(axis=1), "avoid"
+        )
     rank = _room_rank(hand, obj, manifolds, sample, room_fingers, room_after_s, contact)
     return initial_grasp(
         hand,
@@ -538,13 +534,15 @@ def contacts_held_through(
     return lasting[np.lexsort((lasting, -np.round(worst, 9)))]
 
 
-def _near_any(points: np.ndarray, centres: np.ndarray, radius_m: float) -> np.ndarray:
-    """``(N,)`` whether each of ``points`` ``(N, 3)`` is within ``radius_m`` of one of
-    ``centres`` ``(K, 3)``."""
-    near = np.zeros(len(points), bool)
-    for c in centres:  # a few centres
-        near |= np.linalg.norm(points - c, axis=1) <= radius_m
-    return near
+def _restrict(
+    manifolds: dict[str, Manifold], name: str, allowed: np.ndarray, argument: str
+) -> None:
+    """Leave only the sample points ``allowed`` ``(N,)`` to ``name``'s manifold in
+    ``manifolds`` (``argument`` names the finger's origin in an error)."""
+    if name not in manifolds:
+        raise UnknownNameError(argument, name, list(manifolds))
+    m = manifolds[name]
+    manifolds[name] = replace(m, inside=m.inside & allowed[None, :])
 
 
 def _room_rank(

@@ -99,14 +99,9 @@ def test_the_grasp_search_maps_only_what_it_reads_and_picks_the_same_grasp(hand,
         assert np.array_equal(fast.points_object[n], full.points_object[n])
 
 
-def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
-    # with room_fingers, the grasp kept is at least as good as the score's pick by
-    # (holds that cannot be regrasped in turn, smallest regrasp room), both recounted
-    # here on the same manifolds: exit times by a loop, the room by regrasp_room
-    from regrasp_pin.grasp.contact import ContactModel
+def _five_finger_turn():
     from regrasp_pin.model.motion import ObjectMotion
-    from regrasp_pin.placing import regrasp_room
-    from regrasp_pin.scenarios import grasp_for_motion, hand_model, setup_pose
+    from regrasp_pin.scenarios import hand_model, setup_pose
 
     h = hand_model("five_finger")
     obj = setup_objects("five_finger")["hexagon"]()
@@ -119,6 +114,18 @@ def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
         duration_s=1.5,
         dt_s=0.01,
     )
+    return h, obj, turn
+
+
+def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
+    # with room_fingers, the grasp kept is at least as good as the score's pick by
+    # (holds that cannot be regrasped in turn, smallest regrasp room), both recounted
+    # here on the same manifolds: exit times by a loop, the room by regrasp_room
+    from regrasp_pin.grasp.contact import ContactModel
+    from regrasp_pin.placing import regrasp_room
+    from regrasp_pin.scenarios import grasp_for_motion
+
+    h, obj, turn = _five_finger_turn()
     contact = ContactModel()
     fingers = setup_fingers("five_finger")
     movers = [n for n in fingers if n != "thumb"]
@@ -159,24 +166,6 @@ def test_grasps_are_ranked_by_the_fingers_room_to_regrasp():
     assert rank(roomy)[1] > 0
     with pytest.raises(UnknownNameError):
         grasp_for_motion(h, obj, turn, fingers, room_fingers=["pinky"], **kw)
-
-
-def _five_finger_turn():
-    from regrasp_pin.model.motion import ObjectMotion
-    from regrasp_pin.scenarios import hand_model, setup_pose
-
-    h = hand_model("five_finger")
-    obj = setup_objects("five_finger")["hexagon"]()
-    T0 = setup_pose("five_finger")
-    turn = ObjectMotion.constant_twist(
-        T0,
-        axis_palm=T0[:3, 2],
-        point_palm=T0[:3, 3],
-        rate_rad_s=np.radians(40.0),
-        duration_s=1.5,
-        dt_s=0.01,
-    )
-    return h, obj, turn
 
 
 def test_a_grasp_that_avoids_a_start_contact_keeps_the_finger_two_tip_radii_away():

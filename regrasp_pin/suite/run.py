@@ -240,13 +240,9 @@ def run_scenario(
         _record_failure(result, exc, "grasp" if isinstance(exc, ContactError) else "build")
         return result
     result.build_s = time.perf_counter() - t0
-    grasp = scen.grasp
-    if grasp is None:  # build_scenario always chooses one (or raises ContactError)
+    if scen.grasp is None:  # build_scenario always chooses one (or raises ContactError)
         raise AssertionError("build_scenario returned a scenario without a grasp")
-    fingers = tuple(grasp.q)
-    result.initial_finger_clearance_m = float(
-        finger_clearance(scen.hand, scen.obj, scen.motion, fingers, 0.0)(grasp.q)
-    )
+    result.initial_finger_clearance_m = _start_clearance(scen)
     params = dataclasses.replace(
         scen.params,
         max_steps=scen.params.max_steps if steps is None else steps,
@@ -265,6 +261,13 @@ def run_scenario(
             return result
     _record_plan(result, spec, planned, params, out_dir)
     return result
+
+
+def _start_clearance(scen: Any) -> float:
+    """The smallest Coal distance between two fingers at the scenario's initial grasp
+    (idle fingers at rest) [m]."""
+    q = scen.grasp.q
+    return float(finger_clearance(scen.hand, scen.obj, scen.motion, tuple(q), 0.0)(q))
 
 
 def _plan(scen: Any, params: Any) -> tuple[Any, Exception | None]:
@@ -404,10 +407,7 @@ def _forget_failure(result: ScenarioResult, scen: Any) -> None:
         setattr(result, name, None)
     result.measured = result.required = None
     result.attempts = []
-    q = scen.grasp.q
-    result.initial_finger_clearance_m = float(
-        finger_clearance(scen.hand, scen.obj, scen.motion, tuple(q), 0.0)(q)
-    )
+    result.initial_finger_clearance_m = _start_clearance(scen)
     if result.plan_path is not None:
         Path(result.plan_path).unlink(missing_ok=True)
         result.plan_path = None
