@@ -976,6 +976,41 @@ def test_held_clear_measures_each_point_only_in_runs_up_to_its_first_failure(
     assert measured.sum() < still.sum()  # some point failed early: its tail was spared
 
 
+@pytest.mark.parametrize("finger, horizon", [("middle", 2), ("thumb", 5)])
+def test_held_clear_horizon_is_the_first_rows_and_measures_no_further(five, finger, horizon):
+    """held_clear(horizon=h) answers the first h rows of the full call (a prefix of the
+    same running AND) and measures no time beyond them."""
+    hand, box, _, _, manifolds, _ = five
+    m = manifolds[finger]
+    ka = m.time_index(0.25)
+    pool = np.flatnonzero(m.usable(CONTACT.limit_margin_rad)[ka])
+    points = np.random.default_rng(5).choice(pool, size=min(30, pool.size), replace=False)
+    rows_asked = []
+
+    class Asked(ManifoldClearance):
+        def __call__(self, rows, points):
+            rows_asked.append(np.asarray(rows))
+            return super().__call__(rows, points)
+
+    full = held_clear(hand, finger, box, m, points, ka, CONTACT)
+    got = held_clear(
+        hand,
+        finger,
+        box,
+        m,
+        points,
+        ka,
+        CONTACT,
+        Asked(hand, finger, box, m, CONTACT),
+        horizon=horizon,
+    )
+    assert got.shape == (horizon, points.size)
+    np.testing.assert_array_equal(got, full[:horizon])
+    assert np.concatenate(rows_asked).max() < ka + horizon
+    with pytest.raises(InputError, match="horizon"):
+        held_clear(hand, finger, box, m, points, ka, CONTACT, horizon=0)
+
+
 @pytest.mark.parametrize("finger, t_arrive", [("middle", 0.5), ("thumb", 0.75)])
 def test_link_exit_reads_lasting_only_until_the_links_end_a_hold(five, finger, t_arrive):
     """``lasting`` gets each point's horizon: the times before its links or its limits

@@ -25,7 +25,13 @@ from .contact import ContactModel
 from .manifold import Manifold
 from .necessity import MustHold
 from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon
-from .screening import ObjectClearance, ScreeningEpsilons, held_clear, leave_one_out
+from .screening import (
+    ManifoldClearance,
+    ScreeningEpsilons,
+    held_clear,
+    leave_one_out,
+    passes_object_clearance,
+)
 
 __all__ = ["GAP_HORIZON_S", "Grasp", "initial_grasp"]
 
@@ -99,22 +105,24 @@ def _start_candidates(
     last = exit_times(usable[:, idx], man.times_s, t_index)
     frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
     order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
-    clear = ObjectClearance(hand, name, obj, contact)
-    q_rows = hand.to_full(name, man.q[t_index, idx])
-    T0 = man.T_palm_object[t_index]
-
     # held at least until the next grid time (a contact the tracking loses at once is
     # no start) or, for a finger that cannot let go, for as long as it must hold
     k_held = 1 if hold is None else max(hold.k_to - t_index, 1)
+    kept = ManifoldClearance(hand, name, obj, man, contact)  # one store for the candidates
+    # clear of the object at the start: every candidate in one batch (Coal only where
+    # the bounds do not decide)
+    clear = passes_object_clearance(*kept(np.full(idx.size, t_index), idx), contact)
 
     def link_clear(j: int) -> bool:
         # clear of the object at the start and then held: its other links and
         # fingertip link as the tracking will see them (Coal; the manifold knows only
         # the fingertip link's shape)
-        if not clear(q_rows[j : j + 1], T0)[0]:
+        if not clear[j]:
             return False
-        ok = held_clear(hand, name, obj, man, idx[j : j + 1], t_index, contact)[:, 0]
-        return bool(ok[: k_held + 1].all())
+        ok = held_clear(
+            hand, name, obj, man, idx[j : j + 1], t_index, contact, kept, horizon=k_held + 1
+        )[:, 0]
+        return bool(ok.all())
 
     chosen = _spread_out(
         pts[idx],

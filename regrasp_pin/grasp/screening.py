@@ -21,6 +21,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from .._validate import positive_int
 from ..exceptions import InputError
 from ..model.clearance import LinkClearance
 from ..model.distances import object_gap_bounds
@@ -291,6 +292,7 @@ def held_clear(
     ka: int,
     contact: ContactModel,
     distances: ManifoldClearance | None = None,
+    horizon: int | None = None,
 ) -> np.ndarray:
     """``(K, C)`` bool over the manifold's times from index ``ka``: the points are usable
     (``contact.limit_margin_rad``) and, held there, the finger's other links keep
@@ -301,13 +303,16 @@ def held_clear(
     change it): the times before the point leaves the usable set, in runs that double
     in length (:data:`HELD_FIRST_RUN` times first) until the column fails or ends.
     ``distances``: where the distances are kept between calls (the finger's, on this
-    manifold); None: measured afresh."""
+    manifold); None: measured afresh. ``horizon``: only the first ``horizon`` times from
+    ``ka`` are asked about (``K = min(horizon, times - ka)``), and only they are
+    measured."""
     if distances is None:
         distances = ManifoldClearance(hand, finger, obj, manifold, contact)
     else:
         check_kept_clearance(distances, finger, manifold, contact)
     points = np.asarray(points, np.int64).reshape(-1)
-    usable = manifold.usable(contact.limit_margin_rad, rows=slice(ka, None), points=points)
+    end = None if horizon is None else ka + positive_int(horizon, "horizon", minimum=1)
+    usable = manifold.usable(contact.limit_margin_rad, rows=slice(ka, end), points=points)
     # the times before each column first leaves the usable set: rows 0 .. n_rows - 1
     n_rows = np.logical_and.accumulate(usable, axis=0).sum(axis=0)
     ok = np.zeros(usable.shape, bool)
