@@ -63,3 +63,29 @@ def test_the_same_question_is_answered_once(scene, monkeypatch):  # noqa: F811
     assert len(calls) == 1 and other.shape == first[:-1].shape
     holding_q(hand, motion, name, h, t, 10 * CONTACT.ik_tol_m)
     assert len(calls) == 2
+
+
+def test_rest_configuration_is_the_grid_posture_clearest_of_the_object(scene):  # noqa: F811
+    """The idle finger's rest posture is the exhaustive answer: every posture of the
+    grid measured by Coal at every pose, the first strictly clearest (by 1e-6 m) kept;
+    the other fingers stay at the middle of their limits."""
+    from regrasp_pin.grasp.holding import rest_configuration
+    from regrasp_pin.model.clearance import LinkClearance
+
+    hand, box, motion, _ = scene
+    for name in ("index", "thumb"):
+        f = hand.finger(name)
+        got = rest_configuration(hand, box, motion, [name])
+        T = motion.pose(np.linspace(motion.t_start, motion.t_end, 7))
+        fr = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+        grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
+        lc = LinkClearance(hand, name, box, include_tip=True)
+        best, best_d = f.q_mid, -np.inf
+        for qf in f.lower + grid * (f.upper - f.lower):
+            full = hand.to_full(name, qf)
+            d = float(lc(np.repeat(full[None], len(T), 0), T).min())
+            if d > best_d + 1e-6:
+                best, best_d = qf, d
+        np.testing.assert_array_equal(got[f.q_indices], best)
+        others = np.setdiff1d(np.arange(hand.model.nq), f.q_indices)
+        np.testing.assert_array_equal(got[others], hand.neutral()[others])

@@ -33,6 +33,9 @@ __all__ = [
 
 
 _SOLVED_KEPT = 64  # holding_q answers kept per hold
+#: A face-plane lower bound may exceed Coal's distance by Coal's tolerance (about
+#: 1e-6 m): a pose whose bound is this far above a measured distance cannot be nearer.
+_BOUND_SLACK_M = 1e-5
 
 
 @dataclass
@@ -141,6 +144,7 @@ def rest_configuration(
     fingers at the middle of their limits.
     """
     from ..model.clearance import LinkClearance
+    from ..model.distances import object_gap_bound
 
     q = hand.neutral()
     if not idle:
@@ -152,10 +156,24 @@ def rest_configuration(
         grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
         postures = f.lower + grid * (f.upper - f.lower)
         lc = LinkClearance(hand, name, obj, include_tip=True)
+        full = hand.to_full(name, postures, q)
+        # lower bounds of every (posture, pose) in one batch: Coal measures a posture's
+        # poses lowest bound first, only until the rest cannot be nearer or the posture
+        # cannot beat the best
+        lb = object_gap_bound(
+            hand,
+            lc.geometry_ids,
+            obj,
+            np.repeat(full, len(T), axis=0),
+            np.tile(T, (len(postures), 1, 1)),
+        ).reshape(len(postures), len(T))
         best, best_d = f.q_mid, -np.inf
-        for qf in postures:
-            full = hand.to_full(name, qf, q)
-            d = float(lc(np.repeat(full[None], len(T), 0), T).min())
+        for qf, row, bounds in zip(postures, full, lb, strict=True):
+            d = np.inf
+            for t in np.argsort(bounds, kind="stable"):
+                if bounds[t] >= d + _BOUND_SLACK_M or d <= best_d + 1e-6:
+                    break
+                d = min(d, float(lc(row[None], T[t])[0]))
             if d > best_d + 1e-6:
                 best, best_d = qf, d
         q[f.q_indices] = best
