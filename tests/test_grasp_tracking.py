@@ -212,6 +212,21 @@ def test_track_records_what_it_checks(scene, finger):
     assert np.all(track.pad_cos[hold] >= CONTACT.cos_cone_of(f))
     assert np.all(track.link_clearance_m[hold] >= CONTACT.link_clearance_m)
     assert np.all(track.tip_clearance_m[hold] >= -CONTACT.tip_penetration_m)
+    # the clearances: Coal's (Pinocchio's computeDistances here) wherever they are below
+    # what is compared with them, else at least that and never above Coal's
+    for tip, recorded, limit in (
+        (False, track.link_clearance_m, max(CONTACT.link_clearance_m, 0.0)),
+        (True, track.tip_clearance_m, -CONTACT.tip_penetration_m),
+    ):
+        coal = np.array(
+            [
+                _link_distance(hand, finger, box, hand.to_full(finger, q), Ti, tip)
+                for q, Ti in zip(track.q[:k], T[:k], strict=True)
+            ]
+        )
+        low = coal < limit + 1e-6
+        assert_close(recorded[:k][low], coal[low], atol=1e-9, what=f"exact (tip={tip})")
+        assert np.all(recorded[:k][~low] >= limit) and np.all(recorded[:k] <= coal + 1e-6)
     # the numbers in the reasons are the recorded values
     for i in np.flatnonzero(~hold):
         r = track.reasons[i]
