@@ -348,6 +348,56 @@ def test_a_redundant_fingers_spare_joint_keeps_its_fingertip_link_off_the_face(m
     assert plain.tip_clearance_m[i] < -ContactModel().tip_penetration_m
 
 
+def test_settling_only_the_rows_that_sink_gives_the_same_track(monkeypatch):
+    """A chunk's rows before its first turn that do not sink are not handed to the
+    settle (it would leave them as they are): the track is the same, bit for bit, as
+    when every row of a sinking chunk goes through it."""
+    import regrasp_pin.grasp.tracking as tracking_module
+    from regrasp_pin.suite import build_scenario, generate_specs
+
+    scen = build_scenario(generate_specs(26, seed=0)[25])
+    g = scen.grasp
+    times = np.arange(0.0, scen.motion.t_end, 0.01)
+    calls = []
+    settle = tracking_module.settle_tip_link
+    monkeypatch.setattr(
+        tracking_module, "settle_tip_link", lambda *a, **k: calls.append(1) or settle(*a, **k)
+    )
+    skipped = track_contact(
+        scen.hand,
+        "thumb",
+        scen.obj,
+        scen.motion,
+        times,
+        g.points_object["thumb"],
+        g.normals_object["thumb"],
+        g.q["thumb"],
+    )
+    n_skipped = len(calls)
+    sinking = tracking_module.sinking
+    # every row of a chunk with a sinking row counts as sinking: all go through the settle
+    monkeypatch.setattr(
+        tracking_module,
+        "sinking",
+        lambda f, q, n: np.full(len(q), sinking(f, q, n).any()),
+    )
+    calls.clear()
+    every = track_contact(
+        scen.hand,
+        "thumb",
+        scen.obj,
+        scen.motion,
+        times,
+        g.points_object["thumb"],
+        g.normals_object["thumb"],
+        g.q["thumb"],
+    )
+    assert 0 < n_skipped < len(calls)
+    np.testing.assert_array_equal(skipped.q, every.q)
+    np.testing.assert_array_equal(skipped.error_m, every.error_m)
+    assert skipped.reasons == every.reasons
+
+
 def test_a_contact_the_joints_cannot_follow_in_time_is_let_go(scene):
     """The same object poses, those after time index m reached c times sooner: the same
     IK solutions, their steps c times faster. The contact is lost at the first time a

@@ -285,7 +285,8 @@ def _settle_chunk(
     (``prev`` before ``s0``), and re-solved from it by IK once a time before was turned,
     so that the turn carries on; the pad kept within its cone and the joints off the
     trigger's margin where they were."""
-    if not sinking(f, q[s0:s1], n_palm[s0:s1]).any():
+    sink = sinking(f, q[s0:s1], n_palm[s0:s1])
+    if not sink.any():
         return
     last = prev
     turned = False
@@ -297,6 +298,9 @@ def _settle_chunk(
             res = f.ik(targets[i][None], last, tol_m=contact.ik_tol_m, restarts=False)
             if res.success[0]:
                 q[i], err[i] = res.q[0], res.error_m[0]
+        elif not sink[i - s0]:  # as the IK left it, not sinking: nothing to turn
+            last = q[i]
+            continue
         row = settle_tip_link(
             f,
             q[i][None],
