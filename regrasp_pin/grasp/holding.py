@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from ..model.clearance import LinkClearance
+from ..model.distances import object_gap_bound
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
@@ -143,9 +145,6 @@ def rest_configuration(
     the object over the motion (Coal), chosen among a few fixed postures; the other
     fingers at the middle of their limits.
     """
-    from ..model.clearance import LinkClearance
-    from ..model.distances import object_gap_bound
-
     q = hand.neutral()
     if not idle:
         return q
@@ -156,28 +155,38 @@ def rest_configuration(
         grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
         postures = f.lower + grid * (f.upper - f.lower)
         lc = LinkClearance(hand, name, obj, include_tip=True)
-        full = hand.to_full(name, postures, q)
-        # lower bounds of every (posture, pose) in one batch: Coal measures a posture's
-        # poses lowest bound first, only until the rest cannot be nearer or the posture
-        # cannot beat the best
-        lb = object_gap_bound(
-            hand,
-            lc.geometry_ids,
-            obj,
-            np.repeat(full, len(T), axis=0),
-            np.tile(T, (len(postures), 1, 1)),
-        ).reshape(len(postures), len(T))
-        best, best_d = f.q_mid, -np.inf
-        for qf, row, bounds in zip(postures, full, lb, strict=True):
-            d = np.inf
-            for t in np.argsort(bounds, kind="stable"):
-                if bounds[t] >= d + _BOUND_SLACK_M or d <= best_d + 1e-6:
-                    break
-                d = min(d, float(lc(row[None], T[t])[0]))
-            if d > best_d + 1e-6:
-                best, best_d = qf, d
-        q[f.q_indices] = best
+        best = _clearest(hand, obj, lc, hand.to_full(name, postures, q), T)
+        q[f.q_indices] = f.q_mid if best is None else postures[best]
     return q
+
+
+def _clearest(
+    hand: Hand, obj: ConvexObject, clearance: LinkClearance, full: np.ndarray, T: np.ndarray
+) -> int | None:
+    """Index of the first posture (full configurations ``full`` ``(M, nq)``) whose
+    smallest ``clearance`` distance [m] to ``obj`` over the poses ``T`` ``(P, 4, 4)``
+    exceeds every earlier one's by more than 1e-6 m (None: no posture).
+
+    The lower bounds of every (posture, pose) come in one batch; Coal measures a
+    posture's poses lowest bound first, only until no pose left can be nearer or the
+    posture can no longer beat the best: the same answer as measuring them all."""
+    lb = object_gap_bound(
+        hand,
+        clearance.geometry_ids,
+        obj,
+        np.repeat(full, len(T), axis=0),
+        np.tile(T, (len(full), 1, 1)),
+    ).reshape(len(full), len(T))
+    best, best_d = None, -np.inf
+    for m, (row, bounds) in enumerate(zip(full, lb, strict=True)):
+        d = np.inf
+        for t in np.argsort(bounds, kind="stable"):
+            if bounds[t] >= d + _BOUND_SLACK_M or d <= best_d + 1e-6:
+                break
+            d = min(d, float(clearance(row[None], T[t])[0]))
+        if d > best_d + 1e-6:
+            best, best_d = m, d
+    return best
 
 
 def holding_hand(
