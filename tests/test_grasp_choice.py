@@ -933,6 +933,18 @@ def test_link_exit_measures_only_until_each_point_leaves(five, finger, t_arrive)
         assert lasts[c] == (first_bad is None)
 
 
+class _Asked(ManifoldClearance):
+    """A ManifoldClearance that records the (rows, points) it is asked for."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.asked = []
+
+    def __call__(self, rows, points):
+        self.asked.append((np.asarray(rows), np.asarray(points)))
+        return super().__call__(rows, points)
+
+
 @pytest.mark.parametrize("finger, t_arrive", [("middle", 0.5), ("thumb", 0.75), ("index", 0.0)])
 def test_held_clear_measures_each_point_only_in_runs_up_to_its_first_failure(
     five, finger, t_arrive
@@ -946,16 +958,8 @@ def test_held_clear_measures_each_point_only_in_runs_up_to_its_first_failure(
     usable = m.usable(CONTACT.limit_margin_rad)[ka:]
     pool = np.flatnonzero(usable[0])
     points = np.random.default_rng(3).choice(pool, size=min(40, pool.size), replace=False)
-    asked = []
-
-    class Asked(ManifoldClearance):
-        def __call__(self, rows, points):
-            asked.append(np.asarray(points))
-            return super().__call__(rows, points)
-
-    got = held_clear(
-        hand, finger, box, m, points, ka, CONTACT, Asked(hand, finger, box, m, CONTACT)
-    )
+    asked = _Asked(hand, finger, box, m, CONTACT)
+    got = held_clear(hand, finger, box, m, points, ka, CONTACT, asked)
     # the full measurement: every time before each point leaves its usable set
     still = np.logical_and.accumulate(usable[:, points], axis=0)
     full = ManifoldClearance(hand, finger, box, m, CONTACT)
@@ -965,7 +969,7 @@ def test_held_clear_measures_each_point_only_in_runs_up_to_its_first_failure(
     ok[rows, cols] = (d >= CONTACT.link_clearance_m) & (d_tip >= -CONTACT.tip_penetration_m)
     np.testing.assert_array_equal(got, np.logical_and.accumulate(ok, axis=0))
     ends = np.cumsum(HELD_FIRST_RUN * 2 ** np.arange(10))  # where the runs end
-    every = np.concatenate(asked)
+    every = np.concatenate([p for _, p in asked.asked])
     measured = np.array([(every == p).sum() for p in points])
     n_still = still.sum(axis=0)
     for c in range(points.size):
@@ -985,28 +989,12 @@ def test_held_clear_horizon_is_the_first_rows_and_measures_no_further(five, fing
     ka = m.time_index(0.25)
     pool = np.flatnonzero(m.usable(CONTACT.limit_margin_rad)[ka])
     points = np.random.default_rng(5).choice(pool, size=min(30, pool.size), replace=False)
-    rows_asked = []
-
-    class Asked(ManifoldClearance):
-        def __call__(self, rows, points):
-            rows_asked.append(np.asarray(rows))
-            return super().__call__(rows, points)
-
     full = held_clear(hand, finger, box, m, points, ka, CONTACT)
-    got = held_clear(
-        hand,
-        finger,
-        box,
-        m,
-        points,
-        ka,
-        CONTACT,
-        Asked(hand, finger, box, m, CONTACT),
-        horizon=horizon,
-    )
+    asked = _Asked(hand, finger, box, m, CONTACT)
+    got = held_clear(hand, finger, box, m, points, ka, CONTACT, asked, horizon=horizon)
     assert got.shape == (horizon, points.size)
     np.testing.assert_array_equal(got, full[:horizon])
-    assert np.concatenate(rows_asked).max() < ka + horizon
+    assert np.concatenate([r for r, _ in asked.asked]).max() < ka + horizon
     with pytest.raises(InputError, match="horizon"):
         held_clear(hand, finger, box, m, points, ka, CONTACT, horizon=0)
 

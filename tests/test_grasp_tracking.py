@@ -358,21 +358,17 @@ def test_settling_only_the_rows_that_sink_gives_the_same_track(monkeypatch):
     scen = build_scenario(generate_specs(26, seed=0)[25])
     g = scen.grasp
     times = np.arange(0.0, scen.motion.t_end, 0.01)
+
+    def track():
+        p, n, q0 = g.points_object["thumb"], g.normals_object["thumb"], g.q["thumb"]
+        return track_contact(scen.hand, "thumb", scen.obj, scen.motion, times, p, n, q0)
+
     calls = []
     settle = tracking_module.settle_tip_link
     monkeypatch.setattr(
         tracking_module, "settle_tip_link", lambda *a, **k: calls.append(1) or settle(*a, **k)
     )
-    skipped = track_contact(
-        scen.hand,
-        "thumb",
-        scen.obj,
-        scen.motion,
-        times,
-        g.points_object["thumb"],
-        g.normals_object["thumb"],
-        g.q["thumb"],
-    )
+    skipped = track()
     n_skipped = len(calls)
     sinking = tracking_module.sinking
     # every row of a chunk with a sinking row counts as sinking: all go through the settle
@@ -382,16 +378,7 @@ def test_settling_only_the_rows_that_sink_gives_the_same_track(monkeypatch):
         lambda f, q, n: np.full(len(q), sinking(f, q, n).any()),
     )
     calls.clear()
-    every = track_contact(
-        scen.hand,
-        "thumb",
-        scen.obj,
-        scen.motion,
-        times,
-        g.points_object["thumb"],
-        g.normals_object["thumb"],
-        g.q["thumb"],
-    )
+    every = track()
     assert 0 < n_skipped < len(calls)
     np.testing.assert_array_equal(skipped.q, every.q)
     np.testing.assert_array_equal(skipped.error_m, every.error_m)
