@@ -12,6 +12,7 @@ Kinematics by Pinocchio, exact distances by Coal.
 from __future__ import annotations
 
 from . import exceptions
+from .backups import GraspBackup, plan_scenario
 from .exceptions import (
     ContactError,
     GeometryError,
@@ -54,7 +55,7 @@ from .planning.regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .planning.transfer import Transfer, plan_transfer
 from .polygon.approximate import PolygonResult, approximate_polygon
 from .polygon.deviation import deviation_matrix
-from .scenarios import Scenario, make_scenario, scenario_for_hand
+from .scenarios import GraspSearch, Scenario, make_scenario, scenario_for_hand
 from .surface.grid import SurfaceGrid, build_surface_grid
 from .surface.inflation import TipPath, grid_inflation, inflate_path, inflation_height
 from .surface.path import GridPath, shortest_grid_path
@@ -79,6 +80,8 @@ __all__ = [
     "FingerClearance",
     "GeometryError",
     "Grasp",
+    "GraspBackup",
+    "GraspSearch",
     "GridPath",
     "Hand",
     "IKResult",
@@ -132,6 +135,7 @@ __all__ = [
     "object_from_params",
     "plan_manipulation",
     "plan_regrasp",
+    "plan_scenario",
     "plan_transfer",
     "shortest_grid_path",
     "track_contact",

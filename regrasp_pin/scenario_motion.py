@@ -21,7 +21,7 @@ from .grasp.contact import ContactModel
 from .model.hand import Hand
 from .model.motion import ObjectMotion
 from .model.objects import ConvexObject
-from .scenarios import Scenario, grasp_for_motion, palm_hit, scenario_params, start_poses
+from .scenarios import GraspSearch, Scenario, palm_hit, scenario_params, start_poses
 
 __all__ = ["relative_motion_from_csv", "relative_twist", "scenario_for_motion"]
 
@@ -159,10 +159,9 @@ def scenario_for_motion(
     for i, T0 in enumerate(poses):
         where = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
         motion = ObjectMotion.from_poses(relative.times_s, T0 @ rel)
+        search = GraspSearch(motion, names, contact, grasp_dt_s=grasp_dt_s, seed=seed)
         try:
-            grasp = grasp_for_motion(
-                hand, obj, motion, names, contact=contact, grasp_dt_s=grasp_dt_s, seed=seed
-            )
+            grasp = search.choose(hand, obj)
         except ContactError as exc:
             failed.append(exc.as_attempt(where))
             continue
@@ -184,6 +183,7 @@ def scenario_for_motion(
             grasp=grasp,
             params=scenario_params(names, contact),
             description=text,
+            grasp_search=search,
         )
     raise ContactError(
         f"no start pose of the {obj.kind} lets the {hand.name} hand grasp it through the "

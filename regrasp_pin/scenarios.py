@@ -47,6 +47,7 @@ from .planning.regrasp import RegraspParams
 __all__ = [
     "HANDS",
     "OBJECTS",
+    "GraspSearch",
     "Scenario",
     "contacts_held_through",
     "describe",
@@ -71,8 +72,70 @@ OBJECTS = ("hexagon", "octagon", "box")
 
 
 @dataclass(frozen=True)
+class GraspSearch:
+    """How a scenario's initial grasp was chosen: :func:`grasp_for_motion`'s arguments,
+    to choose another start the same way (:func:`~regrasp_pin.backups.plan_scenario`
+    backs up to one after a failure).
+
+    Attributes:
+        motion: The motion the grasp is chosen for: the scenario's own, or the turn
+            about the object's axis from which a turn about the ``pivot``'s contact
+            was placed.
+        fingers: The fingers that grasp.
+        contact: The contact model.
+        grasp_dt_s, horizon_s, seed, finger_clearance, must_hold_check, room_fingers,
+            room_after_s: As :func:`grasp_for_motion`'s.
+        pivot: The finger whose contact places the scenario's motion (its axis passes
+            through it), or None. Another start keeps its contact, and so the motion.
+    """
+
+    motion: ObjectMotion
+    fingers: tuple[str, ...]
+    contact: ContactModel
+    grasp_dt_s: float = 0.05
+    horizon_s: float | None = None
+    seed: int = 0
+    finger_clearance: Callable[[dict[str, np.ndarray]], float] | None = None
+    must_hold_check: bool = False
+    room_fingers: tuple[str, ...] = ()
+    room_after_s: float = 0.25
+    pivot: str | None = None
+
+    def choose(
+        self,
+        hand: Hand,
+        obj: ConvexObject,
+        *,
+        keep: Mapping[str, int] | None = None,
+        avoid: Mapping[str, np.ndarray] | None = None,
+    ) -> Grasp:
+        """The grasp :func:`grasp_for_motion` chooses with these settings and ``keep``
+        and ``avoid`` (its arguments)."""
+        return grasp_for_motion(
+            hand,
+            obj,
+            self.motion,
+            self.fingers,
+            contact=self.contact,
+            grasp_dt_s=self.grasp_dt_s,
+            horizon_s=self.horizon_s,
+            seed=self.seed,
+            finger_clearance=self.finger_clearance,
+            keep=keep,
+            must_hold_check=self.must_hold_check,
+            room_fingers=self.room_fingers,
+            room_after_s=self.room_after_s,
+            avoid=avoid,
+        )
+
+
+@dataclass(frozen=True)
 class Scenario:
-    """A hand, an object, the object's motion, an initial grasp and planner settings."""
+    """A hand, an object, the object's motion, an initial grasp and planner settings.
+
+    ``grasp_search`` says how the grasp was chosen (None: given, not chosen), so that
+    :func:`~regrasp_pin.backups.plan_scenario` can back up to another.
+    """
 
     name: str
     hand: Hand
@@ -81,6 +144,7 @@ class Scenario:
     grasp: Grasp | None
     params: PlannerParams = field(default_factory=PlannerParams)
     description: str = ""
+    grasp_search: GraspSearch | None = None
 
 
 # per hand: object pose in the palm frame, the axis of the turn, the fingers used
@@ -174,7 +238,8 @@ def make_scenario(
     contact = contact or ContactModel()
     # 1) grasp chosen for the turn about the object's own axis (its z axis)
     axis0, turn0 = _own_axis_turn(T0, rate_rad, duration, dt_s)
-    grasp = grasp_for_motion(h, o, turn0, fingers, contact=contact, grasp_dt_s=0.05, seed=seed)
+    search = GraspSearch(turn0, fingers, contact, grasp_dt_s=0.05, seed=seed, pivot="thumb")
+    grasp = search.choose(h, o)
     # 2) the same turn about the thumb's contact, along its normal
     motion = turn_about_thumb_contact(T0, grasp, axis0, rate_rad, duration, dt_s)
     params = scenario_params(fingers, contact)
@@ -186,6 +251,7 @@ def make_scenario(
         grasp=grasp,
         params=params,
         description=describe(h, o, fingers, float(angle), float(rate_deg_s), f"{o.kind} ({obj})"),
+        grasp_search=search,
     )
 
 
@@ -715,20 +781,19 @@ def scenario_for_hand(
     for i, T0 in enumerate(poses):
         what = f"pose {i} (object at {np.round(T0[:3, 3] * 1e3, 1).tolist()} mm)"
         axis0, turn0 = _own_axis_turn(T0, rate_rad, duration, dt_s)
+        # the first grasp only finds the pivot's contact: the turn's first second
+        search = GraspSearch(
+            turn0,
+            names,
+            contact,
+            grasp_dt_s=grasp_dt_s,
+            horizon_s=min(_PIVOT_HORIZON_S, duration) if pivot is not None else None,
+            seed=seed,
+            room_fingers=tuple(n for n in names if n != pivot),
+            room_after_s=room_after,
+        )
         try:
-            # the first grasp only finds the pivot's contact: the turn's first second
-            grasp = grasp_for_motion(
-                hand,
-                obj,
-                turn0,
-                names,
-                contact=contact,
-                grasp_dt_s=grasp_dt_s,
-                horizon_s=min(_PIVOT_HORIZON_S, duration) if pivot is not None else None,
-                seed=seed,
-                room_fingers=[n for n in names if n != pivot],
-                room_after_s=room_after,
-            )
+            grasp = search.choose(hand, obj)
         except ContactError as exc:
             failed.append(exc.as_attempt(what))
             continue
@@ -747,19 +812,9 @@ def scenario_for_hand(
             motion = turn_about_thumb_contact(
                 T0, grasp, axis0, rate_rad, duration, dt_s, finger=pivot
             )
+            search = replace(search, motion=motion, horizon_s=None, pivot=pivot)
             try:  # the pivot's contact stays, fixed in space; the others are chosen again
-                grasp = grasp_for_motion(
-                    hand,
-                    obj,
-                    motion,
-                    names,
-                    contact=contact,
-                    grasp_dt_s=grasp_dt_s,
-                    seed=seed,
-                    keep={pivot: grasp.indices[pivot]},
-                    room_fingers=[n for n in names if n != pivot],
-                    room_after_s=room_after,
-                )
+                grasp = search.choose(hand, obj, keep={pivot: grasp.indices[pivot]})
             except ContactError as exc:
                 failed.append(exc.as_attempt(f"{what}, about the {pivot}'s contact"))
                 continue
@@ -782,6 +837,7 @@ def scenario_for_hand(
             description=describe(
                 hand, obj, names, float(angle_deg), float(rate_deg_s), obj.kind, axis_text
             ),
+            grasp_search=search,
         )
     raise ContactError(
         f"no start pose of the {obj.kind} lets the {hand.name} hand grasp it ({len(poses)} tried)",

@@ -24,6 +24,7 @@ import pytest
 from regrasp_pin.exceptions import InputError
 from regrasp_pin.grasp.holding import holds_to_end, start_holding
 from regrasp_pin.plan import Plan
+from regrasp_pin.scenarios import GraspSearch
 from regrasp_pin.suite import build_scenario, generate_specs, run_scenario, summarize
 from regrasp_pin.verify.plan_check import recheck_plan
 
@@ -130,18 +131,16 @@ def test_bad_backups_name_the_argument():
 
 
 def test_an_error_while_building_a_backup_is_its_outcome(s034, monkeypatch):
-    # a bug in the backup's build does not lose the scenario's result
-    import regrasp_pin.suite.run as run_module
-
+    # a bug in the backup's grasp search does not lose the scenario's result
     spec, alone, _ = s034
-    build = run_module.build_scenario
+    choose = GraspSearch.choose
 
-    def broken(spec, contact=None, *, avoid=None, keep=None):
+    def broken(self, hand, obj, *, keep=None, avoid=None):
         if avoid is not None or keep is not None:
             raise RuntimeError("broken on purpose")
-        return build(spec, contact)
+        return choose(self, hand, obj)
 
-    monkeypatch.setattr(run_module, "build_scenario", broken)
+    monkeypatch.setattr(GraspSearch, "choose", broken)
     r = run_scenario(spec)
     assert r.failure_kind == alone.failure_kind and r.time_s == alone.time_s
     assert [b["outcome"] for b in r.backups] == ["exception:RuntimeError: broken on purpose"]

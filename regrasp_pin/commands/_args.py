@@ -47,3 +47,24 @@ def output_file(path: str | Path, option: str) -> Path:
     if file.is_dir():
         raise InputError(option, f"{str(file)!r} is a folder", "a file path")
     return file
+
+
+def _backups(value: str) -> int:
+    """A whole number >= 0 (argparse ``type=`` of ``--grasp-backups``)."""
+    try:
+        k = int(value)
+    except ValueError:
+        k = -1
+    if k < 0:
+        raise argparse.ArgumentTypeError(f"{value!r} is not a whole number >= 0")
+    return k
+
+
+def add_grasp_backups(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """The ``--grasp-backups K`` option (``plan_scenario(grasp_backups=K)``)."""
+    group.add_argument(
+        "--grasp-backups", type=_backups, default=1, metavar="K",
+        help="a plan that fails at a finger still on its start contact is planned again "
+        "from another initial grasp, up to K times, on the rest of the step budget "
+        "(default: 1; 0: never)",
+    )  # fmt: skip

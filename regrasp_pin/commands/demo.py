@@ -8,8 +8,15 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
-from ._args import HAND_METAVAR, hand_argument, output_file, output_folder
-from .summary import failure_summary, plan_summary, print_table, write_figures
+from ._args import HAND_METAVAR, add_grasp_backups, hand_argument, output_file, output_folder
+from .summary import (
+    backup_lines,
+    backups_of,
+    failure_summary,
+    plan_summary,
+    print_table,
+    write_figures,
+)
 
 if TYPE_CHECKING:
     from ..planning.planner import ManipulationPlan
@@ -55,6 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--meshcat", action="store_true", help="show the plan live in meshcat")
     parser.add_argument("--html", metavar="FILE", help="export the plan as static HTML")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_grasp_backups(parser)
 
 
 def _scenario(args: argparse.Namespace) -> Scenario:
@@ -73,8 +81,8 @@ def _scenario(args: argparse.Namespace) -> Scenario:
 
 def run(args: argparse.Namespace) -> int:
     """Plan the demo scenario, print its table and write the outputs; return the exit status."""
+    from ..backups import plan_scenario
     from ..exceptions import PlanningError
-    from ..planning.planner import plan_manipulation
 
     t0 = time.perf_counter()
     out = output_folder(args.out, "--out")
@@ -90,14 +98,7 @@ def run(args: argparse.Namespace) -> int:
             bar.update(round(t_s - scen.motion.t_start, 2) - bar.n)
 
     try:
-        result = plan_manipulation(
-            scen.hand,
-            scen.obj,
-            scen.motion,
-            grasp=scen.grasp,
-            params=scen.params,
-            progress=progress,
-        )
+        result = plan_scenario(scen, grasp_backups=args.grasp_backups, progress=progress)
     except PlanningError as exc:
         if bar is not None:
             bar.close()
@@ -105,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
         if partial is not None:
             print(f"partial plan written to {partial}", file=sys.stderr)
         if not args.json:
+            for line in backup_lines(backups_of(exc)):
+                print(line, file=sys.stderr)
             raise
         print(json.dumps(failure_summary(scen, exc, partial, time.perf_counter() - t0), indent=2))
         return 1

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ._args import HAND_METAVAR, hand_argument, output_folder
+from ._args import HAND_METAVAR, add_grasp_backups, hand_argument, output_folder
 
 if TYPE_CHECKING:
     from ..model.objects import ConvexObject
@@ -81,6 +81,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument("--no-plots", action="store_true", help="no matplotlib figures")
     out.add_argument("--no-viewer", action="store_true", help="no static viewer page (plan.html)")
     out.add_argument("--seed", type=int, default=0, help="seed of the searches (default: 0)")
+    add_grasp_backups(parser.add_argument_group("the search"))
 
 
 def load_object(spec: str, scale: float, hand: str) -> tuple[ConvexObject, str | None]:
@@ -142,9 +143,16 @@ def _scenario(args: argparse.Namespace, obj: ConvexObject) -> Scenario:
 
 def run(args: argparse.Namespace) -> int:
     """Plan the problem; write the plan, figures and viewer page; return the exit status."""
+    from ..backups import plan_scenario
     from ..exceptions import ContactError, PlanningError
-    from ..planning.planner import plan_manipulation
-    from .summary import failure_summary, plan_summary, print_table, write_figures
+    from .summary import (
+        backup_lines,
+        backups_of,
+        failure_summary,
+        plan_summary,
+        print_table,
+        write_figures,
+    )
 
     t0 = time.perf_counter()
     out = output_folder(args.out, "--out")
@@ -155,15 +163,15 @@ def run(args: argparse.Namespace) -> int:
     if not args.json:
         print(scen.description)
     try:
-        result = plan_manipulation(
-            scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
-        )
+        result = plan_scenario(scen, grasp_backups=args.grasp_backups)
     except (PlanningError, ContactError) as exc:
         partial = getattr(exc, "partial", None)
         path = None if partial is None else partial.save(out / "partial_plan.json")
         if path is not None:
             print(f"partial plan written to {path}", file=sys.stderr)
         if not args.json:
+            for line in backup_lines(backups_of(exc)):
+                print(line, file=sys.stderr)
             raise
         print(json.dumps(failure_summary(scen, exc, path, time.perf_counter() - t0), indent=2))
         return 1

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._args import HAND_METAVAR, hand_argument, output_folder
+from ._args import HAND_METAVAR, add_grasp_backups, hand_argument, output_folder
 
 NAME = "suite"
 HELP = (
@@ -66,12 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-steps", type=int, default=None,
         help="the planner's search budget in steps (default: PlannerParams.max_steps)",
     )  # fmt: skip
-    where.add_argument(
-        "--grasp-backups", type=int, default=1, metavar="K",
-        help="a scenario whose plan fails at a finger still on its start contact is "
-        "planned again from another initial grasp, up to K times, on the rest of the "
-        "step budget (default: 1; 0: never)",
-    )  # fmt: skip
+    add_grasp_backups(where)
     report = parser.add_argument_group("report")
     report.add_argument(
         "--report", metavar="DIR", type=Path, default=None,

@@ -11,6 +11,8 @@ if TYPE_CHECKING:
     from ..scenarios import Scenario
 
 __all__ = [
+    "backup_lines",
+    "backups_of",
     "failure_summary",
     "held_path",
     "plan_summary",
@@ -82,6 +84,7 @@ def plan_summary(
         "total_s": total_s,
         "plan": str(plan_path),
         "figures": [str(f) for f in figures],
+        "grasp_backups": list(result.plan.summary.get("grasp_backups", [])),
     }
 
 
@@ -102,7 +105,27 @@ def failure_summary(scen: Scenario, exc: Any, partial: Path | None, total_s: flo
         "attempts": [a.to_dict() for a in exc.attempts],
         "partial_plan": None if partial is None else str(partial),
         "total_s": total_s,
+        "grasp_backups": backups_of(exc),
     }
+
+
+def backups_of(exc: Any) -> list[dict]:
+    """The backups to other initial grasps that a failure's partial plan lists
+    (:func:`~regrasp_pin.backups.plan_scenario`)."""
+    partial = getattr(exc, "partial", None)
+    summary = getattr(partial, "summary", None) or {}
+    return list(summary.get("grasp_backups", []))
+
+
+def backup_lines(backups: list[dict]) -> list[str]:
+    """One line per backup to another initial grasp: which finger, after what, how it
+    started and what came of it."""
+    how = {"elsewhere": "started elsewhere", "held-through": "started where it holds to the end"}
+    return [
+        f"backed up after {b['after']} at {b['finger']}: {b['finger']} "
+        f"{how.get(b['how'], b['how'])} -> {b['outcome']}"
+        for b in backups
+    ]
 
 
 def print_table(rows: list[dict], summary: dict) -> None:
@@ -151,6 +174,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
             f"{j['finger']} joins at t={j['t_s']:.2f}-{j['t_end_s']:.2f} s ({j['reason']}), "
             "verified by Coal"
         )
+    for line in backup_lines(summary["grasp_backups"]):
+        print(line)
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in summary["stage_s"].items())
     print(f"stages: {stages}; total {summary['total_s']:.2f} s")
     print(f"plan: {summary['plan']}")

@@ -20,9 +20,9 @@ from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..scenarios import (
+    GraspSearch,
     Scenario,
     describe,
-    grasp_for_motion,
     hand_model,
     is_hand_file,
     scenario_for_hand,
@@ -160,20 +160,18 @@ def build_scenario(
         if spec.grasp_clearance_m is None
         else finger_clearance(h, o, turn, fingers, spec.grasp_clearance_m)
     )
-    grasp = grasp_for_motion(
-        h,
-        o,
+    search = GraspSearch(
         turn,
         fingers,
-        contact=contact,
+        contact,
         grasp_dt_s=spec.grasp_dt_s,
         horizon_s=spec.grasp_horizon_s,
         seed=spec.seed,
         finger_clearance=clearance,
         must_hold_check=m.kind != "contact-axis",  # the grasp's turn is the motion
-        keep=keep,
-        avoid=avoid,
+        pivot="thumb" if m.kind == "contact-axis" else None,
     )
+    grasp = search.choose(h, o, keep=keep, avoid=avoid)
     motion = (
         turn_about_thumb_contact(T0, grasp, axis, rate_rad, duration, m.dt_s)
         if m.kind == "contact-axis"
@@ -195,6 +193,7 @@ def build_scenario(
             f"{o.kind} ({spec.object.label})",
             what_axis,
         ),
+        grasp_search=search,
     )
 
 

@@ -16,20 +16,16 @@ from typing import Any
 import numpy as np
 
 from .._validate import known_fields, positive, positive_int
+from ..backups import plan_scenario
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
-from ..planning.planner import plan_manipulation
-from ..scenarios import contacts_held_through, hand_label, is_hand_file
+from ..planning.planner import ManipulationPlan
+from ..scenarios import hand_label
 from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
 from .specs import ScenarioSpec
 
 __all__ = ["ScenarioResult", "load_results", "outcome_template", "run_scenario"]
-
-#: A finger's failure of this kind means that the others do not hold without it: a
-#: backup starts it on a contact it holds to the end (if it has one) instead of
-#: anywhere else (in the default suite, 0 of 20 such backups to anywhere else planned)
-_HOLD_THROUGH = FailureKind.FORCE_CLOSURE
 
 log = logging.getLogger(__name__)
 
@@ -193,19 +189,10 @@ def run_scenario(
 ) -> ScenarioResult:
     """Build and plan one spec; re-check a full plan from its saved file.
 
-    When the plan fails at a finger that still holds the contact it started on, that
-    start was the decision that led there: the scenario is built again with another
-    start for that finger and planned again, up to ``grasp_backups`` times, on what
-    is left of the search budget. After a ``force-closure`` failure (the others do not
-    hold without the finger) the finger starts on a contact it holds to the end
-    (:func:`~regrasp_pin.scenarios.contacts_held_through`; none: no backup), after
-    any other failure anywhere more than two of its tip radii from where it started
-    (``build_scenario(avoid=...)``). Not after a proof that no plan exists
-    (``infeasible``, for any grasp), nor for the thumb of a ``"contact-axis"`` spec
-    (its contact places the turn: a backup for another finger keeps it) or a hand
-    file's (:func:`~regrasp_pin.scenarios.scenario_for_hand` grasps it). A backup that
-    plans fully is the result; otherwise the first failure is, and every backup is
-    listed in ``backups``.
+    The plan backs up to other initial grasps as
+    :func:`~regrasp_pin.backups.plan_scenario` does (up to ``grasp_backups``, on what
+    is left of the search budget): a backup that plans fully is the result; otherwise
+    the first failure is, and every backup is listed in ``backups``.
 
     Never raises for an outcome: a :class:`~regrasp_pin.exceptions.ContactError`
     while building (no initial grasp) or a :class:`~regrasp_pin.exceptions.PlanningError`
@@ -250,15 +237,19 @@ def run_scenario(
     )
 
     t0 = time.perf_counter()
-    planned, failed = _plan(scen, params)
-    result.plan_s = time.perf_counter() - t0
-    if failed is not None:
-        _record_failure(result, failed, "plan")
-        _record_partial(result, spec, failed, out_dir)
-        planned = _back_up(result, spec, scen, params, failed, backups)
-        if planned is None:
-            log.info("suite: %s failed: %s", spec.name, result.failure)
-            return result
+    try:
+        planned = plan_scenario(scen, params=params, grasp_backups=backups)
+    except Exception as exc:  # the first plan's failure (the backups in its partial plan)
+        _record_times(result, exc, time.perf_counter() - t0)
+        _record_failure(result, exc, "plan")
+        _record_partial(result, spec, exc, out_dir)
+        log.info("suite: %s failed: %s", spec.name, result.failure)
+        return result
+    _record_times(result, planned, time.perf_counter() - t0)
+    if result.backups:  # planned from a backup's grasp
+        result.initial_finger_clearance_m = _start_clearance(
+            dataclasses.replace(scen, grasp=planned.grasp)
+        )
     _record_plan(result, spec, planned, params, out_dir)
     return result
 
@@ -270,147 +261,28 @@ def _start_clearance(scen: Any) -> float:
     return float(finger_clearance(scen.hand, scen.obj, scen.motion, tuple(q), 0.0)(q))
 
 
-def _plan(scen: Any, params: Any) -> tuple[Any, Exception | None]:
-    """The scenario planned with ``params``: ``(ManipulationPlan, None)`` or
-    ``(None, the exception)`` (every outcome is data; see :func:`run_scenario`)."""
-    try:
-        return plan_manipulation(
-            scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=params
-        ), None
-    except Exception as exc:
-        return None, exc
-
-
-def _steps_spent(exc: Exception) -> int:
-    """The search steps a failed planning spent (its partial plan's summary)."""
-    partial = getattr(exc, "partial", None)
-    return int(partial.summary.get("search_steps", 0)) if isinstance(partial, Plan) else 0
-
-
-def _backup_finger(spec: ScenarioSpec, scen: Any, exc: Exception) -> str | None:
-    """The finger whose start contact to change after the failure ``exc``, or None: a
-    planning failure (not a proof of infeasibility) at a finger of the initial grasp
-    that still holds its start contact in the partial plan (no other phase), not the
-    thumb of a contact-axis spec, and no hand file's contact-axis spec."""
-    partial = getattr(exc, "partial", None)
-    finger = getattr(exc, "finger", None)
-    if (
-        not isinstance(exc, PlanningError)
-        or exc.kind == FailureKind.INFEASIBLE
-        or not isinstance(partial, Plan)
-        or not isinstance(finger, str)
-        or finger not in scen.grasp.points_object
-    ):
-        return None
-    if spec.motion.kind == "contact-axis" and (finger == "thumb" or is_hand_file(spec.hand)):
-        return None
-    phases = partial.phases.get(finger, [])
-    return finger if all(ph.kind == "contact" for ph in phases) else None
-
-
-def _held_through(spec: ScenarioSpec, scen: Any, finger: str, away: np.ndarray) -> int | None:
-    """The best start contact (a 2 mm sample index) that ``finger`` holds to the
-    motion's end (:func:`~regrasp_pin.scenarios.contacts_held_through`) and that is
-    more than two of its tip radii from ``away`` (its start contact), or None."""
-    held = contacts_held_through(
-        scen.hand, scen.obj, scen.motion, finger, contact=scen.params.contact,
-        grasp_dt_s=spec.grasp_dt_s,
-    )  # fmt: skip
-    points = scen.obj.sample_surface(0.002).points[held]
-    far = held[np.linalg.norm(points - away, axis=1) > 2.0 * scen.hand.finger(finger).tip_radius]
-    return int(far[0]) if far.size else None
-
-
-def _back_up(
-    result: ScenarioResult,
-    spec: ScenarioSpec,
-    scen: Any,
-    params: Any,
-    exc: Exception,
-    backups: int,
-) -> Any:
-    """Plan again from other initial grasps after ``exc`` (see :func:`run_scenario`),
-    recording each in ``result.backups`` and their times in ``result.build_s`` and
-    ``result.plan_s``; the first full plan (its scenario's grasp then replaces the
-    result's start), or None. Never raises: an unexpected error while building a
-    backup is its outcome (``"exception:<Type>: <message>"``)."""
-    avoid: dict[str, list[np.ndarray]] = {}
-    spent = _steps_spent(exc)
-    keep = (
-        {"thumb": int(scen.grasp.indices["thumb"])}
-        if spec.motion.kind == "contact-axis" and "thumb" in scen.grasp.indices
-        else None
+def _record_times(result: ScenarioResult, outcome: Any, wall_s: float) -> None:
+    """The backups that :func:`~regrasp_pin.backups.plan_scenario` made (read from the
+    plan, or from the partial plan of ``outcome``, its failure) in ``result.backups``,
+    their grasp searches' time in ``result.build_s`` and the rest of ``wall_s`` in
+    ``result.plan_s``."""
+    plan = (
+        outcome.plan if isinstance(outcome, ManipulationPlan) else getattr(outcome, "partial", None)
     )
-    while len(result.backups) < backups:
-        finger = _backup_finger(spec, scen, exc)
-        left = params.max_steps - spent
-        if finger is None or left <= 0:
-            return None
-        point = np.asarray(scen.grasp.points_object[finger], float)
-        hold = getattr(exc, "kind", None) == _HOLD_THROUGH
-        entry: dict[str, Any] = {
-            "after": getattr(getattr(exc, "kind", None), "value", None),
-            "finger": finger,
-            "avoid_m": [float(v) for v in point],
-            "how": "held-through" if hold else "elsewhere",
-        }
-        result.backups.append(entry)
-        t0 = time.perf_counter()
-        try:
-            kept = dict(keep or {})
-            if hold:
-                index = _held_through(spec, scen, finger, point)
-                if index is None:
-                    entry["outcome"] = "none-held-through"
-                    return None
-                kept[finger] = index
-            else:
-                avoid.setdefault(finger, []).append(point)
-            scen = build_scenario(
-                spec, avoid={n: np.array(p) for n, p in avoid.items()} or None, keep=kept or None
-            )
-        except ContactError as no_grasp:
-            entry["outcome"] = f"no-grasp:{no_grasp.kind.value}"
-            return None
-        except Exception as bug:  # recorded; the first failure stands
-            entry["outcome"] = f"exception:{type(bug).__name__}: {bug}"
-            return None
-        finally:
-            result.build_s = (result.build_s or 0.0) + time.perf_counter() - t0
-        remaining_s = None
-        if params.budget_s is not None:  # the planning's wall-clock budget, shared
-            remaining_s = params.budget_s - (result.plan_s or 0.0)
-            if remaining_s <= 0:
-                entry["outcome"] = "no-time"
-                return None
-        again = dataclasses.replace(params, max_steps=left, budget_s=remaining_s)
-        t0 = time.perf_counter()
-        planned, again_failed = _plan(scen, again)
-        result.plan_s = (result.plan_s or 0.0) + time.perf_counter() - t0
-        if again_failed is None:
-            entry["outcome"] = "ok"
-            _forget_failure(result, scen)
-            return planned
-        exc = again_failed
-        kind = getattr(exc, "kind", None)
-        entry["outcome"] = kind.value if isinstance(kind, FailureKind) else type(exc).__name__
-        entry["time_s"] = getattr(exc, "time_s", None)
-        spent += _steps_spent(exc)
-    return None
+    backups = plan.summary.get("grasp_backups", []) if isinstance(plan, Plan) else []
+    result.backups = [_backup_entry(b) for b in backups]
+    choose_s = sum(b["choose_s"] for b in backups)
+    result.build_s = (result.build_s or 0.0) + choose_s
+    result.plan_s = wall_s - choose_s
 
 
-def _forget_failure(result: ScenarioResult, scen: Any) -> None:
-    """A failure in ``result`` that a backup's full plan (of ``scen``) replaces: its
-    kind, numbers and attempts cleared, its partial plan file removed, the start's
-    finger clearance that of the backup's grasp."""
-    for name in ("failure_kind", "failure", "failed_stage", "finger", "time_s"):
-        setattr(result, name, None)
-    result.measured = result.required = None
-    result.attempts = []
-    result.initial_finger_clearance_m = _start_clearance(scen)
-    if result.plan_path is not None:
-        Path(result.plan_path).unlink(missing_ok=True)
-        result.plan_path = None
+def _backup_entry(backup: dict[str, Any]) -> dict[str, Any]:
+    """A backup as ``ScenarioResult.backups`` lists it: what it avoided, how, and its
+    outcome (with the time of its failure, if it failed)."""
+    entry = {k: backup[k] for k in ("after", "finger", "avoid_m", "how", "outcome")}
+    if backup.get("time_s") is not None:
+        entry["time_s"] = backup["time_s"]
+    return entry
 
 
 def _record_partial(
