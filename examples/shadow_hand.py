@@ -9,8 +9,9 @@ declare), and the collision meshes (in millimetres, scale 0.001) become convex h
 No setup is hand-written for it: :func:`regrasp_pin.scenarios.scenario_for_hand`
 places an octagonal prism where the thumb and three fingers can grasp it
 (:mod:`regrasp_pin.placing`) and turns it about the thumb's contact. The planner keeps
-the prism in force closure while the fingers regrasp; the plan is saved, reloaded and
-re-checked with Pinocchio and Coal alone.
+the prism in force closure while the fingers regrasp (:func:`regrasp_pin.plan_scenario`:
+from another initial grasp if a finger fails on the contact it started on); the plan
+is saved, reloaded and re-checked with Pinocchio and Coal alone.
 
 Run it from the repository with the models at ``../shared/hands``:
 ``python examples/shadow_hand.py``.
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from regrasp_pin import Hand, Plan, Prism, plan_manipulation
+from regrasp_pin import Hand, Plan, Prism, plan_scenario
 from regrasp_pin.scenarios import scenario_for_hand
 from regrasp_pin.verify.plan_check import recheck_plan
 
@@ -40,7 +41,7 @@ def main(out: Path = Path("out/examples")) -> Path:
         hand, prism, fingers=FINGERS, angle_deg=ANGLE_DEG, rate_deg_s=RATE_DEG_S
     )
     print(scen.description)
-    plan = plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    plan = plan_scenario(scen)  # from another start if a finger fails on its first contact
     for r in plan.regrasps:
         print(
             f"  {r.finger:7} regrasps at t={r.t_start:.2f}-{r.t_end:.2f} s, "

@@ -154,7 +154,7 @@ def _steps_spent(exc: PlanningError) -> int:
     return int(partial.summary.get("search_steps", 0)) if isinstance(partial, Plan) else 0
 
 
-def backup_finger(scenario: Scenario, exc: PlanningError) -> str | None:
+def _backup_finger(scenario: Scenario, exc: PlanningError) -> str | None:
     """The finger whose start contact to change after the failure ``exc`` of a plan of
     ``scenario``, or None: not a proof that no plan exists, at a finger of the initial
     grasp that holds its start contact in the partial plan (no other phase), not the
@@ -238,11 +238,11 @@ def _back_up(
     avoid: dict[str, list[np.ndarray]] = {}
     spent = _steps_spent(exc)
     while len(tried) < backups:
-        finger = backup_finger(scenario, exc)
+        finger = _backup_finger(scenario, exc)
         left = params.max_steps - spent
         if finger is None or left <= 0:
             return None
-        remaining_s = None if params.budget_s is None else params.budget_s - planning_s
+        remaining_s = None if params.budget_s is None else max(params.budget_s - planning_s, 0.0)
         budget = dataclasses.replace(params, max_steps=left, budget_s=remaining_s)
         backup, outcome = _one_backup(scenario, budget, exc, finger, avoid, progress)
         tried.append(backup)

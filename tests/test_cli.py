@@ -143,52 +143,68 @@ def test_version_text(capsys):
 
 
 def _planned_once(monkeypatch):
-    """The planner, planning once: a second call for the same scenario (the same poses,
-    grasp and parameters; asserted) raises the PlanningError that the first one ended in,
-    without planning it again."""
+    """The planner, planning each scenario once: a second call for the same scenario
+    (the same poses, grasp and parameters) raises the PlanningError that the first one
+    ended in, without planning it again. Returns the scenarios planned, with how often
+    each was asked for."""
     import numpy as np
 
+    from regrasp_pin import backups
     from regrasp_pin.exceptions import PlanningError
-    from regrasp_pin.planning import planner
 
-    plan, failed = planner.plan_manipulation, []
+    plan, failed, asked = backups.plan_manipulation, {}, {}
 
     def scenario(motion, grasp, params):
         times = np.linspace(motion.t_start, motion.t_end, 101)
-        return motion.pose(times).tobytes(), sorted(grasp.indices.items()), repr(params)
+        return motion.pose(times).tobytes(), repr(sorted(grasp.indices.items())), repr(params)
 
     def planned_once(hand, obj, motion, *, grasp, params, **kw):
-        if failed:
-            asked, exc = failed[0]
-            assert scenario(motion, grasp, params) == asked, "not the scenario planned"
-            raise exc
+        key = scenario(motion, grasp, params)
+        asked[key] = asked.get(key, 0) + 1
+        if key in failed:
+            raise failed[key]
         try:
             return plan(hand, obj, motion, grasp=grasp, params=params, **kw)
         except PlanningError as exc:
-            failed.append((scenario(motion, grasp, params), exc))
+            failed[key] = exc
             raise
 
-    monkeypatch.setattr(planner, "plan_manipulation", planned_once)
-    return failed
+    monkeypatch.setattr(backups, "plan_manipulation", planned_once)
+    return asked
 
 
 def test_no_plan_exits_1_with_json_on_stdout(tmp_path, capsys, monkeypatch):
     """A turn the five-finger hand cannot follow (-100 deg at 40 deg/s: two holds end
-    together at the start): exit code 1, the failure as JSON with its kind, and the
-    partial plan written. (Planned once: the second command is given the failure the
-    first planned, the same scenario; what it makes of it is checked.)"""
-    failed = _planned_once(monkeypatch)
+    together at the start): exit code 1, the failure as JSON with its kind and the
+    backups to other initial grasps, and the partial plan written. (Each scenario is
+    planned once: the second command is given the failures the first planned, the same
+    scenarios; what it makes of them is checked.)"""
+    asked = _planned_once(monkeypatch)
     argv = ["demo", "--angle", "-100", "--rate", "40", "--no-plots", "--out", str(tmp_path)]
     assert main([*argv, "--json"]) == 1
     captured = capsys.readouterr()
     doc = json.loads(captured.out)
     assert doc["ok"] is False and doc["failure_kind"] in {k.value for k in FailureKind}
     assert Plan.load(doc["partial_plan"]).t[-1] <= doc["duration_s"]
+    # one plan, and one per backup (the default: at most one, of the failing finger)
+    assert len(doc["grasp_backups"]) <= 1 and len(asked) == 1 + len(doc["grasp_backups"])
+    for b in doc["grasp_backups"]:
+        assert b["finger"] == doc["finger"] and b["after"] == doc["failure_kind"]
+        assert b["outcome"] != "ok"
     # without --json: one line on stderr, the same exit code
     assert main([*argv, "--quiet"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("regrasp-pin demo: no plan: ") and "Traceback" not in err
-    assert len(failed) == 1
+    assert sum(line.startswith("backed up after ") for line in err) == len(doc["grasp_backups"])
+    assert sorted(asked.values()) == [2] * len(asked)
+
+
+@pytest.mark.parametrize("command", ["demo", "plan", "suite"])
+def test_grasp_backups_must_be_a_whole_number(command, capsys):
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args([command, "--grasp-backups", "-1"])
+    assert stop.value.code == 2
+    assert "--grasp-backups: '-1' is not a whole number >= 0" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

@@ -80,6 +80,10 @@ def test_a_scenario_follows_the_relative_motion_from_where_it_holds_the_object()
     N = np.array([g.normals_object[n] for n in names])
     assert ferrari_canny_epsilon(P, N, 0.8, torque_scale_m=obj.radius_m) > 0  # force closure
     assert "60" not in scen.description or "own motion" in scen.description
+    # the grasp was chosen for the motion itself, with no pivot (a backup's search)
+    search = scen.grasp_search
+    assert search.motion is scen.motion and search.pivot is None
+    assert search.choose(hand, obj).indices == g.indices
 
 
 def test_the_example_csv_is_a_motion_from_the_identity():

@@ -44,6 +44,36 @@ def test_the_thumb_holds_through_the_whole_turn(scen):
     assert_close(q, np.broadcast_to(q[0], q.shape), atol=1e-4, what="thumb q")
 
 
+def _chosen_again(scen):
+    """The grasp that the scenario's recorded grasp search chooses, its pivot kept."""
+    search = scen.grasp_search
+    keep = None if search.pivot is None else {search.pivot: scen.grasp.indices[search.pivot]}
+    return search.choose(scen.hand, scen.obj, keep=keep)
+
+
+def test_the_recorded_grasp_search_chooses_the_scenarios_grasp_again(scen):
+    # a backup (regrasp_pin.backups) chooses another start the same way: asked again
+    # with nothing to avoid, the search gives the scenario's grasp, on the motion that
+    # the thumb's kept contact places
+    assert scen.grasp_search.pivot == "thumb"
+    assert _chosen_again(scen).indices == scen.grasp.indices
+
+
+def test_scenario_for_hand_records_the_search_about_the_pivots_contact():
+    from regrasp_pin.scenarios import hand_model, scenario_for_hand, setup_pose
+
+    hand = hand_model("five_finger")
+    common = dict(fingers=setup_fingers("five_finger"), angle_deg=60.0, rate_deg_s=40.0)
+    obj = setup_objects("five_finger")["hexagon"]()
+    pivoted = scenario_for_hand(hand, obj, pose=setup_pose("five_finger"), **common)
+    assert pivoted.grasp_search.pivot == "thumb"
+    assert pivoted.grasp_search.motion is pivoted.motion  # the turn about the thumb
+    assert _chosen_again(pivoted).indices == pivoted.grasp.indices
+    centred = scenario_for_hand(hand, obj, pose=setup_pose("five_finger"), pivot=None, **common)
+    assert centred.grasp_search.pivot is None and centred.grasp_search.motion is centred.motion
+    assert _chosen_again(centred).indices == centred.grasp.indices
+
+
 def test_a_hand_files_scenario_entry_picks_fingers_and_scales_objects(tmp_path):
     def hand_file(name, scenario):
         path = tmp_path / f"{name}.json"
