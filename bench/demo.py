@@ -16,6 +16,7 @@ import argparse
 import time
 
 import numpy as np
+from machine import machine_line
 
 from regrasp_pin import make_scenario, plan_manipulation
 from regrasp_pin.grasp.manifold import default_threads, forget_first_times
@@ -68,6 +69,7 @@ def main() -> None:
     parser.add_argument("--object", default="hexagon", choices=("hexagon", "octagon", "box"))
     parser.add_argument("--repeats", type=int, default=2)
     args = parser.parse_args()
+    print(machine_line())
 
     backends = [b for b in IK_BACKENDS if b == "numpy" or numba_available()]
     previous = ik_backend()

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 import pinocchio as pin
+from machine import machine_line
 
 from regrasp_pin import Hand
 from regrasp_pin.model.ik import IK_BACKENDS, ik_backend, set_ik_backend
@@ -69,6 +70,7 @@ def main() -> None:
     parser.add_argument("--hand", default="five_finger", choices=("five_finger", "allegro"))
     parser.add_argument("--finger", default="index")
     args = parser.parse_args()
+    print(machine_line())
 
     hand = Hand.five_finger() if args.hand == "five_finger" else Hand.allegro()
     finger = hand.finger(args.finger)

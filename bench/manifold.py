@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from machine import machine_line
 
 from regrasp_pin.exceptions import ContactError
 from regrasp_pin.grasp.choice import choose_new_contact
@@ -88,6 +89,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("out/bench"), help="figure folder")
     parser.add_argument("--no-figures", action="store_true")
     args = parser.parse_args()
+    print(machine_line())
 
     hand = Hand.five_finger()
     box = Box((0.04, 0.06, 0.04))

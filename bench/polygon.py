@@ -32,6 +32,7 @@ from collections.abc import Callable
 
 import numpy as np
 from digital_curves import benchmark_curves
+from machine import machine_line
 
 from regrasp_pin.polygon.approximate import approximate_polygon, network_band
 from regrasp_pin.polygon.deviation import DEVIATIONS, deviation_matrix
@@ -298,6 +299,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="n <= 200 in the quality table")
     parser.add_argument("--digital", action="store_true", help="only the digital curves (part 5)")
     args = parser.parse_args()
+    print(machine_line())
     if args.digital:
         digital()
         return

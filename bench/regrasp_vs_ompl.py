@@ -64,6 +64,7 @@ from dataclasses import dataclass
 import coal
 import numpy as np
 import pinocchio as pin
+from machine import machine_line
 from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Box, Hand, ObjectMotion, RegraspError
@@ -795,6 +796,7 @@ def main() -> None:
     parser.add_argument("--rate-deg-s", type=float, default=20.0, help="moving box")
     parser.add_argument("--verbose", action="store_true", help="one line per pair")
     args = parser.parse_args()
+    print(machine_line())
     if ob is None:
         print(
             "OMPL is not installed: this benchmark compares against it. Install the "

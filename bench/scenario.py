@@ -24,6 +24,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from machine import machine_line
 
 import regrasp_pin.scenarios as scenarios
 import regrasp_pin.suite.build as suite_build
@@ -131,6 +132,7 @@ def main() -> None:
     parser.add_argument("--neighbours-only", action="store_true")
     parser.add_argument("--limit", type=int, default=None, help="only the first K specs")
     args = parser.parse_args()
+    print(machine_line())
     specs = neighbour_specs() + ([] if args.neighbours_only else generate_specs(args.random, 0))
     specs = specs[: args.limit]
     # the current path on numpy, the reference path, and the current path on numba

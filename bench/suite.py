@@ -35,6 +35,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+from machine import machine_line
 
 from regrasp_pin.planning.planner import PlannerParams
 from regrasp_pin.scenarios import HANDS
@@ -170,6 +171,8 @@ def parse_args() -> argparse.Namespace:
 
 def main() -> None:
     args = parse_args()
+    machine = machine_line()
+    print(machine)
     hands = args.hands
     args.out.mkdir(parents=True, exist_ok=True)
     if args.neighbours:
@@ -216,6 +219,7 @@ def main() -> None:
         text += "\n" + measured
     if args.baseline is not None:
         text += "\n" + compare(results, load_results(args.baseline))
+    text += "\n" + machine
     (args.out / "summary.txt").write_text(text + "\n")
     print()
     print(text)

@@ -1,0 +1,68 @@
+"""The machine a bench figure was measured on, printed first by every bench script.
+
+Figures drift between machines and between runs on one machine (other jobs, CPU
+frequency): a figure is only comparable with a baseline measured in the same run and
+printed beside it, and it is only quotable with the machine it came from. The line
+says which CPU, how many cores the process may use, how busy the machine was when the
+script started (load average over the last minute), and the versions that set the
+speed (Python, numpy, scipy, Pinocchio, Coal, numba) and the IK backend.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+from importlib import metadata
+
+PACKAGES = ("numpy", "scipy", "pin", "coal", "numba")
+
+
+def cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``; else what ``platform`` says)."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity; else every core)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def versions() -> dict[str, str]:
+    """Installed versions of :data:`PACKAGES` (``"-"`` for one not installed)."""
+    out = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "-"
+    return out
+
+
+def machine_line() -> str:
+    """One line: CPU, usable / logical cores, the 1-minute load, versions, IK backend."""
+    try:
+        load = f"{os.getloadavg()[0]:.2f}"
+    except (AttributeError, OSError):
+        load = "?"
+    from regrasp_pin.model.ik import ik_backend
+
+    backend = ik_backend()
+    packages = ", ".join(f"{k} {v}" for k, v in versions().items())
+    return (
+        f"machine: {cpu_model()}, {usable_cores()}/{os.cpu_count()} cores, load {load}; "
+        f"{packages}; IK backend {backend}"
+    )
+
+
+if __name__ == "__main__":
+    print(machine_line())
