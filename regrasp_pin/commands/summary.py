@@ -174,7 +174,7 @@ def print_table(rows: list[dict], summary: dict) -> None:
             f"{j['finger']} joins at t={j['t_s']:.2f}-{j['t_end_s']:.2f} s ({j['reason']}), "
             "verified by Coal"
         )
-    for line in backup_lines(summary["grasp_backups"]):
+    for line in backup_lines(summary.get("grasp_backups", [])):
         print(line)
     stages = ", ".join(f"{k} {v:.2f} s" for k, v in summary["stage_s"].items())
     print(f"stages: {stages}; total {summary['total_s']:.2f} s")
