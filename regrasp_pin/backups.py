@@ -14,6 +14,12 @@ chooses another start for that finger the way the scenario's grasp was chosen
 - after any other failure it starts more than two of its tip radii from every contact
   it started on before (``grasp_for_motion(avoid=...)``).
 
+The search is the one that chose the scenario's grasp, on its motion: for a turn that
+was placed about the pivot's contact after the grasp was chosen for the turn about the
+object's own axis (:func:`~regrasp_pin.scenarios.make_scenario`, the suite's
+contact-axis specs), that own-axis turn; for :func:`~regrasp_pin.scenarios.scenario_for_hand`,
+which chose the others' contacts again for the turn about the pivot, that turn.
+
 There is no backup after a proof that no plan exists (``infeasible``: it holds for
 every grasp), for the finger whose contact places the motion (``GraspSearch.pivot``:
 every backup keeps its contact, and so the motion), or for a scenario whose grasp was
@@ -93,7 +99,8 @@ def plan_scenario(
     fails at a finger that still holds its start contact, up to ``grasp_backups``
     other starts for that finger are planned in turn (the module docstring says which).
     The backups share the search budget: each gets the steps that the plans before it
-    left (``PlannerParams.max_steps``) and what is left of ``budget_s``.
+    left (``PlannerParams.max_steps``) and what their planning left of ``budget_s``
+    [s] (a backup's grasp search is not counted; none left: outcome ``"no-time"``).
 
     Args:
         scenario: The scenario (its ``grasp``; ``grasp_search`` to back up).
@@ -203,7 +210,8 @@ def _another_start(
     search, grasp = scenario.grasp_search, scenario.grasp
     assert search is not None and grasp is not None
     point = np.asarray(grasp.points_object[finger], float)
-    keep = {} if search.pivot is None else {search.pivot: int(grasp.indices[search.pivot])}
+    pivot = search.pivot
+    keep = {pivot: int(grasp.indices[pivot])} if pivot in grasp.indices else {}
     if hold:
         index = _held_through(scenario, finger, point)
         if index is None:
@@ -288,8 +296,13 @@ def _one_backup(
     t0 = time.perf_counter()
     try:
         planned = _plan(started, params, progress)
-    except Exception as bug:  # recorded; the first failure stands
-        failed = f"exception:{type(bug).__name__}: {bug}"
+    except Exception as bug:  # recorded (a typed error by its kind); the first failure stands
+        kind = getattr(bug, "kind", None)
+        failed = (
+            kind.value
+            if isinstance(kind, FailureKind)
+            else f"exception:{type(bug).__name__}: {bug}"
+        )
         return record(outcome=failed, choose_s=choose_s, plan_s=time.perf_counter() - t0), None
     plan_s = time.perf_counter() - t0
     if isinstance(planned, ManipulationPlan):

@@ -19,7 +19,7 @@ import pytest
 
 from regrasp_pin import backups, make_scenario
 from regrasp_pin.backups import plan_scenario
-from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
+from regrasp_pin.exceptions import ContactError, FailureKind, InputError, PlanningError
 from regrasp_pin.plan import ContactPhase, Plan, ReleasePhase
 from regrasp_pin.planning.planner import ManipulationPlan
 from regrasp_pin.scenarios import GraspSearch, contacts_held_through
@@ -74,7 +74,9 @@ class Scripted:
         monkeypatch.setattr(backups, "plan_manipulation", self)
 
     def __call__(self, hand, obj, motion, *, grasp, params, progress=None):
-        self.calls.append(SimpleNamespace(motion=motion, grasp=grasp, params=params))
+        self.calls.append(
+            SimpleNamespace(motion=motion, grasp=grasp, params=params, progress=progress)
+        )
         out = self.outcomes.pop(0)
         if out == "ok":
             return ManipulationPlan(_plan({}, 0), [], grasp, {}, None, {})
@@ -136,22 +138,48 @@ def test_each_backup_avoids_every_start_before_and_the_first_failure_stands(scen
     assert [b["avoid_m"] for b in record] == [starts[0].tolist(), starts[1].tolist()]
 
 
+def _asking(monkeypatch, refuse=lambda keep, avoid: False):
+    """``GraspSearch.choose`` recorded (its ``keep`` and ``avoid``), raising a
+    ``no-candidate`` ContactError where ``refuse(keep, avoid)``."""
+    asked = []
+    choose = GraspSearch.choose
+
+    def spy(self, hand, obj, *, keep=None, avoid=None):
+        asked.append((keep, avoid))
+        if refuse(keep, avoid):
+            raise ContactError("refused on purpose", kind=FailureKind.NO_CANDIDATE)
+        return choose(self, hand, obj, keep=keep, avoid=avoid)
+
+    monkeypatch.setattr(GraspSearch, "choose", spy)
+    return asked
+
+
 def test_a_backup_without_a_grasp_ends_the_backups(scen, monkeypatch):
-    # the index has one start elsewhere in this scene; a second, away from both, has
-    # no force-closure grasp (the grasp search's ContactError, by kind)
+    # the second backup, away from both starts, has no grasp: the backups end there
+    asked = _asking(monkeypatch, lambda keep, avoid: len(avoid["ring"]) == 2)
     planner = Scripted(
         monkeypatch,
-        fails("index", FailureKind.NO_CANDIDATE),
-        fails("index", FailureKind.NO_CANDIDATE),
+        fails("ring", FailureKind.NO_CANDIDATE),
+        fails("ring", FailureKind.NO_CANDIDATE),
         "ok",
     )
     with pytest.raises(PlanningError) as failed:
         plan_scenario(scen, grasp_backups=3)
-    assert len(planner.calls) == 2
+    assert len(planner.calls) == 2 and len(asked) == 2
     outcomes = [b["outcome"] for b in failed.value.partial.summary["grasp_backups"]]
-    assert outcomes[0] == "no-candidate" and outcomes[1].startswith("no-grasp:")
-    kinds = {k.value for k in FailureKind}
-    assert outcomes[1].removeprefix("no-grasp:") in kinds and len(outcomes) == 2
+    assert outcomes == ["no-candidate", "no-grasp:no-candidate"]
+
+
+def test_without_a_pivot_no_contact_is_kept(scen, monkeypatch):
+    asked = _asking(monkeypatch)
+    free = dataclasses.replace(
+        scen, grasp_search=dataclasses.replace(scen.grasp_search, pivot=None)
+    )
+    Scripted(monkeypatch, fails("thumb", FailureKind.NO_CANDIDATE), "ok")
+    result = plan_scenario(free)
+    [(keep, avoid)] = asked
+    assert keep is None and list(avoid) == ["thumb"]
+    assert result.plan.summary["grasp_backups"][0]["finger"] == "thumb"
 
 
 @pytest.mark.parametrize(
@@ -183,16 +211,9 @@ def test_a_finger_the_others_do_not_hold_without_starts_where_it_holds_to_the_en
     scen, monkeypatch
 ):
     # after force-closure, the middle's start is asked to be its best contact held to
-    # the end that is more than two tip radii from where it was (in this scene no
-    # force-closure grasp has it there); the index has no such contact
-    asked = []
-    choose = GraspSearch.choose
-
-    def spy(self, hand, obj, *, keep=None, avoid=None):
-        asked.append((keep, avoid))
-        return choose(self, hand, obj, keep=keep, avoid=avoid)
-
-    monkeypatch.setattr(GraspSearch, "choose", spy)
+    # the end that is more than two tip radii from where it was (the grasp search then
+    # refuses, on purpose); the index has no such contact: no search, no backup
+    asked = _asking(monkeypatch, lambda keep, avoid: True)
     points = scen.obj.sample_surface(0.002).points
 
     def far_held(finger):
@@ -214,9 +235,8 @@ def test_a_finger_the_others_do_not_hold_without_starts_where_it_holds_to_the_en
 
     far = far_held("middle")
     assert far, "the scene's middle has a contact held to the end, away from its start"
-    outcome = backed_up("middle")
+    assert backed_up("middle") == "no-grasp:no-candidate"
     assert asked == [({"thumb": scen.grasp.indices["thumb"], "middle": far[0]}, None)]
-    assert outcome.startswith("no-grasp:")
     assert far_held("index") == [], "the scene's index has none"
     assert backed_up("index") == "none-held-through" and asked == []
 
@@ -232,6 +252,20 @@ def test_the_wall_clock_budget_is_shared(scen, monkeypatch):
     assert len(planner.calls) == 1
     [b] = failed.value.partial.summary["grasp_backups"]
     assert b["outcome"] == "no-time" and b["plan_s"] == 0.0
+
+
+def test_a_backup_gets_what_the_planning_left_of_the_wall_clock_budget(scen, monkeypatch):
+    def slow(grasp):
+        time.sleep(0.05)
+        return fails("index", FailureKind.NO_CANDIDATE)(grasp)
+
+    planner = Scripted(monkeypatch, slow, "ok")
+    params = dataclasses.replace(scen.params, budget_s=10.0)
+    seen = []
+    plan_scenario(scen, params=params, progress=seen.append)
+    first, again = planner.calls
+    assert first.params.budget_s == 10.0 and 9.0 < again.params.budget_s <= 10.0 - 0.05
+    assert first.progress is again.progress  # the caller's, for every plan
 
 
 def test_an_unexpected_error_in_a_backup_is_its_outcome(scen, monkeypatch):

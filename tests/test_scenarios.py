@@ -52,11 +52,13 @@ def _chosen_again(scen):
 
 
 def test_the_recorded_grasp_search_chooses_the_scenarios_grasp_again(scen):
-    # a backup (regrasp_pin.backups) chooses another start the same way: asked again
-    # with nothing to avoid, the search gives the scenario's grasp, on the motion that
-    # the thumb's kept contact places
-    assert scen.grasp_search.pivot == "thumb"
-    assert _chosen_again(scen).indices == scen.grasp.indices
+    # a backup (regrasp_pin.backups) chooses another start the same way: the search
+    # that chose the grasp, for the turn about the prism's own axis (the scenario's
+    # turn was then placed about the thumb's contact), gives the same grasp when asked
+    # again with nothing kept or avoided
+    search = scen.grasp_search
+    assert search.pivot == "thumb" and search.motion is not scen.motion
+    assert search.choose(scen.hand, scen.obj).indices == scen.grasp.indices
 
 
 def test_scenario_for_hand_records_the_search_about_the_pivots_contact():

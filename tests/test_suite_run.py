@@ -114,7 +114,7 @@ def test_a_backup_that_plans_fully_is_the_result(tmp_path):
     assert [b["outcome"] for b in r.backups] == ["ok"]
     assert r.backups[0]["finger"] == "index"
     assert r.backups[0]["after"] == "object-clearance"
-    # the full plan file only (the first failure's partial plan removed), re-checked
+    # the full plan file only (none of the first failure's partial plan), re-checked
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"{spec.name}.json"]
     plan = Plan.load(tmp_path / f"{spec.name}.json")
     assert r.recheck_ok and recheck_plan(plan).ok

@@ -9,14 +9,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from ._args import HAND_METAVAR, add_grasp_backups, hand_argument, output_file, output_folder
-from .summary import (
-    backup_lines,
-    backups_of,
-    failure_summary,
-    plan_summary,
-    print_table,
-    write_figures,
-)
+from .summary import plan_summary, print_table, report_failure, write_figures
 
 if TYPE_CHECKING:
     from ..planning.planner import ManipulationPlan
@@ -94,23 +87,20 @@ def run(args: argparse.Namespace) -> int:
     bar = None if args.quiet or args.json else _progress_bar(scen.motion.duration_s)
 
     def progress(t_s: float) -> None:
-        if bar is not None:
-            bar.update(round(t_s - scen.motion.t_start, 2) - bar.n)
+        if bar is None:
+            return
+        done = round(t_s - scen.motion.t_start, 2)
+        if done < bar.n:  # a backup plans again from the start
+            bar.write("backing up to another initial grasp")
+            bar.reset(total=bar.total)
+        bar.update(done - bar.n)
 
     try:
         result = plan_scenario(scen, grasp_backups=args.grasp_backups, progress=progress)
     except PlanningError as exc:
         if bar is not None:
             bar.close()
-        partial = None if exc.partial is None else exc.partial.save(out / "partial_plan.json")
-        if partial is not None:
-            print(f"partial plan written to {partial}", file=sys.stderr)
-        if not args.json:
-            for line in backup_lines(backups_of(exc)):
-                print(line, file=sys.stderr)
-            raise
-        print(json.dumps(failure_summary(scen, exc, partial, time.perf_counter() - t0), indent=2))
-        return 1
+        return report_failure(scen, exc, out, args.json, time.perf_counter() - t0)
     if bar is not None:
         bar.update(bar.total - bar.n)
         bar.close()

@@ -80,8 +80,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument("--json", action="store_true", help="print one JSON object, also on failure")
     out.add_argument("--no-plots", action="store_true", help="no matplotlib figures")
     out.add_argument("--no-viewer", action="store_true", help="no static viewer page (plan.html)")
-    out.add_argument("--seed", type=int, default=0, help="seed of the searches (default: 0)")
-    add_grasp_backups(parser.add_argument_group("the search"))
+    search = parser.add_argument_group("the search")
+    search.add_argument("--seed", type=int, default=0, help="seed of the searches (default: 0)")
+    add_grasp_backups(search)
 
 
 def load_object(spec: str, scale: float, hand: str) -> tuple[ConvexObject, str | None]:
@@ -145,14 +146,7 @@ def run(args: argparse.Namespace) -> int:
     """Plan the problem; write the plan, figures and viewer page; return the exit status."""
     from ..backups import plan_scenario
     from ..exceptions import ContactError, PlanningError
-    from .summary import (
-        backup_lines,
-        backups_of,
-        failure_summary,
-        plan_summary,
-        print_table,
-        write_figures,
-    )
+    from .summary import plan_summary, print_table, report_failure, write_figures
 
     t0 = time.perf_counter()
     out = output_folder(args.out, "--out")
@@ -165,16 +159,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = plan_scenario(scen, grasp_backups=args.grasp_backups)
     except (PlanningError, ContactError) as exc:
-        partial = getattr(exc, "partial", None)
-        path = None if partial is None else partial.save(out / "partial_plan.json")
-        if path is not None:
-            print(f"partial plan written to {path}", file=sys.stderr)
-        if not args.json:
-            for line in backup_lines(backups_of(exc)):
-                print(line, file=sys.stderr)
-            raise
-        print(json.dumps(failure_summary(scen, exc, path, time.perf_counter() - t0), indent=2))
-        return 1
+        return report_failure(scen, exc, out, args.json, time.perf_counter() - t0)
     plan_path = result.plan.save(out / "plan.json")
     figures = [] if args.no_plots else write_figures(result, out)
     summary: dict[str, Any] = plan_summary(

@@ -3,6 +3,8 @@ summary (on success and on failure) and the figures (Figs. 9, 2 and 8)."""
 
 from __future__ import annotations
 
+import json
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,6 +19,7 @@ __all__ = [
     "held_path",
     "plan_summary",
     "print_table",
+    "report_failure",
     "release_rows",
     "summary_rows",
     "write_figures",
@@ -107,6 +110,23 @@ def failure_summary(scen: Scenario, exc: Any, partial: Path | None, total_s: flo
         "total_s": total_s,
         "grasp_backups": backups_of(exc),
     }
+
+
+def report_failure(scen: Scenario, exc: Any, out: Path, as_json: bool, total_s: float) -> int:
+    """A plan that failed: its partial plan written to ``out`` (if any) and said so on
+    stderr, then the failure as JSON on stdout (``as_json``; returns the exit status
+    1) or, without it, the backups tried on stderr and ``exc`` raised again (the CLI
+    prints it on one line)."""
+    partial = getattr(exc, "partial", None)
+    path = None if partial is None else partial.save(out / "partial_plan.json")
+    if path is not None:
+        print(f"partial plan written to {path}", file=sys.stderr)
+    if not as_json:
+        for line in backup_lines(backups_of(exc)):
+            print(line, file=sys.stderr)
+        raise exc
+    print(json.dumps(failure_summary(scen, exc, path, total_s), indent=2))
+    return 1
 
 
 def backups_of(exc: Any) -> list[dict]:

@@ -5,14 +5,13 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .._validate import positive_int
-from ..exceptions import Attempt, ContactError, InputError
+from ..exceptions import Attempt, ContactError
 from ..grasp.contact import ContactModel
 from ..grasp.holding import rest_configuration
 from ..model.clearance import FingerClearance
@@ -64,13 +63,7 @@ def finger_clearance(
     return clearance
 
 
-def build_scenario(
-    spec: ScenarioSpec,
-    contact: ContactModel | None = None,
-    *,
-    avoid: Mapping[str, np.ndarray] | None = None,
-    keep: Mapping[str, int] | None = None,
-) -> Scenario:
+def build_scenario(spec: ScenarioSpec, contact: ContactModel | None = None) -> Scenario:
     """Build the scenario of a spec.
 
     The object starts at the hand's canonical pose (:func:`~regrasp_pin.scenarios.setup_pose`)
@@ -87,21 +80,12 @@ def build_scenario(
         spec: The spec.
         contact: The contact model of the grasp search and the planner (default
             ``ContactModel()``: each finger's own pad cone).
-        avoid: Start contacts to leave out of the grasp search: finger -> ``(K, 3)``
-            points, object frame [m] (``grasp_for_motion(avoid=...)``); for another
-            initial grasp after a plan failed (:func:`~.run.run_scenario`).
-        keep: Fingers whose start contact is given: finger -> index in the grasp
-            search's 2 mm surface sample (``Grasp.indices``; ``grasp_for_motion(keep=...)``).
-            A ``"contact-axis"`` turn is placed about the thumb's contact, so keeping
-            the thumb keeps the motion.
 
     Returns:
         The :class:`~regrasp_pin.scenarios.Scenario` (planner settings as make_scenario's).
 
     Raises:
         ContactError: no initial force-closure grasp.
-        InputError: ``avoid`` or ``keep`` for a hand file's ``"contact-axis"`` spec
-            (its grasp is chosen by :func:`~regrasp_pin.scenarios.scenario_for_hand`).
     """
     h = suite_hand(spec.hand)
     o = spec.object.build()
@@ -112,12 +96,6 @@ def build_scenario(
     fingers = setup_fingers(spec.hand)
     contact = contact or ContactModel()
     if is_hand_file(spec.hand) and m.kind == "contact-axis" and spec.grasp_clearance_m is None:
-        if avoid or keep:
-            raise InputError(
-                "avoid/keep",
-                "given for a hand file's contact-axis spec",
-                "None (scenario_for_hand chooses that grasp)",
-            )
         # any hand: as scenario_for_hand builds it (the pivot's contact kept, the other
         # fingers' chosen again for the turn about it)
         scen = scenario_for_hand(
@@ -171,7 +149,7 @@ def build_scenario(
         must_hold_check=m.kind != "contact-axis",  # the grasp's turn is the motion
         pivot="thumb" if m.kind == "contact-axis" else None,
     )
-    grasp = search.choose(h, o, keep=keep, avoid=avoid)
+    grasp = search.choose(h, o)
     motion = (
         turn_about_thumb_contact(T0, grasp, axis, rate_rad, duration, m.dt_s)
         if m.kind == "contact-axis"

@@ -57,8 +57,10 @@ class ScenarioResult:
         attempts: The failed attempts behind the failure (``Attempt.to_dict()``).
         n_regrasps: Verified regrasps (of the partial plan, for a failure).
         regrasp_ms: Planning time of each verified regrasp [ms].
-        plan_s: Wall time of :func:`~regrasp_pin.planning.planner.plan_manipulation` [s].
-        build_s: Wall time of :func:`build_scenario` [s].
+        plan_s: Wall time of the planning [s]: :func:`~regrasp_pin.backups.plan_scenario`
+            but the backups' grasp searches.
+        build_s: Wall time of :func:`build_scenario` and of the backups' grasp
+            searches [s].
         duration_s: Duration of the motion [s].
         planned_until_s: End of the (partial) plan [s]; None without a plan.
         min_clearance_m: Smallest regrasp clearance reported by the planner [m].
@@ -72,12 +74,14 @@ class ScenarioResult:
         plan_path: Where the plan (or partial plan) was saved, if it was.
         stage_s: The planner's time per stage [s] (full plans).
         spec: The spec (``ScenarioSpec.to_dict()``), to rebuild the scenario.
-        backups: The initial grasps backed up to after a failure (:func:`run_scenario`),
-            in order: the failure's kind (``"after"``), the finger whose start changed
-            and the contact it started on (object frame [m]), how (``"elsewhere"``: that
-            contact avoided; ``"held-through"``: a contact held to the end), and the
-            outcome (``"ok"``, a failure kind, ``"no-grasp:<kind>"``,
-            ``"none-held-through"`` or ``"no-time"``). ``plan_s`` and ``build_s``
+        backups: The initial grasps backed up to after a failure, in order
+            (:meth:`~regrasp_pin.backups.GraspBackup.to_dict`): the failure's kind
+            (``"after"``), the finger whose start changed and the contact it started on
+            (object frame [m]), how (``"elsewhere"``: that contact avoided;
+            ``"held-through"``: a contact held to the end), the outcome (``"ok"``, a
+            failure kind, ``"no-grasp:<kind>"``, ``"none-held-through"``, ``"no-time"``
+            or ``"exception:<Type>: <message>"``), when its plan failed [s], and the
+            wall times of its grasp search and plan [s]. ``plan_s`` and ``build_s``
             include theirs.
     """
 
@@ -270,19 +274,10 @@ def _record_times(result: ScenarioResult, outcome: Any, wall_s: float) -> None:
         outcome.plan if isinstance(outcome, ManipulationPlan) else getattr(outcome, "partial", None)
     )
     backups = plan.summary.get("grasp_backups", []) if isinstance(plan, Plan) else []
-    result.backups = [_backup_entry(b) for b in backups]
+    result.backups = [dict(b) for b in backups]
     choose_s = sum(b["choose_s"] for b in backups)
     result.build_s = (result.build_s or 0.0) + choose_s
     result.plan_s = wall_s - choose_s
-
-
-def _backup_entry(backup: dict[str, Any]) -> dict[str, Any]:
-    """A backup as ``ScenarioResult.backups`` lists it: what it avoided, how, and its
-    outcome (with the time of its failure, if it failed)."""
-    entry = {k: backup[k] for k in ("after", "finger", "avoid_m", "how", "outcome")}
-    if backup.get("time_s") is not None:
-        entry["time_s"] = backup["time_s"]
-    return entry
 
 
 def _record_partial(
