@@ -100,6 +100,26 @@ def test_bound_holds_for_every_grasp_of_the_other_fingers(box):
     assert found_closure > 0  # the test exercised the bound
 
 
+def test_closure_possible_with_tests_the_one_more_contact_one_face_at_a_time(box):
+    """Two contacts on the top face, and a finger that reaches two opposite side faces:
+    both side faces' corners together would span with the top (the bound before, all
+    faces at once), but the one more contact lies on one face, and neither side face
+    with the top does; no usable point puts the three in force closure (exact test)."""
+    obj, sample = box
+    top = np.flatnonzero(sample.normals[:, 2] > 0.99)
+    sides = (sample.normals[:, 0] > 0.99) | (sample.normals[:, 0] < -0.99)
+    fixed = sample.points[top[[0, -1]]], sample.normals[top[[0, -1]]]
+    m = _manifold("a", sides[None], np.array([0.0]))
+    assert not closure_possible_with(*fixed, m, sample, obj, MU, np.array([0]))
+    for q in np.flatnonzero(sides):
+        three = np.vstack([fixed[0], sample.points[q]]), np.vstack([fixed[1], sample.normals[q]])
+        assert not is_force_closure(*three, MU, torque_scale_m=obj.radius_m)
+    # with the bottom face in reach too, the bottom with the top could
+    reach = sides | (sample.normals[:, 2] < -0.99)
+    m = _manifold("a", reach[None], np.array([0.0]))
+    assert closure_possible_with(*fixed, m, sample, obj, MU, np.array([0]))
+
+
 def test_closure_possible_with_one_more_contact_is_an_upper_bound(box):
     """closure_possible_with: where fixed contacts plus one usable contact of a finger
     (exact epsilon, the planner's test) are in force closure at a time, the bound says

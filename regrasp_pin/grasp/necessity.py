@@ -220,10 +220,12 @@ def closure_possible_with(
     """Whether the contacts ``points``, ``normals`` ``(F, 3)`` (object frame) plus one
     contact that ``manifold``'s finger could use at one of the manifold times ``rows``
     could be in force closure: an upper bound, as :func:`closure_possible_without`'s
-    (circumscribed cones; each face's usable points replaced by their bounding box's
-    corners, all of the finger's faces at once). False proves that no contact of that
-    finger landed at those times puts them in force closure (e.g. frees a finger whose
-    neighbours do not hold without it)."""
+    (circumscribed cones; the finger's usable points replaced by the corners of their
+    bounding box on their face), one face at a time: the one contact lies on one face,
+    so the fixed contacts with that face's corners must positively span, whatever the
+    other faces offer. False proves that no contact of that finger landed at those
+    times puts them in force closure (e.g. frees a finger whose neighbours do not hold
+    without it)."""
     rows = np.asarray(rows, int)
     if rows.size == 0:
         return False
@@ -238,13 +240,16 @@ def closure_possible_with(
     fixed = wrenches(
         np.asarray(points, float).reshape(-1, 3), np.asarray(normals, float).reshape(-1, 3)
     )
+    tested: set[bytes] = set()  # a face's corners at several times: one test
     for k in range(rows.size):
-        faces = np.flatnonzero(present[k])
-        if faces.size == 0:
-            continue
-        mine = wrenches(corners[k, faces].reshape(-1, 3), np.repeat(face_normals[faces], 4, 0))
-        if _positively_spanning(np.vstack([fixed, mine])):
-            return True
+        for face in np.flatnonzero(present[k]):
+            key = int(face).to_bytes(4, "little") + corners[k, face].tobytes()
+            if key in tested:
+                continue
+            tested.add(key)
+            mine = wrenches(corners[k, face], np.repeat(face_normals[[face]], 4, 0))
+            if _positively_spanning(np.vstack([fixed, mine])):
+                return True
     return False
 
 
