@@ -43,7 +43,7 @@ from .plan import Plan
 from .planning.planner import ManipulationPlan, PlannerParams, plan_manipulation
 from .scenarios import Scenario, contacts_held_through
 
-__all__ = ["HOLD_THROUGH", "GraspBackup", "plan_scenario"]
+__all__ = ["HOLD_THROUGH", "GraspBackup", "plan_scenario", "recorded_backups"]
 
 #: A failure of this kind means that the others do not hold without the finger: its
 #: backup starts it on a contact it holds to the end instead of anywhere else
@@ -136,6 +136,20 @@ def plan_scenario(
     if isinstance(first.partial, Plan):
         first.partial.summary["grasp_backups"] = record
     raise first
+
+
+def recorded_backups(
+    outcome: ManipulationPlan | Plan | BaseException | None,
+) -> list[dict[str, Any]]:
+    """The backups (:meth:`GraspBackup.to_dict`) that :func:`plan_scenario` recorded
+    with a plan (a :class:`ManipulationPlan` or its :class:`~regrasp_pin.plan.Plan`)
+    or with a failure's partial plan; empty when none are recorded."""
+    plan = outcome.plan if isinstance(outcome, ManipulationPlan) else outcome
+    if isinstance(plan, BaseException):
+        plan = getattr(plan, "partial", None)
+    return (
+        [dict(b) for b in plan.summary.get("grasp_backups", [])] if isinstance(plan, Plan) else []
+    )
 
 
 def _plan(

@@ -14,7 +14,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "backup_lines",
-    "backups_of",
     "failure_summary",
     "held_path",
     "plan_summary",
@@ -87,7 +86,7 @@ def plan_summary(
         "total_s": total_s,
         "plan": str(plan_path),
         "figures": [str(f) for f in figures],
-        "grasp_backups": list(result.plan.summary.get("grasp_backups", [])),
+        "grasp_backups": _recorded(result),
     }
 
 
@@ -108,7 +107,7 @@ def failure_summary(scen: Scenario, exc: Any, partial: Path | None, total_s: flo
         "attempts": [a.to_dict() for a in exc.attempts],
         "partial_plan": None if partial is None else str(partial),
         "total_s": total_s,
-        "grasp_backups": backups_of(exc),
+        "grasp_backups": _recorded(exc),
     }
 
 
@@ -122,19 +121,19 @@ def report_failure(scen: Scenario, exc: Any, out: Path, as_json: bool, total_s: 
     if path is not None:
         print(f"partial plan written to {path}", file=sys.stderr)
     if not as_json:
-        for line in backup_lines(backups_of(exc)):
+        for line in backup_lines(_recorded(exc)):
             print(line, file=sys.stderr)
         raise exc
     print(json.dumps(failure_summary(scen, exc, path, total_s), indent=2))
     return 1
 
 
-def backups_of(exc: Any) -> list[dict]:
-    """The backups to other initial grasps that a failure's partial plan lists
-    (:func:`~regrasp_pin.backups.plan_scenario`)."""
-    partial = getattr(exc, "partial", None)
-    summary = getattr(partial, "summary", None) or {}
-    return list(summary.get("grasp_backups", []))
+def _recorded(outcome: Any) -> list[dict]:
+    """:func:`~regrasp_pin.backups.recorded_backups` (imported when asked: the commands
+    load the planner only to plan)."""
+    from ..backups import recorded_backups
+
+    return recorded_backups(outcome)
 
 
 def backup_lines(backups: list[dict]) -> list[str]:

@@ -16,10 +16,9 @@ from typing import Any
 import numpy as np
 
 from .._validate import known_fields, positive, positive_int
-from ..backups import plan_scenario
+from ..backups import plan_scenario, recorded_backups
 from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
-from ..planning.planner import ManipulationPlan
 from ..scenarios import hand_label
 from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
@@ -270,11 +269,8 @@ def _record_times(result: ScenarioResult, outcome: Any, wall_s: float) -> None:
     plan, or from the partial plan of ``outcome``, its failure) in ``result.backups``,
     their grasp searches' time in ``result.build_s`` and the rest of ``wall_s`` in
     ``result.plan_s``."""
-    plan = (
-        outcome.plan if isinstance(outcome, ManipulationPlan) else getattr(outcome, "partial", None)
-    )
-    backups = plan.summary.get("grasp_backups", []) if isinstance(plan, Plan) else []
-    result.backups = [dict(b) for b in backups]
+    backups = recorded_backups(outcome)
+    result.backups = backups
     choose_s = sum(b["choose_s"] for b in backups)
     result.build_s = (result.build_s or 0.0) + choose_s
     result.plan_s = wall_s - choose_s
