@@ -175,11 +175,15 @@ def _steps_spent(exc: PlanningError) -> int:
     return int(partial.summary.get("search_steps", 0)) if isinstance(partial, Plan) else 0
 
 
+#: The phases of a finger that is still on its start contact
+_NOT_MOVED = ("contact", "idle")
+
+
 def _backup_finger(scenario: Scenario, exc: PlanningError) -> str | None:
     """The finger whose start contact to change after the failure ``exc`` of a plan of
     ``scenario``, or None: not a proof that no plan exists, at a finger of the initial
-    grasp that holds its start contact in the partial plan (no other phase), not the
-    pivot, and a scenario whose grasp was chosen (``grasp_search``)."""
+    grasp that has not moved in the partial plan (no phase but holds, or nothing
+    planned), not the pivot, and a scenario whose grasp was chosen (``grasp_search``)."""
     search, grasp, finger = scenario.grasp_search, scenario.grasp, exc.finger
     if (
         search is None
@@ -191,8 +195,10 @@ def _backup_finger(scenario: Scenario, exc: PlanningError) -> str | None:
         or finger == search.pivot
     ):
         return None
+    # a finger of the grasp that has not moved: it holds (``contact``), or nothing was
+    # planned before the failure (``idle`` phases only, a failure at the motion's start)
     phases = exc.partial.phases.get(finger, [])
-    return finger if all(ph.kind == "contact" for ph in phases) else None
+    return finger if all(ph.kind in _NOT_MOVED for ph in phases) else None
 
 
 def _held_through(scenario: Scenario, finger: str, away: np.ndarray) -> int | None:

@@ -20,7 +20,7 @@ import pytest
 from regrasp_pin import backups, make_scenario
 from regrasp_pin.backups import plan_scenario
 from regrasp_pin.exceptions import ContactError, FailureKind, InputError, PlanningError
-from regrasp_pin.plan import ContactPhase, Plan, ReleasePhase
+from regrasp_pin.plan import ContactPhase, IdlePhase, Plan, ReleasePhase
 from regrasp_pin.planning.planner import ManipulationPlan
 from regrasp_pin.scenarios import GraspSearch, contacts_held_through
 
@@ -46,16 +46,19 @@ def _plan(phases: dict, steps: int) -> Plan:
     )
 
 
-def fails(finger, kind, *, steps=100, time_s=1.0, released=False):
+def fails(finger, kind, *, steps=100, time_s=1.0, released=False, at_start=False):
     """A scripted failure at ``finger`` after ``steps`` search steps: every finger of
     the grasp holds its start contact in the partial plan (``finger`` lets go of it
-    afterwards if ``released``)."""
+    afterwards if ``released``), or, ``at_start``, nothing is planned: every finger is
+    idle, as the planner leaves a plan that fails at t = 0."""
 
     def fail(grasp):
         phases = {
             n: [ContactPhase(n, 0.0, 0.5, grasp.points_object[n], grasp.normals_object[n])]
             for n in grasp.points_object
         }
+        if at_start:
+            phases = {n: [IdlePhase(n, 0.0, 1.0)] for n in grasp.points_object}
         if released:
             phases[finger].append(ReleasePhase(finger, 0.5, 1.0, grasp.points_object[finger], 0.0))
         return PlanningError(
@@ -136,6 +139,25 @@ def test_each_backup_avoids_every_start_before_and_the_first_failure_stands(scen
         ("ik-unreachable", "velocity", 0.5),
     ]
     assert [b["avoid_m"] for b in record] == [starts[0].tolist(), starts[1].tolist()]
+
+
+def test_a_failure_before_anything_was_planned_backs_up(scen, monkeypatch):
+    # failing at t = 0, the planner leaves every finger idle: none has moved, so the
+    # failing one is still on its start contact
+    planner = Scripted(
+        monkeypatch, fails("index", FailureKind.NO_CANDIDATE, time_s=0.0, at_start=True), "ok"
+    )
+    result = plan_scenario(scen)
+    first, again = planner.calls
+    p0 = first.grasp.points_object["index"]
+    assert _apart(again.grasp.points_object["index"], p0) > 2 * scen.hand.finger("index").tip_radius
+    [b] = result.plan.summary["grasp_backups"]
+    assert (b["after"], b["finger"], b["how"], b["outcome"]) == (
+        "no-candidate",
+        "index",
+        "elsewhere",
+        "ok",
+    )
 
 
 def _asking(monkeypatch, refuse=lambda keep, avoid: False):
