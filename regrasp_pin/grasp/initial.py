@@ -376,7 +376,7 @@ def initial_grasp(
         raise ContactError(
             f"every grasp tried ({search.refused}) puts two fingers too close"
             + (
-                f" (the best {closest * 1e3:.2f} mm apart, need {min_finger_gap_m * 1e3:.2f} mm)"
+                f" (the best {closest * 1e3:.3f} mm apart, need {min_finger_gap_m * 1e3:.3f} mm)"
                 if known
                 else " (finger_clearance refused them)"
             ),
