@@ -48,7 +48,7 @@ from regrasp_pin.suite import (
     summarize,
 )
 from regrasp_pin.suite.cluster import SuiteRun, run_suite
-from regrasp_pin.suite.report import result_line
+from regrasp_pin.suite.report import paired_change, result_line
 
 
 def compare(results: list[ScenarioResult], baseline: list[ScenarioResult]) -> str:
@@ -74,6 +74,7 @@ def compare(results: list[ScenarioResult], baseline: list[ScenarioResult]) -> st
         a = [v for r in both for v in get(old[r.name])]
         b = [v for r in both for v in get(r)]
         out.append(f"  median {what:18} {median(a):>8} -> {median(b):>8}")
+    out.append(f"  full plans {paired_change(results, baseline).line()}")
     changed = [(r, old[r.name]) for r in both if status(r) != status(old[r.name])]
     out.append(f"  changed outcomes: {len(changed)}")
     for r, o in changed:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from collections import Counter
 
 import numpy as np
@@ -38,6 +39,7 @@ from regrasp_pin.suite import (
     summarize,
 )
 from regrasp_pin.suite.build import finger_clearance
+from regrasp_pin.suite.report import paired_change, rate_interval
 
 
 @pytest.fixture(scope="module")
@@ -274,6 +276,53 @@ def test_summary_counts():
     text = summarize(results)
     assert "full plans: 2/6" in text
     assert "proven to have no plan (kind infeasible): 1; full plans of the others: 2/5" in text
+
+
+def test_the_rate_interval_is_wilsons():
+    """The Wilson score interval, from its closed form: (k + z^2/2 +- z sqrt(k (n - k) / n
+    + z^2 / 4)) / (n + z^2), z the normal quantile of the level."""
+    z = 1.959963984540054
+    for k, n in [(42, 100), (0, 30), (30, 30), (7, 15)]:
+        half = z * math.sqrt(k * (n - k) / n + z * z / 4)
+        want = ((k + z * z / 2 - half) / (n + z * z), (k + z * z / 2 + half) / (n + z * z))
+        assert rate_interval(k, n) == pytest.approx(want, abs=1e-9)
+    lo, hi = rate_interval(42, 100)
+    assert 0.32 < lo < 0.42 < hi < 0.53  # about +-10 points at 100 scenarios
+    for k, n, arg in [(1, 0, "n"), (-1, 10, "k"), (11, 10, "k"), (1.0, 10, "k")]:
+        with pytest.raises(InputError, match=f"^{arg}"):
+            rate_interval(k, n)
+
+
+def test_the_summary_gives_the_rates_interval():
+    results = [_result(str(i), "allegro", "box", "object-axis", i < 7) for i in range(15)]
+    lo, hi = rate_interval(7, 15)
+    first = summarize(results).splitlines()[0]
+    assert first.endswith(f"full plans: 7/15  47% (95% interval {lo:.0%}-{hi:.0%})")
+
+
+def test_a_paired_change_is_a_sign_test_of_won_against_lost():
+    """Exact two-sided sign test: all of 6 changes one way happens with probability
+    2 / 2^6 when each goes either way at random; 5 of 5 with 2 / 2^5."""
+
+    def runs(before, after):
+        old = [_result(str(i), "allegro", "box", "object-axis", ok) for i, ok in enumerate(before)]
+        new = [_result(str(i), "allegro", "box", "object-axis", ok) for i, ok in enumerate(after)]
+        return new, old
+
+    new, old = runs([False] * 6 + [True] * 4, [True] * 10)
+    change = paired_change(new, old)
+    assert (change.n, change.won, change.lost) == (10, 6, 0)
+    assert change.p_value == pytest.approx(2 / 2**6)
+    assert "won 6, lost 0 of 10" in change.line() and "more than the noise" in change.line()
+    new, old = runs([False] * 5, [True] * 5)
+    assert paired_change(new, old).p_value == pytest.approx(2 / 2**5)
+    assert "within the noise" in paired_change(new, old).line()
+    # wins and losses that cancel, no change at all, and scenarios in one run only
+    new, old = runs([True, False, True], [False, True, True])
+    assert paired_change(new, old).p_value == pytest.approx(1.0)
+    new, old = runs([True, False], [True, False])
+    assert paired_change(new, old).p_value == 1.0 and paired_change(new, old).won == 0
+    assert paired_change(new, old[:1]).n == 1
 
 
 def test_summary_gives_how_far_distance_failures_missed():
