@@ -421,3 +421,33 @@ def test_a_contact_the_joints_cannot_follow_in_time_is_let_go(scene):
     assert held_until(fast, CONTACT) == times[first - 1]
     h = Holding(p=p, n=n, t_from=0.0, track=fast)
     assert loss_reason(h, times[first - 1]) == fast.reasons[first]
+
+
+def test_a_hold_is_not_lost_to_a_jump_between_the_ik_branches_of_a_batch(monkeypatch):
+    """Suite spec s1-093 (Allegro, a triangular prism turned about its axis): the
+    index's start contact. Its four joints have a curve of solutions per target; the
+    batch warm-starts a chunk's times from one configuration, and from t = 0.05 s on
+    it lands elsewhere on that curve: joint_3.0 jumps by 0.09 rad in 0.01 s, over its
+    7 rad/s, and the hold was "lost" there. Solved again from the time before
+    (model.follow_on), the track stays on its branch: held on, every step within the
+    velocity limits, every time reached."""
+    import regrasp_pin.grasp.tracking as tracking_module
+    from regrasp_pin.suite import build_scenario, generate_specs
+
+    scen = build_scenario(generate_specs(94, seed=1)[93])
+    g, f = scen.grasp, scen.hand.finger("index")
+    times = np.arange(0.0, 0.3, 0.01)
+
+    def track():
+        p, n, q0 = g.points_object["index"], g.normals_object["index"], g.q["index"]
+        return track_contact(scen.hand, "index", scen.obj, scen.motion, times, p, n, q0)
+
+    held = track()
+    assert held.holdable.all() and held.error_m.max() <= ContactModel().ik_tol_m
+    speed = np.abs(np.diff(held.q, axis=0)) / np.diff(times)[:, None]
+    assert np.all(speed <= f.velocity_limit)
+    # the batch as it was: the jump, taken for the hold's loss
+    monkeypatch.setattr(tracking_module, "follow_on", lambda *args: 0)
+    batch = track()
+    i = batch.trigger_index()
+    assert i is not None and batch.cannot_follow[i] and "joint_3.0" in batch.reasons[i]

@@ -18,6 +18,7 @@ import numpy as np
 from .._validate import as_array
 from ..exceptions import InputError
 from ..model.clearance import LinkClearance
+from ..model.follow_on import follow_on
 from ..model.hand import Finger, Hand, speed_shares
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
@@ -173,6 +174,9 @@ def track_contact(
         s1 = min(s0 + chunk, times.size)
         res = f.ik(targets[s0:s1], prev, tol_m=contact.ik_tol_m)
         q[s0:s1], err[s0:s1] = res.q, res.error_m
+        # a joint that jumps (another branch of a spare joint's solutions) is solved
+        # again from the time before: the jump is the batch's, not the hold's limit
+        follow_on(f, q[s0:s1], err[s0:s1], targets[s0:s1], prev, step_s[s0:s1], contact.ik_tol_m)
         _settle_chunk(f, q, err, targets, n_palm, s0, s1, prev, step_s, contact)  # grasp.settle
         margin[s0:s1] = f.limit_margin(q[s0:s1])
         pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])

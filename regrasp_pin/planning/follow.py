@@ -15,6 +15,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from ..exceptions import FailureKind, PlanningError
+from ..model.follow_on import follow_on
 from ..model.hand import Finger
 from ..model.objects import ConvexObject
 from ..surface.inflation import TipPath
@@ -85,10 +86,13 @@ def follow_curve(
     targets = np.einsum("nij,nj->ni", T[:, :3, :3], tip_obj) + T[:, :3, 3]
     q = np.empty((times.size, f.k))
     prev = q0
+    step = np.diff(times, prepend=times[0])  # q0 is the configuration at times[0]
     for s0 in range(0, times.size, _IK_CHUNK):
         s1 = min(s0 + _IK_CHUNK, times.size)
         # warm start only: a restart may jump to another IK branch (a joint flip)
         res = f.ik(targets[s0:s1], prev, tol_m=ik_tol_m, restarts=False)
+        # a sample that misses or jumps to another branch is solved from the one before
+        follow_on(f, res.q, res.error_m, targets[s0:s1], prev, step[s0:s1], ik_tol_m, tol[s0:s1])
         bad = res.error_m > tol[s0:s1]
         if bad.any():
             i = int(np.argmax(res.error_m - tol[s0:s1]))
