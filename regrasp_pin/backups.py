@@ -45,6 +45,9 @@ from .scenarios import Scenario, contacts_held_through
 
 __all__ = ["HOLD_THROUGH", "GraspBackup", "plan_scenario", "recorded_backups"]
 
+#: plan_scenario's ``progress`` and ``on_backup``
+_Report = tuple[Callable[[float], None] | None, Callable[[str, str], None] | None]
+
 #: A failure of this kind means that the others do not hold without the finger: its
 #: backup starts it on a contact it holds to the end instead of anywhere else
 HOLD_THROUGH = FailureKind.FORCE_CLOSURE
@@ -92,6 +95,7 @@ def plan_scenario(
     params: PlannerParams | None = None,
     grasp_backups: int = 1,
     progress: Callable[[float], None] | None = None,
+    on_backup: Callable[[str, str], None] | None = None,
 ) -> ManipulationPlan:
     """Plan a scenario from its initial grasp, backing up to other initial grasps.
 
@@ -106,8 +110,11 @@ def plan_scenario(
         scenario: The scenario (its ``grasp``; ``grasp_search`` to back up).
         params: Planner settings; default the scenario's.
         grasp_backups: Most initial grasps to back up to (0: none).
-        progress: Called with the planned time [s] as planning advances (again from
-            the start for a backup).
+        progress: Called with the planned time [s] as planning advances; it goes back
+            when the search backtracks, and to the start for a backup.
+        on_backup: Called with the finger and the kind of the failure (a
+            ``FailureKind`` value) when a backup, its grasp found, starts planning
+            again.
 
     Returns:
         The first full plan. Its ``grasp`` is the start it planned from, and its plan's
@@ -128,7 +135,9 @@ def plan_scenario(
         first.plan.summary["grasp_backups"] = []
         return first
     tried: list[GraspBackup] = []
-    planned = _back_up(scenario, params, first, backups, tried, time.perf_counter() - t0, progress)
+    planned = _back_up(
+        scenario, params, first, backups, tried, time.perf_counter() - t0, (progress, on_backup)
+    )
     record = [b.to_dict() for b in tried]
     if planned is not None:
         planned.plan.summary["grasp_backups"] = record
@@ -258,11 +267,12 @@ def _back_up(
     backups: int,
     tried: list[GraspBackup],
     planning_s: float,
-    progress: Callable[[float], None] | None,
+    report: _Report,
 ) -> ManipulationPlan | None:
     """Plan again from other initial grasps after ``exc`` (see :func:`plan_scenario`),
     appending each backup to ``tried``; the first full plan, or None. ``planning_s``
-    is the wall time the planning took so far [s]."""
+    is the wall time the planning took so far [s]; ``report``: :func:`plan_scenario`'s
+    ``progress`` and ``on_backup``."""
     avoid: dict[str, list[np.ndarray]] = {}
     spent = _steps_spent(exc)
     while len(tried) < backups:
@@ -272,7 +282,7 @@ def _back_up(
             return None
         remaining_s = None if params.budget_s is None else max(params.budget_s - planning_s, 0.0)
         budget = dataclasses.replace(params, max_steps=left, budget_s=remaining_s)
-        backup, outcome = _one_backup(scenario, budget, exc, finger, avoid, progress)
+        backup, outcome = _one_backup(scenario, budget, exc, finger, avoid, report)
         tried.append(backup)
         planning_s += backup.plan_s
         if outcome is None or isinstance(outcome, ManipulationPlan):
@@ -288,7 +298,7 @@ def _one_backup(
     exc: PlanningError,
     finger: str,
     avoid: dict[str, list[np.ndarray]],
-    progress: Callable[[float], None] | None,
+    report: _Report,
 ) -> tuple[GraspBackup, ManipulationPlan | tuple[PlanningError, Scenario] | None]:
     """One backup of ``finger`` after ``exc``, planned with ``params`` (the budget
     left): its record and its full plan, or its failure and scenario (to back up
@@ -313,6 +323,9 @@ def _one_backup(
         return record(outcome=started, choose_s=choose_s), None
     if params.budget_s is not None and params.budget_s <= 0:
         return record(outcome="no-time", choose_s=choose_s), None
+    progress, on_backup = report
+    if on_backup is not None:
+        on_backup(finger, exc.kind.value)
     t0 = time.perf_counter()
     try:
         planned = _plan(started, params, progress)

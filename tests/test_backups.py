@@ -290,6 +290,28 @@ def test_a_backup_gets_what_the_planning_left_of_the_wall_clock_budget(scen, mon
     assert first.progress is again.progress  # the caller's, for every plan
 
 
+def test_the_caller_hears_of_each_backup_as_it_starts_planning(scen, monkeypatch):
+    planner = Scripted(
+        monkeypatch,
+        fails("ring", FailureKind.NO_CANDIDATE),
+        fails("ring", FailureKind.VELOCITY),
+        "ok",
+    )
+    heard = []
+    plan_scenario(
+        scen, grasp_backups=2, on_backup=lambda *a: heard.append((*a, len(planner.calls)))
+    )
+    # the finger and the kind backed up from, before each backup's plan (1 and 2 made)
+    assert heard == [("ring", "no-candidate", 1), ("ring", "velocity", 2)]
+    # a backup that finds no grasp does not plan: nothing to hear
+    _asking(monkeypatch, lambda keep, avoid: True)
+    Scripted(monkeypatch, fails("index", FailureKind.NO_CANDIDATE), "ok")
+    heard.clear()
+    with pytest.raises(PlanningError):
+        plan_scenario(scen, on_backup=lambda *a: heard.append(a))
+    assert heard == []
+
+
 def test_an_unexpected_error_in_a_backup_is_its_outcome(scen, monkeypatch):
     planner = Scripted(
         monkeypatch, fails("index", FailureKind.NO_CANDIDATE), RuntimeError("broken on purpose")

@@ -206,10 +206,12 @@ def test_a_plan_from_a_backup_says_so(tmp_path, capsys, monkeypatch):
 
     plan, kept = backups.plan_manipulation, []
 
-    def first_fails(hand, obj, motion, *, grasp, params, **kw):
+    def first_fails(hand, obj, motion, *, grasp, params, progress=None):
         if not kept:  # the demo's own plan, once
-            kept.append((plan(hand, obj, motion, grasp=grasp, params=params, **kw), grasp))
+            kept.append((plan(hand, obj, motion, grasp=grasp, params=params), grasp))
         result, first = kept[0]
+        for t in (0.6, 0.3, 0.9) if progress is not None else ():
+            progress(t)  # the search backtracks: not a backup
         if grasp.indices["index"] != first.indices["index"]:
             return result  # a backup: its grasp avoids the index's first start
         full = result.plan  # cut: the index still on its start contact
@@ -243,6 +245,12 @@ def test_a_plan_from_a_backup_says_so(tmp_path, capsys, monkeypatch):
     assert main(argv) == 0
     shown = capsys.readouterr().out.splitlines()
     assert "backed up after no-candidate at index: index started elsewhere -> ok" in shown
+    # with the progress bar: the backup said once, when it plans, and not the backtracks
+    assert main([a for a in argv if a != "--quiet"]) == 0
+    said = capsys.readouterr()
+    note = "index failed (no-candidate) on its start contact: another initial grasp"
+    assert (said.out + said.err).count(note) == 1
+    assert (said.out + said.err).count("another initial grasp") == 1
 
 
 @pytest.mark.parametrize("command", ["demo", "plan", "suite"])

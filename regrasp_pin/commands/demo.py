@@ -90,13 +90,18 @@ def run(args: argparse.Namespace) -> int:
         if bar is None:
             return
         done = round(t_s - scen.motion.t_start, 2)
-        if done < bar.n:  # a backup plans again from the start
-            bar.write("backing up to another initial grasp")
+        if done < bar.n:  # the search backtracks, or a backup plans from the start
             bar.reset(total=bar.total)
         bar.update(done - bar.n)
 
+    def on_backup(finger: str, kind: str) -> None:
+        if bar is not None:
+            bar.write(f"{finger} failed ({kind}) on its start contact: another initial grasp")
+
     try:
-        result = plan_scenario(scen, grasp_backups=args.grasp_backups, progress=progress)
+        result = plan_scenario(
+            scen, grasp_backups=args.grasp_backups, progress=progress, on_backup=on_backup
+        )
     except PlanningError as exc:
         if bar is not None:
             bar.close()
