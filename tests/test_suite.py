@@ -286,6 +286,7 @@ def test_the_rate_interval_is_wilsons():
         half = z * math.sqrt(k * (n - k) / n + z * z / 4)
         want = ((k + z * z / 2 - half) / (n + z * z), (k + z * z / 2 + half) / (n + z * z))
         assert rate_interval(k, n) == pytest.approx(want, abs=1e-9)
+    assert rate_interval(np.int64(42), np.int64(100)) == rate_interval(42, 100)
     lo, hi = rate_interval(42, 100)
     assert 0.32 < lo < 0.42 < hi < 0.53  # about +-10 points at 100 scenarios
     for k, n, arg in [(1, 0, "n"), (-1, 10, "k"), (11, 10, "k"), (1.0, 10, "k")]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from numbers import Integral
 
 import numpy as np
 from scipy.stats import binomtest
@@ -38,11 +39,11 @@ def rate_interval(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float
     Raises:
         InputError: ``n`` < 1 or ``k`` not in ``0..n``.
     """
-    if not (isinstance(n, int) and n >= 1):
-        raise InputError("n", f"is {n!r}", "an int >= 1 (scenarios)")
-    if not (isinstance(k, int) and 0 <= k <= n):
-        raise InputError("k", f"is {k!r}", f"an int in 0..{n} (full plans)")
-    ci = binomtest(k, n).proportion_ci(confidence_level=confidence, method="wilson")
+    if not (isinstance(n, Integral) and n >= 1):
+        raise InputError("n", f"is {n!r}", "a whole number >= 1 (scenarios)")
+    if not (isinstance(k, Integral) and 0 <= k <= n):
+        raise InputError("k", f"is {k!r}", f"a whole number in 0..{n} (full plans)")
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
     return float(ci.low), float(ci.high)
 
 
