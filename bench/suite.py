@@ -10,7 +10,9 @@ Coal alone (:func:`regrasp_pin.verify.plan_check.recheck_plan`).
 Prints one line per scenario as it finishes (outcome, regrasps, times; the reason of a
 failure on a second line), then :func:`regrasp_pin.suite.summarize`, then, with
 ``--baseline``, the change against a previous ``results.jsonl``: full-plan rate, median
-planning times, and every scenario whose outcome changed. Writes ``results.jsonl``
+planning times, the full plans won and lost with an exact sign test
+(:func:`regrasp_pin.suite.report.paired_change`), and every scenario whose outcome
+changed. Writes ``results.jsonl``
 (one :class:`~regrasp_pin.suite.ScenarioResult` per line, in spec order),
 ``skipped.jsonl`` and ``summary.txt`` into ``--out``, with the plans and partial plans.
 

@@ -204,8 +204,8 @@ def _backup_finger(scenario: Scenario, exc: PlanningError) -> str | None:
         or finger == search.pivot
     ):
         return None
-    # a finger of the grasp that has not moved: it holds (``contact``), or nothing was
-    # planned before the failure (``idle`` phases only, a failure at the motion's start)
+    # a finger of the grasp that has not moved: it holds (``contact``), or it is
+    # ``idle`` where nothing was planned for it (a plan that fails at its start)
     phases = exc.partial.phases.get(finger, [])
     return finger if all(ph.kind in _NOT_MOVED for ph in phases) else None
 

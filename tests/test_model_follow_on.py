@@ -30,6 +30,7 @@ def _smooth(f, n=12):
     mid = 0.5 * (f.lower + f.upper)
     t = np.arange(n)[:, None] * DT_S
     q = mid + np.sin(3.0 * t + np.arange(f.k)) * f.velocity_limit / 9.0
+    assert np.all(f.within_limits(q))
     step = np.full(n, DT_S)
     step[0] = 0.0
     return q, f.fk(q), step
@@ -66,6 +67,21 @@ def test_a_jump_to_another_branch_is_solved_again_from_the_sample_before(index):
     # back on the path's branch: nearer the true sample than a tenth of the jump
     assert np.abs(q[7] - q_true[7]).max() < 0.1 * np.abs(jump - q_true[7]).max()
     np.testing.assert_array_equal(np.delete(q, 7, 0), np.delete(q_true, 7, 0))
+
+
+def test_a_run_of_samples_on_another_branch_comes_back_sample_by_sample(index):
+    """The batch's case: from sample 7 on, every sample on another branch (each its own
+    target's solution): solved one after another from the one before, all of them
+    reach their targets within the speed limits, near the path."""
+    f = index
+    q_true, targets, step = _smooth(f)
+    q = q_true.copy()
+    q[7:] = [_other_branch(f, targets[i], q_true[i]) for i in range(7, len(q))]
+    err = np.linalg.norm(f.fk(q) - targets, axis=1)
+    assert follow_on(f, q, err, targets, q_true[0], step, TOL_M) == len(q) - 7
+    assert np.all(np.linalg.norm(f.fk(q) - targets, axis=1) <= TOL_M)
+    assert _fastest(f, q, q_true[0], step).max() <= 1.0
+    assert np.abs(q - q_true).max() < 0.1
 
 
 def test_a_sample_the_batch_missed_is_solved_from_the_one_before(index):
@@ -114,9 +130,14 @@ def test_an_unreachable_target_stays_missed(index):
 
 
 def test_what_counts_as_reached_can_be_given_per_sample(index):
-    """A residual within the sample's own tolerance is reached: left as it is."""
+    """A residual within the sample's own tolerance is reached: left as it is; one
+    above it is solved again."""
     f = index
     q_true, targets, step = _smooth(f)
     q, err = q_true.copy(), np.full(len(q_true), 5e-5)
     assert follow_on(f, q, err, targets, q_true[0], step, TOL_M, reached_m=1e-4) == 0
     np.testing.assert_array_equal(q, q_true)
+    reached = np.full(len(q), 1e-4)
+    reached[9] = 1e-5  # 5e-5 misses this one
+    assert follow_on(f, q, err, targets, q_true[0], step, TOL_M, reached_m=reached) == 1
+    assert err[9] <= TOL_M and np.all(err[np.arange(len(q)) != 9] == 5e-5)

@@ -289,9 +289,12 @@ def test_the_rate_interval_is_wilsons():
     assert rate_interval(np.int64(42), np.int64(100)) == rate_interval(42, 100)
     lo, hi = rate_interval(42, 100)
     assert 0.32 < lo < 0.42 < hi < 0.53  # about +-10 points at 100 scenarios
-    for k, n, arg in [(1, 0, "n"), (-1, 10, "k"), (11, 10, "k"), (1.0, 10, "k")]:
+    for k, n, arg in [(1, 0, "n"), (-1, 10, "k"), (11, 10, "k"), (1.0, 10, "k"), (True, 1, "k")]:
         with pytest.raises(InputError, match=f"^{arg}"):
             rate_interval(k, n)
+    for bad in (0.0, 1.0, 95, "0.95"):
+        with pytest.raises(InputError, match="^confidence"):
+            rate_interval(4, 10, confidence=bad)
 
 
 def test_the_summary_gives_the_rates_interval():

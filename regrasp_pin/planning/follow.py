@@ -82,7 +82,9 @@ def follow_curve(
 ) -> np.ndarray:
     """Joint trajectory ``(S, k)`` whose tip follows ``tip_obj`` (object frame) within
     ``tol`` ``(S,)`` [m] per sample (each solve to ``ik_tol_m`` [m]), by warm-started
-    batched IK in chunks."""
+    batched IK in chunks; a sample that a chunk missed or put on another branch of a
+    spare joint's solutions is solved again from the sample before
+    (:func:`~regrasp_pin.model.follow_on.follow_on`)."""
     targets = np.einsum("nij,nj->ni", T[:, :3, :3], tip_obj) + T[:, :3, 3]
     q = np.empty((times.size, f.k))
     prev = q0
@@ -91,20 +93,19 @@ def follow_curve(
         s1 = min(s0 + _IK_CHUNK, times.size)
         # warm start only: a restart may jump to another IK branch (a joint flip)
         res = f.ik(targets[s0:s1], prev, tol_m=ik_tol_m, restarts=False)
-        # a sample that misses or jumps to another branch is solved from the one before
-        follow_on(f, res.q, res.error_m, targets[s0:s1], prev, step[s0:s1], ik_tol_m, tol[s0:s1])
-        bad = res.error_m > tol[s0:s1]
+        q[s0:s1], err = res.q, res.error_m.copy()
+        follow_on(f, q[s0:s1], err, targets[s0:s1], prev, step[s0:s1], ik_tol_m, tol[s0:s1])
+        bad = err > tol[s0:s1]
         if bad.any():
-            i = int(np.argmax(res.error_m - tol[s0:s1]))
+            i = int(np.argmax(err - tol[s0:s1]))
             raise PlanningError(
-                f"IK cannot follow the path (residual {1e3 * res.error_m[i]:.2f} mm, "
+                f"IK cannot follow the path (residual {1e3 * err[i]:.2f} mm, "
                 f"tolerance {1e3 * tol[s0 + i]:.3f} mm)",
                 finger=f.name,
                 time_s=float(times[s0 + i]),
                 kind=FailureKind.IK_UNREACHABLE,
-                measured=float(res.error_m[i]),
+                measured=float(err[i]),
                 required=float(tol[s0 + i]),
             )
-        q[s0:s1] = res.q
-        prev = res.q[-1]
+        prev = q[s1 - 1]
     return q

@@ -37,12 +37,14 @@ def rate_interval(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float
     differs.
 
     Raises:
-        InputError: ``n`` < 1 or ``k`` not in ``0..n``.
+        InputError: ``n`` < 1, ``k`` not in ``0..n``, or ``confidence`` not in (0, 1).
     """
-    if not (isinstance(n, Integral) and n >= 1):
+    if isinstance(n, bool) or not (isinstance(n, Integral) and n >= 1):
         raise InputError("n", f"is {n!r}", "a whole number >= 1 (scenarios)")
-    if not (isinstance(k, Integral) and 0 <= k <= n):
+    if isinstance(k, bool) or not (isinstance(k, Integral) and 0 <= k <= n):
         raise InputError("k", f"is {k!r}", f"a whole number in 0..{n} (full plans)")
+    if not (isinstance(confidence, float | int) and 0.0 < confidence < 1.0):
+        raise InputError("confidence", f"is {confidence!r}", "a number in (0, 1), e.g. 0.95")
     ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
     return float(ci.low), float(ci.high)
 
