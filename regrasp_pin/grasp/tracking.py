@@ -18,7 +18,7 @@ import numpy as np
 from .._validate import as_array
 from ..exceptions import InputError
 from ..model.clearance import LinkClearance
-from ..model.follow_on import follow_on
+from ..model.follow_on import fastest_share, follow_on
 from ..model.hand import Finger, Hand, speed_shares
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
@@ -180,7 +180,8 @@ def track_contact(
         _settle_chunk(f, q, err, targets, n_palm, s0, s1, prev, step_s, contact)  # grasp.settle
         margin[s0:s1] = f.limit_margin(q[s0:s1])
         pad_cos[s0:s1] = pad_cosines(f, q[s0:s1], n_palm[s0:s1])
-        speed[s0:s1] = _speed_share(f, q[s0:s1], q[s0 - 1] if s0 else None, step_s[s0:s1])
+        # the first time is where the track starts (its own configuration): no speed
+        speed[s0:s1] = fastest_share(f, q[s0:s1], q[s0 - 1] if s0 else q[0], step_s[s0:s1])
         prev = q[s1 - 1]
         lost = _lost(err[s0:s1], speed[s0:s1], margin[s0:s1], pad_cos[s0:s1], contact, cos_cone)
         if lost.any():
@@ -322,17 +323,6 @@ def _settle_chunk(
         last = q[i]
 
 
-def _speed_share(
-    f: Finger, q: np.ndarray, before: np.ndarray | None, step_s: np.ndarray
-) -> np.ndarray:
-    """``(S,)``: how fast the fastest joint moves into each of the configurations ``q``
-    ``(S, k)`` from the one before (``before`` ahead of the first; None: the first is
-    where the track starts, 0), over ``step_s`` ``(S,)`` [s], as a share of its
-    velocity limit (:func:`~regrasp_pin.model.hand.speed_shares`)."""
-    prior = np.concatenate([q[:1] if before is None else before[None], q[:-1]])
-    return speed_shares(q - prior, step_s, f.velocity_limit).max(axis=1)
-
-
 def _lost(
     err: np.ndarray,
     speed: np.ndarray,
@@ -342,7 +332,7 @@ def _lost(
     cos_cone: float,
 ) -> np.ndarray:
     """Where the contact is lost: not reached, a joint that cannot follow it within its
-    velocity limit (``speed``: :func:`_speed_share`), outside the joint limits, or the
-    pad turned away beyond the cone (the conditions that end every hold; the links and
-    the trigger margin come on top of them)."""
+    velocity limit (``speed``: :func:`~regrasp_pin.model.follow_on.fastest_share`),
+    outside the joint limits, or the pad turned away beyond the cone (the conditions
+    that end every hold; the links and the trigger margin come on top of them)."""
     return (err > contact.ik_tol_m) | (speed > 1.0) | (margin < 0.0) | (pad_cos < cos_cone)

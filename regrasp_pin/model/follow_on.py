@@ -16,7 +16,7 @@ import numpy as np
 
 from .hand import Finger, speed_shares
 
-__all__ = ["follow_on"]
+__all__ = ["fastest_share", "follow_on"]
 
 
 def follow_on(
@@ -56,8 +56,7 @@ def follow_on(
         How many samples were solved again and kept.
     """
     reached = np.broadcast_to(ik_tol_m if reached_m is None else reached_m, error_m.shape)
-    before = np.vstack([q_before[None], q[:-1]])
-    share = _shares(finger, q - before, step_s)
+    share = fastest_share(finger, q, q_before, step_s)
     bad = np.flatnonzero((error_m > reached) | (share > 1.0))
     if bad.size == 0:
         return 0
@@ -65,10 +64,10 @@ def follow_on(
     last = q[bad[0] - 1] if bad[0] > 0 else q_before
     for i in range(int(bad[0]), q.shape[0]):
         failed = bool(error_m[i] > reached[i])
-        step = float(_shares(finger, (q[i] - last)[None], step_s[i : i + 1])[0])
+        step = float(fastest_share(finger, q[i][None], last, step_s[i : i + 1])[0])
         if failed or step > 1.0:
             res = finger.ik(targets_palm[i][None], last, tol_m=ik_tol_m, restarts=False)
-            moved = float(_shares(finger, res.q - last[None], step_s[i : i + 1])[0])
+            moved = float(fastest_share(finger, res.q, last, step_s[i : i + 1])[0])
             if res.error_m[0] <= reached[i] and (failed or moved < step):
                 q[i], error_m[i] = res.q[0], res.error_m[0]
                 kept += 1
@@ -76,7 +75,12 @@ def follow_on(
     return kept
 
 
-def _shares(finger: Finger, dq: np.ndarray, step_s: np.ndarray) -> np.ndarray:
-    """``(S,)``: the fastest joint's share of its velocity limit over each step (0 for a
-    step of no time)."""
-    return speed_shares(dq, step_s, finger.velocity_limit).max(axis=1)
+def fastest_share(
+    finger: Finger, q: np.ndarray, q_before: np.ndarray, step_s: np.ndarray
+) -> np.ndarray:
+    """``(S,)``: how fast the fastest joint moves into each of the configurations ``q``
+    ``(S, k)`` from the one before (``q_before`` ``(k,)`` ahead of the first) over
+    ``step_s`` ``(S,)`` [s], as a share of its velocity limit
+    (:func:`~regrasp_pin.model.hand.speed_shares`; 0 for a step of no time)."""
+    before = np.vstack([q_before[None], q[:-1]])
+    return speed_shares(q - before, step_s, finger.velocity_limit).max(axis=1)
