@@ -132,6 +132,7 @@ def _placements(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.n
         np.array([g.R_frame_geom for g in geoms]).reshape(-1, 3, 3),
         np.array([g.p_frame_geom for g in geoms]).reshape(-1, 3),
         q,
+        compiled=ik_backend() == "numba",  # the same loop compiled, the same bits
     )
 
 
@@ -157,7 +158,9 @@ def _segment_ends_soa(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray
     """:func:`_segment_ends` coordinate first, ``(3, G, D)`` each (the same bits)."""
     ends = [g.p_frame_geom + g.R_frame_geom @ g.seg_a for g in geoms]
     ends += [g.p_frame_geom + g.R_frame_geom @ g.seg_b for g in geoms]
-    p = attached_points_soa([g.chain for g in geoms] * 2, np.array(ends), q)
+    p = attached_points_soa(
+        [g.chain for g in geoms] * 2, np.array(ends), q, compiled=ik_backend() == "numba"
+    )
     return p[:, : len(geoms)], p[:, len(geoms) :]
 
 

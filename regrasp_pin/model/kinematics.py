@@ -29,6 +29,7 @@ points and get exactly the entries of the whole batch.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import cast
@@ -37,6 +38,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..exceptions import InputError
+from . import placements_numba
 
 __all__ = ["FingerChain", "attached_placements", "attached_points", "attached_points_soa"]
 
@@ -191,6 +193,8 @@ class FingerChain:
         self._theta_column = np.array([jt.column for jt in joints], dtype=np.int64)
         self._scaled = tuple(i for i, jt in enumerate(joints) if jt.scaling != 1.0)
         self._offset = tuple(i for i, jt in enumerate(joints) if jt.offset)
+        # the same constants for the compiled placements (placements_numba)
+        self._plan = placements_numba.chain_plan(joints, self._t_terms, self._C_terms)
         self._packed = (
             np.array([jt.C for jt in joints]).reshape(-1, 3, 3),
             np.array([jt.t for jt in joints]).reshape(-1, 3),
@@ -301,12 +305,7 @@ class FingerChain:
         joint) serves :func:`attached_placements`.
         """
         n = qT.shape[1]
-        theta = qT[self._theta_column]  # (m, N)
-        for i in self._scaled:
-            jt = self._joints[i]
-            theta[i] = qT[jt.column] * jt.scaling
-        for i in self._offset:
-            theta[i] += self._joints[i].offset
+        theta = self._angles(qT)
         if fast_trig:
             t32 = theta.astype(np.float32)
             cos = np.cos(t32).astype(np.float64)
@@ -346,6 +345,28 @@ class FingerChain:
         if n <= _FEW_POINTS:
             return p, cols, self._jacobian_few(p, axes, origins)
         return p, cols, self._jacobian_loop(p, axes, origins)
+
+    def _angles(self, qT: np.ndarray) -> np.ndarray:
+        """The joints' angles ``(m, N)`` [rad] on the path root -> tip, from the
+        finger's configurations ``qT`` ``(k, N)`` (mimic scalings and offsets applied)."""
+        theta = qT[self._theta_column]  # (m, N)
+        for i in self._scaled:
+            jt = self._joints[i]
+            theta[i] = qT[jt.column] * jt.scaling
+        for i in self._offset:
+            theta[i] += self._joints[i].offset
+        return theta
+
+    def _frame_terms(
+        self, R_off: np.ndarray | None, p_off: np.ndarray
+    ) -> tuple[tuple[tuple[int, float], ...], tuple[tuple[tuple[int, float], ...], ...] | None]:
+        """The terms of :meth:`_attached`'s sums for the frame ``(R_off, p_off)`` (its
+        origin; its rotation's columns, None without ``R_off``)."""
+        p_terms = _terms(self._tip_t + self._tip_R @ p_off)
+        if R_off is None:
+            return p_terms, None
+        R_c = self._tip_R @ R_off
+        return p_terms, tuple(_terms(R_c[:, a]) for a in range(3))
 
     def _jacobian_loop(
         self, p: np.ndarray, axes: list[np.ndarray], origins: list[np.ndarray]
@@ -442,23 +463,19 @@ class FingerChain:
         3)`` (skipped when None) and ``p_out`` ``(N, 3)``: the constants folded into one
         rotation and one offset in the last ``W'`` frame, then written-out sums per
         point."""
-        t_c = self._tip_t + self._tip_R @ p_off
-        d = _linear(_terms(t_c), cols)
+        p_terms, R_terms = self._frame_terms(None if R_out is None else R_off, p_off)
+        d = _linear(p_terms, cols)
         p_out[...] = (o + (0.0 if d is None else d)).T
-        if R_off is None or R_out is None:
+        if R_terms is None or R_out is None:
             return
-        R_c = self._tip_R @ R_off
         for a in range(3):
-            R_out[:, :, a] = cast(np.ndarray, _linear(_terms(R_c[:, a]), cols)).T
+            R_out[:, :, a] = cast(np.ndarray, _linear(R_terms[a], cols)).T
 
 
-def _kernel_states(
-    chains: list[FingerChain], q: np.ndarray
-) -> Iterator[tuple[int, np.ndarray, list[np.ndarray]]]:
-    """``(j, o, cols)`` for every chain ``j``: the kernel's origin and ``W'`` columns after
-    the chain's last joint, at full model configurations ``q`` ``(N, nq)``, with one
-    kernel run per chain that does not start the path of a longer one (a finger's link
-    frames lie on prefixes of the path to its tip)."""
+def _hosts(chains: list[FingerChain]) -> list[tuple[FingerChain, list[int]]]:
+    """The chains whose paths do not start a longer one's (the hosts), each with the
+    indices of the chains on its path (a finger's link frames lie on prefixes of the
+    path to its tip): one kernel run per host serves them all."""
     distinct = list({id(c): c for c in chains}.values())
     distinct.sort(key=lambda c: -len(c.path))  # stable: ties keep the given order
     hosts: list[FingerChain] = []
@@ -469,8 +486,16 @@ def _kernel_states(
             hosts.append(c)
             host = c
         host_of[id(c)] = host
-    for host in hosts:
-        members = [j for j, c in enumerate(chains) if host_of[id(c)] is host]
+    return [(h, [j for j, c in enumerate(chains) if host_of[id(c)] is h]) for h in hosts]
+
+
+def _kernel_states(
+    chains: list[FingerChain], q: np.ndarray
+) -> Iterator[tuple[int, np.ndarray, list[np.ndarray]]]:
+    """``(j, o, cols)`` for every chain ``j``: the kernel's origin and ``W'`` columns after
+    the chain's last joint, at full model configurations ``q`` ``(N, nq)``, with one
+    kernel run per host (:func:`_hosts`)."""
+    for host, members in _hosts(chains):
         keep: dict[int, tuple[np.ndarray, list[np.ndarray]]] = {
             len(chains[j].path) - 1: (np.empty(0), []) for j in members
         }
@@ -480,7 +505,11 @@ def _kernel_states(
 
 
 def attached_placements(
-    chains: list[FingerChain], R_off: np.ndarray, p_off: np.ndarray, q: np.ndarray
+    chains: list[FingerChain],
+    R_off: np.ndarray,
+    p_off: np.ndarray,
+    q: np.ndarray,
+    compiled: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Palm-frame placements of frames fixed to chains' tip frames (a finger's links and
     their collision geometries), with one kernel run per finger (see
@@ -492,15 +521,77 @@ def attached_placements(
         R_off: Rotations of the attached frames in their chain's tip frame ``(G, 3, 3)``.
         p_off: Their origins in the tip frame ``(G, 3)`` [m].
         q: Full model configurations ``(N, nq)`` [rad].
+        compiled: Run the compiled loop (:mod:`.placements_numba`, numba installed):
+            the same numbers, bit for bit.
 
     Returns:
         ``R`` ``(N, G, 3, 3)`` and ``p`` ``(N, G, 3)`` [m], palm frame.
     """
     n, g = q.shape[0], len(chains)
     R, p = np.empty((n, g, 3, 3)), np.empty((n, g, 3))
+    if compiled:
+        _compiled_placements(chains, R_off, p_off, q, R, p)
+        return R, p
     for j, o, cols in _kernel_states(chains, q):
         chains[j]._attached(o, cols, R_off[j], p_off[j], R[:, j], p[:, j])
     return R, p
+
+
+_FRAME_PLANS: dict[tuple, tuple] = {}  # the attached frames' packed terms, by chains and frames
+_FRAME_PLANS_KEPT = 256
+_FRAME_PLANS_LOCK = threading.Lock()
+
+
+def _frame_plans(
+    chains: list[FingerChain], R_off: np.ndarray | None, p_off: np.ndarray
+) -> list[tuple[FingerChain, tuple[np.ndarray, ...]]]:
+    """Per host (:func:`_hosts`), the packed terms of its frames
+    (:func:`~.placements_numba.frame_terms` and the joint and output column of each),
+    kept for the same chains and frames (the checks of a plan place the same geometries
+    thousands of times)."""
+    key = (
+        tuple(id(c) for c in chains),
+        None if R_off is None else R_off.tobytes(),
+        np.ascontiguousarray(p_off).tobytes(),
+    )
+    with _FRAME_PLANS_LOCK:
+        kept = _FRAME_PLANS.get(key)
+    if kept is not None and all(a is b for a, b in zip(kept[0], chains, strict=True)):
+        return kept[1]
+    plans = []
+    for host, members in _hosts(chains):
+        terms = [
+            chains[j]._frame_terms(None if R_off is None else R_off[j], p_off[j]) for j in members
+        ]
+        packed = placements_numba.frame_terms(
+            [t[0] for t in terms], None if R_off is None else [t[1] for t in terms]
+        )
+        joint_of = np.array([len(chains[j].path) - 1 for j in members], np.int64)
+        plans.append((host, (joint_of, np.array(members, np.int64), *packed)))
+    with _FRAME_PLANS_LOCK:
+        if len(_FRAME_PLANS) >= _FRAME_PLANS_KEPT:
+            _FRAME_PLANS.pop(next(iter(_FRAME_PLANS)))
+        _FRAME_PLANS[key] = (tuple(chains), plans)
+    return plans
+
+
+def _compiled_placements(
+    chains: list[FingerChain],
+    R_off: np.ndarray | None,
+    p_off: np.ndarray,
+    q: np.ndarray,
+    R_out: np.ndarray | None,
+    p_out: np.ndarray,
+) -> None:
+    """:func:`attached_placements` (``R_out`` ``(N, G, 3, 3)``, or None for the
+    positions alone) into ``p_out`` ``(N, G, 3)`` (any strides), by the compiled loop."""
+    want_R = R_out is not None and R_off is not None
+    R_fill = R_out if want_R else np.empty((1, 1, 3, 3))
+    for host, frames in _frame_plans(chains, R_off if want_R else None, p_off):
+        theta = host._angles(np.ascontiguousarray(q[:, host.q_indices].T))
+        placements_numba.placements(
+            np.cos(theta), np.sin(theta), *host._plan, *frames, want_R, R_fill, p_out
+        )
 
 
 def attached_points(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -510,11 +601,17 @@ def attached_points(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray)
     return np.moveaxis(attached_points_soa(chains, p_off, q), 0, -1).swapaxes(0, 1)
 
 
-def attached_points_soa(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray) -> np.ndarray:
+def attached_points_soa(
+    chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray, compiled: bool = False
+) -> np.ndarray:
     """:func:`attached_points` laid out coordinate first, ``(3, G, N)`` [m] (the same
-    bits): each coordinate of each point a contiguous row, for batched arithmetic."""
+    bits): each coordinate of each point a contiguous row, for batched arithmetic;
+    ``compiled`` as :func:`attached_placements`'s."""
     n, g = q.shape[0], len(chains)
     p = np.empty((3, g, n))
+    if compiled:
+        _compiled_placements(chains, None, p_off, q, None, p.transpose(2, 1, 0))
+        return p
     for j, o, cols in _kernel_states(chains, q):
         chains[j]._attached(o, cols, None, p_off[j], None, p[:, j].T)
     return p
