@@ -1,10 +1,11 @@
 """Exact clearances (regrasp_pin.model.clearance).
 
 Scene (palm frame): the five-finger hand and a box 40 x 60 x 40 mm. ``LinkClearance``
-is checked against Pinocchio's distance pipeline (the object added to a fresh
-GeometryModel, ``pin.computeDistances`` over explicit collision pairs);
-``FingerClearance``, which is built on that pipeline, against ``coal.distance`` called
-pair by pair on the placements Pinocchio gives.
+and ``FingerClearance``, which are built on Pinocchio's distance pipeline
+(``pin.computeDistances`` over explicit collision pairs), are checked against
+``coal.distance`` called pair by pair on the placements Pinocchio gives (the object's
+pose as given), to the bit; ``LinkClearance`` also against a fresh pipeline with the
+object placed in the model.
 """
 
 from __future__ import annotations
@@ -49,6 +50,23 @@ def _pinocchio_distances(hand: Hand, geometry_ids, others, q_full, T_palm_object
     return min(r.min_distance for r in gdata.distanceResults)
 
 
+def _coal_object(hand: Hand, geometry_ids, q_full, T_palm_object, obj) -> float:
+    """Smallest ``coal.distance`` between ``geometry_ids`` and the object, pair by pair."""
+    data = hand.model.createData()
+    gdata = pin.GeometryData(hand.collision_model)
+    pin.updateGeometryPlacements(hand.model, data, hand.collision_model, gdata, q_full)
+    objs = hand.collision_model.geometryObjects
+    tf = coal.Transform3s(T_palm_object[:3, :3], T_palm_object[:3, 3])
+    best = np.inf
+    for a in geometry_ids:
+        res = coal.DistanceResult()
+        d = coal.distance(
+            objs[a].geometry, gdata.oMg[a], obj.coal_geometry(), tf, coal.DistanceRequest(), res
+        )
+        best = min(best, d)
+    return best
+
+
 def _coal_pairs(hand: Hand, geometry_ids, others, q_full) -> float:
     """Smallest ``coal.distance`` between ``geometry_ids`` and ``others``, pair by pair."""
     data = hand.model.createData()
@@ -88,6 +106,8 @@ def test_link_clearance_matches_pinocchio_distances(hand, box, finger):
         expected_tip = _pinocchio_distances(hand, f.geometry_ids, None, q_full[i], T[i], box)
         assert_close(got[i], expected, atol=1e-9, what=f"links, config {i}")
         assert_close(got_tip[i], expected_tip, atol=1e-9, what=f"with tip, config {i}")
+        assert got[i] == _coal_object(hand, lc.geometry_ids, q_full[i], T[i], box)
+        assert got_tip[i] == _coal_object(hand, f.geometry_ids, q_full[i], T[i], box)
     assert np.all(got_tip <= got + 1e-12)
     # one pose for all configurations broadcasts
     assert_close(
@@ -110,6 +130,38 @@ def test_link_clearance_is_negative_when_the_object_swallows_a_link(hand, box):
     assert lc(q_full[None], T)[0] < 0.0
     T[:3, 3] = [1.0, 1.0, 1.0]  # far away: about the distance to the box
     assert lc(q_full[None], T)[0] > 1.0
+
+
+def test_link_clearance_is_coals_distance_pair_by_pair_for_any_object_and_thread(hand, box):
+    """Many configurations, penetrating or not, against two objects in turn (the pairs
+    are kept per object) and from another thread: each distance is the smallest of one
+    ``coal.distance`` call per geometry, to the bit."""
+    import threading
+
+    from regrasp_pin.model.objects import Prism
+
+    rng = np.random.default_rng(8)
+    f = hand.finger("middle")
+    q_full = hand.to_full("middle", rng.uniform(f.lower, f.upper, (40, f.k)))
+    T = np.tile(np.eye(4), (40, 1, 1))
+    T[:, :3, :3] = Rotation.random(40, random_state=9).as_matrix()
+    T[:, :3, 3] = 0.5 * f.fk(hand.from_full("middle", q_full)) + rng.uniform(-0.02, 0.02, (40, 3))
+    for obj in (box, Prism(6, 0.03, 0.04), box):
+        for kwargs in ({}, {"include_tip": True}, {"tip_only": True}):
+            lc = LinkClearance(hand, "middle", obj, **kwargs)
+            got = lc(q_full, T)
+            ref = [
+                _coal_object(hand, lc.geometry_ids, q, Ti, obj)
+                for q, Ti in zip(q_full, T, strict=True)
+            ]
+            assert got.tolist() == ref, kwargs
+            assert (got < 0).any() and (got > 0).any()  # both sides occur
+    in_thread = {}
+    lc = LinkClearance(hand, "middle", box, include_tip=True)
+    worker = threading.Thread(target=lambda: in_thread.setdefault("d", lc(q_full, T)))
+    worker.start()
+    worker.join()
+    assert in_thread["d"].tobytes() == lc(q_full, T).tobytes()
 
 
 def test_finger_clearance_matches_coal_pair_by_pair(hand):
