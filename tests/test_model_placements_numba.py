@@ -2,7 +2,7 @@
 
 The loop is plain Python that numba compiles unchanged; it performs numpy's operations
 in numpy's order on the cosines and sines numpy computed, so both paths must place
-every collision geometry (and every capsule end) at the same bits. Without numba the
+every collision geometry, capsule end and fingertip frame at the same bits. Without numba the
 plain Python runs uncompiled on a few dozen configurations; with numba the compiled
 loop is checked on more, and through the distance bounds that read it.
 """
@@ -60,6 +60,11 @@ def _check_same_bits(hand, n, seed):
     s0 = kinematics.attached_points_soa(chains, ends, q)
     s1 = kinematics.attached_points_soa(chains, ends, q, compiled=True)
     assert s0.tobytes() == s1.tobytes()
+    for f in hand.fingers.values():  # the tip frames (FingerChain.poses)
+        qf = q[:, f.q_indices]
+        R0, p0 = f.chain.poses(qf)
+        R1, p1 = f.chain.poses(qf, compiled=True)
+        assert R0.tobytes() == R1.tobytes() and p0.tobytes() == p1.tobytes(), f.name
     if n > 1:  # not one placement repeated: the configurations differ
         assert not np.allclose(p0[0], p0[-1])
 

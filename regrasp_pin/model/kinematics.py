@@ -440,8 +440,16 @@ class FingerChain:
         p, _, J = self._forward(q, True)
         return p, J
 
-    def poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Tip frame rotations ``(N, 3, 3)`` and positions ``(N, 3)`` in the palm frame."""
+    def poses(self, q: np.ndarray, compiled: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Tip frame rotations ``(N, 3, 3)`` and positions ``(N, 3)`` in the palm frame;
+        ``compiled``: by the compiled loop (:mod:`.placements_numba`, numba installed),
+        the same bits (the tip frame as a frame attached to it)."""
+        if compiled:
+            n = q.shape[0]
+            R_out, p_out = np.empty((n, 1, 3, 3)), np.empty((n, 1, 3))
+            ((_, frames),) = _frame_plans([self], _TIP_FRAME[0], _TIP_FRAME[1])
+            _place_compiled(self, frames, np.ascontiguousarray(q.T), R_out, p_out)
+            return R_out[:, 0], p_out[:, 0]
         p, W, _ = self.forward_soa(np.ascontiguousarray(q.T), False)
         cols = [W[:, 0], W[:, 1], W[:, 2]]  # R = W @ tip_R, per point
         R = np.empty_like(W)
@@ -586,12 +594,31 @@ def _compiled_placements(
     """:func:`attached_placements` (``R_out`` ``(N, G, 3, 3)``, or None for the
     positions alone) into ``p_out`` ``(N, G, 3)`` (any strides), by the compiled loop."""
     want_R = R_out is not None and R_off is not None
-    R_fill = R_out if want_R else np.empty((1, 1, 3, 3))
     for host, frames in _frame_plans(chains, R_off if want_R else None, p_off):
-        theta = host._angles(np.ascontiguousarray(q[:, host.q_indices].T))
-        placements_numba.placements(
-            np.cos(theta), np.sin(theta), *host._plan, *frames, want_R, R_fill, p_out
-        )
+        qT = np.ascontiguousarray(q[:, host.q_indices].T)
+        _place_compiled(host, frames, qT, R_out if want_R else None, p_out)
+
+
+#: the tip frame itself, attached to its chain's tip: ``(R_off (1, 3, 3), p_off (1, 3))``
+_TIP_FRAME = (np.eye(3)[None], np.zeros((1, 3)))
+
+
+def _place_compiled(
+    host: FingerChain,
+    frames: tuple[np.ndarray, ...],
+    qT: np.ndarray,
+    R_out: np.ndarray | None,
+    p_out: np.ndarray,
+) -> None:
+    """One host's frames (:func:`_frame_plans`) placed by the compiled loop at its
+    finger's configurations ``qT`` ``(k, N)``, into ``p_out`` (and ``R_out`` unless
+    None)."""
+    theta = host._angles(qT)
+    want_R = R_out is not None
+    R_fill = R_out if R_out is not None else np.empty((1, 1, 3, 3))
+    placements_numba.placements(
+        np.cos(theta), np.sin(theta), *host._plan, *frames, want_R, R_fill, p_out
+    )
 
 
 def attached_points(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray) -> np.ndarray:
