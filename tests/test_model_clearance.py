@@ -17,6 +17,7 @@ import pytest
 from conftest import assert_close
 from scipy.spatial.transform import Rotation
 
+from regrasp_pin.model import clearance
 from regrasp_pin.model.clearance import FingerClearance, LinkClearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.objects import Box
@@ -132,36 +133,80 @@ def test_link_clearance_is_negative_when_the_object_swallows_a_link(hand, box):
     assert lc(q_full[None], T)[0] > 1.0
 
 
-def test_link_clearance_is_coals_distance_pair_by_pair_for_any_object_and_thread(hand, box):
+def _near_poses(hand, finger, n, seed):
+    """``n`` random configurations of ``finger`` and object poses about its middle."""
+    rng = np.random.default_rng(seed)
+    f = hand.finger(finger)
+    q_full = hand.to_full(finger, rng.uniform(f.lower, f.upper, (n, f.k)))
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, :3] = Rotation.random(n, random_state=seed + 1).as_matrix()
+    T[:, :3, 3] = 0.5 * f.fk(hand.from_full(finger, q_full)) + rng.uniform(-0.02, 0.02, (n, 3))
+    return q_full, T
+
+
+def _same_as_coal(hand, finger, obj, q_full, T, **kwargs):
+    lc = LinkClearance(hand, finger, obj, **kwargs)
+    got = lc(q_full, T)
+    ref = [_coal_object(hand, lc.geometry_ids, q, Ti, obj) for q, Ti in zip(q_full, T, strict=True)]
+    assert got.tobytes() == np.array(ref).tobytes(), kwargs
+    return got
+
+
+@pytest.mark.parametrize("which", ["five_finger", "allegro"])
+def test_link_clearance_is_coals_distance_pair_by_pair_for_any_object_and_thread(which, box):
     """Many configurations, penetrating or not, against two objects in turn (the pairs
-    are kept per object) and from another thread: each distance is the smallest of one
-    ``coal.distance`` call per geometry, to the bit."""
+    are kept per object) and from other threads at once: each distance is the smallest
+    of one ``coal.distance`` call per geometry, to the bit."""
     import threading
 
     from regrasp_pin.model.objects import Prism
 
-    rng = np.random.default_rng(8)
-    f = hand.finger("middle")
-    q_full = hand.to_full("middle", rng.uniform(f.lower, f.upper, (40, f.k)))
-    T = np.tile(np.eye(4), (40, 1, 1))
-    T[:, :3, :3] = Rotation.random(40, random_state=9).as_matrix()
-    T[:, :3, 3] = 0.5 * f.fk(hand.from_full("middle", q_full)) + rng.uniform(-0.02, 0.02, (40, 3))
+    hand = getattr(Hand, which)()
+    q_full, T = _near_poses(hand, "middle", 40, 8)
     for obj in (box, Prism(6, 0.03, 0.04), box):
         for kwargs in ({}, {"include_tip": True}, {"tip_only": True}):
-            lc = LinkClearance(hand, "middle", obj, **kwargs)
-            got = lc(q_full, T)
-            ref = [
-                _coal_object(hand, lc.geometry_ids, q, Ti, obj)
-                for q, Ti in zip(q_full, T, strict=True)
-            ]
-            assert got.tolist() == ref, kwargs
+            got = _same_as_coal(hand, "middle", obj, q_full, T, **kwargs)
             assert (got < 0).any() and (got > 0).any()  # both sides occur
-    in_thread = {}
     lc = LinkClearance(hand, "middle", box, include_tip=True)
-    worker = threading.Thread(target=lambda: in_thread.setdefault("d", lc(q_full, T)))
-    worker.start()
-    worker.join()
-    assert in_thread["d"].tobytes() == lc(q_full, T).tobytes()
+    alone = lc(q_full, T).tobytes()
+    in_threads: list[bytes] = []
+    workers = [
+        threading.Thread(
+            target=lambda: in_threads.extend(lc(q_full, T).tobytes() for _ in range(5))
+        )
+        for _ in range(3)
+    ]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    assert in_threads == [alone] * 15
+
+
+def test_link_clearance_measures_geometries_whose_collisions_are_disabled(box):
+    """A collision model may disable a geometry's collisions (Pinocchio then leaves its
+    pairs out): its distance to the object is still measured, as Coal measures it."""
+    hand = Hand.five_finger()
+    for g in hand.finger("index").geometry_ids:
+        hand.collision_model.geometryObjects[g].disableCollision = True
+    q_full, T = _near_poses(hand, "index", 20, 12)
+    got = _same_as_coal(hand, "index", box, q_full, T, include_tip=True)
+    assert (got < 0).any()
+
+
+def test_link_clearance_without_a_smallest_pair_takes_the_smallest_result(hand, box, monkeypatch):
+    """Where Pinocchio names no pair (none below +inf, or NaN), the smallest result is
+    read, NaN left out, as the pair-by-pair minimum does."""
+    q_full, T = _near_poses(hand, "thumb", 10, 14)
+    expected = LinkClearance(hand, "thumb", box)(q_full, T)
+    measure = pin.computeDistances
+
+    def none_named(pairs, gdata):
+        measure(pairs, gdata)
+        return len(pairs.collisionPairs)
+
+    monkeypatch.setattr(clearance.pin, "computeDistances", none_named)
+    assert LinkClearance(hand, "thumb", box)(q_full, T).tobytes() == expected.tobytes()
 
 
 def test_finger_clearance_matches_coal_pair_by_pair(hand):

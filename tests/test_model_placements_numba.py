@@ -40,14 +40,23 @@ def _random_q(hand, n, seed):
 
 def _frames(hand):
     """Every finger's collision geometries (repeats and links of several fingers in one
-    call, as the verification asks) and their capsules' ends."""
+    call, as the verification asks) and their capsules' ends; then, on every finger's
+    tip chain, frames whose constants have no term, unit terms and a permutation (the
+    sums' special cases)."""
     geoms = [distances._geometry(hand, g) for f in hand.fingers.values() for g in f.geometry_ids]
     geoms = geoms + geoms[:3]  # a chain asked twice
     chains = [g.chain for g in geoms]
-    R_off = np.array([g.R_frame_geom for g in geoms])
-    p_off = np.array([g.p_frame_geom for g in geoms])
-    ends = np.array([g.p_frame_geom + g.R_frame_geom @ g.seg_b for g in geoms])
-    return chains, R_off, p_off, ends
+    R_off = [g.R_frame_geom for g in geoms]
+    p_off = [g.p_frame_geom for g in geoms]
+    ends = [g.p_frame_geom + g.R_frame_geom @ g.seg_b for g in geoms]
+    swap = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])
+    for f in hand.fingers.values():
+        for R, p in ((np.eye(3), np.zeros(3)), (swap, np.array([0.0, 0.0, 1.0]))):
+            chains.append(f.chain)
+            R_off.append(R)
+            p_off.append(p)
+            ends.append(p)
+    return chains, np.array(R_off), np.array(p_off), np.array(ends)
 
 
 def _check_same_bits(hand, n, seed):
@@ -92,11 +101,21 @@ def test_the_verifications_bounds_are_the_same_on_both_backends(hand, backend):
     q = _random_q(hand, 300, 11)
     T = np.tile(np.eye(4), (300, 1, 1))
     T[:, :3, 3] = [0.07, 0.0, 0.04]
+    calls = []
+    compiled = placements_numba.placements
+
+    def counted(*args):
+        calls.append(args[0].shape)
+        compiled(*args)
+
     out = {}
     for name in ("numpy", "numba"):
         ik.set_ik_backend(name)
-        pd = distances.PairDistances(hand, box, f, q, T, np.full(300, -1e-4), 0.002, 0.0005)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(placements_numba, "placements", counted)
+            pd = distances.PairDistances(hand, box, f, q, T, np.full(300, -1e-4), 0.002, 0.0005)
         out[name] = (pd.lb.tobytes(), pd._R.tobytes(), pd._p.tobytes())
+        assert bool(calls) == (name == "numba")  # the numba backend places by the loop
     assert out["numpy"] == out["numba"]
 
 

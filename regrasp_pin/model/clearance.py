@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import threading
 import weakref
+from collections import OrderedDict
 from collections.abc import Iterable
 from typing import Any
 
@@ -102,7 +103,7 @@ class LinkClearance:
             pin.updateGeometryPlacements(model, data, pairs, gdata, q)
             gdata.oMg[obj_id] = pin.SE3(Ti[:3, :3], Ti[:3, 3])
             # Pinocchio returns the pair of the smallest distance (the first of equals;
-            # past the last pair when none is below the largest double)
+            # past the last pair when none is finite and below +inf)
             k = pin.computeDistances(pairs, gdata)
             out[i] = results[k].min_distance if k < len(results) else _smallest(results)
         return out
@@ -117,8 +118,11 @@ def _smallest(results: Any) -> float:
     return best
 
 
-#: per hand: (thread, geometries, object geometry) -> the object pairs' models
-_OBJECT_PAIRS: weakref.WeakKeyDictionary[Hand, dict[tuple, tuple]] = weakref.WeakKeyDictionary()
+#: per hand: (thread, geometries, object geometry) -> the object pairs' models, the
+#: most recently used last
+_OBJECT_PAIRS: weakref.WeakKeyDictionary[Hand, OrderedDict[tuple, tuple]] = (
+    weakref.WeakKeyDictionary()
+)
 _OBJECT_PAIRS_KEPT = 64  # per hand (the objects of one process's scenarios)
 _OBJECT_PAIRS_LOCK = threading.Lock()
 
@@ -130,20 +134,24 @@ def _object_pairs(
     the root, placed by the caller in the geometry data) and a collision pair for each of
     ``geometry_ids`` with it (Coal's default distance request each), its geometry data
     and the object's id; built at the first call and kept while ``hand`` lives, one per
-    thread (the data are written by every call).
+    thread (the data are written by every call; a finished thread's entries stay until
+    they are the least recently used of the hand's last ``_OBJECT_PAIRS_KEPT``).
 
     One C++ call then measures every pair (``pin.computeDistances``), the same Coal
-    distances as one ``coal.distance`` call per pair, bit for bit."""
+    distances as one ``coal.distance`` call per pair, bit for bit. Pinocchio leaves out
+    a pair of a geometry whose collisions are disabled; the copy measures them all."""
     key = (threading.get_ident(), geometry_ids, id(obj_geom))
     with _OBJECT_PAIRS_LOCK:
-        per_hand = _OBJECT_PAIRS.setdefault(hand, {})
+        per_hand = _OBJECT_PAIRS.setdefault(hand, OrderedDict())
         kept = per_hand.get(key)
-    if kept is not None and kept[0] is obj_geom:
-        return kept[1]
+        if kept is not None and kept[0] is obj_geom:
+            per_hand.move_to_end(key)
+            return kept[1]
     pairs = hand.collision_model.copy()
     pairs.removeAllCollisionPairs()
     obj_id = pairs.addGeometryObject(pin.GeometryObject("object", 0, pin.SE3.Identity(), obj_geom))
     for g in geometry_ids:
+        pairs.geometryObjects[g].disableCollision = False  # measured as coal.distance would
         pairs.addCollisionPair(pin.CollisionPair(g, obj_id))
     gdata = pin.GeometryData(pairs)
     for k in range(len(geometry_ids)):
@@ -151,7 +159,7 @@ def _object_pairs(
     built = (hand.model.createData(), pairs, gdata, obj_id)
     with _OBJECT_PAIRS_LOCK:
         if len(per_hand) >= _OBJECT_PAIRS_KEPT:
-            per_hand.pop(next(iter(per_hand)))
+            per_hand.popitem(last=False)
         per_hand[key] = (obj_geom, built)  # the geometry kept: its id stays its own
     return built
 

@@ -30,6 +30,7 @@ points and get exactly the entries of the whole batch.
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import cast
@@ -193,8 +194,13 @@ class FingerChain:
         self._theta_column = np.array([jt.column for jt in joints], dtype=np.int64)
         self._scaled = tuple(i for i, jt in enumerate(joints) if jt.scaling != 1.0)
         self._offset = tuple(i for i, jt in enumerate(joints) if jt.offset)
-        # the same constants for the compiled placements (placements_numba)
-        self._plan = placements_numba.chain_plan(joints, self._t_terms, self._C_terms)
+        # the same constants for the compiled placements (placements_numba); a chain
+        # without joints has no kernel
+        self._plan = (
+            placements_numba.chain_plan(joints, self._t_terms, self._C_terms) if joints else ()
+        )
+        for a in self._plan:
+            a.flags.writeable = False
         self._packed = (
             np.array([jt.C for jt in joints]).reshape(-1, 3, 3),
             np.array([jt.t for jt in joints]).reshape(-1, 3),
@@ -441,9 +447,10 @@ class FingerChain:
         return p, J
 
     def poses(self, q: np.ndarray, compiled: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """Tip frame rotations ``(N, 3, 3)`` and positions ``(N, 3)`` in the palm frame;
-        ``compiled``: by the compiled loop (:mod:`.placements_numba`, numba installed),
-        the same bits (the tip frame as a frame attached to it)."""
+        """Tip frame rotations ``(N, 3, 3)`` and positions ``(N, 3)`` [m] in the palm
+        frame, at configurations ``q`` ``(N, k)`` [rad]; ``compiled``: by the compiled
+        loop (:mod:`.placements_numba`, numba installed), the same bits (the tip frame as
+        a frame attached to it)."""
         if compiled:
             n = q.shape[0]
             R_out, p_out = np.empty((n, 1, 3, 3)), np.empty((n, 1, 3))
@@ -545,7 +552,9 @@ def attached_placements(
     return R, p
 
 
-_FRAME_PLANS: dict[tuple, tuple] = {}  # the attached frames' packed terms, by chains and frames
+#: the attached frames' packed terms, by chains and frames, the most recently used last
+#: (the entries hold their chains: an id in a key stays its chain's)
+_FRAME_PLANS: OrderedDict[tuple, tuple] = OrderedDict()
 _FRAME_PLANS_KEPT = 256
 _FRAME_PLANS_LOCK = threading.Lock()
 
@@ -564,8 +573,9 @@ def _frame_plans(
     )
     with _FRAME_PLANS_LOCK:
         kept = _FRAME_PLANS.get(key)
-    if kept is not None and all(a is b for a, b in zip(kept[0], chains, strict=True)):
-        return kept[1]
+        if kept is not None and all(a is b for a, b in zip(kept[0], chains, strict=True)):
+            _FRAME_PLANS.move_to_end(key)
+            return kept[1]
     plans = []
     for host, members in _hosts(chains):
         terms = [
@@ -575,10 +585,13 @@ def _frame_plans(
             [t[0] for t in terms], None if R_off is None else [t[1] for t in terms]
         )
         joint_of = np.array([len(chains[j].path) - 1 for j in members], np.int64)
-        plans.append((host, (joint_of, np.array(members, np.int64), *packed)))
+        frames = (joint_of, np.array(members, np.int64), *packed)
+        for a in frames:
+            a.flags.writeable = False
+        plans.append((host, frames))
     with _FRAME_PLANS_LOCK:
         if len(_FRAME_PLANS) >= _FRAME_PLANS_KEPT:
-            _FRAME_PLANS.pop(next(iter(_FRAME_PLANS)))
+            _FRAME_PLANS.popitem(last=False)
         _FRAME_PLANS[key] = (tuple(chains), plans)
     return plans
 
@@ -601,6 +614,7 @@ def _compiled_placements(
 
 #: the tip frame itself, attached to its chain's tip: ``(R_off (1, 3, 3), p_off (1, 3))``
 _TIP_FRAME = (np.eye(3)[None], np.zeros((1, 3)))
+_TIP_FRAME[0].flags.writeable = _TIP_FRAME[1].flags.writeable = False
 
 
 def _place_compiled(
@@ -635,10 +649,11 @@ def attached_points_soa(
     bits): each coordinate of each point a contiguous row, for batched arithmetic;
     ``compiled`` as :func:`attached_placements`'s."""
     n, g = q.shape[0], len(chains)
+    if compiled:  # (N, G, 3), as attached_placements writes it: one compiled layout
+        rows = np.empty((n, g, 3))
+        _compiled_placements(chains, None, p_off, q, None, rows)
+        return np.ascontiguousarray(rows.transpose(2, 1, 0))
     p = np.empty((3, g, n))
-    if compiled:
-        _compiled_placements(chains, None, p_off, q, None, p.transpose(2, 1, 0))
-        return p
     for j, o, cols in _kernel_states(chains, q):
         chains[j]._attached(o, cols, None, p_off[j], None, p[:, j].T)
     return p

@@ -6,11 +6,12 @@ numpy batches, a few dozen numpy calls per joint and per attached frame (a link'
 collision geometry, a capsule's end); on the few hundred configurations of one check,
 those calls cost more than their arithmetic. :func:`placements_python` does the same
 per configuration: the same products with the same nonzero constants, in the same
-order (no fused multiply-adds: numba's default), on the cosines and sines that numpy
-computed for the batch, so that its numbers are the numpy path's to the bit. It runs
-when the IK backend is numba (:func:`~regrasp_pin.model.ik.set_ik_backend`), which
-already compiles with numba; numpy remains the reference and the tests compare both,
-bit for bit. The function is plain Python too, which lets the tests run it uncompiled.
+order (no fused multiply-adds: numba does not ask LLVM to contract a multiply and an
+add, on any CPU), on the cosines and sines that numpy computed for the batch, so that
+its numbers are the numpy path's to the bit. It runs when the IK backend is numba
+(:func:`~regrasp_pin.model.ik.set_ik_backend`), which already compiles with numba;
+numpy remains the reference and the tests compare both, bit for bit. The function is
+plain Python too, which lets the tests run it uncompiled.
 
 A chain's constants are packed once (:func:`chain_plan`): per joint the nonzero terms
 of ``W' t_j`` and of ``W' C_j`` (columns; none where ``C_j`` is the identity), per
@@ -83,8 +84,8 @@ def placements_python(
     R_out,
     p_out,
 ):
-    """Fill ``p_out[n, out_of[j]]`` ``(3,)`` (and ``R_out[n, out_of[j]]`` ``(3, 3)`` when
-    ``want_R``) with the palm-frame placement of the attached frame ``j`` at each
+    """Fill ``p_out[n, out_of[j]]`` ``(3,)`` [m] (and ``R_out[n, out_of[j]]`` ``(3, 3)``
+    when ``want_R``) with the palm-frame placement of the attached frame ``j`` at each
     configuration ``n``.
 
     One chain (the host of the frames): ``cos``, ``sin`` ``(m, N)`` of its joint angles;
