@@ -194,6 +194,21 @@ def test_link_clearance_measures_geometries_whose_collisions_are_disabled(box):
     assert (got < 0).any()
 
 
+def test_finger_clearance_measures_geometries_whose_collisions_are_disabled():
+    """As LinkClearance: a geometry whose collisions the model disables is measured."""
+    hand = Hand.five_finger()
+    for g in hand.finger("middle").geometry_ids:
+        hand.collision_model.geometryObjects[g].disableCollision = True
+    rng = np.random.default_rng(6)
+    for _ in range(10):
+        q = hand.neutral()
+        for f in hand.fingers.values():
+            q[f.q_indices] = rng.uniform(f.lower, f.upper)
+        ids = list(hand.finger("index").geometry_ids)
+        expected = _coal_pairs(hand, ids, list(hand.finger("middle").geometry_ids), q)
+        assert FingerClearance(hand, "index", ["middle"])(q) == expected
+
+
 def test_link_clearance_without_a_smallest_pair_takes_the_smallest_result(hand, box, monkeypatch):
     """Where Pinocchio names no pair (none below +inf, or NaN), the smallest result is
     read, NaN left out, as the pair-by-pair minimum does."""

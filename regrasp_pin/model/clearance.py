@@ -188,10 +188,13 @@ class FingerClearance:
             if b not in mine
         ]
         # the pairs as the collision pairs of a copy of the hand's geometry model, with
-        # Coal's default distance request each: Pinocchio computes them all in C++
+        # Coal's default distance request each: Pinocchio computes them all in C++ (it
+        # leaves out a geometry whose collisions are disabled: the copy enables them)
         self._model = hand.collision_model.copy()
         self._model.removeAllCollisionPairs()
         for a, b in self.pairs:
+            self._model.geometryObjects[a].disableCollision = False
+            self._model.geometryObjects[b].disableCollision = False
             self._model.addCollisionPair(pin.CollisionPair(a, b))
         self._data = hand.model.createData()
         self._gdata = pin.GeometryData(self._model)
@@ -228,9 +231,11 @@ class FingerClearance:
         if not self.pairs:
             return float(np.inf)
         q = np.asarray(q_full, float)
-        # Pinocchio returns the pair of the smallest distance (the first of equals)
+        # Pinocchio returns the pair of the smallest distance (the first of equals; past
+        # the last pair when none is finite and below +inf)
         k = pin.computeDistances(self._pin_model, self._data, self._model, self._gdata, q)
-        return float(self._gdata.distanceResults[k].min_distance)
+        results = self._gdata.distanceResults
+        return float(results[k].min_distance if k < len(results) else _smallest(results))
 
 
 _SHARED: weakref.WeakKeyDictionary[Hand, dict[tuple, FingerClearance]] = weakref.WeakKeyDictionary()
