@@ -26,6 +26,7 @@ import numpy as np
 
 from .._validate import positive
 from ..exceptions import InputError
+from ..model import placements_numba
 from ..model.hand import Finger
 from ..model.ik import ik_backend
 
@@ -121,7 +122,7 @@ def pad_cosines_and_overshoot(
     past the plane on which the tip sphere rests, ``(N,)`` [m]
     (:class:`~regrasp_pin.model.tip_reach.TipReach`; ``-inf`` without one): above
     ``ContactModel.tip_penetration_m``, the link sinks into a face under it."""
-    R, _ = finger.chain.poses(q, compiled=ik_backend() == "numba")
+    R, _ = finger.chain.poses(q, compiled=placements_numba.wanted(ik_backend()))
     cos = _pad_cosines(finger, R, normals_palm)
     if finger.tip_reach is None:
         return cos, np.full(cos.shape, -np.inf)
@@ -140,7 +141,7 @@ def pad_cosines(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.n
     Returns:
         ``(N,)`` cosines in [-1, 1]; feasible contacts have ``cos >= cos(cone)``.
     """
-    R, _ = finger.chain.poses(q, compiled=ik_backend() == "numba")
+    R, _ = finger.chain.poses(q, compiled=placements_numba.wanted(ik_backend()))
     return _pad_cosines(finger, R, normals_palm)
 
 

@@ -20,7 +20,7 @@ import coal
 import numpy as np
 
 from ..exceptions import InputError
-from . import capsules_numba
+from . import capsules_numba, placements_numba
 from .hand import Finger, Hand
 from .ik import ik_backend
 from .kinematics import FingerChain, attached_placements, attached_points_soa
@@ -132,7 +132,7 @@ def _placements(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray, np.n
         np.array([g.R_frame_geom for g in geoms]).reshape(-1, 3, 3),
         np.array([g.p_frame_geom for g in geoms]).reshape(-1, 3),
         q,
-        compiled=ik_backend() == "numba",  # the same loop compiled, the same bits
+        compiled=placements_numba.wanted(ik_backend()),  # the same loop compiled, the same bits
     )
 
 
@@ -159,7 +159,10 @@ def _segment_ends_soa(geoms: list[_Geometry], q: np.ndarray) -> tuple[np.ndarray
     ends = [g.p_frame_geom + g.R_frame_geom @ g.seg_a for g in geoms]
     ends += [g.p_frame_geom + g.R_frame_geom @ g.seg_b for g in geoms]
     p = attached_points_soa(
-        [g.chain for g in geoms] * 2, np.array(ends), q, compiled=ik_backend() == "numba"
+        [g.chain for g in geoms] * 2,
+        np.array(ends),
+        q,
+        compiled=placements_numba.wanted(ik_backend()),
     )
     return p[:, : len(geoms)], p[:, len(geoms) :]
 

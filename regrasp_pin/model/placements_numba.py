@@ -28,7 +28,7 @@ import numpy as np
 
 from .numba_jit import compile_together
 
-__all__ = ["available", "frame_terms", "placements", "placements_python"]
+__all__ = ["available", "frame_terms", "placements", "placements_python", "wanted"]
 
 _compiled: Callable[..., Any] | None = None
 _failed = False
@@ -242,6 +242,13 @@ def _compile() -> Callable[..., Any] | None:
 def available() -> bool:
     """True when numba is installed (the compiled loop can be used)."""
     return _compile() is not None
+
+
+def wanted(backend: str) -> bool:
+    """Whether to place by the compiled loop on the IK backend ``backend``
+    (:func:`~regrasp_pin.model.ik.ik_backend`): on ``"numba"`` when it compiles (the
+    same bits as numpy either way)."""
+    return backend == "numba" and available()
 
 
 def placements(*args: Any) -> None:
