@@ -1,5 +1,6 @@
-"""Shared test helpers: ``assert_close`` with an explicit tolerance, a scenario's
-initial grasp held without regrasping, and where the third-party Shadow Hand is."""
+"""Shared test helpers: ``assert_close`` with an explicit tolerance, random hand
+configurations, the IK backend restored after a test, a scenario's initial grasp held
+without regrasping, and where the third-party Shadow Hand is."""
 
 from __future__ import annotations
 
@@ -7,8 +8,10 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from regrasp_pin.grasp.contact import ContactModel
+from regrasp_pin.model import ik
 
 
 def assert_close(actual, expected, *, atol: float, rtol: float = 0.0, what: str = "") -> None:
@@ -23,6 +26,25 @@ def assert_close(actual, expected, *, atol: float, rtol: float = 0.0, what: str 
         f"{what}: max error {float(np.max(err)):.3e} exceeds tolerance "
         f"(atol={atol:g}, rtol={rtol:g}; worst excess {worst:.3e})"
     )
+
+
+def random_q(hand, n, seed, names=None):
+    """``(n, nq)`` seeded hand configurations: the fingers ``names`` (default all, in
+    the hand's order) uniform within their joint limits, the rest neutral."""
+    rng = np.random.default_rng(seed)
+    q = np.tile(hand.neutral(), (n, 1))
+    for name in hand.fingers if names is None else names:
+        f = hand.fingers[name]
+        q[:, f.q_indices] = rng.uniform(f.lower, f.upper, (n, f.k))
+    return q
+
+
+@pytest.fixture
+def backend():
+    """Restore the IK backend that was in use after the test."""
+    previous = ik.ik_backend()
+    yield
+    ik.set_ik_backend(previous)
 
 
 def held_grasp(scen):

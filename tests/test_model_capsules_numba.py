@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import random_q
 
 from regrasp_pin import Hand
 from regrasp_pin.model import capsules_numba, ik
@@ -25,22 +26,6 @@ def allegro():
 @pytest.fixture(scope="module")
 def five():
     return Hand.five_finger()
-
-
-@pytest.fixture
-def backend():
-    """Restore the backend that was in use after the test."""
-    previous = ik.ik_backend()
-    yield
-    ik.set_ik_backend(previous)
-
-
-def _random_q(hand, n, seed):
-    rng = np.random.default_rng(seed)
-    q = np.tile(hand.neutral(), (n, 1))
-    for f in hand.fingers.values():
-        q[:, f.q_indices] = rng.uniform(f.lower, f.upper, (n, f.k))
-    return q
 
 
 def _both(hand, q, cap, q_b=None, rows_b=None):
@@ -65,8 +50,8 @@ def _both(hand, q, cap, q_b=None, rows_b=None):
 
 
 def _check_same_bits(hand, n, seed):
-    q = _random_q(hand, n, seed)
-    distinct = _random_q(hand, 5, seed + 1)
+    q = random_q(hand, n, seed)
+    distinct = random_q(hand, 5, seed + 1)
     rows = np.random.default_rng(seed + 2).integers(0, 5, n)
     near = far = 0
     for cap in (np.inf, 0.004, 0.02):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import assert_close
+from conftest import assert_close, random_q
 
 from regrasp_pin import Hand
 from regrasp_pin.exceptions import InputError
@@ -30,20 +30,11 @@ def hand():
     return Hand.five_finger()
 
 
-def _random_q(hand, names, n, seed):
-    rng = np.random.default_rng(seed)
-    q = np.tile(hand.neutral(), (n, 1))
-    for name in names:
-        f = hand.fingers[name]
-        q[:, f.q_indices] = rng.uniform(f.lower, f.upper, (n, f.k))
-    return q
-
-
 def test_capsule_gap_is_the_pair_by_pair_minimum_bit_for_bit(hand):
     # all pairs in one batch: each pair's distances as computed alone, minimum in order
     names = ("index", "middle")
     ids_a, ids_b = (list(hand.fingers[n].geometry_ids) for n in names)
-    q = _random_q(hand, names, 200, 31)
+    q = random_q(hand, 200, 31, names)
     ga, gb = [_geometry(hand, g) for g in ids_a], [_geometry(hand, g) for g in ids_b]
     A1, B1 = _segment_ends(ga, q)
     A2, B2 = _segment_ends(gb, q)
@@ -94,9 +85,9 @@ def test_capsule_gap_is_the_pair_by_pair_minimum_bit_for_bit(hand):
 def test_capsule_gap_places_the_second_geometries_from_their_own_rows_bit_for_bit(hand):
     # the middle finger takes 7 distinct configurations over 200 rows (as the other
     # fingers repeat over a regrasp's grid nodes); the index moves in every row
-    q = _random_q(hand, ("index", "middle"), 200, 37)
+    q = random_q(hand, 200, 37, ("index", "middle"))
     mid = hand.fingers["middle"].q_indices
-    distinct = _random_q(hand, ("middle",), 7, 38)
+    distinct = random_q(hand, 7, 38, ("middle",))
     rows = np.random.default_rng(39).integers(0, 7, 200)
     q[:, mid] = distinct[rows][:, mid]
     ids_a = list(hand.fingers["index"].geometry_ids)
@@ -112,8 +103,8 @@ def test_capsule_gap_places_the_second_geometries_from_their_own_rows_bit_for_bi
 def test_capsule_gaps_by_group_are_each_groups_own_bits(hand):
     """One finger against each other finger at once: every group's row is the bits of
     capsule_gap against that group alone (placed from its own rows, capped or not)."""
-    q = _random_q(hand, ("index", "middle", "ring", "thumb"), 150, 41)
-    distinct = _random_q(hand, ("middle", "ring", "thumb"), 9, 42)
+    q = random_q(hand, 150, 41, ("index", "middle", "ring", "thumb"))
+    distinct = random_q(hand, 9, 42, ("middle", "ring", "thumb"))
     rows = np.random.default_rng(43).integers(0, 9, 150)
     ids_a = list(hand.fingers["index"].geometry_ids)
     groups = [list(hand.fingers[n].geometry_ids) for n in ("middle", "ring", "thumb")]
@@ -131,7 +122,7 @@ def test_capsule_gaps_by_group_are_each_groups_own_bits(hand):
 def test_capsule_gap_is_a_lower_bound_on_the_coal_distance(hand):
     names = ("ring", "little")
     ids_a, ids_b = (list(hand.fingers[n].geometry_ids) for n in names)
-    q = _random_q(hand, names, 40, 32)
+    q = random_q(hand, 40, 32, names)
     gap = capsule_gap(hand, ids_a, ids_b, q)
     gm = hand.collision_model
     gd = pin.GeometryData(gm)

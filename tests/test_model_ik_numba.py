@@ -34,14 +34,6 @@ def allegro():
 
 
 @pytest.fixture
-def backend():
-    """Restore the backend that was in use after the test."""
-    previous = ik.ik_backend()
-    yield
-    ik.set_ik_backend(previous)
-
-
-@pytest.fixture
 def uncompiled(monkeypatch, backend):
     """The 'numba' backend running the kernel as plain Python."""
     monkeypatch.setattr(ik_numba, "available", lambda: True)

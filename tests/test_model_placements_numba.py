@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import random_q
 
 from regrasp_pin import Hand
 from regrasp_pin.model import distances, ik, kinematics, placements_numba
@@ -20,22 +21,6 @@ from regrasp_pin.model.objects import Box
 @pytest.fixture(scope="module", params=["allegro", "five_finger"])
 def hand(request):
     return getattr(Hand, request.param)()
-
-
-@pytest.fixture
-def backend():
-    """Restore the backend that was in use after the test."""
-    previous = ik.ik_backend()
-    yield
-    ik.set_ik_backend(previous)
-
-
-def _random_q(hand, n, seed):
-    rng = np.random.default_rng(seed)
-    q = np.tile(hand.neutral(), (n, 1))
-    for f in hand.fingers.values():
-        q[:, f.q_indices] = rng.uniform(f.lower, f.upper, (n, f.k))
-    return q
 
 
 def _frames(hand):
@@ -61,7 +46,7 @@ def _frames(hand):
 
 def _check_same_bits(hand, n, seed):
     chains, R_off, p_off, ends = _frames(hand)
-    q = _random_q(hand, n, seed)
+    q = random_q(hand, n, seed)
     R0, p0 = kinematics.attached_placements(chains, R_off, p_off, q)
     R1, p1 = kinematics.attached_placements(chains, R_off, p_off, q, compiled=True)
     assert R0.tobytes() == R1.tobytes()
@@ -98,7 +83,7 @@ def test_the_verifications_bounds_are_the_same_on_both_backends(hand, backend):
     pytest.importorskip("numba")
     box = Box((0.05, 0.05, 0.05))
     f = next(iter(hand.fingers.values()))
-    q = _random_q(hand, 300, 11)
+    q = random_q(hand, 300, 11)
     T = np.tile(np.eye(4), (300, 1, 1))
     T[:, :3, 3] = [0.07, 0.0, 0.04]
     calls = []
