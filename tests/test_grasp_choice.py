@@ -724,6 +724,8 @@ def test_no_feasible_q_names_the_finger_and_time(five):
             contact=impossible,
         )
     assert e.value.finger == "middle" and e.value.time_s == pytest.approx(1.5)
+    assert e.value.measured == 0.0  # none inside the limits with that margin
+    assert "0 with the margin at both arrival times" in e.value.reason
     # alone on the object, no candidate is in force closure (links not tested: they
     # are tested first and would reject some candidates before their force closure)
     with pytest.raises(ContactError, match="finger 'middle'.*force closure") as e:
@@ -739,6 +741,35 @@ def test_no_feasible_q_names_the_finger_and_time(five):
             link_check=False,
         )
     assert e.value.kind == FailureKind.FORCE_CLOSURE
+
+
+def test_no_candidate_counts_what_each_test_kept(five):
+    """Every contact inside the limits kept 1 m from the other contacts: the failure
+    counts the contacts inside the limits with the choice margin at both arrival times
+    (the manifold's usable mask, read directly) and says that the separation from the
+    others left none."""
+    hand, box, _, sample, manifolds, grasp = five
+    P, n_P = grasp.points_object["middle"], grasp.normals_object["middle"]
+    others = {n: (grasp.points_object[n], grasp.normals_object[n]) for n in ("thumb", "index")}
+    man = manifolds["middle"]
+    ka = int(np.searchsorted(man.times_s, 1.5))
+    inside = int(man.usable(CONTACT.choice_margin_rad, rows=np.array([ka, ka])).all(0).sum())
+    assert inside > 0
+    with pytest.raises(ContactError) as e:
+        choose_new_contact(
+            hand,
+            box,
+            man,
+            sample,
+            1.5,
+            P_object=P,
+            n_P_object=n_P,
+            others=others,
+            contact=CONTACT,
+            min_separation_m=1.0,
+        )
+    assert e.value.kind == FailureKind.NO_CANDIDATE and e.value.measured == inside
+    assert f"{inside} with the margin at both arrival times, 0 of them apart" in e.value.reason
 
 
 def _regrasp_of(grasp, finger):

@@ -14,6 +14,7 @@ from regrasp_pin.exceptions import (
 from regrasp_pin.planning.outcomes import (
     CROSSES,
     INSIDE,
+    OTHERS_THERE,
     SINKS_IN,
     dominant_kind,
     failure_summary,
@@ -41,6 +42,19 @@ def test_failure_summary_counts_and_advises():
     text = failure_summary(a, K.BUDGET)
     assert "3 attempts failed" in text and "2 ik-unreachable" in text
     assert ADVICE[K.IK_UNREACHABLE] in text
+
+
+def test_no_candidate_advice_tells_the_limits_from_the_other_tests():
+    """A choice that found no contact inside the limits with the choice margin (a count
+    of 0) is told to lower that margin or turn more slowly; one that found some (the
+    last attempt's count) is told that the other fingers and the exclusions took them."""
+    none_inside = [Attempt(K.NO_CANDIDATE, measured=3.0), Attempt(K.NO_CANDIDATE, measured=0.0)]
+    assert failure_summary(none_inside, K.BUDGET).endswith(ADVICE[K.NO_CANDIDATE])
+    taken = list(reversed(none_inside))
+    text = failure_summary(taken, K.BUDGET)
+    assert text.endswith(OTHERS_THERE.format(count=3.0)) and "(3 at the last attempt)" in text
+    no_numbers = [Attempt(K.NO_CANDIDATE)]
+    assert failure_summary(no_numbers, K.BUDGET).endswith(ADVICE[K.NO_CANDIDATE])
 
 
 def test_failure_summary_gives_the_nearest_miss_and_advice_by_its_sign():

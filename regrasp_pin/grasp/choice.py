@@ -288,9 +288,12 @@ def choose_new_contact(
     # the landing falls between two manifold times: Q must be usable at both
     cand = manifold.usable(contact.choice_margin_rad, rows=np.array([ka, min(kb, ka)])).all(0)
     pts = sample.points
+    kept = [int(cand.sum())]  # how many each test keeps, for a failure's message
     cand &= _apart_from(hand, finger, sample, others, min_separation_m)
+    kept.append(int(cand.sum()))
     if exclude_radius_m > 0:
         cand &= _far_from(pts, [P_object], exclude_radius_m)
+    kept.append(int(cand.sum()))
     if exclude_points_object is not None:
         r_ex = exclude_radius_m if exclude_points_radius_m is None else exclude_points_radius_m
         ex = np.asarray(exclude_points_object, float).reshape(-1, 3)
@@ -303,11 +306,13 @@ def choose_new_contact(
         raise ContactError(
             f"no surface point is inside the joint limits (margin >= "
             f"{contact.choice_margin_rad:.2f} rad), faces the pad and is clear of the other "
-            f"contacts at arrival ({int(usable.sum())} usable before the separation test)",
+            f"contacts at arrival ({int(usable.sum())} usable before the separation test; "
+            + _emptied_words(kept, exclude_radius_m)
+            + ")",
             finger=finger.name,
             time_s=float(manifold.times_s[ka]),
             kind=FailureKind.NO_CANDIDATE,
-            measured=float(usable.sum()),
+            measured=float(kept[0]),  # inside the limits with the choice margin
             required=1.0,
         )
     if landing_s is not None:
@@ -435,6 +440,20 @@ def tip_gap(
     ca = np.asarray(contact_a[0], float) + ra * np.asarray(contact_a[1], float)
     cb = np.asarray(contact_b[0], float) + rb * np.asarray(contact_b[1], float)
     return float(np.linalg.norm(ca - cb)) - ra - rb
+
+
+def _emptied_words(kept: list[int], exclude_radius_m: float) -> str:
+    """How the tests of :func:`choose_new_contact` left no candidate, in words, from
+    ``kept``: how many points the choice margin at both arrival indices kept, then
+    apart from the other contacts, then away from P (the rest: failed points, rooms)."""
+    words = (
+        f"{kept[0]} with the margin at both arrival times, {kept[1]} of them apart from "
+        f"the other contacts, {kept[2]} of those more than {exclude_radius_m * 1e3:.1f} mm "
+        "from P"
+    )
+    if kept[2]:
+        words += ", none of those away from the points that failed before and the rooms"
+    return words
 
 
 def _apart_from(

@@ -12,6 +12,7 @@ __all__ = [
     "CROSSES",
     "DISTANCE_KINDS",
     "INSIDE",
+    "OTHERS_THERE",
     "SINKS_IN",
     "dominant_kind",
     "failure_summary",
@@ -39,6 +40,15 @@ CROSSES = (
     "every contact or path tried puts the finger into another finger (they cross, not "
     "just come near): start from a grasp whose fingers stand further apart (the grasp "
     "search's finger_clearance), or plan with fewer fingers"
+)
+
+# a no-candidate failure whose finger has contacts inside its joint limits with the
+# choice margin (a positive count measured): the choice's other tests left none
+OTHERS_THERE = (
+    "the finger has contacts inside its joint limits at arrival ({count:.0f} at the "
+    "last attempt), but they lie where the other fingers hold, near its own contact or "
+    "near contacts that failed before: use fingers that are further apart, or fewer "
+    "fingers, or turn more slowly"
 )
 
 
@@ -77,8 +87,19 @@ def failure_summary(attempts: Sequence[Attempt], default: FailureKind) -> str:
     head = f"{len(attempts)} attempts failed ({parts}); " if attempts else ""
     near = nearest_miss(attempts, kind)
     if near is None:
-        return f"{head}mostly {kind.value}: {ADVICE[kind]}"
+        return f"{head}mostly {kind.value}: {_advice_without_distance(attempts, kind)}"
     return f"{head}mostly {kind.value}{_numbers(near)}: {_advice(near)}"
+
+
+def _advice_without_distance(attempts: Sequence[Attempt], kind: FailureKind) -> str:
+    """What to change for a failure whose numbers are not distances: for
+    ``no-candidate``, by the last such attempt's count of contacts inside the joint
+    limits with the choice margin (none: the limits; some: the choice's other tests)."""
+    if kind == FailureKind.NO_CANDIDATE:
+        last = next((a for a in reversed(attempts) if a.kind == kind), None)
+        if last is not None and last.measured is not None and last.measured > 0:
+            return OTHERS_THERE.format(count=last.measured)
+    return ADVICE[kind]
 
 
 def _numbers(near: Attempt) -> str:
