@@ -154,6 +154,18 @@ def test_max_ties_are_broken_toward_spread_out_vertices(method):
     assert np.diff(res.indices).min() >= 6  # 4 free vertices over 3 runs of 20 steps
 
 
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+def test_a_vertex_as_near_the_midpoint_from_both_sides_goes_to_the_first(deviation):
+    """A straight path of 6 evenly spaced points: the middle vertex of 3 costs nothing
+    anywhere, and positions 2 and 3 are as near the midpoint (2.5 steps): from either,
+    spreading ends on 2 (which of two such ties a search ends on follows its start and
+    the last bits of H; the spread does not)."""
+    P = np.c_[np.arange(6.0), 0.5 * np.arange(6.0)]
+    H = deviation_matrix(P, deviation, closed=False)
+    for start in ([0, 2, 5], [0, 3, 5]):
+        assert spread_ties(H, np.array(start), P, closed=False).tolist() == [0, 2, 5]
+
+
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 10_000), closed=st.booleans())
 def test_spreading_ties_keeps_the_energy_and_the_order(seed, closed):

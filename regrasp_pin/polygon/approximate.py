@@ -245,9 +245,10 @@ def approximate_polygon(
         idx, energy = ex.indices, ex.energy
         sweeps, history = 0, np.zeros(0)
     idx = np.asarray(idx, dtype=np.int64)
-    if deviation == "max":  # degenerate optima: spread the vertices among the ties
-        idx = spread_ties(Hx, idx, P, closed=closed)
-        energy = polygon_energy(Hx, idx, closed=closed)
+    # degenerate optima ("max": chords between neighbours are free; any measure where
+    # the curve runs straight): spread the vertices among the ties
+    idx = spread_ties(Hx, idx, P, closed=closed)
+    energy = polygon_energy(Hx, idx, closed=closed)
     return PolygonResult(
         indices=idx,
         vertices=P[idx].copy(),

@@ -238,12 +238,16 @@ def spread_ties(
 ) -> np.ndarray:
     """Move each vertex, among the positions that cost its two chords no more (ties
     within :data:`~.hopfield.TIE_RTOL` of the polygon's energy), to the one nearest the
-    arc-length midpoint of its neighbours: the tie-break toward spread-out vertices.
+    arc-length midpoint of its neighbours (of positions as near within ``1e-12`` of the
+    arc's length, the first): the tie-break toward spread-out vertices.
 
     The ``"max"`` measure (Eq. 7) makes a chord between adjacent points free, so its
-    optima are degenerate (vertices may bunch up); this keeps the energy (all moves
-    together raise it by at most ``TIE_RTOL`` times itself: one budget, so that ties do
-    not follow last-bit noise and the energy cannot creep) and spreads the vertices out.
+    optima are degenerate (vertices may bunch up); the others have ties too where the
+    curve runs straight (a vertex anywhere on a straight stretch costs the same). This
+    keeps the energy (all moves together raise it by at most ``TIE_RTOL`` times itself:
+    one budget, so that ties do not follow last-bit noise and the energy cannot creep)
+    and spreads the vertices out; two searches that end on polygons of equal energy
+    (within that tolerance) on the same plateau end on the same polygon.
     Columns are visited in order, ``sweeps`` times at most (until nothing moves); an open
     path's end columns stay.
 
@@ -282,8 +286,11 @@ def spread_ties(
             current = float(H[p, s[i]] + H[s[i], q])
             cost = H[p, xs] + H[xs, q]
             miss = np.where(cost <= current + tol, np.abs(along(xs, p) - half), np.inf)
-            j = int(np.argmin(miss))  # ties: the first
-            if miss[j] < abs(float(along(np.array([s[i]]), p)[0]) - half) - eps:
+            best = float(miss.min())
+            j = int(np.argmax(miss <= best + eps))  # ties within eps: the first
+            here = abs(float(along(np.array([s[i]]), p)[0]) - half)
+            # nearer by more than eps, or as near (a tie): the first of the nearest
+            if xs[j] != s[i] and (miss[j] < here - eps or here <= best + eps):
                 tol -= max(float(cost[j]) - current, 0.0)  # one budget for all moves
                 s[i] = xs[j]
                 moved = True

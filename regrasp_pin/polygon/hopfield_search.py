@@ -27,6 +27,7 @@ from .._validate import positive_int
 from ..exceptions import InputError
 from .hopfield import (
     MAX_SWEEPS,
+    TIE_RTOL,
     NetworkRun,
     check_deviation_matrix,
     check_state,
@@ -36,6 +37,7 @@ from .hopfield import (
     make_increasing,
     polygon_energy,
     run_from,
+    tolerant_order,
     update_columns,
     window_costs,
     winners,
@@ -86,6 +88,35 @@ class HopfieldResult:
 
 
 # ------------------------------------------------ improvement: starts and moves
+def _gain_tolerance(H: np.ndarray, s: np.ndarray, closed: bool) -> float:
+    """The tolerance within which energy changes of moves from state ``s`` are ties:
+    :data:`~.hopfield.TIE_RTOL` times its energy (a change is a difference of chord
+    costs, each at most the energy, so its rounding is relative to the energy, not to
+    the change; a change of about 0 on a straight stretch is a tie, not noise's sign)."""
+    energy = polygon_energy(H, s, closed=closed)
+    return TIE_RTOL * (abs(energy) if np.isfinite(energy) else 0.0) + 1e-300
+
+
+def _first_least(values: np.ndarray, tol: float) -> int:
+    """The first index whose value is within ``tol`` of the least (inf and NaN last)."""
+    return int(tolerant_order(values, tol)[0])
+
+
+def _tie_groups(values: np.ndarray, tol: float) -> np.ndarray:
+    """Per value, the rank of its group of ties, the groups of
+    :func:`~.hopfield.tolerant_order`: ascending, each the values within ``tol`` of its
+    least; inf and NaN in one group, last."""
+    v = np.asarray(values, dtype=float)
+    order = np.argsort(v, kind="stable")
+    group = np.empty(v.shape[0], dtype=np.int64)
+    g, first = -1, -np.inf  # the current group and its least value
+    for k in order.tolist():  # ascending, inf and NaN last
+        if not v[k] <= first + tol and first != np.inf:  # a new group (one for inf, NaN)
+            g, first = g + 1, float(v[k]) if np.isfinite(v[k]) else np.inf
+        group[k] = g
+    return group
+
+
 def _chords(s: np.ndarray, closed: bool) -> tuple[np.ndarray, np.ndarray]:
     return (s, np.append(s[1:], s[0])) if closed else (s[:-1], s[1:])
 
@@ -138,15 +169,15 @@ def _relocations(
     total[i, (i - 1) % nc] = np.inf
     flat = total.ravel()
     count = min(count, flat.shape[0])
-    best = np.argpartition(flat, count - 1)[:count] if count < flat.shape[0] else np.arange(count)
+    tol = _gain_tolerance(H, s, closed)
     moves = []
-    for k in best.tolist():
+    for k in tolerant_order(flat, tol)[:count].tolist():
         if np.isfinite(flat[k]):
             ri, cj = divmod(k, nc)
             moves.append((float(flat[k]), np.sort(np.append(np.delete(s, ri), x[cj]))))
-    moves += _pair_relocations(H, s, closed, x, gain_ins, count)
-    moves.sort(key=lambda mv: mv[0])
-    return moves[:count]
+    moves += _pair_relocations(H, s, closed, x, gain_ins, count, tol)
+    order = tolerant_order(np.array([g for g, _ in moves]), tol) if moves else []
+    return [moves[k] for k in order[:count]]
 
 
 def _pair_relocations(
@@ -156,8 +187,10 @@ def _pair_relocations(
     x: np.ndarray,
     gain_ins: np.ndarray,
     count: int,
+    tol: float,
 ) -> list[tuple[float, np.ndarray]]:
-    """The ``count`` best moves of two neighbouring vertices into two other chords.
+    """The ``count`` best moves of two neighbouring vertices into two other chords
+    (energy changes within ``tol`` are ties, taken in index order).
 
     Removing vertices ``i, i+1`` merges three chords into one; with ``"max"`` a long chord
     costs little more than a short one, so this is how spare vertices get parked.
@@ -169,12 +202,12 @@ def _pair_relocations(
     a, b, c, d = s[(i - 1) % m], s[i], s[(i + 1) % m], s[(i + 2) % m]
     with np.errstate(invalid="ignore"):
         gain_rem = H[a, d] - H[a, b] - H[b, c] - H[c, d]
-    order = np.argsort(gain_ins, kind="stable")[:5]
+    order = tolerant_order(gain_ins, tol)[:5]
     moves = []
-    for k in np.argsort(np.where(np.isfinite(gain_rem), gain_rem, np.inf))[:count].tolist():
+    for k in tolerant_order(np.where(np.isfinite(gain_rem), gain_rem, np.inf), tol)[:count]:
         if not np.isfinite(gain_rem[k]):
             break
-        r = int(i[k])
+        r = int(i[int(k)])
         hit = {(r - 1) % nc, r % nc, (r + 1) % nc}  # chords replaced by the merge
         free = [j for j in order.tolist() if j not in hit][:2]
         if len(free) < 2:
@@ -196,9 +229,9 @@ def _insert_greedy(
         gain = _split_gain(new, old)
         if np.isneginf(gain).any():  # an unavailable chord: split it at its cheapest point
             cand = np.where(np.isneginf(gain), new, np.inf)
-            j = int(np.argmin(cand))
+            j = _first_least(cand, TIE_RTOL * float(np.min(np.abs(cand))) + 1e-300)
         else:
-            j = int(np.argmin(gain))
+            j = _first_least(gain, _gain_tolerance(H, s, closed))
             if not np.isfinite(gain[j]):
                 return None
         s = np.sort(np.append(s, x[j]))
@@ -335,10 +368,13 @@ def _greedy_merge(H: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
         cost = np.where(np.isfinite(cost), cost, np.inf)
         if not closed:
             cost[0] = cost[-1] = np.inf
-        # rank by cost, ties broken by a fixed scrambled order of the positions
+        # rank by cost (a difference of chord costs: ties within the tie tolerance of
+        # the largest merged chord's), ties broken by a fixed scrambled order
+        merged = H[prev, nxt]
+        scale = float(np.abs(merged[np.isfinite(merged)]).max(initial=0.0))
         prio = (idx * 2654435761) % 4294967296
         rank = np.empty(k, dtype=np.int64)
-        rank[np.lexsort((prio, cost))] = idx
+        rank[np.lexsort((prio, _tie_groups(cost, TIE_RTOL * scale + 1e-300)))] = idx
         take = max(1, (k - m) // 2)
         sel = (rank < take) & np.isfinite(cost)
         if not sel.any():
