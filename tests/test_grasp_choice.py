@@ -34,7 +34,9 @@ from hypothesis import strategies as st
 from regrasp_pin.exceptions import ContactError, FailureKind, InputError
 from regrasp_pin.grasp import screening as screening_module
 from regrasp_pin.grasp.choice import (
+    DISTANCE_TOL_M,
     Room,
+    _far_from,
     _link_exit,
     _Ranking,
     _rerank,
@@ -770,6 +772,20 @@ def test_no_candidate_counts_what_each_test_kept(five):
         )
     assert e.value.kind == FailureKind.NO_CANDIDATE and e.value.measured == inside
     assert f"{inside} with the margin at both arrival times, 0 of them apart" in e.value.reason
+
+
+def test_a_point_exactly_a_radius_away_is_kept_on_every_machine():
+    """Sample points lie on grids, so a distance between two is often exactly an
+    exclusion radius; its last bits follow how the sample was placed. Such a point is
+    kept whichever way its last bits fall, one more than the tolerance nearer is not."""
+    r = 0.008
+    centre = np.array([0.01, 0.02, 0.03])
+    on = centre + np.array([r, 0.0, 0.0])
+    pts = np.array(
+        [on, np.nextafter(on, np.inf), np.nextafter(on, -np.inf), on - [3 * DISTANCE_TOL_M, 0, 0]]
+    )
+    assert _far_from(pts, [centre], r).tolist() == [True, True, True, False]
+    assert not _far_from(centre[None], [centre], 1e-12)[0]  # a tiny radius: the centre
 
 
 def _regrasp_of(grasp, finger):

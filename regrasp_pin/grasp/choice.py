@@ -65,6 +65,11 @@ __all__ = [
 
 #: The gap kept between a new contact's fingertip sphere and another finger's [m].
 TIP_GAP_M = 0.001
+#: Distances within this of a separation or exclusion radius meet it [m]: the surface
+#: sample's points lie on grids, so a distance between two of them is often exactly
+#: such a radius, and its last bits (the sample's placement by matrix products) follow
+#: the machine's BLAS kernels; such a point is kept on every machine
+DISTANCE_TOL_M = 1e-9
 _REMOVABLE_WINDOW = 4  # passing candidates compared by how many fingers could let go
 _LINK_BATCH = 64  # candidates whose link clearance is measured at once (Coal)
 _NEAREST_SETS = 8  # refused contact sets whose epsilons a force-closure failure reads
@@ -76,7 +81,8 @@ class Room:
 
     Attributes:
         point: The other finger's contact to be, object frame ``(3,)`` [m].
-        radius_m: Candidates closer than this to ``point`` are not chosen [m].
+        radius_m: Candidates closer than this to ``point`` (by more than
+            :data:`DISTANCE_TOL_M`) are not chosen [m].
         finger: Optionally, that finger, standing at ``q_finger`` [rad] at ``t_s`` [s]
             (e.g. its arrival configuration there): the choosing finger, held at a
             candidate (its manifold's configuration at ``t_s``), must then stand at
@@ -215,7 +221,8 @@ def choose_new_contact(
             (Coal, in batches) or for their finger clearance (one Coal pass each,
             about 70 us), do not count: the choice may read every candidate.
         exclude_radius_m: Candidates closer than this to P (and to each of
-            ``exclude_points_object``) are ignored [m].
+            ``exclude_points_object``; by more than :data:`DISTANCE_TOL_M`) are ignored
+            [m].
         exclude_points_object: ``(E, 3)`` points to stay away from (e.g. contacts
             for which no verified path was found).
         exclude_points_radius_m: Radius around each of ``exclude_points_object``
@@ -465,7 +472,8 @@ def _apart_from(
 ) -> np.ndarray:
     """``(N,)`` whether each sample point is far enough from the other contacts: at
     least ``min_separation_m`` from each when given, else with the two fingertip
-    spheres resting there (each on its own normal) ``TIP_GAP_M`` apart. On one face
+    spheres resting there (each on its own normal) ``TIP_GAP_M`` apart (within
+    :data:`DISTANCE_TOL_M` either way). On one face
     that is ``2 r + 1 mm`` between the points; across an edge the spheres stand
     further apart than their points (the normals diverge), so it admits more."""
     if min_separation_m is not None:
@@ -475,7 +483,8 @@ def _apart_from(
     for name, (p, n) in others.items():
         r = hand.finger(name).tip_radius
         c = np.asarray(p, float) + r * np.asarray(n, float)
-        ok &= np.linalg.norm(centres - c, axis=1) >= finger.tip_radius + r + TIP_GAP_M
+        gap = np.linalg.norm(centres - c, axis=1)
+        ok &= gap >= finger.tip_radius + r + TIP_GAP_M - DISTANCE_TOL_M
     return ok
 
 
@@ -530,10 +539,12 @@ def _posture(
 
 
 def _far_from(pts: np.ndarray, centres: list[np.ndarray], radius_m: float) -> np.ndarray:
-    """``(N,)`` True where a point is at least ``radius_m`` from every centre."""
+    """``(N,)`` True where a point is at least ``radius_m`` from every centre (within
+    :data:`DISTANCE_TOL_M`; a radius below it excludes the centres themselves)."""
     ok = np.ones(pts.shape[0], bool)
+    least = max(radius_m - DISTANCE_TOL_M, min(radius_m, DISTANCE_TOL_M))
     for c in centres:
-        ok &= np.linalg.norm(pts - c, axis=1) >= radius_m
+        ok &= np.linalg.norm(pts - c, axis=1) >= least
     return ok
 
 
