@@ -23,14 +23,6 @@ demo: $(STAMP)
 # another's share.
 PYTEST_WORKERS ?= logical
 
-# OpenBLAS picks its kernels by the CPU, and one plan of the tests (suite spec 5, a
-# neighbour making room) follows them: AVX-512 kernels take another branch than the
-# AVX2 ones (a decision that follows last-bit noise, not yet found). Until it is, the
-# tests and the demo run OpenBLAS's AVX2 (Haswell) kernels on every x86-64 machine.
-ifeq ($(shell uname -m),x86_64)
-export OPENBLAS_CORETYPE ?= Haswell
-endif
-
 test: $(STAMP)
 	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist worksteal
 

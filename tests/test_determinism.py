@@ -1,8 +1,11 @@
-"""The same plan on every machine: numpy's SIMD kernels must not change a decision.
+"""The same plan on every machine: numpy's SIMD kernels and OpenBLAS's must not change
+a decision.
 
 The planner runs twice in fresh processes: once as installed, once with numpy's
 AVX2/AVX-512 kernels turned off (``NPY_DISABLE_CPU_FEATURES``), which changes the
-last bits of many reductions. Both must give the same regrasps: the same fingers at
+last bits of many reductions; and, on a CPU with AVX-512, once with OpenBLAS's kernels
+for it and once with its AVX2 (Haswell) kernels (``OPENBLAS_CORETYPE``), which changes
+the last bits of matrix products. Both must give the same regrasps: the same fingers at
 the same times, landing on the same contacts (within 0.1 mm).
 """
 
@@ -21,8 +24,12 @@ import json, sys
 from regrasp_pin import make_scenario, plan_manipulation
 from regrasp_pin.exceptions import PlanningError
 from regrasp_pin.suite import build_scenario, neighbour_specs
+from regrasp_pin.suite.specs import generate_specs
 if sys.argv[1] == "demo":
     scen = make_scenario("five_finger", "hexagon", angle_deg=100, rate_deg_s=20)
+elif sys.argv[1].startswith("spec "):  # "spec <seed> <index>" of the default suite
+    _, seed, index = sys.argv[1].split()
+    scen = build_scenario(generate_specs(int(index) + 1, seed=int(seed))[int(index)])
 else:
     scen = build_scenario(next(s for s in neighbour_specs() if s.name == sys.argv[1]))
 try:
@@ -48,8 +55,17 @@ def _wide_simd() -> list[str]:
     return [f for f in wide if feats.get(f)]
 
 
-def _run(scenario: str, env_extra: dict[str, str]) -> dict:
-    env = {**os.environ, **env_extra}
+def _avx512() -> bool:
+    """Whether this CPU has AVX-512, for which OpenBLAS has kernels of its own."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as feats
+    except ImportError:  # numpy < 2
+        from numpy.core._multiarray_umath import __cpu_features__ as feats
+    return bool(feats.get("AVX512F"))
+
+
+def _run(scenario: str, env_extra: dict[str, str], drop: tuple[str, ...] = ()) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in drop} | env_extra
     out = subprocess.run(
         [sys.executable, "-c", _SCRIPT, scenario],
         env=env,
@@ -75,6 +91,29 @@ def test_plan_does_not_change_without_the_wide_simd_kernels(scenario):
         pytest.skip("this CPU has no AVX2/AVX-512 kernels to turn off")
     a = _run(scenario, {})
     b = _run(scenario, {"NPY_DISABLE_CPU_FEATURES": " ".join(wide)})
+    _assert_same_plan(a, b)
+
+
+@pytest.mark.parametrize(
+    "scenario",
+    [
+        "demo",
+        # the Allegro turning a mesh while it moves: Hopfield ties on straight stretches
+        # and contacts exactly a separation apart, which OpenBLAS's kernels once decided
+        "spec 0 5",
+    ],
+)
+def test_plan_does_not_change_with_openblas_kernels(scenario):
+    if not _avx512():
+        pytest.skip("this CPU has no AVX-512: OpenBLAS runs its AVX2 kernels either way")
+    a = _run(scenario, {}, drop=("OPENBLAS_CORETYPE",))  # the kernels OpenBLAS picks
+    b = _run(scenario, {"OPENBLAS_CORETYPE": "Haswell"})
+    _assert_same_plan(a, b)
+
+
+def _assert_same_plan(a: dict, b: dict) -> None:
+    """The same failure (or none), initial grasp and regrasps: fingers, times within
+    1e-6 s, new contacts within 0.1 mm."""
     assert a["failure"] == b["failure"]
     for n in a["grasp"]:
         np.testing.assert_allclose(a["grasp"][n], b["grasp"][n], atol=1e-4)
