@@ -35,7 +35,9 @@ from regrasp_pin.exceptions import ContactError, FailureKind, InputError
 from regrasp_pin.grasp import screening as screening_module
 from regrasp_pin.grasp.choice import (
     DISTANCE_TOL_M,
+    TIP_GAP_M,
     Room,
+    _apart_from,
     _far_from,
     _link_exit,
     _Ranking,
@@ -786,6 +788,20 @@ def test_a_point_exactly_a_radius_away_is_kept_on_every_machine():
     )
     assert _far_from(pts, [centre], r).tolist() == [True, True, True, False]
     assert not _far_from(centre[None], [centre], 1e-12)[0]  # a tiny radius: the centre
+
+
+def test_fingertip_spheres_exactly_the_gap_apart_are_kept_on_every_machine(five):
+    """Two fingertip spheres resting on one face exactly ``TIP_GAP_M`` apart (their
+    points ``2 r + TIP_GAP_M`` apart along the face): the point is kept whichever way
+    its last bits fall; one more than the tolerance nearer is not."""
+    hand, box, _, sample, manifolds, grasp = five
+    finger = hand.finger("middle")
+    r = finger.tip_radius + hand.finger("index").tip_radius + TIP_GAP_M
+    p, n = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    pts = np.array([[r, 0, 0], [np.nextafter(r, 0.0), 0, 0], [r - 3 * DISTANCE_TOL_M, 0, 0]])
+    fake = dataclasses.replace(sample, points=pts, normals=np.tile(n, (3, 1)))
+    ok = _apart_from(hand, finger, fake, {"index": (p, n)}, None)
+    assert ok.tolist() == [True, True, False]
 
 
 def _regrasp_of(grasp, finger):

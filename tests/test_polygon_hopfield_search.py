@@ -199,10 +199,25 @@ def test_a_lower_bound_that_is_not_finite_is_refused(bad):
 
 
 def test_tie_groups_chain_from_each_groups_least():
-    values = np.array([3.0, 1.0, 1.0 + 1e-12, np.inf, 2.0, np.nan, 1.0 + 2e-9])
+    values = np.array([3.0, 1.0, 1.0 + 1e-12, np.inf, 2.0, np.nan, 1.0 + 2e-9, -np.inf])
     groups = hopfield_search._tie_groups(values, 1e-9)
-    assert groups.tolist() == [3, 0, 0, 4, 2, 4, 1]  # inf and NaN share the last
+    assert groups.tolist() == [4, 1, 1, 5, 3, 5, 2, 0]  # -inf first, inf and NaN last
     assert hopfield_search._tie_groups(np.array([np.inf, np.inf]), 1e-9).tolist() == [0, 0]
+    # ranked: ties in index order, an unavailable chord's split (-inf) first
+    assert hopfield_search._ranked(values, 1e-9).tolist() == [7, 1, 2, 6, 4, 0, 3, 5]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_best_few_are_the_first_of_the_whole_ranking(seed):
+    """``_best`` ranks only the values that can be among the first ``count``: the same
+    indices as ranking them all (ties within the tolerance, inf among them)."""
+    rng = np.random.default_rng(seed)
+    values = np.round(rng.normal(size=40), 1)  # many exact ties
+    values[rng.random(40) < 0.1] = np.inf
+    values[rng.random(40) < 0.05] = -np.inf
+    for count in range(1, 42):
+        best = hopfield_search._best(values, count, 0.05).tolist()
+        assert best == hopfield_search._ranked(values, 0.05)[:count].tolist()
 
 
 def _staircase(seed: int, n: int = 60) -> np.ndarray:

@@ -55,6 +55,7 @@ from .screening import (
 )
 
 __all__ = [
+    "DISTANCE_TOL_M",
     "TIP_GAP_M",
     "NewContact",
     "Room",
@@ -455,9 +456,10 @@ def _emptied_words(kept: list[int], exclude_radius_m: float) -> str:
     apart from the other contacts, then away from P (the rest: failed points, rooms)."""
     words = (
         f"{kept[0]} with the margin at both arrival times, {kept[1]} of them apart from "
-        f"the other contacts, {kept[2]} of those more than {exclude_radius_m * 1e3:.1f} mm "
-        "from P"
+        "the other contacts"
     )
+    if exclude_radius_m > 0:
+        words += f", {kept[2]} of those at least {exclude_radius_m * 1e3:.1f} mm from P"
     if kept[2]:
         words += ", none of those away from the points that failed before and the rooms"
     return words
@@ -539,10 +541,14 @@ def _posture(
 
 
 def _far_from(pts: np.ndarray, centres: list[np.ndarray], radius_m: float) -> np.ndarray:
-    """``(N,)`` True where a point is at least ``radius_m`` from every centre (within
-    :data:`DISTANCE_TOL_M`; a radius below it excludes the centres themselves)."""
+    """``(N,)`` True where a point is at least ``radius_m`` from every centre, within
+    :data:`DISTANCE_TOL_M` (``radius_m - DISTANCE_TOL_M``; a radius below twice that:
+    ``min(radius_m, DISTANCE_TOL_M)``, which still excludes the centres themselves)."""
     ok = np.ones(pts.shape[0], bool)
-    least = max(radius_m - DISTANCE_TOL_M, min(radius_m, DISTANCE_TOL_M))
+    if radius_m >= 2 * DISTANCE_TOL_M:
+        least = radius_m - DISTANCE_TOL_M
+    else:  # a radius of about the tolerance: what is nearer than it (the centre)
+        least = min(radius_m, DISTANCE_TOL_M)
     for c in centres:
         ok &= np.linalg.norm(pts - c, axis=1) >= least
     return ok

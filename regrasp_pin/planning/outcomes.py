@@ -42,8 +42,9 @@ CROSSES = (
     "search's finger_clearance), or plan with fewer fingers"
 )
 
-# a no-candidate failure whose finger has contacts inside its joint limits with the
-# choice margin (a positive count measured): the choice's other tests left none
+# a no-candidate failure of a regrasp's choice of Q (choose_new_contact) whose finger
+# has contacts inside its joint limits with the choice margin (a positive count
+# measured): the choice's other tests left none
 OTHERS_THERE = (
     "the finger has contacts inside its joint limits at arrival ({count:.0f} at the "
     "last attempt), but they lie where the other fingers hold, near its own contact or "

@@ -175,7 +175,8 @@ def approximate_polygon(
 
     A straight curve (all points collinear) deviates from every chord by 0: any ``m``
     vertices are optimal (energy 0) and the ones returned are the network's (or the
-    exact solver's) first.
+    exact solver's) first, spread out among the ties
+    (:func:`~regrasp_pin.polygon.hopfield_moves.spread_ties`).
         UnknownNameError: unknown ``deviation`` or ``method``.
     """
     P = validate_points(points)

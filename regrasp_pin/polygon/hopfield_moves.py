@@ -246,8 +246,9 @@ def spread_ties(
     curve runs straight (a vertex anywhere on a straight stretch costs the same). This
     keeps the energy (all moves together raise it by at most ``TIE_RTOL`` times itself:
     one budget, so that ties do not follow last-bit noise and the energy cannot creep)
-    and spreads the vertices out; two searches that end on polygons of equal energy
-    (within that tolerance) on the same plateau end on the same polygon.
+    and spreads the vertices out; no move follows the last bits of ``H`` or of the
+    arc lengths (ties between positions go to the first). At most ``sweeps`` passes: a
+    long plateau may be left before its vertices are evenly spread.
     Columns are visited in order, ``sweeps`` times at most (until nothing moves); an open
     path's end columns stay.
 

@@ -37,7 +37,6 @@ from .hopfield import (
     make_increasing,
     polygon_energy,
     run_from,
-    tolerant_order,
     update_columns,
     window_costs,
     winners,
@@ -98,23 +97,40 @@ def _gain_tolerance(H: np.ndarray, s: np.ndarray, closed: bool) -> float:
 
 
 def _first_least(values: np.ndarray, tol: float) -> int:
-    """The first index whose value is within ``tol`` of the least (inf and NaN last)."""
-    return int(tolerant_order(values, tol)[0])
+    """The first index whose value is within ``tol`` of the least (:func:`_ranked`)."""
+    return int(_ranked(values, tol)[0])
 
 
 def _tie_groups(values: np.ndarray, tol: float) -> np.ndarray:
-    """Per value, the rank of its group of ties, the groups of
-    :func:`~.hopfield.tolerant_order`: ascending, each the values within ``tol`` of its
-    least; inf and NaN in one group, last."""
+    """Per value, the rank of its group of ties: ascending, each group the values within
+    ``tol`` of its least (chained from it, as :func:`~.hopfield.tolerant_order` does);
+    -inf first as one group, +inf and NaN last as one."""
     v = np.asarray(values, dtype=float)
-    order = np.argsort(v, kind="stable")
     group = np.empty(v.shape[0], dtype=np.int64)
-    g, first = -1, -np.inf  # the current group and its least value
-    for k in order.tolist():  # ascending, inf and NaN last
-        if not v[k] <= first + tol and first != np.inf:  # a new group (one for inf, NaN)
-            g, first = g + 1, float(v[k]) if np.isfinite(v[k]) else np.inf
+    g, first = -1, np.nan  # the current group and its least value
+    for k in np.argsort(v, kind="stable").tolist():  # ascending, NaN last
+        x = float(v[k])
+        if g < 0 or (first != np.inf and not x <= first + tol):
+            g, first = g + 1, np.inf if np.isnan(x) else x
         group[k] = g
     return group
+
+
+def _ranked(values: np.ndarray, tol: float) -> np.ndarray:
+    """Indices of ``values`` (1-D), least first, values within ``tol`` of their group's
+    least ties in index order (:func:`_tie_groups`): -inf first, +inf and NaN last."""
+    return np.lexsort((np.arange(len(values)), _tie_groups(values, tol)))
+
+
+def _best(values: np.ndarray, count: int, tol: float) -> np.ndarray:
+    """The first ``count`` of :func:`_ranked`, ranking only the values that can be among
+    them (those within ``tol`` of the ``count``-th least): the same indices."""
+    v = np.asarray(values, dtype=float)
+    if count < v.shape[0]:
+        kth = np.partition(v, count - 1)[count - 1]
+        near = np.flatnonzero(~(v > kth + tol))  # NaN kth: keep all
+        return near[_ranked(v[near], tol)][:count]
+    return _ranked(v, tol)[:count]
 
 
 def _chords(s: np.ndarray, closed: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -171,13 +187,13 @@ def _relocations(
     count = min(count, flat.shape[0])
     tol = _gain_tolerance(H, s, closed)
     moves = []
-    for k in tolerant_order(flat, tol)[:count].tolist():
+    for k in _best(flat, count, tol).tolist():
         if np.isfinite(flat[k]):
             ri, cj = divmod(k, nc)
             moves.append((float(flat[k]), np.sort(np.append(np.delete(s, ri), x[cj]))))
     moves += _pair_relocations(H, s, closed, x, gain_ins, count, tol)
-    order = tolerant_order(np.array([g for g, _ in moves]), tol) if moves else []
-    return [moves[k] for k in order[:count]]
+    order = _best(np.array([g for g, _ in moves]), count, tol).tolist() if moves else []
+    return [moves[k] for k in order]
 
 
 def _pair_relocations(
@@ -202,12 +218,12 @@ def _pair_relocations(
     a, b, c, d = s[(i - 1) % m], s[i], s[(i + 1) % m], s[(i + 2) % m]
     with np.errstate(invalid="ignore"):
         gain_rem = H[a, d] - H[a, b] - H[b, c] - H[c, d]
-    order = tolerant_order(gain_ins, tol)[:5]
+    order = _best(gain_ins, 5, tol)
     moves = []
-    for k in tolerant_order(np.where(np.isfinite(gain_rem), gain_rem, np.inf), tol)[:count]:
+    for k in _best(np.where(np.isfinite(gain_rem), gain_rem, np.inf), count, tol).tolist():
         if not np.isfinite(gain_rem[k]):
             break
-        r = int(i[int(k)])
+        r = int(i[k])
         hit = {(r - 1) % nc, r % nc, (r + 1) % nc}  # chords replaced by the merge
         free = [j for j in order.tolist() if j not in hit][:2]
         if len(free) < 2:
