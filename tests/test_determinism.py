@@ -46,22 +46,23 @@ print(json.dumps({
 """
 
 
-def _wide_simd() -> list[str]:
+def _cpu_features() -> dict[str, bool]:
+    """numpy's record of this CPU's SIMD features."""
     try:
         from numpy._core._multiarray_umath import __cpu_features__ as feats
     except ImportError:  # numpy < 2
         from numpy.core._multiarray_umath import __cpu_features__ as feats
+    return feats
+
+
+def _wide_simd() -> list[str]:
     wide = ("X86_V3", "X86_V4", "AVX2", "AVX512F", "AVX512CD", "AVX512_SKX", "FMA3")
-    return [f for f in wide if feats.get(f)]
+    return [f for f in wide if _cpu_features().get(f)]
 
 
 def _avx512() -> bool:
     """Whether this CPU has AVX-512, for which OpenBLAS has kernels of its own."""
-    try:
-        from numpy._core._multiarray_umath import __cpu_features__ as feats
-    except ImportError:  # numpy < 2
-        from numpy.core._multiarray_umath import __cpu_features__ as feats
-    return bool(feats.get("AVX512F"))
+    return bool(_cpu_features().get("AVX512F"))
 
 
 def _run(scenario: str, env_extra: dict[str, str], drop: tuple[str, ...] = ()) -> dict:

@@ -15,6 +15,7 @@ from regrasp_pin.polygon.hopfield import (
     network_input,
     polygon_energy,
     run_network,
+    tie_groups,
     tolerant_order,
 )
 from regrasp_pin.polygon.hopfield_search import competitive_hopfield
@@ -181,3 +182,13 @@ def test_tolerant_order_ignores_last_bit_noise():
     assert tolerant_order(v, 1e-12).tolist() == [7, 1, 3, 6, 4, 0, 2, 5]
     assert tolerant_order(v, 0.0)[:4].tolist() == [7, 6, 3, 1]  # no tolerance: by value
     assert tolerant_order(np.zeros(0), 1e-9).tolist() == []
+
+
+def test_tie_groups_chain_from_each_groups_least():
+    values = np.array([3.0, 1.0, 1.0 + 1e-12, np.inf, 2.0, np.nan, 1.0 + 2e-9, -np.inf])
+    groups = tie_groups(values, 1e-9)
+    assert groups.tolist() == [4, 1, 1, 5, 3, 5, 2, 0]  # -inf first, inf and NaN last
+    assert tie_groups(np.array([np.inf, np.inf]), 1e-9).tolist() == [0, 0]
+    assert tie_groups(np.zeros(0), 1e-9).size == 0
+    # tolerant_order: the same groups, -inf last with inf and NaN
+    assert tolerant_order(values, 1e-9).tolist() == [1, 2, 6, 4, 0, 3, 5, 7]

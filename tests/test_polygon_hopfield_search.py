@@ -198,12 +198,9 @@ def test_a_lower_bound_that_is_not_finite_is_refused(bad):
         competitive_hopfield(H, 6, closed=False, points=P, lower_bound=bad)
 
 
-def test_tie_groups_chain_from_each_groups_least():
+def test_moves_are_ranked_with_ties_in_index_order_and_minus_inf_first():
     values = np.array([3.0, 1.0, 1.0 + 1e-12, np.inf, 2.0, np.nan, 1.0 + 2e-9, -np.inf])
-    groups = hopfield_search._tie_groups(values, 1e-9)
-    assert groups.tolist() == [4, 1, 1, 5, 3, 5, 2, 0]  # -inf first, inf and NaN last
-    assert hopfield_search._tie_groups(np.array([np.inf, np.inf]), 1e-9).tolist() == [0, 0]
-    # ranked: ties in index order, an unavailable chord's split (-inf) first
+    # an unavailable chord's split (-inf) is the best move
     assert hopfield_search._ranked(values, 1e-9).tolist() == [7, 1, 2, 6, 4, 0, 3, 5]
 
 

@@ -85,20 +85,34 @@ def _winners_and_tolerance(cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.argmax(cost <= (best + tol)[:, None], axis=1), tol
 
 
+def tie_groups(values: np.ndarray, tol: float) -> np.ndarray:
+    """Per value of ``values`` (1-D), the rank of its group of ties: the finite values
+    ascending in groups, each the values within ``tol`` of its least (the next group
+    starts at the first value above that); -inf one group first, +inf and NaN one
+    group last."""
+    v = np.asarray(values, dtype=float)
+    order = np.argsort(v, kind="stable")  # -inf, finite, +inf, NaN
+    sv = v[order]
+    group = np.empty(v.shape[0], dtype=np.int64)
+    start = int(np.isneginf(sv).sum())
+    end = start + int(np.isfinite(sv).sum())
+    group[order[:start]] = 0
+    g = 1 if start else 0
+    while start < end:
+        stop = start + int(np.searchsorted(sv[start:end], sv[start] + tol, side="right"))
+        group[order[start:stop]] = g
+        g, start = g + 1, stop
+    group[order[end:]] = g
+    return group
+
+
 def tolerant_order(values: np.ndarray, tol: float) -> np.ndarray:
     """Indices that sort ``values`` (1-D) ascending, values within ``tol`` of the first of
     their group counting as ties, ordered by index: an order that does not follow last-bit
-    noise (inf and NaN last, by index)."""
+    noise (inf and NaN last, by index; -inf among them)."""
     v = np.asarray(values, dtype=float)
-    order = np.argsort(v, kind="stable")
-    fin = order[np.isfinite(v[order])]
-    out, start = [], 0
-    while start < fin.shape[0]:
-        stop = start + int(np.searchsorted(v[fin[start:]], v[fin[start]] + tol, side="right"))
-        out.append(np.sort(fin[start:stop]))
-        start = stop
-    out.append(np.sort(order[~np.isfinite(v[order])]))
-    return np.concatenate(out) if out else order
+    groups = tie_groups(np.where(np.isneginf(v), np.inf, v), tol)
+    return np.lexsort((np.arange(v.shape[0]), groups))
 
 
 @dataclass(frozen=True)
@@ -403,6 +417,7 @@ __all__ = [
     "polygon_energy",
     "run_from",
     "run_network",
+    "tie_groups",
     "tolerant_order",
     "update_columns",
     "window_costs",

@@ -247,10 +247,9 @@ def spread_ties(
     keeps the energy (all moves together raise it by at most ``TIE_RTOL`` times itself:
     one budget, so that ties do not follow last-bit noise and the energy cannot creep)
     and spreads the vertices out; no move follows the last bits of ``H`` or of the
-    arc lengths (ties between positions go to the first). At most ``sweeps`` passes: a
-    long plateau may be left before its vertices are evenly spread.
-    Columns are visited in order, ``sweeps`` times at most (until nothing moves); an open
-    path's end columns stay.
+    arc lengths (ties between positions go to the first). Columns are visited in order,
+    ``sweeps`` times at most (until nothing moves: a long plateau may be left before its
+    vertices are evenly spread); an open path's end columns stay.
 
     Args:
         H: Deviation matrix, shape ``(n, n)``.

@@ -37,6 +37,7 @@ from .hopfield import (
     make_increasing,
     polygon_energy,
     run_from,
+    tie_groups,
     update_columns,
     window_costs,
     winners,
@@ -101,25 +102,12 @@ def _first_least(values: np.ndarray, tol: float) -> int:
     return int(_ranked(values, tol)[0])
 
 
-def _tie_groups(values: np.ndarray, tol: float) -> np.ndarray:
-    """Per value, the rank of its group of ties: ascending, each group the values within
-    ``tol`` of its least (chained from it, as :func:`~.hopfield.tolerant_order` does);
-    -inf first as one group, +inf and NaN last as one."""
-    v = np.asarray(values, dtype=float)
-    group = np.empty(v.shape[0], dtype=np.int64)
-    g, first = -1, np.nan  # the current group and its least value
-    for k in np.argsort(v, kind="stable").tolist():  # ascending, NaN last
-        x = float(v[k])
-        if g < 0 or (first != np.inf and not x <= first + tol):
-            g, first = g + 1, np.inf if np.isnan(x) else x
-        group[k] = g
-    return group
-
-
 def _ranked(values: np.ndarray, tol: float) -> np.ndarray:
     """Indices of ``values`` (1-D), least first, values within ``tol`` of their group's
-    least ties in index order (:func:`_tie_groups`): -inf first, +inf and NaN last."""
-    return np.lexsort((np.arange(len(values)), _tie_groups(values, tol)))
+    least ties in index order (:func:`~.hopfield.tie_groups`): as
+    :func:`~.hopfield.tolerant_order`, but -inf first (an unavailable chord's split,
+    the best move), +inf and NaN last."""
+    return np.lexsort((np.arange(len(values)), tie_groups(values, tol)))
 
 
 def _best(values: np.ndarray, count: int, tol: float) -> np.ndarray:
@@ -390,7 +378,7 @@ def _greedy_merge(H: np.ndarray, m: int, closed: bool) -> np.ndarray | None:
         scale = float(np.abs(merged[np.isfinite(merged)]).max(initial=0.0))
         prio = (idx * 2654435761) % 4294967296
         rank = np.empty(k, dtype=np.int64)
-        rank[np.lexsort((prio, _tie_groups(cost, TIE_RTOL * scale + 1e-300)))] = idx
+        rank[np.lexsort((prio, tie_groups(cost, TIE_RTOL * scale + 1e-300)))] = idx
         take = max(1, (k - m) // 2)
         sel = (rank < take) & np.isfinite(cost)
         if not sel.any():
