@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from regrasp_pin.grasp.contact import ContactModel
 from regrasp_pin.model import ik
@@ -104,3 +105,20 @@ def shadow_urdf() -> Path:
     if not urdf.is_file():
         pytest.skip(f"third-party hand models absent: no Shadow Hand URDF at {urdf}")
     return urdf
+
+
+def staircase(rng: np.random.Generator, runs: int) -> np.ndarray:
+    """A lattice path of ``runs`` straight runs of 4-14 unit steps, each turning 90 deg."""
+    pts, d = [np.zeros(2)], np.array([1.0, 0.0])
+    for _ in range(runs):
+        for _ in range(int(rng.integers(4, 15))):
+            pts.append(pts[-1] + d)
+        d = np.array([-d[1], d[0]]) if rng.random() < 0.5 else np.array([d[1], -d[0]])
+    return np.array(pts)
+
+
+def placed(P: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``P`` (n, 2) scaled to 4 mm steps and placed by a random rotation and a shift of up
+    to 1 m in 3-D: the same deviations in exact arithmetic, other last bits in floats."""
+    R = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+    return (0.004 * np.c_[P, np.zeros(len(P))]) @ R.T + rng.uniform(-1.0, 1.0, 3)

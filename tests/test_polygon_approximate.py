@@ -7,7 +7,7 @@ import logging
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import assert_close, placed, staircase
 
 from regrasp_pin.exceptions import InputError, UnknownNameError
 from regrasp_pin.polygon.approximate import METHODS, PolygonResult, approximate_polygon
@@ -206,3 +206,20 @@ def test_fig8_plot_2d_and_3d():
         assert len(ax.lines) == 2  # curve and polygon
     with pytest.raises(InputError, match="points: has shape"):
         plot_polygon(P[:10], res)
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+@pytest.mark.parametrize("closed", [False, True])
+def test_polygon_of_straight_runs_does_not_follow_the_placements_last_bits(deviation, closed):
+    # lattice paths with more vertices than corners: many polygons of energy 0 (or of
+    # equal energy), which rounding of the placed points would decide between
+    rng = np.random.default_rng(11)
+    for _ in range(8):
+        P = staircase(rng, int(rng.integers(2, 5)))
+        m = min(int(rng.integers(5, 12)), len(P))
+        if closed:
+            P = np.r_[P, P[-2:0:-1] + [0.0, 0.5]]  # back alongside: a closed loop
+        first = approximate_polygon(0.004 * P, m, deviation=deviation, closed=closed)
+        for _ in range(3):
+            res = approximate_polygon(placed(P, rng), m, deviation=deviation, closed=closed)
+            assert res.indices.tolist() == first.indices.tolist()

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import assert_close
+from conftest import assert_close, placed, staircase
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -242,3 +242,23 @@ def test_bad_names_and_options():
         deviation_matrix(P, cap=1.0, m=7)
     with pytest.raises(InputError, match="max_span"):
         deviation_matrix(P, max_span=0)
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+def test_arcs_on_their_chords_deviate_by_exactly_zero_wherever_the_curve_lies(deviation):
+    # rounding leaves collinear arcs about 1e-19 off their chords, with a sign and size
+    # that follow the placement's last bits: those are exactly 0, the others untouched
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        P = staircase(rng, 3)
+        for closed in (False, True):
+            Q = placed(P, rng)
+            H = deviation_matrix(Q, deviation, closed=closed)
+            exact = deviation_matrix(0.004 * P, deviation, closed=closed)
+            on_chord = loop_matrix(P, deviation, closed) == 0.0  # lattice: exact in floats
+            assert np.all(H[on_chord] == 0.0) and on_chord.sum() > len(P)
+            np.testing.assert_allclose(H[~on_chord], exact[~on_chord], rtol=1e-9, atol=0)
+            assert np.all(H[~on_chord] > 0.0)
+            x, y = np.nonzero(np.isfinite(H))
+            direct = chord_deviations(Q, x, y, deviation, closed=closed)
+            np.testing.assert_allclose(direct, H[x, y], rtol=1e-9, atol=0)

@@ -67,6 +67,18 @@ def test_initial_state_is_equidistant_along_the_curve():
     assert initial_state(same, 4).tolist() == [0, 3, 6, 9]
 
 
+def test_initial_state_target_midway_between_points_snaps_to_the_later_wherever_placed():
+    # 20 evenly spaced points, m = 3: the middle target lies exactly midway between
+    # points 9 and 10, which the arc lengths' last bits would decide, placement by placement
+    rng = np.random.default_rng(3)
+    line = np.c_[np.arange(20.0), np.zeros(20), np.zeros(20)] * 0.004
+    for _ in range(30):
+        R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+        P = line @ R.T + rng.uniform(-1.0, 1.0, 3)
+        assert initial_state(P, 3).tolist() == [0, 10, 19]
+        assert initial_state(P, 5).tolist() == [0, 5, 10, 14, 19]  # 4.75 and 14.25 nearer
+
+
 @pytest.mark.parametrize("closed", [False, True])
 @pytest.mark.parametrize("deviation", DEVIATIONS)
 def test_converged_state_is_winner_take_all_fixed_point(closed, deviation):

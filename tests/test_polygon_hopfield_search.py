@@ -126,18 +126,19 @@ def test_growing_start_is_a_valid_state():
     assert np.isfinite(polygon_energy(H, s, closed=True))
 
 
-def test_turned_starts_reach_the_spiral_optimum(monkeypatch):
-    """The spiral of 112 pixels, m = 16, "max": the optimum is one chord across the inner
-    turns and 15 zero-cost chords packed on the other side; the network's minimum packs
-    them elsewhere (10.2 % above), and no move of a few columns turns the whole polygon.
-    The best state turned by a quarter of the curve does reach the optimum."""
-    P = digital_curve("spiral", 112)
+def test_turned_starts_reach_the_figure_eights_optimum(monkeypatch):
+    """The figure eight of 110 pixels, m = 16, "max": the states that moves of a few
+    columns reach from the network's minimum end 3.3 % above the optimum; the best
+    state turned by a quarter of the curve reaches it. (The spiral of 112 pixels was
+    the case until zero-cost chords became exactly 0: their ties are now broken by
+    index instead of by the points' rounding, and neither search reaches its optimum.)"""
+    P = digital_curve("eight", 110)
     H = deviation_matrix(P, "max", closed=True)
     best = exact_polygon(H, 16, closed=True).energy
     turned = competitive_hopfield(H, 16, closed=True, points=P)
     monkeypatch.setattr(hopfield_search, "_TURNS", 1)
     without = competitive_hopfield(H, 16, closed=True, points=P)
-    assert without.energy > 1.05 * best, "the case no longer needs the turned starts"
+    assert without.energy > 1.03 * best, "the case no longer needs the turned starts"
     assert turned.energy <= best * (1 + 1e-9)
     assert turned.energy <= turned.plain_energy
 

@@ -47,6 +47,11 @@ _CAP_RTOL = 1e-9
 #: Points closer than this fraction of the curve's extent (largest coordinate range)
 #: coincide: a chord between them is unavailable (``inf``), like the diagonal of Eq. 7.
 COINCIDENT_RTOL = 1e-9
+#: Deviations at or below this fraction of the curve's unit (:func:`deviation_unit`) are
+#: exactly 0: the arc lies on its chord, and what is left is rounding (about ``n``
+#: machine epsilons of the unit). Without it the ties of a curve that runs straight
+#: (energies of 0) would be decided by the last bits of the points' coordinates.
+ZERO_RTOL = 1e-12
 
 
 def validate_points(points: object, argument: str = "points") -> np.ndarray:
@@ -181,7 +186,22 @@ def chord_deviations(
         out[seg] = np.add.reduceat(np.sqrt(d2), first[seg])
     else:
         out[seg] = np.add.reduceat(d2, first[seg])
+    _snap_zeros(out, deviation, P)
     return out
+
+
+def deviation_unit(kind: str, scale: float, n: int) -> float:
+    """The size of a deviation ``kind`` on a curve of ``n`` points within ``scale`` of
+    their mean [length unit, squared for ``"ise"``]: one point's distance for ``"max"``,
+    ``n`` of them for ``"sum"``, ``n`` squared ones for ``"ise"``."""
+    return {"max": scale, "sum": scale * n, "ise": scale**2 * n}[kind]
+
+
+def _snap_zeros(values: np.ndarray, kind: str, P: np.ndarray) -> None:
+    """Set the deviations of ``values`` at or below :data:`ZERO_RTOL` times the curve's
+    unit to exactly 0, in place (inf stays)."""
+    scale = float(np.abs(P - P.mean(axis=0)).max())
+    values[values <= ZERO_RTOL * deviation_unit(kind, scale, P.shape[0])] = 0.0
 
 
 def coincident_sq(points: np.ndarray) -> float:
@@ -339,7 +359,7 @@ class _Builder:
     def _keep(self, lower: np.ndarray, valid: np.ndarray, cap: float, m: int | None) -> np.ndarray:
         """Chords that may appear in a polygon of energy <= cap, offset form."""
         n, ncols = lower.shape
-        unit = {"max": self.scale, "sum": self.scale * n, "ise": self.scale**2 * n}[self._kind]
+        unit = deviation_unit(self._kind, self.scale, n)
         budget = np.full(ncols, cap + _CAP_RTOL * (cap + unit))
         if m is not None:
             min_by_length = np.where(valid, lower, np.inf).min(axis=0)
@@ -377,6 +397,7 @@ class _Builder:
                 assert cap is not None
                 keep = self._keep(self._middle_lower_bound(ncols), valid, cap, m)
             self._max_or_sum(F, kind, keep)
+        F[F <= ZERO_RTOL * deviation_unit(kind, self.scale, n)] = 0.0  # rounding, not arc
         F[~(valid if keep is None else keep)] = np.inf
         F[self._coincident(ncols)] = np.inf  # zero-length chords, like h_xx (Eq. 7)
         F[:, :min_span] = np.inf

@@ -143,8 +143,9 @@ def initial_state(
     """The paper's initial state (step 2): ``m`` points as equidistant as possible.
 
     Targets are spaced evenly in arc length (cumulative chord length, including the closing
-    segment of a closed curve) and snapped to the nearest point along the curve; the
-    indices are then made strictly increasing. Open curves keep both end points.
+    segment of a closed curve) and snapped to the nearest point along the curve (a target
+    midway between two, within :data:`TIE_RTOL` of the length: the later); the indices
+    are then made strictly increasing. Open curves keep both end points.
 
     Args:
         points: Curve points, shape ``(n, d)`` [length unit].
@@ -176,7 +177,10 @@ def initial_state(
     else:
         targets = np.arange(m) / (m - 1) * total
     after = np.clip(np.searchsorted(cum, targets), 1, n - 1)
-    nearer_before = (targets - cum[after - 1]) < (cum[after] - targets)
+    # a target midway between two points (within the rounding of the arc lengths) snaps
+    # to the later one: on evenly spaced points the last bits would decide otherwise
+    tie = TIE_RTOL * total
+    nearer_before = (targets - cum[after - 1]) < (cum[after] - targets) - tie
     idx = np.where(nearer_before, after - 1, after)
     return make_increasing(idx, n, closed)
 
