@@ -1391,6 +1391,29 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
         assert search.refused > 0 and search.closest < gap_m
 
 
+def test_combination_search_contacts_exactly_the_separation_apart_are_apart_anywhere():
+    # the surface sample's points lie on grids: two candidates exactly ``sep`` apart (5
+    # steps of 4 mm) must not be decided by the last bits of where the object lies
+    rng = np.random.default_rng(4)
+    lattice = 0.004 * np.array([[0.0, 0, 0], [5, 0, 0], [3, 4, 0], [0, 3, 4]])
+    ids = {"a": np.array([0]), "b": np.array([1, 2, 3])}  # 1, 2 and 3 all 20 mm from 0
+    per_finger = {f: (ids[f], np.ones(len(ids[f]))) for f in ids}
+    table = {}
+    for j in ids["b"]:
+        table["a", 0, "b", j] = table["b", j, "a", 0] = 0.01
+    for _ in range(40):
+        R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+        pts = lattice @ R.T + rng.uniform(-0.3, 0.3, 3)
+        gaps = _TableGaps(table, ids, 0.001, 0)
+        search = _CombinationSearch(per_finger, pts, 0.02, gaps, 0.001, max_nodes=100)
+        assert search.complete(["a", "b"], {"a": np.arange(1), "b": np.arange(3)}) == {
+            "a": 0,
+            "b": 0,
+        }
+        search = _CombinationSearch(per_finger, pts, 0.02 + 1e-6, gaps, 0.001, max_nodes=100)
+        assert search.complete(["a", "b"], {"a": np.arange(1), "b": np.arange(3)}) is None
+
+
 class _Forgetful(dict):
     """A memo that remembers nothing."""
 

@@ -20,7 +20,7 @@ from ..model.clearance import FingerClearance
 from ..model.distances import capsule_gap
 from ..model.hand import Hand
 from ..model.objects import ConvexObject, SurfaceSample
-from .choice import exit_times
+from .choice import DISTANCE_TOL_M, exit_times
 from .contact import ContactModel
 from .manifold import Manifold
 from .necessity import MustHold
@@ -549,14 +549,17 @@ class _CombinationSearch:
         self.gaps, self.min_gap_m, self.max_nodes = gaps, min_gap_m, max_nodes
         self.refused, self.closest = 0, -np.inf
         # which candidates are closer than ``sep``: one table over every finger's
-        # candidates (sample index -> row), looked up in the search's inner loops
+        # candidates (sample index -> row), looked up in the search's inner loops; two
+        # exactly ``sep`` apart (the sample's points lie on grids) are apart on every
+        # machine, within DISTANCE_TOL_M as the choice of a new contact has it
         ids = np.unique(np.concatenate([np.asarray(c[0], int) for c in per_finger.values()]))
         self._row = {int(i): r for r, i in enumerate(ids)}
         self._rows = {
             n: np.array([self._row[int(i)] for i in c[0]], int) for n, c in per_finger.items()
         }
         p = np.asarray(points, float)[ids]
-        self._near = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1) < sep
+        dist = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
+        self._near = dist < sep - DISTANCE_TOL_M
         # _admissible per (finger, picked): None, or the gaps of its spaced candidates
         self._known: dict[tuple[str, tuple[tuple[str, int], ...]], list[float] | None] = {}
         # subtrees searched to the end without a combination, per (picked, fingers still
