@@ -15,7 +15,10 @@ every measure, and so is every chord whose two ends coincide (closer than
 :data:`COINCIDENT_RTOL` times the curve's extent): digital curves repeat pixels (a
 one-pixel-wide part is walked along both sides), and a zero-length chord has no line to
 measure against and would give the polygon two vertices at one place, which Eq. 7 rules
-out for one point. No entry is NaN.
+out for one point. No entry is NaN. A deviation at or below :data:`ZERO_RTOL` times
+the curve's unit (:func:`deviation_unit`) is exactly 0: an arc on its chord costs
+nothing wherever the curve lies, not rounding whose sign and size follow the
+coordinates' last bits.
 
 Open curves (a path from P to Q) only have forward arcs, ``H[x, y] = inf`` for ``y <= x``.
 Closed curves use cyclic indices (Eq. 5): the arc from ``x`` to ``y`` runs through
@@ -193,7 +196,7 @@ def chord_deviations(
 def deviation_unit(kind: str, scale: float, n: int) -> float:
     """The size of a deviation ``kind`` on a curve of ``n`` points within ``scale`` of
     their mean [length unit, squared for ``"ise"``]: one point's distance for ``"max"``,
-    ``n`` of them for ``"sum"``, ``n`` squared ones for ``"ise"``."""
+    ``n`` of them for ``"sum"``, ``n`` squared distances for ``"ise"``."""
     return {"max": scale, "sum": scale * n, "ise": scale**2 * n}[kind]
 
 
