@@ -1325,6 +1325,21 @@ def test_spread_out_covers_the_surface_first_then_fills_in():
     assert all(d[k, :k].min() >= 0.01 for k in range(first, 60))
 
 
+def test_spread_out_points_exactly_a_spacing_apart_are_apart_wherever_they_lie():
+    # a grid of 4 mm steps, the spacing 8 mm: every other point along a row is exactly
+    # the spacing from the last chosen, which the placement's last bits must not decide
+    grid = 0.004 * np.array([[i, j, 0.0] for j in range(3) for i in range(9)])
+    rng = np.random.default_rng(8)
+    first = None
+    for _ in range(30):
+        R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+        pts = grid @ R.T + rng.uniform(-0.3, 0.3, 3)
+        chosen = _spread_out(pts, np.arange(len(grid)), (0.008,), 100, lambda j: True)
+        first = chosen if first is None else first
+        assert chosen == first
+    assert first == [0, 2, 4, 6, 8, 18, 20, 22, 24, 26]  # rows 0 and 2, every other point
+
+
 class _TableGaps:
     """Pairwise finger distances from a table: (finger, point, finger, point) -> [m],
     and lower bounds on them (the table less a random slack of up to 2 mm) for the

@@ -104,7 +104,9 @@ def _start_candidates(
         idx = idx[needed[idx]] if needed[idx].any() else idx[hold.lasting[idx]]
     last = exit_times(usable[:, idx], man.times_s, t_index)
     frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
-    order = np.lexsort((-man.margin_rad[t_index, idx], -frac))
+    # margins on a 1e-9 rad lattice, as the choice of a new contact keys them: the order
+    # must not follow the IK's last bits
+    order = np.lexsort((-np.round(man.margin_rad[t_index, idx], 9), -frac))
     # held at least until the next grid time (a contact the tracking loses at once is
     # no start) or, for a finger that cannot let go, for as long as it must hold
     k_held = 1 if hold is None else max(hold.k_to - t_index, 1)
@@ -503,8 +505,10 @@ def _spread_out(
     admit: Callable[[int], bool],
 ) -> list[int]:
     """Up to ``limit`` indices into ``points``, in ``order``, each at least the pass's
-    spacing [m] from those chosen before; one pass per spacing (widest first), so the
-    first candidates cover the surface and the later ones fill in. ``admit`` filters."""
+    spacing [m] from those chosen before (within :data:`~.choice.DISTANCE_TOL_M`: points
+    of the sample's grids exactly a spacing apart are apart on every machine); one pass
+    per spacing (widest first), so the first candidates cover the surface and the later
+    ones fill in. ``admit`` filters."""
     chosen: list[int] = []
     refused: set[int] = set()
     for spacing in spacings:
@@ -514,7 +518,8 @@ def _spread_out(
                 return chosen
             if j in refused or j in chosen:
                 continue
-            if chosen and np.min(np.linalg.norm(points[chosen] - points[j], axis=1)) < spacing:
+            near = np.linalg.norm(points[chosen] - points[j], axis=1) < spacing - DISTANCE_TOL_M
+            if chosen and near.any():
                 continue
             if not admit(j):
                 refused.add(j)
