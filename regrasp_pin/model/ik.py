@@ -62,6 +62,9 @@ _BLOCK = 32768  # points per block
 _STALL_SQ = 0.995**2  # an iteration must shrink the error by 0.5 % ...
 _STALL_TOL_FACTOR = 10.0  # ... unless it is already within 10 x tol
 _CONSTS = (_LAMBDA0_SQ, _LAMBDA_ERR, _MAX_STEP, _STALL_SQ, _STALL_TOL_FACTOR)
+#: Residuals [m] of restarts within this fraction of each other (of the tolerance, when
+#: they are smaller) are ties, won by the first seed: not by their last bits.
+RESIDUAL_RTOL = 1e-9
 _backend: list[str] = []  # the chosen backend, once chosen
 
 
@@ -365,7 +368,9 @@ def solve_position_ik(
         q_init: ``(N, k)`` initial guesses [rad] (clipped into the limits).
         tol_m: Convergence tolerance on the tip position error [m].
         max_iter: Iteration cap per pass.
-        restarts: Restart points that did not converge from deterministic seeds.
+        restarts: Restart points that did not converge from deterministic seeds: the
+            first seed that converges, else the first of those that end nearest the
+            target (within :data:`RESIDUAL_RTOL`), if nearer than the first solve.
 
     Returns:
         An :class:`IKResult`; ``q`` is always within ``[lower, upper]``.
@@ -413,12 +418,17 @@ def solve_position_ik(
             iters += it + it2
             e_try = e_try.reshape(ns, bad.size).T  # (point, seed)
             # the first seed that converged (not the smallest residual below the
-            # tolerance: that one follows rounding noise), else the smallest residual
+            # tolerance: that one follows rounding noise), else the first of the smallest
+            # residuals: seeds that stall where the target is out of reach end at the
+            # same distance, on other branches of a spare joint, and the last bits of
+            # that distance must not choose the branch
             conv = e_try <= tol_m
-            best = np.where(conv.any(axis=1), np.argmax(conv, axis=1), np.argmin(e_try, axis=1))
+            least = e_try.min(axis=1, keepdims=True)
+            tied = e_try <= least + RESIDUAL_RTOL * np.maximum(least, tol_m)
+            best = np.where(conv.any(axis=1), np.argmax(conv, axis=1), np.argmax(tied, axis=1))
             rows = np.arange(bad.size)
             e_best = e_try[rows, best]
-            better = e_best < err[bad]
+            better = e_best < err[bad] - RESIDUAL_RTOL * np.maximum(err[bad], tol_m)
             q_best = q_try.reshape(k, ns, bad.size)[:, best, rows]
             q[:, bad[better]] = q_best[:, better]
             err[bad[better]] = e_best[better]
