@@ -1325,19 +1325,20 @@ def test_spread_out_covers_the_surface_first_then_fills_in():
     assert all(d[k, :k].min() >= 0.01 for k in range(first, 60))
 
 
-def test_spread_out_points_exactly_a_spacing_apart_are_apart_wherever_they_lie():
-    # a grid of 4 mm steps, the spacing 8 mm: every other point along a row is exactly
-    # the spacing from the last chosen, which the placement's last bits must not decide
-    grid = 0.004 * np.array([[i, j, 0.0] for j in range(3) for i in range(9)])
+def test_spread_out_points_exactly_a_spacing_apart_are_near_wherever_they_lie():
+    # a grid of 4 mm steps, the spacing 8 mm: many points are exactly the spacing from
+    # one chosen before, which the placement's last bits must not decide: they are near
+    steps = np.array([[i, j, 0] for j in range(3) for i in range(9)])
+    greedy: list[int] = []  # the same pass in exact integer arithmetic (grid steps)
+    for j, p in enumerate(steps):
+        if all(((p - steps[g]) ** 2).sum() > 4 for g in greedy):
+            greedy.append(j)
     rng = np.random.default_rng(8)
-    first = None
     for _ in range(30):
         R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
-        pts = grid @ R.T + rng.uniform(-0.3, 0.3, 3)
-        chosen = _spread_out(pts, np.arange(len(grid)), (0.008,), 100, lambda j: True)
-        first = chosen if first is None else first
-        assert chosen == first
-    assert first == [0, 2, 4, 6, 8, 18, 20, 22, 24, 26]  # rows 0 and 2, every other point
+        pts = (0.004 * steps) @ R.T + rng.uniform(-0.3, 0.3, 3)
+        chosen = _spread_out(pts, np.arange(len(steps)), (0.008,), 100, lambda j: True)
+        assert chosen == greedy
 
 
 class _TableGaps:
@@ -1427,6 +1428,18 @@ def test_combination_search_contacts_exactly_the_separation_apart_are_apart_anyw
         }
         search = _CombinationSearch(per_finger, pts, 0.02 + 1e-6, gaps, 0.001, max_nodes=100)
         assert search.complete(["a", "b"], {"a": np.arange(1), "b": np.arange(3)}) is None
+
+
+def test_combination_search_a_separation_below_the_tolerance_still_keeps_fingers_apart():
+    # a separation of 0.1 nm (below DISTANCE_TOL_M): two fingers may not share a point
+    pts = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0]])
+    ids = {"a": np.array([0]), "b": np.array([0, 1])}
+    per_finger = {f: (ids[f], np.ones(len(ids[f]))) for f in ids}
+    table = {(f, i, g, j): 0.01 for f in ids for g in ids for i in ids[f] for j in ids[g]}
+    gaps = _TableGaps(table, ids, 0.001, 0)
+    search = _CombinationSearch(per_finger, pts, 1e-10, gaps, 0.001, max_nodes=100)
+    found = search.complete(["a", "b"], {"a": np.arange(1), "b": np.arange(2)})
+    assert found == {"a": 0, "b": 1}
 
 
 class _Forgetful(dict):

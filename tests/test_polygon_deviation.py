@@ -246,8 +246,8 @@ def test_bad_names_and_options():
 
 @pytest.mark.parametrize("deviation", DEVIATIONS)
 def test_arcs_on_their_chords_deviate_by_exactly_zero_wherever_the_curve_lies(deviation):
-    # rounding leaves collinear arcs about 1e-19 off their chords, with a sign and size
-    # that follow the placement's last bits: those are exactly 0, the others untouched
+    # rounding leaves collinear arcs 1e-17 to 1e-15 m off their chords, with a sign and
+    # size that follow the placement's last bits: those are exactly 0, the others not
     rng = np.random.default_rng(7)
     for _ in range(5):
         P = staircase(rng, 3)
@@ -262,3 +262,17 @@ def test_arcs_on_their_chords_deviate_by_exactly_zero_wherever_the_curve_lies(de
             x, y = np.nonzero(np.isfinite(H))
             direct = chord_deviations(Q, x, y, deviation, closed=closed)
             np.testing.assert_allclose(direct, H[x, y], rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("deviation", DEVIATIONS)
+def test_a_short_straight_curve_far_from_the_origin_deviates_by_exactly_zero(deviation):
+    # centring 2 mm of line 100 m away rounds each point by ~1e-14 m: still on the chord
+    rng = np.random.default_rng(2)
+    line = np.c_[np.linspace(0.0, 0.002, 20), np.zeros(20), np.zeros(20)]
+    for offset_m in (1.0, 10.0, 100.0):
+        R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+        P = line @ R.T + offset_m * rng.standard_normal(3)
+        H = deviation_matrix(P, deviation)
+        assert np.all(H[np.isfinite(H)] == 0.0), offset_m
+        assert np.all(chord_deviations(P, [0, 3], [19, 17], deviation) == 0.0)
+

@@ -56,6 +56,7 @@ from .screening import (
 
 __all__ = [
     "DISTANCE_TOL_M",
+    "apart_threshold",
     "TIP_GAP_M",
     "NewContact",
     "Room",
@@ -540,15 +541,22 @@ def _posture(
     return clear, hand.to_full(str(room.finger), q), row
 
 
+def apart_threshold(radius_m: float) -> float:
+    """The distance [m] from which two points count as ``radius_m`` apart: the radius
+    within :data:`DISTANCE_TOL_M` (``radius_m - DISTANCE_TOL_M``; a radius below twice
+    that: ``min(radius_m, DISTANCE_TOL_M)``, so that a point is still near itself), so
+    that points of the sample's grids exactly a radius apart are apart on every
+    machine."""
+    if radius_m >= 2 * DISTANCE_TOL_M:
+        return radius_m - DISTANCE_TOL_M
+    return min(radius_m, DISTANCE_TOL_M)  # about the tolerance: what is nearer (itself)
+
+
 def _far_from(pts: np.ndarray, centres: list[np.ndarray], radius_m: float) -> np.ndarray:
     """``(N,)`` True where a point is at least ``radius_m`` from every centre, within
-    :data:`DISTANCE_TOL_M` (``radius_m - DISTANCE_TOL_M``; a radius below twice that:
-    ``min(radius_m, DISTANCE_TOL_M)``, which still excludes the centres themselves)."""
+    :data:`DISTANCE_TOL_M` (:func:`apart_threshold`)."""
     ok = np.ones(pts.shape[0], bool)
-    if radius_m >= 2 * DISTANCE_TOL_M:
-        least = radius_m - DISTANCE_TOL_M
-    else:  # a radius of about the tolerance: what is nearer than it (the centre)
-        least = min(radius_m, DISTANCE_TOL_M)
+    least = apart_threshold(radius_m)
     for c in centres:
         ok &= np.linalg.norm(pts - c, axis=1) >= least
     return ok

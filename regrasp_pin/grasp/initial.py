@@ -20,7 +20,7 @@ from ..model.clearance import FingerClearance
 from ..model.distances import capsule_gap
 from ..model.hand import Hand
 from ..model.objects import ConvexObject, SurfaceSample
-from .choice import DISTANCE_TOL_M, exit_times
+from .choice import DISTANCE_TOL_M, apart_threshold, exit_times
 from .contact import ContactModel
 from .manifold import Manifold
 from .necessity import MustHold
@@ -104,8 +104,9 @@ def _start_candidates(
         idx = idx[needed[idx]] if needed[idx].any() else idx[hold.lasting[idx]]
     last = exit_times(usable[:, idx], man.times_s, t_index)
     frac = (last - man.times_s[t_index]) / max(man.times_s[-1] - man.times_s[t_index], 1e-9)
-    # margins on a 1e-9 rad lattice, as the choice of a new contact keys them: the order
-    # must not follow the IK's last bits
+    # margins on a 1e-9 rad lattice, as the choice of a new contact keys them: margins
+    # equal but for the IK's last bits are one key (unless they straddle a lattice
+    # boundary, which takes a margin within rounding of one)
     order = np.lexsort((-np.round(man.margin_rad[t_index, idx], 9), -frac))
     # held at least until the next grid time (a contact the tracking loses at once is
     # no start) or, for a finger that cannot let go, for as long as it must hold
@@ -504,22 +505,22 @@ def _spread_out(
     limit: int,
     admit: Callable[[int], bool],
 ) -> list[int]:
-    """Up to ``limit`` indices into ``points``, in ``order``, each at least the pass's
-    spacing [m] from those chosen before (within :data:`~.choice.DISTANCE_TOL_M`: points
-    of the sample's grids exactly a spacing apart are apart on every machine); one pass
-    per spacing (widest first), so the first candidates cover the surface and the later
-    ones fill in. ``admit`` filters."""
+    """Up to ``limit`` indices into ``points``, in ``order``, each more than the pass's
+    spacing [m] from those chosen before (by :data:`~.choice.DISTANCE_TOL_M`: points of
+    the sample's grids exactly a spacing apart are near on every machine, and the later
+    waits for a narrower pass); one pass per spacing (widest first), so the first
+    candidates cover the surface and the later ones fill in. ``admit`` filters."""
     chosen: list[int] = []
     refused: set[int] = set()
     for spacing in spacings:
+        near = spacing + DISTANCE_TOL_M if spacing > 0 else 0.0  # 0: any point
         for j in order:
             j = int(j)
             if len(chosen) == limit:
                 return chosen
             if j in refused or j in chosen:
                 continue
-            near = np.linalg.norm(points[chosen] - points[j], axis=1) < spacing - DISTANCE_TOL_M
-            if chosen and near.any():
+            if (np.linalg.norm(points[chosen] - points[j], axis=1) < near).any():
                 continue
             if not admit(j):
                 refused.add(j)
@@ -556,7 +557,7 @@ class _CombinationSearch:
         # which candidates are closer than ``sep``: one table over every finger's
         # candidates (sample index -> row), looked up in the search's inner loops; two
         # exactly ``sep`` apart (the sample's points lie on grids) are apart on every
-        # machine, within DISTANCE_TOL_M as the choice of a new contact has it
+        # machine, as the choice of a new contact has it (apart_threshold)
         ids = np.unique(np.concatenate([np.asarray(c[0], int) for c in per_finger.values()]))
         self._row = {int(i): r for r, i in enumerate(ids)}
         self._rows = {
@@ -564,7 +565,7 @@ class _CombinationSearch:
         }
         p = np.asarray(points, float)[ids]
         dist = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
-        self._near = dist < sep - DISTANCE_TOL_M
+        self._near = dist < apart_threshold(sep)
         # _admissible per (finger, picked): None, or the gaps of its spaced candidates
         self._known: dict[tuple[str, tuple[tuple[str, int], ...]], list[float] | None] = {}
         # subtrees searched to the end without a combination, per (picked, fingers still

@@ -62,8 +62,9 @@ _BLOCK = 32768  # points per block
 _STALL_SQ = 0.995**2  # an iteration must shrink the error by 0.5 % ...
 _STALL_TOL_FACTOR = 10.0  # ... unless it is already within 10 x tol
 _CONSTS = (_LAMBDA0_SQ, _LAMBDA_ERR, _MAX_STEP, _STALL_SQ, _STALL_TOL_FACTOR)
-#: Residuals [m] of restarts within this fraction of each other (of the tolerance, when
-#: they are smaller) are ties, won by the first seed: not by their last bits.
+#: Residuals [m] of restarts that did not converge, within this fraction of the
+#: smallest, are ties, won by the first seed rather than by their last bits (which move
+#: a residual by about 1e-13 of it: a flip needs two seeds' residuals that close).
 RESIDUAL_RTOL = 1e-9
 _backend: list[str] = []  # the chosen backend, once chosen
 
@@ -370,7 +371,8 @@ def solve_position_ik(
         max_iter: Iteration cap per pass.
         restarts: Restart points that did not converge from deterministic seeds: the
             first seed that converges, else the first of those that end nearest the
-            target (within :data:`RESIDUAL_RTOL`), if nearer than the first solve.
+            target (within :data:`RESIDUAL_RTOL` of the nearest), if nearer than the
+            first solve by more than that.
 
     Returns:
         An :class:`IKResult`; ``q`` is always within ``[lower, upper]``.
@@ -424,11 +426,13 @@ def solve_position_ik(
             # that distance must not choose the branch
             conv = e_try <= tol_m
             least = e_try.min(axis=1, keepdims=True)
-            tied = e_try <= least + RESIDUAL_RTOL * np.maximum(least, tol_m)
+            tied = e_try <= least * (1.0 + RESIDUAL_RTOL)
             best = np.where(conv.any(axis=1), np.argmax(conv, axis=1), np.argmax(tied, axis=1))
             rows = np.arange(bad.size)
             e_best = e_try[rows, best]
-            better = e_best < err[bad] - RESIDUAL_RTOL * np.maximum(err[bad], tol_m)
+            # a seed that converged replaces the first solve (which did not); one that
+            # stalled, only where it ends nearer by more than the tie tolerance
+            better = conv.any(axis=1) | (e_best < err[bad] * (1.0 - RESIDUAL_RTOL))
             q_best = q_try.reshape(k, ns, bad.size)[:, best, rows]
             q[:, bad[better]] = q_best[:, better]
             err[bad[better]] = e_best[better]

@@ -15,8 +15,8 @@ every measure, and so is every chord whose two ends coincide (closer than
 :data:`COINCIDENT_RTOL` times the curve's extent): digital curves repeat pixels (a
 one-pixel-wide part is walked along both sides), and a zero-length chord has no line to
 measure against and would give the polygon two vertices at one place, which Eq. 7 rules
-out for one point. No entry is NaN. A deviation at or below :data:`ZERO_RTOL` times
-the curve's unit (:func:`deviation_unit`) is exactly 0: an arc on its chord costs
+out for one point. No entry is NaN. A deviation at or below :func:`zero_floor` (about
+:data:`ZERO_RTOL` times the curve's size) is exactly 0: an arc on its chord costs
 nothing wherever the curve lies, not rounding whose sign and size follow the
 coordinates' last bits.
 
@@ -50,8 +50,8 @@ _CAP_RTOL = 1e-9
 #: Points closer than this fraction of the curve's extent (largest coordinate range)
 #: coincide: a chord between them is unavailable (``inf``), like the diagonal of Eq. 7.
 COINCIDENT_RTOL = 1e-9
-#: Deviations at or below this fraction of the curve's unit (:func:`deviation_unit`) are
-#: exactly 0: the arc lies on its chord, and what is left is rounding (about ``n``
+#: Deviations at or below this fraction of the curve's unit (:func:`zero_floor`) are
+#: exactly 0: the arc lies on its chord, and what is left is rounding (a few times ``n``
 #: machine epsilons of the unit). Without it the ties of a curve that runs straight
 #: (energies of 0) would be decided by the last bits of the points' coordinates.
 ZERO_RTOL = 1e-12
@@ -189,7 +189,7 @@ def chord_deviations(
         out[seg] = np.add.reduceat(np.sqrt(d2), first[seg])
     else:
         out[seg] = np.add.reduceat(d2, first[seg])
-    _snap_zeros(out, deviation, P)
+    out[out <= zero_floor(deviation, P)] = 0.0  # on the chord (inf stays)
     return out
 
 
@@ -200,11 +200,17 @@ def deviation_unit(kind: str, scale: float, n: int) -> float:
     return {"max": scale, "sum": scale * n, "ise": scale**2 * n}[kind]
 
 
-def _snap_zeros(values: np.ndarray, kind: str, P: np.ndarray) -> None:
-    """Set the deviations of ``values`` at or below :data:`ZERO_RTOL` times the curve's
-    unit to exactly 0, in place (inf stays)."""
-    scale = float(np.abs(P - P.mean(axis=0)).max())
-    values[values <= ZERO_RTOL * deviation_unit(kind, scale, P.shape[0])] = 0.0
+def zero_floor(kind: str, P: np.ndarray) -> float:
+    """The deviation ``kind`` at or below which an arc of curve ``P`` ``(n, d)`` lies on
+    its chord [length unit, squared for ``"ise"``]: :data:`ZERO_RTOL` times the unit
+    (:func:`deviation_unit`) of the points' spread about their mean, or for ``"max"``
+    and ``"sum"`` of their distance from the origin if larger (centring the points
+    rounds each by about that many machine epsilons, which those measures see to first
+    order). For ``"ise"`` the floor is also what one point about ``1e-6 sqrt(n)`` of the
+    spread off its chord costs: far below what the planner's paths read."""
+    spread = float(np.abs(P - P.mean(axis=0)).max())
+    size = spread if kind == "ise" else max(spread, float(np.abs(P).max()))
+    return ZERO_RTOL * deviation_unit(kind, size, P.shape[0])
 
 
 def coincident_sq(points: np.ndarray) -> float:
@@ -303,6 +309,7 @@ class _Builder:
         self.closed = closed
         self.P = P - P.mean(axis=0)  # deviations are translation invariant
         self.scale = float(np.abs(self.P).max())
+        self.zero = {kind: zero_floor(kind, P) for kind in DEVIATIONS}
         self.tiny2 = coincident_sq(P)
         self.P3 = np.concatenate([self.P, self.P, self.P])  # index i + n for i in [-n, 2n)
         self.planes = [(i, j) for i in range(self.d) for j in range(i + 1, self.d)]
@@ -400,7 +407,7 @@ class _Builder:
                 assert cap is not None
                 keep = self._keep(self._middle_lower_bound(ncols), valid, cap, m)
             self._max_or_sum(F, kind, keep)
-        F[F <= ZERO_RTOL * deviation_unit(kind, self.scale, n)] = 0.0  # rounding, not arc
+        F[F <= self.zero[kind]] = 0.0  # the arc on its chord: rounding, not deviation
         F[~(valid if keep is None else keep)] = np.inf
         F[self._coincident(ncols)] = np.inf  # zero-length chords, like h_xx (Eq. 7)
         F[:, :min_span] = np.inf
