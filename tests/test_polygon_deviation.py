@@ -275,4 +275,3 @@ def test_a_short_straight_curve_far_from_the_origin_deviates_by_exactly_zero(dev
         H = deviation_matrix(P, deviation)
         assert np.all(H[np.isfinite(H)] == 0.0), offset_m
         assert np.all(chord_deviations(P, [0, 3], [19, 17], deviation) == 0.0)
-
