@@ -310,10 +310,11 @@ def test_a_budget_that_runs_out_while_backing_up_is_the_failure(monkeypatch):
 
 
 def test_a_finger_lets_go_when_no_regrasp_can_land_before_the_end(tmp_path):
-    """60 deg at 40 deg/s: a contact is lost too close to the end for any regrasp; the
+    """60 deg at 20 deg/s: a contact is lost too close to the end for any regrasp; the
     others hold to the end, so the finger lets go. The release is in the plan file and
-    passes the same independent re-check as the regrasps."""
-    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40)
+    passes the same independent re-check as the regrasps. (60 deg at 40 deg/s showed
+    it until the grasp search's spacing ties were decided on every machine alike.)"""
+    scen = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=20)
     result = plan_manipulation(
         scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
     )
@@ -538,16 +539,17 @@ def test_a_neighbour_regrasps_first_to_free_a_finger_that_must_let_go(tmp_path):
 
 
 def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
-    """Suite spec 78 (the five-finger hand turning a triangular prism -100 deg at
-    23 deg/s about the thumb's contact): a finger must regrasp and land before another
-    finger's hold is lost, sooner than a regrasp of the shortest duration (0.25 s)
-    could. A faster one (as short as rush_duration_s, within the joint velocity limits)
-    lands in time. The plan (full, or the part planned before a later failure) passes
-    the independent re-check. Without faster regrasps, every regrasp takes the
-    shortest duration at least. (Spec 81 showed this until regrasps were paced by
-    their joints, and spec 54 with 60 deg pad cones until a finger that let go could
-    join again: their plans no longer need a faster regrasp.)"""
-    scen = build_scenario(generate_specs(79, seed=0)[78])
+    """Suite spec 51 (the Allegro turning a heptagonal prism -80 deg at 36 deg/s while
+    it drifts): a finger must regrasp and land before another finger's hold is lost,
+    sooner than a regrasp of the shortest duration (0.25 s) could. A faster one (as
+    short as rush_duration_s, within the joint velocity limits) lands in time. The plan
+    (full, or the part planned before a later failure) passes the independent
+    re-check. Without faster regrasps, every regrasp takes the shortest duration at
+    least. (Spec 81 showed this until regrasps were paced by their joints, spec 54
+    with 60 deg pad cones until a finger that let go could join again, and spec 78
+    until the grasp search's spacing ties and the IK's restart ties were decided on
+    every machine alike: their plans no longer need a faster regrasp.)"""
+    scen = build_scenario(generate_specs(52, seed=0)[51])
     try:
         planned = plan_manipulation(
             scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
