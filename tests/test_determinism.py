@@ -67,8 +67,13 @@ def _avx512() -> bool:
     return bool(_cpu_features().get("AVX512F"))
 
 
-def _run(scenario: str, env_extra: dict[str, str], drop: tuple[str, ...] = ()) -> dict:
-    env = {k: v for k, v in os.environ.items() if k not in drop} | env_extra
+_KERNEL_VARIABLES = ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
+
+
+def _run(scenario: str, env_extra: dict[str, str]) -> dict:
+    """The plan in a fresh process, with the kernels as installed but for ``env_extra``
+    (a kernel variable set in this shell is dropped, so that each run changes one)."""
+    env = {k: v for k, v in os.environ.items() if k not in _KERNEL_VARIABLES} | env_extra
     out = subprocess.run(
         [sys.executable, "-c", _SCRIPT, scenario],
         env=env,
@@ -84,7 +89,7 @@ def _run(scenario: str, env_extra: dict[str, str], drop: tuple[str, ...] = ()) -
 def _as_installed(scenario: str) -> dict:
     """The plan with numpy's and OpenBLAS's kernels as they pick them (run once per
     scenario and test process)."""
-    return _run(scenario, {}, drop=("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES"))
+    return _run(scenario, {})
 
 
 @pytest.mark.parametrize(
