@@ -476,7 +476,7 @@ def _apart_from(
     """``(N,)`` whether each sample point is far enough from the other contacts: at
     least ``min_separation_m`` from each when given, else with the two fingertip
     spheres resting there (each on its own normal) ``TIP_GAP_M`` apart (within
-    :data:`DISTANCE_TOL_M` either way). On one face
+    :data:`DISTANCE_TOL_M`: :func:`apart_threshold`). On one face
     that is ``2 r + 1 mm`` between the points; across an edge the spheres stand
     further apart than their points (the normals diverge), so it admits more."""
     if min_separation_m is not None:
@@ -487,7 +487,7 @@ def _apart_from(
         r = hand.finger(name).tip_radius
         c = np.asarray(p, float) + r * np.asarray(n, float)
         gap = np.linalg.norm(centres - c, axis=1)
-        ok &= gap >= finger.tip_radius + r + TIP_GAP_M - DISTANCE_TOL_M
+        ok &= gap >= apart_threshold(finger.tip_radius + r + TIP_GAP_M)
     return ok
 
 

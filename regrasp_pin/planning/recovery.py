@@ -24,7 +24,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..exceptions import ContactError, FailureKind, PlanningError
-from ..grasp.choice import DISTANCE_TOL_M, TIP_GAP_M, NewContact, Room, tip_gap
+from ..grasp.choice import TIP_GAP_M, NewContact, Room, apart_threshold, tip_gap
 from ..grasp.necessity import closure_possible_with
 from ..model.clearance import FingerClearance
 from .advance import Step, advance, window
@@ -453,7 +453,7 @@ def _room_taken(
     h = state.holding[other]
     posture = Room(wanted.p_object, sep, name, wanted.q_arrive, wanted.t_arrive_s)
     gap = tip_gap(ctx.scene.hand, name, (wanted.p_object, wanted.n_object), other, (h.p, h.n))
-    if gap < TIP_GAP_M - DISTANCE_TOL_M:  # the choice's own test
+    if gap < apart_threshold(TIP_GAP_M):  # the choice's own test
         return posture, Room(wanted.p_object, sep)
     if not links:
         return None

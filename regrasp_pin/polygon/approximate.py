@@ -172,12 +172,12 @@ def approximate_polygon(
         InputError: bad ``points`` (shape, fewer than 2, NaN/inf, all equal, fewer
             distinct points than ``m``), ``m`` (also ``m = 2`` on an open path whose ends
             coincide), ``seed`` or ``restarts``.
+        UnknownNameError: unknown ``deviation`` or ``method``.
 
     A straight curve (all points collinear) deviates from every chord by 0: any ``m``
     vertices are optimal (energy 0) and the ones returned are the network's (or the
     exact solver's) first, spread out among the ties
     (:func:`~regrasp_pin.polygon.hopfield_moves.spread_ties`).
-        UnknownNameError: unknown ``deviation`` or ``method``.
     """
     P = validate_points(points)
     n = P.shape[0]
