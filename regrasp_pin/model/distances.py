@@ -20,7 +20,7 @@ import coal
 import numpy as np
 
 from ..exceptions import InputError
-from . import capsules_numba, placements_numba
+from . import bounds_numba, capsules_numba, placements_numba
 from .hand import Finger, Hand
 from .ik import ik_backend
 from .kinematics import FingerChain, attached_placements, attached_points_soa
@@ -355,6 +355,7 @@ class PairDistances:
         ]
         self._mid_local = 0.5 * (self._local[0] + self._local[1])  # capsule segments' middles
         self._c = _place(self._R, self._p, self._local[2])  # centres, palm frame (D, G, 3)
+        self._compiled = bounds_numba.wanted(ik_backend())  # the same bounds to rounding
         step = self._steps(obj.radius_m)
         self._sweep = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])
         #: Largest per-step bound on the relative motion of two checked bodies [m].
@@ -414,6 +415,10 @@ class PairDistances:
 
     def _bounds_rows(self, rows: np.ndarray) -> np.ndarray:
         """Lower bounds ``(R, P)`` of every column at the samples ``rows``."""
+        if self._compiled:
+            n_p = self.first.size
+            lb = self._bounds_compiled(np.repeat(rows, n_p), np.tile(np.arange(n_p), rows.size))
+            return lb.reshape(rows.size, n_p)
         nm, n_g = self._nm, len(self.geoms)
         R, p, T = self._R[rows], self._p[rows], self._T[rows]
         # geometry vs object: the face-plane support bound, in the object frame
@@ -434,6 +439,8 @@ class PairDistances:
     def _bounds(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Lower bounds ``(K,)`` of the (sample, column) pairs ``rows``, ``cols``: the
         same numbers as :meth:`_bounds_rows`, pair by pair."""
+        if self._compiled:
+            return self._bounds_compiled(rows, cols)
         out = np.empty(rows.size)
         n_g = len(self.geoms)
         g1, g2 = self.first[cols], self.second[cols]
@@ -455,6 +462,36 @@ class PairDistances:
             near = np.flatnonzero(lb < self._ff_req + BROAD_PHASE_MARGIN_M)
             lb[near] = self._near_pair_bounds(j1[near], j2[near])
             out[ff] = lb
+        return out
+
+    def _bounds_compiled(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """:meth:`_bounds` by the compiled loop (:mod:`.bounds_numba`): the same
+        bounds to rounding, ``(K,)`` [m] of the samples ``rows`` ``(K,)`` and columns
+        ``cols`` ``(K,)``."""
+        out = np.empty(rows.size)
+        if rows.size == 0:
+            return out
+        obj = self._obj
+        bounds_numba.bounds(
+            self._R,
+            self._p,
+            np.ascontiguousarray(self._T, dtype=np.float64),
+            self._c,
+            self._local[0],
+            self._local[1],
+            self._mid_local,
+            self._params,
+            self._rad,
+            self._reach,
+            np.ascontiguousarray(obj.normals, dtype=np.float64),
+            np.ascontiguousarray(obj.offsets, dtype=np.float64),
+            self.first,
+            self.second,
+            self._ff_req + BROAD_PHASE_MARGIN_M,
+            np.ascontiguousarray(rows, dtype=np.int64),
+            np.ascontiguousarray(cols, dtype=np.int64),
+            out,
+        )
         return out
 
     def _near_pair_bounds(self, j1: np.ndarray, j2: np.ndarray) -> np.ndarray:
