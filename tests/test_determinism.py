@@ -41,6 +41,7 @@ except PlanningError as exc:
     regrasps = exc.partial.regrasps() if exc.partial is not None else []
     failure = [exc.kind.value, exc.finger, exc.time_s]
 print(json.dumps({
+    "vertices": scen.obj.vertices.tolist(),
     "grasp": {n: p.tolist() for n, p in scen.grasp.points_object.items()},
     "regrasps": [[g.finger, g.t_start, g.t_end, list(map(float, g.Q_object))] for g in regrasps],
     "failure": failure,
@@ -132,8 +133,9 @@ def test_plan_does_not_change_with_openblas_kernels(scenario, coretype):
 
 
 def _assert_same_plan(a: dict, b: dict) -> None:
-    """The same failure (or none), initial grasp and regrasps: fingers, times within
-    1e-6 s, new contacts within 0.1 mm."""
+    """The same object (its vertices to the bit), failure (or none), initial grasp and
+    regrasps: fingers, times within 1e-6 s, new contacts within 0.1 mm."""
+    assert a["vertices"] == b["vertices"]
     assert a["failure"] == b["failure"]
     for n in a["grasp"]:
         np.testing.assert_allclose(a["grasp"][n], b["grasp"][n], atol=1e-4)

@@ -142,6 +142,28 @@ def test_convex_mesh_of_cube_equals_box():
     assert_close(sm.normals, sb.normals, atol=1e-12, what="normals")
 
 
+def test_convex_mesh_rebuilt_from_its_plan_params_is_the_same_to_the_bit():
+    """A mesh's params hold its centred vertices; rebuilding it (as a plan file is
+    opened) keeps them as they are instead of re-centring them by rounding."""
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        mesh = ConvexMesh(rng.normal(size=(40, 3)) * 0.02 + rng.uniform(-0.1, 0.1, 3))
+        again = object_from_params(mesh.kind, mesh.params)
+        assert np.array_equal(again.vertices, mesh.vertices)
+        assert np.array_equal(again.input_centroid, np.zeros(3))
+        assert np.max(np.abs(mesh.input_centroid)) > 1e-3  # the first build did re-centre
+
+
+def test_volume_centroid_of_a_tetrahedron_is_its_vertices_mean():
+    """The exact centroid of a tetrahedron (the mean of its vertices), far from the
+    origin and with all its faces slanted."""
+    tet = np.array(
+        [[0.31, 0.12, -0.2], [0.35, 0.11, -0.19], [0.32, 0.16, -0.18], [0.33, 0.13, -0.14]]
+    )
+    mesh = ConvexMesh(tet)
+    assert_close(mesh.input_centroid, tet.mean(axis=0), atol=1e-15, what="centroid")
+
+
 def test_coplanar_triangles_merge_into_polygons():
     # A cube whose faces carry extra vertices in their plane: still 6 faces.
     rng = np.random.default_rng(2)

@@ -31,12 +31,24 @@ def convex_hull(pts: np.ndarray) -> ConvexHull:
 
 
 def volume_centroid(pts: np.ndarray, hull: ConvexHull) -> np.ndarray:
-    """Centroid of the solid hull: tetrahedra from an interior point to each triangle."""
-    c0 = pts.mean(axis=0)
+    """Centroid of the solid hull: tetrahedra from an interior point to each triangle.
+
+    The same bits on every machine: each determinant is written out (LAPACK's follow
+    the CPU's kernels) and every sum is correctly rounded (``math.fsum``), so the
+    object's vertices, re-centred by it, do not differ in their last bits between
+    machines."""
+    c0 = np.array([math.fsum(column) for column in pts.T]) / pts.shape[0]
     tri = hull.points[hull.simplices]  # (T, 3, 3)
-    vol = np.abs(np.linalg.det(tri - c0)) / 6.0
-    cent = (c0 + tri.sum(axis=1)) / 4.0
-    return (vol[:, None] * cent).sum(axis=0) / vol.sum()
+    a, b, c = (tri[:, k] - c0 for k in range(3))
+    det = (
+        a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
+        - a[:, 1] * (b[:, 0] * c[:, 2] - b[:, 2] * c[:, 0])
+        + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+    )
+    vol = np.abs(det) / 6.0
+    cent = (c0 + (tri[:, 0] + tri[:, 1] + tri[:, 2])) / 4.0
+    total = math.fsum(vol)
+    return np.array([math.fsum(vol * cent[:, k]) for k in range(3)]) / total
 
 
 def hull_polygons(pts: np.ndarray, tol: float) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -150,11 +162,14 @@ def convex_polygon_ccw(polygon_xy: np.ndarray) -> np.ndarray:
 
 
 def polygon_centroid(poly: np.ndarray) -> np.ndarray:
+    """Area centroid of a simple polygon ``(k, 2)``; sums correctly rounded
+    (``math.fsum``), the same bits on every machine (see :func:`volume_centroid`)."""
     x, y = poly[:, 0], poly[:, 1]
     xn, yn = np.roll(x, -1), np.roll(y, -1)
     cross = x * yn - xn * y
-    area = 0.5 * cross.sum()
-    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * area)
+    area = 0.5 * math.fsum(cross)
+    sums = [math.fsum((x + xn) * cross), math.fsum((y + yn) * cross)]
+    return np.array(sums) / (6.0 * area)
 
 
 def extrude(poly: np.ndarray, height_m: float) -> np.ndarray:

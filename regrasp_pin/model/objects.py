@@ -454,12 +454,19 @@ class Prism(ExtrudedPolygon):
         self.params = {"n_sides": n, "circumradius_m": r, "height_m": h}
 
 
+#: A point set whose volume centroid lies within this many times its extent of the
+#: origin is centred already (rounding): :class:`ConvexMesh` keeps it as it is, so that
+#: a mesh rebuilt from its own vertices (a plan file's) has the same vertices, bit for bit.
+CENTRED_RTOL = 1e-12
+
+
 class ConvexMesh(ConvexObject):
     """The convex hull of a point set, re-centred at its volume centroid.
 
     Hull triangles that are coplanar within ``coplanar_tol`` are merged into polygonal
     faces. :attr:`input_centroid` holds the centre of mass in the input coordinates,
-    so ``p_object = p_input - input_centroid``.
+    so ``p_object = p_input - input_centroid`` (zero for points centred already, to
+    :data:`CENTRED_RTOL`).
     """
 
     def __init__(self, vertices: np.ndarray, *, coplanar_tol: float = 1e-6) -> None:
@@ -474,6 +481,9 @@ class ConvexMesh(ConvexObject):
         pts = as_array(vertices, "vertices", (None, 3))
         hull = convex_hull(pts)
         c = volume_centroid(pts[hull.vertices], hull)
+        spread = float(np.max(np.abs(pts[hull.vertices] - c)))
+        if float(np.max(np.abs(c))) <= CENTRED_RTOL * spread:
+            c = np.zeros(3)  # centred already, to rounding: kept as they are
         centred = pts[hull.vertices] - c
         super().__init__(centred, kind="convex_mesh", coplanar_tol=coplanar_tol)
         self.input_centroid = frozen(c)
