@@ -255,7 +255,7 @@ def test_strided_queries_find_every_failing_sample_with_fewer_queries(five, alle
         for stride in (1, distances.QUERY_STRIDE):
             monkeypatch.setattr(distances, "QUERY_STRIDE", stride)
             runs[stride] = PairDistances(*args)
-            runs[stride]._mandatory_queries()
+            runs[stride].run(exact_minima=False)
         every, strided = runs[1], runs[distances.QUERY_STRIDE]
         fail = every.exact < every.required
         assert np.array_equal(strided.exact < strided.required, fail)
@@ -264,36 +264,6 @@ def test_strided_queries_find_every_failing_sample_with_fewer_queries(five, alle
         spared += every.n_queries - strided.n_queries
         failing += int(fail.sum())
     assert failing > 0 and spared > 0  # failures to find, and queries spared
-
-
-def test_failures_sunk_by_the_upper_sweep_are_the_failing_samples(five, allegro):
-    """Without exact minima, samples that the sweep's upper bound sinks below their
-    requirement are not measured: the same failing samples as measuring every one, and
-    in each run of them its worst sample measured, with the same value, in fewer
-    queries."""
-    sunk = spared = 0
-    for case in range(len(CASES)):
-        for seed in (21, 22, 23):
-            args = _dense_motion_near_object(five, allegro, case, seed=seed + case)
-            every = PairDistances(*args)
-            every._query(*np.nonzero(every.lb < every.required))
-            fast = PairDistances(*args)
-            fast.run(exact_minima=False)
-            fail = every.exact < every.required
-            assert np.array_equal(fast.failing, fail)
-            for col in np.flatnonzero(fail.any(axis=0)):
-                edges = np.diff(np.r_[0, fail[:, col].astype(np.int8), 0])
-                for lo, hi in zip(
-                    np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True
-                ):
-                    margin = (every.exact - every.required)[lo:hi, col]
-                    w = lo + int(np.argmin(margin))
-                    assert fast.exact[w, col] == every.exact[w, col]
-                    measured = fast.exact[lo:hi, col]
-                    assert np.all(np.isnan(measured) | (measured >= every.exact[w, col]))
-            sunk += int((fast.sunk & np.isnan(fast.exact)).sum())
-            spared += every.n_queries - fast.n_queries
-    assert sunk > 0 and spared > 0
 
 
 def test_densify_bounds_steps_and_stays_on_the_interpolation():

@@ -363,8 +363,6 @@ class PairDistances:
         self.lb = self._bounds_coarse_to_fine(coarse_stride)
         self.swept = np.full(self.lb.shape, -np.inf)
         self.exact = np.full(self.lb.shape, np.nan)
-        #: Checks that fail for certain without a Coal query (see _mandatory_queries).
-        self.sunk = np.zeros(self.lb.shape, dtype=bool)
         self.n_queries = 0
         self._request = coal.DistanceRequest()
         self._request.gjk_tolerance = 1e-9  # separation distances to ~1e-9 m
@@ -530,9 +528,8 @@ class PairDistances:
         Returns:
             The minima ``{"tip", "link", "ff", "margin"}`` [m] and whether all are exact.
         """
-        self._mandatory_queries(every_failure=exact_minima)
+        self._mandatory_queries()
         if not exact_minima:
-            self._settle_failing_runs()
             return self._lowest_all()
         minimum = self._minimum
         out, exact = {}, True
@@ -543,7 +540,7 @@ class PairDistances:
         out["margin"], ok = minimum(-self.required, np.ones(self.kind.size, dtype=bool))
         return out, exact and ok
 
-    def _mandatory_queries(self, every_failure: bool = True) -> None:
+    def _mandatory_queries(self) -> None:
         """Every (sample, column) whose bound is below its requirement, settled: first
         every :data:`QUERY_STRIDE`-th such sample of each column is measured, then only
         those that the sweep bound from these Coal values does not lift above the
@@ -551,12 +548,7 @@ class PairDistances:
         never lifted by a lower bound, so every failing sample is measured either way
         (the same failures and values), up to one case: a sample where Coal's EPA fails
         keeps the broad-phase bound as its value, which measuring it would report as a
-        failure, while the sweep bound from its neighbours may spare it.
-
-        With ``every_failure`` False, a sample that the sweep's *upper* bound from those
-        first values sinks below its requirement by :data:`_LIFT_MARGIN_M` fails for
-        certain and is not measured here (:attr:`sunk`); :meth:`_settle_failing_runs`
-        then measures what the failures' reports read."""
+        failure, while the sweep bound from its neighbours may spare it."""
         cols, rows = np.nonzero((self.lb < self.required).T)  # column by column, in time
         if QUERY_STRIDE > 1 and rows.size:
             starts = np.flatnonzero(np.r_[True, cols[1:] != cols[:-1]])
@@ -566,73 +558,8 @@ class PairDistances:
             self._update_sweep(np.unique(cols[first]))
             lifted = self.swept[rows, cols] >= self.required[rows, cols] + _LIFT_MARGIN_M
             rows, cols = rows[~lifted], cols[~lifted]
-            if not every_failure and rows.size:
-                ceiling = self._upper_sweep(np.unique(cols))
-                sunk = ceiling[rows, cols] < self.required[rows, cols] - _LIFT_MARGIN_M
-                self.sunk[rows[sunk], cols[sunk]] = True
-                rows, cols = rows[~sunk], cols[~sunk]
         self._query(rows, cols)
         self._update_sweep(np.unique(cols))
-
-    def _upper_sweep(self, cols: np.ndarray) -> np.ndarray:
-        """Upper bounds ``(D, P)`` [m] on the distances of the columns ``cols`` from
-        their exact values (inf elsewhere): a distance is 1-Lipschitz in the sweep
-        parameter ``S`` both ways, so ``d(s) <= min_k exact(k) + |S(s) - S(k)|``."""
-        out = np.full(self.lb.shape, np.inf)
-        if cols.size == 0:
-            return out
-        S = self._sweep[:, cols]
-        e = self.exact[:, cols]
-        e = np.where(np.isnan(e), np.inf, e)
-        forward = np.minimum.accumulate(e - S, axis=0) + S
-        backward = np.minimum.accumulate((e + S)[::-1], axis=0)[::-1] - S
-        out[:, cols] = np.minimum(forward, backward) + 1e-12  # rounding of S
-        return out
-
-    @property
-    def failing(self) -> np.ndarray:
-        """``(D, P)`` bool: the (sample, column) checks that fail: an exact distance
-        below its requirement, or, not measured, one the sweep's upper bound sank
-        (:attr:`sunk`)."""
-        return np.where(np.isnan(self.exact), self.sunk, self.exact < self.required)
-
-    def _settle_failing_runs(self) -> None:
-        """Measure, in each run of failing samples of each column, every sample not
-        measured yet whose broad-phase bound on ``distance - requirement`` is at or
-        below the smallest such value measured in the run, until none is: each run's
-        worst sample (the first of equals) is then measured, as measuring every failing
-        sample would find it (:func:`~regrasp_pin.verify.finger_motion` reports each
-        run by its worst). Not the sweep bound: Coal's penetration depths (EPA) jump by
-        more than the bodies move where they are deep (-10.0 to -7.9 mm in a step of
-        0.55 mm), so that bound does not hold for the values Coal would report."""
-        while True:
-            left = self.sunk & np.isnan(self.exact)
-            if not left.any():
-                return
-            rows, cols = [], []
-            fail = self.failing
-            for col in np.flatnonzero(left.any(axis=0)):
-                req = self.required[:, col]
-                margin = self.exact[:, col] - req
-                low = self.lb[:, col] - req
-                edges = np.diff(np.r_[0, fail[:, col].astype(np.int8), 0])
-                for lo, hi in zip(
-                    np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True
-                ):
-                    unmeasured = left[lo:hi, col]
-                    if not unmeasured.any():
-                        continue
-                    measured = margin[lo:hi][~np.isnan(margin[lo:hi])]
-                    best = measured.min() if measured.size else np.inf
-                    pick = lo + np.flatnonzero(unmeasured & (low[lo:hi] <= best))
-                    rows.append(pick)
-                    cols.append(np.full(pick.size, col))
-            r = np.concatenate(rows) if rows else np.zeros(0, int)
-            if r.size == 0:
-                return
-            c = np.concatenate(cols)
-            self._query(r, c)
-            self._update_sweep(np.unique(c))
 
     def _lowest_all(self) -> tuple[dict[str, float], bool]:
         """:meth:`run`'s minima without further queries: of each kind, and of the

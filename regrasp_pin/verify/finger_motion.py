@@ -515,15 +515,13 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def _distance_failures(pairs: PairDistances, t_d: np.ndarray) -> list[Failure]:
-    """Runs of samples where a distance is below its requirement, each by its worst
-    sample (measured: see :meth:`PairDistances._settle_failing_runs`)."""
-    fail = pairs.failing  # not queried and not sunk: proven by the bound -> False
+    """Runs of samples where an exact distance is below its requirement."""
+    fail = pairs.exact < pairs.required  # NaN (not queried: proven by the bound) -> False
     out = []
     for col in np.nonzero(fail.any(axis=0))[0]:
         g1 = pairs.geoms[pairs.first[col]].name
         g2 = "object" if pairs.second[col] < 0 else pairs.geoms[pairs.second[col]].name
-        margin = np.where(np.isnan(pairs.exact[:, col]), np.inf, pairs.exact[:, col])
-        margin = margin - pairs.required[:, col]
+        margin = pairs.exact[:, col] - pairs.required[:, col]
         for lo, hi in _runs(fail[:, col]):
             w = lo + int(np.argmin(margin[lo:hi]))
             out.append(
