@@ -10,6 +10,7 @@ import pytest
 from conftest import assert_close
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from regrasp_pin.exceptions import GeometryError, InputError
 from regrasp_pin.model.objects import (
@@ -154,14 +155,24 @@ def test_convex_mesh_rebuilt_from_its_plan_params_is_the_same_to_the_bit():
         assert np.max(np.abs(mesh.input_centroid)) > 1e-3  # the first build did re-centre
 
 
-def test_volume_centroid_of_a_tetrahedron_is_its_vertices_mean():
-    """The exact centroid of a tetrahedron (the mean of its vertices), far from the
-    origin and with all its faces slanted."""
-    tet = np.array(
-        [[0.31, 0.12, -0.2], [0.35, 0.11, -0.19], [0.32, 0.16, -0.18], [0.33, 0.13, -0.14]]
+def test_volume_centroid_of_a_square_pyramid_is_a_quarter_up():
+    """A square pyramid's centroid lies a quarter of its height above the base, not at
+    the mean of its vertices (a fifth): the volumes weigh the tetrahedra. Turned and
+    far from the origin."""
+    h = 0.05
+    pyramid = np.array(
+        [
+            [-0.02, -0.02, 0.0],
+            [0.02, -0.02, 0.0],
+            [0.02, 0.02, 0.0],
+            [-0.02, 0.02, 0.0],
+            [0.0, 0.0, h],
+        ]
     )
-    mesh = ConvexMesh(tet)
-    assert_close(mesh.input_centroid, tet.mean(axis=0), atol=1e-15, what="centroid")
+    R = Rotation.from_rotvec([0.3, -0.5, 0.2]).as_matrix()
+    shift = np.array([0.31, 0.12, -0.2])
+    mesh = ConvexMesh(pyramid @ R.T + shift)
+    assert_close(mesh.input_centroid, R @ [0.0, 0.0, h / 4] + shift, atol=1e-15, what="centroid")
 
 
 def test_coplanar_triangles_merge_into_polygons():

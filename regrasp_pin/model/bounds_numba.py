@@ -13,9 +13,12 @@ remains the reference and the tests compare both.
 
 The numbers agree with numpy's to rounding, not to the bit: numpy's matrix products of
 the object frame go through BLAS, whose kernels differ between machines. No decision
-reads those last bits: a bound decides only which samples Coal measures (one below the
-requirement is measured; every distance that fails is measured, whatever the bounds),
-and the verification reports the exact Coal distances of its failures.
+reads those last bits: a bound decides which samples Coal measures (one below its
+requirement is measured, or cleared by the sweep bound from measured ones; a failing
+distance is always measured), so the pass/fail decisions and the failures are the same.
+What may differ in the last bits: how many queries were made, the minima of the
+planner's check (``exact_minima=False``, read partly from bounds; nothing decides on
+them), and the value of a failure where Coal's EPA fails and the bound stands in.
 """
 
 from __future__ import annotations
@@ -60,10 +63,10 @@ def _support(u0, u1, u2, params, g):
     return h + params[g, 5]
 
 
-def _object_bound(R, T, c, params, normals, offsets, r, g):
+def _object_bound(R, T, c, params, normals, offsets, r, g, Rog):
     """The face-plane support bound of geometry ``g`` at sample ``r`` against the object
     (:func:`~regrasp_pin.model.distances._object_lower_bound`): ``max_f (n_f . c - o_f -
-    h(R^T n_f))``, ``c`` and ``R`` in the object frame."""
+    h(R^T n_f))``, ``c`` and ``R`` in the object frame; ``Rog`` a scratch ``(3, 3)``."""
     c0 = c[r, g, 0] - T[r, 0, 3]
     c1 = c[r, g, 1] - T[r, 1, 3]
     c2 = c[r, g, 2] - T[r, 2, 3]
@@ -71,7 +74,6 @@ def _object_bound(R, T, c, params, normals, offsets, r, g):
     co0 = c0 * T[r, 0, 0] + c1 * T[r, 1, 0] + c2 * T[r, 2, 0]
     co1 = c0 * T[r, 0, 1] + c1 * T[r, 1, 1] + c2 * T[r, 2, 1]
     co2 = c0 * T[r, 0, 2] + c1 * T[r, 1, 2] + c2 * T[r, 2, 2]
-    Rog = np.empty((3, 3))
     for i in range(3):
         for col in range(3):
             Rog[i, col] = (
@@ -158,11 +160,12 @@ def bounds_python(
     ``near_m`` apart or less get the capsule and separating-axis bounds."""
     w = np.empty((4, 3))
     mid = np.empty((2, 3))
+    Rog = np.empty((3, 3))
     for k in range(rows.shape[0]):
         r, col = rows[k], cols[k]
         g1, g2 = first[col], second[col]
         if g2 < 0:
-            out[k] = _object_bound(R, T, c, params, normals, offsets, r, g1)
+            out[k] = _object_bound(R, T, c, params, normals, offsets, r, g1, Rog)
             continue
         _place(R, p, mid_loc, r, g1, mid[0])
         _place(R, p, mid_loc, r, g2, mid[1])
