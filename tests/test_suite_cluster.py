@@ -17,6 +17,7 @@ import suite_tasks
 from conftest import assert_close
 
 from regrasp_pin.exceptions import InputError, MissingExtraError
+from regrasp_pin.grasp.manifold import THREADS_ENV
 from regrasp_pin.plan import Plan
 from regrasp_pin.suite import neighbour_specs, run_scenario
 from regrasp_pin.suite.cluster import (
@@ -161,6 +162,26 @@ def test_scenarios_are_given_their_manifold_threads(tmp_path):
     done = run_suite(_named("a", "b"), out=tmp_path, workers=1, task=suite_tasks.threads)
     want = local_manifold_threads(1)
     assert [r.n_regrasps for r in done.results] == [want, want]
+
+
+def test_each_local_cluster_gives_its_own_threads_and_leaves_the_environment(tmp_path, monkeypatch):
+    """A nanny copies its workers' environment into this process and leaves it there;
+    a later cluster must still give its own threads (here a count per worker number,
+    whatever the backend), and this process's environment is as it was."""
+    import regrasp_pin.suite.cluster as cluster
+
+    monkeypatch.setattr(cluster, "local_manifold_threads", lambda workers: 10 + workers)
+    monkeypatch.delenv(THREADS_ENV, raising=False)
+    before = dict(os.environ)
+    got = []
+    for workers in (2, 1):
+        done = run_suite(
+            _named("a", "b"), out=tmp_path / str(workers), workers=workers,
+            task=suite_tasks.threads,
+        )  # fmt: skip
+        got.append([r.n_regrasps for r in done.results])
+        assert dict(os.environ) == before
+    assert got == [[12, 12], [11, 11]]
 
 
 def test_specs_without_a_grasp_do_not_count(tmp_path):

@@ -159,6 +159,27 @@ def local_manifold_threads(workers: int) -> int:
 
 
 @contextmanager
+def _environ_kept(environ: dict[str, Any]) -> Any:
+    """This process's environment with the variables of ``environ`` set to its values
+    (as strings; None: left as it is) inside, and as it was before on leaving.
+
+    A nanny of a local cluster copies its ``pre-spawn-environ`` (and a
+    ``PYTHONHASHSEED``) into the environment of the process that starts it, this one,
+    and leaves them there, and a later nanny prefers a variable of the environment to
+    its configuration: without this, a second cluster of this process gave its workers
+    the first one's manifold threads.
+    """
+    before = dict(os.environ)
+    os.environ.update({key: str(value) for key, value in environ.items() if value is not None})
+    try:
+        yield
+    finally:
+        for key in set(os.environ) - set(before):
+            del os.environ[key]
+        os.environ.update(before)
+
+
+@contextmanager
 def _client(workers: int | None, scheduler: str | None) -> Any:
     """A Dask client: on a LocalCluster of ``workers`` single-threaded processes
     (started and stopped here), or on the cluster at ``scheduler``."""
@@ -178,7 +199,7 @@ def _client(workers: int | None, scheduler: str | None) -> Any:
         "distributed.worker.daemon": False,
         "distributed.nanny.pre-spawn-environ": environ,
     }
-    with dask.config.set(settings):
+    with dask.config.set(settings), _environ_kept(environ):
         if scheduler is not None:
             client = distributed.Client(scheduler)
             try:
