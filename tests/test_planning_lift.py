@@ -65,7 +65,7 @@ def test_where_the_normal_is_out_of_reach_a_tilted_back_off_rises_as_asked(index
     rescued = 0
     for q, contact in contacts_past_a_limit(f):
         with pytest.raises(PlanningError):
-            lift._along(f, T, contact, contact[1], OFFSETS, q, IK_TOL_M)
+            lift.along(f, T, contact, contact[1], OFFSETS, q, IK_TOL_M)
         try:
             qs = lift.back_off(f, T, contact, OFFSETS, q, IK_TOL_M)
         except PlanningError as exc:
@@ -92,7 +92,7 @@ def test_where_nothing_can_be_followed_the_failure_is_the_normals(index):
     contact = (p - f.tip_radius * n, n)
     far = OFFSETS * 200.0
     with pytest.raises(PlanningError) as normal:
-        lift._along(f, T, contact, n, far, q, IK_TOL_M)
+        lift.along(f, T, contact, n, far, q, IK_TOL_M)
     with pytest.raises(PlanningError) as exc:
         lift.back_off(f, T, contact, far, q, IK_TOL_M)
     assert exc.value.kind == FailureKind.IK_UNREACHABLE
@@ -127,3 +127,66 @@ def test_with_every_direction_in_reach_the_ties_go_to_the_small_tilt_towards_the
     lean = dirs[0] - (dirs[0] @ n) * n
     along = (goal - contact[0]) / np.linalg.norm(goal - contact[0])
     np.testing.assert_allclose(lean / np.linalg.norm(lean), along, atol=1e-9)
+
+
+def _contact_in_reach(f, seed: int):
+    """``(q, contact)`` with ``q`` inside the joint box and the contact's normal a
+    direction the fingertip can move in (the tip's velocity under all joints turning
+    alike)."""
+    rng = np.random.default_rng(seed)
+    q = f.lower + (0.3 + 0.4 * rng.random(f.k)) * (f.upper - f.lower)
+    p, J = f.jacobian(q)
+    n = J @ np.ones(f.k)
+    n = n / np.linalg.norm(n)
+    return q, (p - f.tip_radius * n, n)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_directions_apart_lead_away_from_a_neighbour_the_furthest_first(index, seed):
+    """A neighbour beside the contact (a point 8 mm along a tangent): no direction
+    returned leans towards it, the first leans away, their tops stand further from it than the normal's by
+    the gain (forward kinematics), the furthest first, and no direction left out ends
+    further than the last one returned."""
+    q, contact = _contact_in_reach(index, seed)
+    p, n = contact
+    side = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    neighbour = p + 0.008 * side
+    height = 0.004
+
+    def gap(qk: np.ndarray) -> float:
+        return float(np.linalg.norm(index.fk(qk[None])[0] - neighbour))
+
+    T = np.eye(4)
+    dirs = lift.directions_apart(index, T, contact, q, height, gap, IK_TOL_M)
+    assert 1 <= len(dirs) <= lift.MAX_APART
+    assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0)
+    assert dirs[0] @ side < 0.0  # the first leans away from the neighbour
+    assert np.all(dirs @ side <= 1e-9)  # none towards it
+
+    def top_gap(d: np.ndarray) -> float:
+        local = p + index.tip_radius * n + height / float(d @ n) * d
+        res = index.ik(local[None], q, tol_m=IK_TOL_M, restarts=False)
+        assert res.error_m[0] <= IK_TOL_M
+        return gap(res.q[0])
+
+    gaps = [top_gap(d) for d in dirs]
+    assert all(g >= top_gap(n) + lift.APART_GAIN_M - 1e-9 for g in gaps)
+    assert gaps == sorted(gaps, reverse=True)
+    # every tilt and azimuth of the search: none left out ends further than the last
+    e1 = lift._tangent_towards(n, None)
+    e2 = np.cross(n, e1)
+    for tilt in np.radians(lift.TILTS_DEG):
+        for az in 2.0 * np.pi * np.arange(lift.AZIMUTHS) / lift.AZIMUTHS:
+            d = np.cos(tilt) * n + np.sin(tilt) * (np.cos(az) * e1 + np.sin(az) * e2)
+            if not np.any(np.all(np.isclose(dirs, d), axis=1)):
+                local = p + index.tip_radius * n + height / float(d @ n) * d
+                res = index.ik(local[None], q, tol_m=IK_TOL_M, restarts=False)
+                if res.error_m[0] <= IK_TOL_M:
+                    assert gap(res.q[0]) <= gaps[-1] + 1e-9
+
+
+def test_no_direction_apart_where_the_neighbours_do_not_care(index):
+    q, contact = _contact_in_reach(index, 0)
+    dirs = lift.directions_apart(index, np.eye(4), contact, q, 0.004, lambda qk: 0.01, IK_TOL_M)
+    assert dirs.shape == (0, 3)

@@ -15,6 +15,11 @@ face before it travels. So the back-off is searched over directions:
    its joint limits (a bounded least-squares step of the tip Jacobian at the contact,
    :func:`scipy.optimize.lsq_linear`); the ``MAX_TILTED`` best are tried.
 
+A back-off along the normal can also take the finger towards a neighbour holding
+beside it on the same face (the fingers' links converge as they curl). Where the
+caller found that, :func:`directions_apart` gives the tilted directions whose top
+stands further from the other fingers than the normal's, measured there.
+
 Along a direction ``d`` the tip centre rises to the same height above the contact's
 tangent plane as along the normal (it moves ``offset / (d . n)`` along ``d``): the
 clearance reached is the same, only the tip slides sideways on the way. Every
@@ -24,13 +29,25 @@ with the object; what the finger then does is verified by the Coal check of its 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.optimize import lsq_linear
 
 from ..exceptions import FailureKind, PlanningError
 from ..model.hand import Finger
 
-__all__ = ["AZIMUTHS", "MAX_TILTED", "TILTS_DEG", "back_off", "tilted_directions"]
+__all__ = [
+    "APART_GAIN_M",
+    "AZIMUTHS",
+    "MAX_APART",
+    "MAX_TILTED",
+    "TILTS_DEG",
+    "along",
+    "back_off",
+    "directions_apart",
+    "tilted_directions",
+]
 
 #: Tilts from the contact normal of the directions tried when the normal is out of
 #: reach [deg].
@@ -39,6 +56,11 @@ TILTS_DEG = (30.0, 60.0)
 AZIMUTHS = 8
 #: Most tilted directions followed with IK (the best ranked at first order).
 MAX_TILTED = 4
+#: Most directions away from the other fingers returned by :func:`directions_apart`.
+MAX_APART = 3
+#: How much further from the other fingers than the normal's a tilted back-off's top
+#: must stand to be tried for that [m].
+APART_GAIN_M = 2e-4
 #: First-order shares of the move within the joint limits closer than this are ties,
 #: broken by the smaller tilt, then the azimuth's order [-].
 _SHARE_TOL = 1e-3
@@ -89,6 +111,60 @@ def tilted_directions(
     return dirs[_ranked(share, tilt)[:MAX_TILTED]]
 
 
+def directions_apart(
+    f: Finger,
+    T: np.ndarray,
+    contact: tuple[np.ndarray, np.ndarray],
+    q: np.ndarray,
+    height_m: float,
+    gap: Callable[[np.ndarray], float],
+    ik_tol_m: float,
+    toward: np.ndarray | None = None,
+) -> np.ndarray:
+    """Directions ``(D, 3)`` (object frame, unit) tilted from the contact's outward
+    normal along which the back-off ends further from the other fingers than along the
+    normal, the furthest first: where backing off along the normal takes the finger
+    towards a neighbour (fingers side by side on one face).
+
+    Each direction of ``TILTS_DEG`` x ``AZIMUTHS`` (:func:`tilted_directions`'
+    directions, unranked) is judged at the back-off's top, the tip centre ``height_m``
+    above the tangent plane at the object pose ``T`` ``(4, 4)``, solved from ``q``
+    ``(k,)`` [rad]: its ``gap`` (configuration -> distance from the other fingers [m])
+    must exceed the normal's by ``APART_GAIN_M`` (an unreachable top has none); at most
+    ``MAX_APART`` are returned, gaps within a nanometre by the smaller tilt, then the
+    azimuth's order.
+
+    Args:
+        f: The finger.
+        T: The object's pose in the palm frame at the back-off's top.
+        contact: ``(point, outward normal)``, object frame [m].
+        q: The finger's configuration to solve from [rad].
+        height_m: How high above the tangent plane the back-off goes [m].
+        gap: The finger's distance from the other fingers at a configuration [m].
+        ik_tol_m: IK tolerance of the tops [m].
+        toward: As :func:`tilted_directions`': the first azimuth's direction.
+    """
+    p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
+    n = n / np.linalg.norm(n)
+    e1 = _tangent_towards(n, None if toward is None else np.asarray(toward, float) - p)
+    e2 = np.cross(n, e1)
+    azimuths = 2.0 * np.pi * np.arange(AZIMUTHS) / AZIMUTHS
+    tilt = np.r_[0.0, np.repeat(np.radians(np.asarray(TILTS_DEG, float)), AZIMUTHS)]
+    az = np.r_[0.0, np.tile(azimuths, len(TILTS_DEG))]
+    dirs = np.cos(tilt)[:, None] * n + np.sin(tilt)[:, None] * (
+        np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2
+    )  # the normal first
+    local = p + f.tip_radius * n + (height_m / (dirs @ n))[:, None] * dirs
+    T = np.asarray(T, float)
+    res = f.ik(local @ T[:3, :3].T + T[:3, 3], np.asarray(q, float), tol_m=ik_tol_m, restarts=False)
+    gaps = np.array(
+        [gap(res.q[i]) if res.error_m[i] <= ik_tol_m else -np.inf for i in range(len(dirs))]
+    )
+    better = np.flatnonzero(gaps[1:] >= gaps[0] + APART_GAIN_M) + 1
+    order = np.lexsort((better, tilt[better], -np.round(gaps[better], 9)))
+    return dirs[better[order][:MAX_APART]]
+
+
 def _ranked(share: np.ndarray, tilt: np.ndarray) -> list[int]:
     """Indices by decreasing ``share``, shares within ``_SHARE_TOL`` of the best left
     counting as ties, broken by the smaller tilt, then the index."""
@@ -123,13 +199,13 @@ def back_off(
     """
     n = np.asarray(contact[1], float)
     try:
-        return _along(f, T, contact, n / np.linalg.norm(n), offsets, q_seed, ik_tol_m)
+        return along(f, T, contact, n / np.linalg.norm(n), offsets, q_seed, ik_tol_m)
     except PlanningError as exc:
         normal = exc
     height = float(np.max(offsets))
     for d in tilted_directions(f, T[0], contact, q_seed, height, toward):
         try:
-            return _along(f, T, contact, d, offsets, q_seed, ik_tol_m)
+            return along(f, T, contact, d, offsets, q_seed, ik_tol_m)
         except PlanningError:
             continue
     raise normal
@@ -148,7 +224,7 @@ def _tangent_towards(n: np.ndarray, v: np.ndarray | None) -> np.ndarray:
     return t / np.linalg.norm(t)
 
 
-def _along(
+def along(
     f: Finger,
     T: np.ndarray,
     contact: tuple[np.ndarray, np.ndarray],
@@ -157,7 +233,8 @@ def _along(
     q_seed: np.ndarray,
     ik_tol_m: float,
 ) -> np.ndarray:
-    """The back-off along the unit direction ``d`` (object frame), or ik-unreachable."""
+    """The back-off of :func:`back_off` along the unit direction ``d`` (object frame),
+    or ik-unreachable."""
     p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
     n = n / np.linalg.norm(n)
     local = p[None] + f.tip_radius * n[None] + (offsets / float(d @ n))[:, None] * d[None]

@@ -37,6 +37,12 @@ is checked against the joint velocity limits and verified with Coal exactly as a
 (:func:`~regrasp_pin.verify.finger_motion.verify_finger_motion`: the fingertip and the
 other links clear of the object by ``clearance_m`` during the transfer, allowed to touch
 only at lift-off and landing, the other fingers clear, joints within their limits).
+
+Where every via crosses another finger (``finger-collision``), the lift may be what
+took the finger towards it (a neighbour holding beside it on the same face: the
+fingers' links converge as they curl): the transfer is tried again lifted off along
+the tilted directions whose lift ends further from the other fingers
+(:func:`~.lift.directions_apart`), the first failure standing if none passes.
 """
 
 from __future__ import annotations
@@ -54,7 +60,7 @@ from ..model.hand import Finger, Hand, speed_shares
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
 from ..verify.finger_motion import VerificationReport
-from .lift import back_off
+from .lift import along, back_off, directions_apart
 from .release import verify_or_raise
 from .timing import MJ_PEAK, check_joint_speed, minimum_jerk, velocity_blend
 
@@ -182,20 +188,63 @@ def plan_transfer(
     even = (LIFT_FRACTION, LIFT_FRACTION)
     ends = _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, even)
     try:
-        return _through_vias(moving, ends)
+        return _even_or_paced(moving, tau, q_start, q_land, ik_tol_m, ends)
     except PlanningError as exc:
-        paced = _paced_shares(f, times, ends) if exc.kind == FailureKind.VELOCITY else None
+        if exc.kind != FailureKind.FINGER_COLLISION:
+            raise
+        failure = exc
+    # the finger's way crosses another finger's: lifted off P away from the others
+    # (their failures aside, the first one's stands)
+    for d in _lifts_apart(moving, tau, q_start, ik_tol_m, ends):
+        try:
+            apart = _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, even, d)
+            return _through_vias(moving, apart)
+        except PlanningError:
+            continue
+    raise failure
+
+
+def _even_or_paced(
+    m: _Moving,
+    tau: np.ndarray,
+    q_start: np.ndarray,
+    q_land: np.ndarray,
+    ik_tol_m: float,
+    ends: _Ends,
+) -> Transfer:
+    """The transfer through the vias between the even split's ``ends``, or, where that
+    is too fast, between the parts paced by their joints' needs, the even split's
+    failure standing if that fails too (a longer duration is its to ask for)."""
+    try:
+        return _through_vias(m, ends)
+    except PlanningError as exc:
+        paced = _paced_shares(m.f, m.times, ends) if exc.kind == FailureKind.VELOCITY else None
         if paced is None:
             raise
         failure = exc
-    # too fast with the even split: the parts paced by their joints' needs, the even
-    # split's failure standing if that fails too (a longer duration is its to ask for)
     try:
-        return _through_vias(
-            moving, _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, paced)
-        )
+        return _through_vias(m, _lift_and_approach(m, tau, q_start, q_land, ik_tol_m, paced))
     except PlanningError:
         raise failure from None
+
+
+def _lifts_apart(
+    m: _Moving, tau: np.ndarray, q_start: np.ndarray, ik_tol_m: float, ends: _Ends
+) -> np.ndarray:
+    """Directions (object frame) to back off from P along that end the lift further
+    from the other fingers than ``ends``' lift along the normal does
+    (:func:`~.lift.directions_apart`, judged where the lift ends, the others holding)."""
+    i_a = int(np.flatnonzero(ends.lift)[-1])
+    fingers = FingerClearance.shared(m.hand, m.f.name)
+    q_full = np.array(m.q_others[i_a], float)
+
+    def gap(q: np.ndarray) -> float:
+        q_full[m.f.q_indices] = q
+        return float(fingers(q_full))
+
+    return directions_apart(
+        m.f, m.T[i_a], m.P, ends.q_lift[-1], m.clearance_m, gap, ik_tol_m, m.Q[0]
+    )
 
 
 @dataclass(frozen=True)
@@ -318,19 +367,26 @@ def _lift_and_approach(
     q_land: np.ndarray,
     ik_tol_m: float,
     shares: tuple[float, float],
+    lift_dir: np.ndarray | None = None,
 ) -> _Ends:
     """The lift over the first ``shares[0]`` of the normalized time ``tau`` ``(S,)`` and
     the approach over the last ``shares[1]``: the fingertip backs off ``clearance_m``
     from P, and comes down onto Q, minimum jerk, with the object moving
-    (:func:`~.lift.back_off`, from ``q_start`` and towards ``q_land`` ``(k,)`` [rad]);
-    ``ik-unreachable`` if either is out of reach."""
+    (:func:`~.lift.back_off`, from ``q_start`` and towards ``q_land`` ``(k,)`` [rad];
+    the lift along ``lift_dir``, object frame, when given); ``ik-unreachable`` if
+    either is out of reach."""
     f, T, P, Q = m.f, m.T, m.P, m.Q
     s_lift, s_land = shares
     lift = tau <= s_lift + 1e-12
     land = tau >= 1.0 - s_land - 1e-12
     off_lift = m.clearance_m * minimum_jerk(tau[lift] / s_lift)
     off_land = m.clearance_m * minimum_jerk((1.0 - tau[land]) / s_land)
-    q_lift = back_off(f, T[lift], P, off_lift, np.asarray(q_start, float), ik_tol_m, Q[0])
+    q0 = np.asarray(q_start, float)
+    q_lift = (
+        back_off(f, T[lift], P, off_lift, q0, ik_tol_m, Q[0])
+        if lift_dir is None
+        else along(f, T[lift], P, lift_dir, off_lift, q0, ik_tol_m)
+    )
     q_app = back_off(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m, P[0])
     return _Ends(lift, land, q_lift, q_app[::-1])
 
