@@ -144,9 +144,9 @@ def _contact_in_reach(f, seed: int):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_directions_apart_lead_away_from_a_neighbour_the_furthest_first(index, seed):
     """A neighbour beside the contact (a point 8 mm along a tangent): no direction
-    returned leans towards it, the first leans away, their tops stand further from it than the normal's by
-    the gain (forward kinematics), the furthest first, and no direction left out ends
-    further than the last one returned."""
+    returned leans towards it, the first leans away, their tops stand further from it
+    than the normal's by the gain (forward kinematics), the furthest first, and no
+    direction left out ends further than the last one returned."""
     q, contact = _contact_in_reach(index, seed)
     p, n = contact
     side = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
