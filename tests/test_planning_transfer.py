@@ -452,3 +452,91 @@ def test_sampled_vias_that_fail_leave_the_fixed_vias_failure_as_it_was(scenes, m
         transfer(scene, *case)
     a, b = without.value, through_bad.value
     assert (a.kind, a.measured, a.required, a.time_s) == (b.kind, b.measured, b.required, b.time_s)
+
+
+def _tilted(n: np.ndarray, deg: float) -> np.ndarray:
+    """A unit direction ``deg`` from ``n`` (object frame)."""
+    side = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    return np.cos(np.radians(deg)) * n + np.sin(np.radians(deg)) * side
+
+
+@pytest.mark.parametrize("late", [False, True])
+def test_a_way_into_another_finger_is_tried_again_lifted_or_landing_apart(
+    scenes, checker, late, monkeypatch
+):
+    """Every via of the normal's back-offs "crosses another finger" (a stand-in
+    failure, early or late in the transfer): the transfer is tried again along the
+    directions apart of the side where the failure came first, and the one that passes
+    leaves P (or reaches Q) along that direction, to the clearance above the tangent
+    plane (forward kinematics), and passes the independent re-check."""
+    scene, (p_object, q_object) = scenes["upright-moving"], CASES[3][1:]
+    real = transfer_module._through_vias
+    asked: list[str] = []
+
+    def crossed_unless_apart(m, ends):
+        if not apart_ends:
+            raise PlanningError(
+                "crosses another finger",
+                finger=FINGER,
+                time_s=0.75 if late else 0.05,
+                kind=FailureKind.FINGER_COLLISION,
+                measured=-0.001,
+                required=PARAMS.finger_clearance_m,
+            )
+        return real(m, ends)
+
+    real_ends = transfer_module._lift_and_approach
+    apart_ends: list = []
+
+    def ends_of(m, tau, q_start, q_land, tol, shares, lift_dir=None, approach_dir=None):
+        apart_ends[:] = [d for d in (lift_dir, approach_dir) if d is not None]
+        return real_ends(m, tau, q_start, q_land, tol, shares, lift_dir, approach_dir)
+
+    def directions(f, T, contact, q, height, gap, tol, toward=None):
+        asked.append("Q" if np.allclose(contact[0], scene_q) else "P")
+        assert np.isfinite(gap(q))  # the finger's distance from the others
+        return np.array([_tilted(contact[1], 30.0)])
+
+    monkeypatch.setattr(transfer_module, "_through_vias", crossed_unless_apart)
+    monkeypatch.setattr(transfer_module, "_lift_and_approach", ends_of)
+    monkeypatch.setattr(transfer_module, "directions_apart", directions)
+    S = scene.sample
+    scene_q = S.points[scene.contact(q_object)]
+    moved = transfer(scene, p_object, q_object)
+    assert asked == (["Q"] if late else ["P"])
+    recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, 0.8)
+    f = checker.finger
+    i = scene.contact(q_object if late else p_object)
+    p, n = S.points[i], S.normals[i]
+    d = _tilted(n, 30.0)
+    steps = len(moved.times_s) - 1  # where the approach begins, or the lift ends:
+    k = (
+        int(np.ceil((1.0 - LIFT_FRACTION) * steps - 1e-9))
+        if late
+        else int(np.floor(LIFT_FRACTION * steps + 1e-9))
+    )
+    T = scene.motion.pose(moved.times_s[k : k + 1])[0]
+    tip = T[:3, :3].T @ (f.fk(moved.q[k : k + 1])[0] - T[:3, 3])
+    want = p + f.tip_radius * n + PARAMS.clearance_m / float(d @ n) * d
+    assert np.linalg.norm(tip - want) <= IK_TOL_M + 1e-9
+
+
+def test_when_no_way_apart_passes_the_first_failure_stands(scenes, monkeypatch):
+    scene, case = scenes["upright-moving"], CASES[3][1:]
+    first = PlanningError(
+        "crosses another finger", finger=FINGER, time_s=0.05,
+        kind=FailureKind.FINGER_COLLISION, measured=-0.001, required=0.0005,
+    )  # fmt: skip
+    tried = []
+
+    def crossed(m, ends):
+        tried.append(ends)
+        if len(tried) == 1:
+            raise first
+        raise PlanningError("other", finger=FINGER, kind=FailureKind.OBJECT_CLEARANCE)
+
+    monkeypatch.setattr(transfer_module, "_through_vias", crossed)
+    with pytest.raises(PlanningError) as info:
+        transfer(scene, *case)
+    assert info.value is first and len(tried) > 1
