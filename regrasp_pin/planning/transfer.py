@@ -38,12 +38,11 @@ is checked against the joint velocity limits and verified with Coal exactly as a
 other links clear of the object by ``clearance_m`` during the transfer, allowed to touch
 only at lift-off and landing, the other fingers clear, joints within their limits).
 
-Where every via crosses another finger (``finger-collision``), the lift or the
-approach may be what took the finger towards it (a neighbour holding beside it on
-the same face: the fingers' links converge as they curl): the transfer is tried again
-lifted off P, or come down onto Q, along the tilted directions whose lift ends, or
-approach begins, further from the other fingers (:func:`~.lift.directions_apart`;
-the side where the failure came first), the first failure standing if none passes.
+Where every via crosses another finger (``finger-collision``), the lift may be what
+took the finger towards it (a neighbour holding beside it on the same face: the
+fingers' links converge as they curl): the transfer is tried again lifted off along
+the tilted directions whose lift ends further from the other fingers
+(:func:`~.lift.directions_apart`), the first failure standing if none passes.
 """
 
 from __future__ import annotations
@@ -194,13 +193,11 @@ def plan_transfer(
         if exc.kind != FailureKind.FINGER_COLLISION:
             raise
         failure = exc
-    # the finger's way crosses another finger's: lifted off P, or come down onto Q,
-    # away from the others (their failures aside, the first one's stands)
-    for lift_dir, approach_dir in _ends_apart(moving, q_start, q_land, ik_tol_m, ends, failure):
+    # the finger's way crosses another finger's: lifted off P away from the others
+    # (their failures aside, the first one's stands)
+    for d in _lifts_apart(moving, tau, q_start, ik_tol_m, ends):
         try:
-            apart = _lift_and_approach(
-                moving, tau, q_start, q_land, ik_tol_m, even, lift_dir, approach_dir
-            )
+            apart = _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, even, d)
             return _through_vias(moving, apart)
         except PlanningError:
             continue
@@ -231,46 +228,23 @@ def _even_or_paced(
         raise failure from None
 
 
-def _ends_apart(
-    m: _Moving,
-    q_start: np.ndarray,
-    q_land: np.ndarray,
-    ik_tol_m: float,
-    ends: _Ends,
-    failure: PlanningError,
-) -> Iterator[tuple[np.ndarray | None, np.ndarray | None]]:
-    """``(lift direction, approach direction)`` pairs (object frame; None: the normal's
-    back-off of ``ends``) that end the lift, or begin the approach, further from the
-    other fingers than along the normal (:func:`~.lift.directions_apart`, judged
-    there, the others holding): the lifts first where ``failure`` came in the first
-    half of the transfer, else the approaches; each side's directions found when
-    asked for."""
-    i_a, i_b = int(np.flatnonzero(ends.lift)[-1]), int(np.flatnonzero(ends.land)[0])
+def _lifts_apart(
+    m: _Moving, tau: np.ndarray, q_start: np.ndarray, ik_tol_m: float, ends: _Ends
+) -> np.ndarray:
+    """Directions (object frame) to back off from P along that end the lift further
+    from the other fingers than ``ends``' lift along the normal does
+    (:func:`~.lift.directions_apart`, judged where the lift ends, the others holding)."""
+    i_a = int(np.flatnonzero(ends.lift)[-1])
     fingers = FingerClearance.shared(m.hand, m.f.name)
+    q_full = np.array(m.q_others[i_a], float)
 
-    def apart(
-        i: int, contact: tuple[np.ndarray, np.ndarray], q: np.ndarray, toward: np.ndarray
-    ) -> np.ndarray:
-        q_full = np.array(m.q_others[i], float)
+    def gap(q: np.ndarray) -> float:
+        q_full[m.f.q_indices] = q
+        return float(fingers(q_full))
 
-        def gap(qk: np.ndarray) -> float:
-            q_full[m.f.q_indices] = qk
-            return float(fingers(q_full))
-
-        return directions_apart(m.f, m.T[i], contact, q, m.clearance_m, gap, ik_tol_m, toward)
-
-    def lifts() -> Iterator[tuple[np.ndarray | None, np.ndarray | None]]:
-        for d in apart(i_a, m.P, ends.q_lift[-1], m.Q[0]):
-            yield d, None
-
-    def approaches() -> Iterator[tuple[np.ndarray | None, np.ndarray | None]]:
-        for d in apart(i_b, m.Q, ends.q_app[0], m.P[0]):
-            yield None, d
-
-    middle = 0.5 * float(m.times[0] + m.times[-1])
-    late = failure.time_s is not None and failure.time_s > middle
-    for side in (approaches, lifts) if late else (lifts, approaches):
-        yield from side()
+    return directions_apart(
+        m.f, m.T[i_a], m.P, ends.q_lift[-1], m.clearance_m, gap, ik_tol_m, m.Q[0]
+    )
 
 
 @dataclass(frozen=True)
@@ -394,14 +368,13 @@ def _lift_and_approach(
     ik_tol_m: float,
     shares: tuple[float, float],
     lift_dir: np.ndarray | None = None,
-    approach_dir: np.ndarray | None = None,
 ) -> _Ends:
     """The lift over the first ``shares[0]`` of the normalized time ``tau`` ``(S,)`` and
     the approach over the last ``shares[1]``: the fingertip backs off ``clearance_m``
     from P, and comes down onto Q, minimum jerk, with the object moving
     (:func:`~.lift.back_off`, from ``q_start`` and towards ``q_land`` ``(k,)`` [rad];
-    along ``lift_dir`` and ``approach_dir``, object frame, when given);
-    ``ik-unreachable`` if either is out of reach."""
+    the lift along ``lift_dir``, object frame, when given); ``ik-unreachable`` if
+    either is out of reach."""
     f, T, P, Q = m.f, m.T, m.P, m.Q
     s_lift, s_land = shares
     lift = tau <= s_lift + 1e-12
@@ -414,12 +387,7 @@ def _lift_and_approach(
         if lift_dir is None
         else along(f, T[lift], P, lift_dir, off_lift, q0, ik_tol_m)
     )
-    q1 = np.asarray(q_land, float)
-    q_app = (
-        back_off(f, T[land][::-1], Q, off_land[::-1], q1, ik_tol_m, P[0])
-        if approach_dir is None
-        else along(f, T[land][::-1], Q, approach_dir, off_land[::-1], q1, ik_tol_m)
-    )
+    q_app = back_off(f, T[land][::-1], Q, off_land[::-1], np.asarray(q_land, float), ik_tol_m, P[0])
     return _Ends(lift, land, q_lift, q_app[::-1])
 
 
