@@ -452,3 +452,76 @@ def test_sampled_vias_that_fail_leave_the_fixed_vias_failure_as_it_was(scenes, m
         transfer(scene, *case)
     a, b = without.value, through_bad.value
     assert (a.kind, a.measured, a.required, a.time_s) == (b.kind, b.measured, b.required, b.time_s)
+
+
+def _tilted(n: np.ndarray, deg: float) -> np.ndarray:
+    """A unit direction ``deg`` from ``n`` (object frame)."""
+    side = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    return np.cos(np.radians(deg)) * n + np.sin(np.radians(deg)) * side
+
+
+def _crossing(time_s: float = 0.05) -> PlanningError:
+    return PlanningError(
+        "crosses another finger", finger=FINGER, time_s=time_s,
+        kind=FailureKind.FINGER_COLLISION, measured=-0.001, required=0.0005,
+    )  # fmt: skip
+
+
+def test_a_way_into_another_finger_is_tried_again_lifted_apart(scenes, checker, monkeypatch):
+    """Every via of the lift along the normal "crosses another finger" (a stand-in
+    failure): the transfer is tried again lifted off along the directions apart, and
+    the one that passes leaves P along that direction, to the clearance above the
+    tangent plane where the lift ends (forward kinematics), and passes the independent
+    re-check."""
+    scene, (p_object, q_object) = scenes["upright-moving"], CASES[3][1:]
+    real_vias, real_ends = transfer_module._through_vias, transfer_module._lift_and_approach
+    lifted: list = []
+    asked: list = []
+
+    def crossed_unless_apart(m, ends):
+        if lifted[-1] is None:
+            raise _crossing()
+        return real_vias(m, ends)
+
+    def ends_of(m, tau, q_start, q_land, tol, shares, lift_dir=None):
+        lifted.append(lift_dir)
+        return real_ends(m, tau, q_start, q_land, tol, shares, lift_dir)
+
+    def directions(f, T, contact, q, height, gap, tol, toward=None):
+        asked.append((contact[0], height, gap(q)))  # the finger's distance from the others
+        return np.array([_tilted(contact[1], 30.0)])
+
+    monkeypatch.setattr(transfer_module, "_through_vias", crossed_unless_apart)
+    monkeypatch.setattr(transfer_module, "_lift_and_approach", ends_of)
+    monkeypatch.setattr(transfer_module, "directions_apart", directions)
+    moved = transfer(scene, p_object, q_object)
+    S = scene.sample
+    i = scene.contact(p_object)
+    p, n = S.points[i], S.normals[i]
+    [(at, height, gap)] = asked
+    assert np.array_equal(at, p) and height == PARAMS.clearance_m and np.isfinite(gap)
+    recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, 0.8)
+    f = checker.finger
+    k = int(np.floor(LIFT_FRACTION * (len(moved.times_s) - 1) + 1e-9))  # where the lift ends
+    T = scene.motion.pose(moved.times_s[k : k + 1])[0]
+    tip = T[:3, :3].T @ (f.fk(moved.q[k : k + 1])[0] - T[:3, 3])
+    d = _tilted(n, 30.0)
+    want = p + f.tip_radius * n + PARAMS.clearance_m / float(d @ n) * d
+    assert np.linalg.norm(tip - want) <= IK_TOL_M + 1e-9
+
+
+def test_when_no_lift_apart_passes_the_first_failure_stands(scenes, monkeypatch):
+    scene, case = scenes["upright-moving"], CASES[3][1:]
+    first, tried = _crossing(), []
+
+    def crossed(m, ends):
+        tried.append(ends)
+        if len(tried) == 1:
+            raise first
+        raise PlanningError("other", finger=FINGER, kind=FailureKind.OBJECT_CLEARANCE)
+
+    monkeypatch.setattr(transfer_module, "_through_vias", crossed)
+    with pytest.raises(PlanningError) as info:
+        transfer(scene, *case)
+    assert info.value is first and len(tried) > 1  # directions apart were tried
