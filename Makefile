@@ -11,7 +11,7 @@ $(PY):
 	$(PY) -m pip install --quiet --upgrade pip
 
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e ".[viz,dev,scale]"
+	$(PY) -m pip install --quiet -e ".[viz,dev,scale,fast]"
 	touch $(STAMP)
 
 demo: $(STAMP)
