@@ -89,3 +89,40 @@ def test_rest_configuration_is_the_grid_posture_clearest_of_the_object(scene):  
         np.testing.assert_array_equal(got[f.q_indices], best)
         others = np.setdiff1d(np.arange(hand.model.nq), f.q_indices)
         np.testing.assert_array_equal(got[others], hand.neutral()[others])
+
+
+def test_clear_rest_postures_are_clear_of_the_object_the_clearest_first(scene):  # noqa: F811
+    """Every posture returned keeps the whole finger the gap from the object at each of
+    the seven poses (Coal, which the bound only underestimates), by decreasing bound;
+    every grid posture left out has a bound below the gap."""
+    from regrasp_pin.grasp.holding import clear_rest_postures
+    from regrasp_pin.model.clearance import LinkClearance
+    from regrasp_pin.model.distances import object_gap_bound
+
+    hand, box, motion, _ = scene
+    gap = 0.003
+    T = motion.pose(np.linspace(motion.t_start, motion.t_end, 7))
+    for name in ("index", "thumb"):
+        f = hand.finger(name)
+        got = clear_rest_postures(hand, box, motion, name, gap)
+        lc = LinkClearance(hand, name, box, include_tip=True)
+        fr = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+        grid = f.lower + np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k) * (
+            f.upper - f.lower
+        )
+
+        def bound(qf, name=name, lc=lc):
+            full = np.repeat(hand.to_full(name, qf)[None], len(T), 0)
+            return float(object_gap_bound(hand, lc.geometry_ids, box, full, T).min())
+
+        assert 0 < len(got) < len(grid)
+        bounds = [bound(qf) for qf in got]
+        assert all(b >= gap for b in bounds)
+        assert all(a >= b - 1e-6 for a, b in zip(bounds[:-1], bounds[1:], strict=True))
+        for qf in got[:5]:
+            full = np.repeat(hand.to_full(name, qf)[None], len(T), 0)
+            assert float(lc(full, T).min()) >= gap - 1e-9
+        kept = {tuple(qf) for qf in got}
+        left = [qf for qf in grid if tuple(qf) not in kept]
+        assert len(left) == len(grid) - len(got)
+        assert all(bound(qf) < gap for qf in left)

@@ -269,3 +269,48 @@ def test_a_finger_with_no_regrasp_lets_go_and_joins_again_on_its_own(tmp_path):
     assert on.reason == "joins again: its contacts are back within reach"
     assert ring[again[0] + 1].kind == "contact"
     _assert_rechecked(plan)
+
+
+def test_parks_apart_stand_apart_from_the_others_while_the_finger_is_let_go():
+    """The parking postures offered after a release met another finger: clear of the
+    object (the clearest first, as ``clear_rest_postures`` orders them), each at least
+    the finger clearance plus the margin from the other fingers at every sampled time
+    of the release (Coal, measured again here), the ones skipped before the last
+    offered are nearer, and at most ``PARK_TRIED`` are offered."""
+    from types import SimpleNamespace
+
+    from regrasp_pin.grasp.holding import clear_rest_postures
+    from regrasp_pin.model.clearance import FingerClearance
+
+    scen = build_scenario(neighbour_specs()[0])
+    hand, obj, motion = scen.hand, scen.obj, scen.motion
+    ctx = SimpleNamespace(
+        scene=SimpleNamespace(hand=hand, obj=obj, motion=motion),
+        params=scen.params,
+        clear_parks={},
+    )
+    others = hand.neutral()  # the other fingers where the scenario's grasp holds
+    for n, q in scen.grasp.q.items():
+        others[hand.finger(n).q_indices] = q
+
+    def q_hand(times):
+        return np.tile(others, (len(times), 1))
+
+    need = scen.params.regrasp.finger_clearance_m + letgo.PARK_MARGIN_M
+    for name in ("middle", "index"):
+        got = list(letgo._parks_apart(ctx, name, 0.5, q_hand, None))
+        order = clear_rest_postures(hand, obj, motion, name, letgo.PARK_OBJECT_GAP_M)
+        assert 0 < len(got) <= letgo.PARK_TRIED
+        fc = FingerClearance(hand, name)
+        f = hand.finger(name)
+
+        def gap(posture, f=f, fc=fc):
+            q = others.copy()
+            q[f.q_indices] = posture
+            return fc(q)
+
+        rows = [int(np.flatnonzero((order == g).all(axis=1))[0]) for g in got]
+        assert rows == sorted(rows) and rows[-1] < letgo.PARK_SCREENED
+        assert all(gap(g) >= need for g in got)
+        skipped = [i for i in range(rows[-1]) if i not in rows]
+        assert all(gap(order[i]) < need for i in skipped)
