@@ -26,7 +26,6 @@ from .tracking import ContactTrack, track_contact
 
 __all__ = [
     "Holding",
-    "clear_rest_postures",
     "holding_hand",
     "holding_q",
     "holds_to_end",
@@ -139,43 +138,6 @@ def holding_q(
     return q
 
 
-def _rest_grid(f) -> np.ndarray:
-    """The postures ``(5^k, k)`` a finger may rest at: each joint at 0, 1/4, ..., 1 of
-    its range [rad]."""
-    fr = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
-    grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
-    return f.lower + grid * (f.upper - f.lower)
-
-
-def clear_rest_postures(
-    hand: Hand, obj: ConvexObject, motion: ObjectMotion, name: str, gap_m: float
-) -> np.ndarray:
-    """The postures ``(M, k)`` of :func:`rest_configuration`'s grid at which the whole
-    finger ``name`` stays at least ``gap_m`` [m] from the object over the motion (by a
-    lower bound of the distance at seven poses), the clearest first (bounds within a
-    micrometre by the grid's order), the other fingers where they are irrelevant (at
-    neutral: only the finger's own links are measured)."""
-    f = hand.fingers[name]
-    postures = _rest_grid(f)
-    T = motion.pose(np.linspace(motion.t_start, motion.t_end, 7))
-    lc = LinkClearance(hand, name, obj, include_tip=True)
-    full = hand.to_full(name, postures, hand.neutral())
-    lb = (
-        object_gap_bound(
-            hand,
-            lc.geometry_ids,
-            obj,
-            np.repeat(full, len(T), axis=0),
-            np.tile(T, (len(full), 1, 1)),
-        )
-        .reshape(len(full), len(T))
-        .min(axis=1)
-    )
-    keep = np.flatnonzero(lb >= gap_m)
-    order = np.lexsort((keep, -np.round(lb[keep], 6)))
-    return postures[keep[order]]
-
-
 def rest_configuration(
     hand: Hand, obj: ConvexObject, motion: ObjectMotion, idle: list[str]
 ) -> np.ndarray:
@@ -189,7 +151,9 @@ def rest_configuration(
     T = motion.pose(np.linspace(motion.t_start, motion.t_end, 7))
     for name in idle:
         f = hand.fingers[name]
-        postures = _rest_grid(f)
+        fr = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+        grid = np.stack(np.meshgrid(*[fr] * f.k, indexing="ij"), -1).reshape(-1, f.k)
+        postures = f.lower + grid * (f.upper - f.lower)
         lc = LinkClearance(hand, name, obj, include_tip=True)
         best = _clearest(hand, obj, lc, hand.to_full(name, postures, q), T)
         q[f.q_indices] = f.q_mid if best is None else postures[best]

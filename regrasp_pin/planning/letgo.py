@@ -12,12 +12,6 @@ finger may also let go while they hold alone and join again itself before their
 first hold is lost. Each moves the plan's time on (to the release, or to the joining
 finger's landing); one that would take it past the loss of another finger's hold is
 refused (a regrasp is refused when such a loss comes before its earliest landing).
-
-A finger that lets go backs off and stays, or moves to its parking posture, the one
-clearest of the object over the motion; where both meet another finger (the
-neighbours move on with the object), it may park at another posture clear of the
-object that stands apart from the other fingers while it is let go
-(:func:`_parks_apart`).
 """
 
 from __future__ import annotations
@@ -30,10 +24,9 @@ from typing import TypeVar
 
 import numpy as np
 
-from ..exceptions import ContactError, FailureKind, PlanningError
-from ..grasp.holding import Holding, clear_rest_postures, holding_q, rest_configuration
+from ..exceptions import ContactError, PlanningError
+from ..grasp.holding import Holding, holding_q, rest_configuration
 from ..grasp.manifold import build_manifold
-from ..model.clearance import FingerClearance
 from ..plan import JoinPhase, ReleasePhase
 from .join import Join, join_durations, plan_join
 from .release import Release, plan_release
@@ -185,51 +178,9 @@ def _release_either(
     )[0]
     for park in (None, _park(ctx, name)):
         rel = _release_at(ctx, state, name, t_r, q_r, stay, q_hand, park, tried, until)
-        if isinstance(rel, Release):
-            return rel
-    if not (isinstance(rel, PlanningError) and rel.kind == FailureKind.FINGER_COLLISION):
-        return None
-    # the parking posture, or the way there, meets another finger: postures clear of
-    # the object that stand apart from the others while the finger is let go
-    for park in _parks_apart(ctx, name, t_r, q_hand, until):
-        rel = _release_at(ctx, state, name, t_r, q_r, stay, q_hand, park, tried, until)
-        if isinstance(rel, Release):
+        if rel is not None:
             return rel
     return None
-
-
-def _parks_apart(
-    ctx: PlanContext,
-    name: str,
-    t_r: float,
-    q_hand: Callable[[np.ndarray], np.ndarray],
-    until: float | None,
-) -> Iterator[np.ndarray]:
-    """Parking postures ``(k,)`` for ``name`` let go at ``t_r`` [s]: of its postures
-    clear of the object by ``PARK_OBJECT_GAP_M`` over the motion
-    (:func:`~.holding.clear_rest_postures`, the clearest first, the first
-    ``PARK_SCREENED``), those that stand ``PARK_MARGIN_M`` beyond the finger clearance
-    from the other fingers (``q_hand``) at ``PARK_TIMES`` times from ``t_r`` to the end
-    of the release (Coal), at most ``PARK_TRIED``; the Coal check of the release judges
-    the way there."""
-    hand, p = ctx.scene.hand, ctx.params
-    if name not in ctx.clear_parks:
-        ctx.clear_parks[name] = clear_rest_postures(
-            hand, ctx.scene.obj, ctx.scene.motion, name, PARK_OBJECT_GAP_M
-        )
-    t_end = ctx.scene.motion.t_end if until is None else min(until, ctx.scene.motion.t_end)
-    q_full = np.array(q_hand(np.linspace(t_r, max(t_end, t_r), PARK_TIMES)), dtype=float)
-    fingers = FingerClearance.shared(hand, name)
-    need = p.regrasp.finger_clearance_m + PARK_MARGIN_M
-    f = hand.fingers[name]
-    given = 0
-    for posture in ctx.clear_parks[name][:PARK_SCREENED]:
-        if given >= PARK_TRIED:
-            return
-        q_full[:, f.q_indices] = posture
-        if all(fingers(q) >= need for q in q_full):
-            given += 1
-            yield posture
 
 
 def _release_at(
@@ -243,9 +194,9 @@ def _release_at(
     park: np.ndarray | None,
     tried: list[str],
     until: float | None = None,
-) -> Release | PlanningError:
+) -> Release | None:
     """A verified release of ``name`` at ``t_r`` (``park``, ``until``: see
-    plan_release), or its failure (noted in ``tried``).
+    plan_release), or None (the failure noted in ``tried``).
 
     The outcome is kept for the plan (``ctx.releases``), by what it depends on: the
     finger, the time, parked or not, the time it is planned to, its hold and the holds
@@ -265,6 +216,7 @@ def _release_at(
         outcome = ctx.releases[key] = _plan_release(ctx, state, name, t_r, q_r, q_hand, park, until)
     if isinstance(outcome, PlanningError):
         tried.append(f"{t_r:.3f} s{' (park)' if park is not None else ''}: {outcome.kind.value}")
+        return None
     return outcome
 
 
@@ -336,15 +288,6 @@ def _apply_release(state: PlanState, name: str, rel: Release, why: str) -> PlanS
 
 
 _JOIN_CANDIDATES = 3  # new contacts tried per joining finger and release time
-#: A let-go finger's parking postures apart from the others (:func:`_parks_apart`): how
-#: far from the object over the motion they stay [m], how many of the clearest are
-#: screened, at how many times the others are measured, what they keep beyond the
-#: finger clearance [m], and how many are tried
-PARK_OBJECT_GAP_M = 0.003
-PARK_SCREENED = 32
-PARK_TIMES = 5
-PARK_MARGIN_M = 0.002
-PARK_TRIED = 2
 
 
 _JOIN_APPROACH_S = 0.1  # the joining fingertip's final approach along Q's normal [s]

@@ -77,8 +77,6 @@ class PlanContext:
     manifolds: dict[str, Manifold]
     tried: set[tuple] = field(default_factory=set)  # (state signature, option) taken
     parks: dict[str, np.ndarray] = field(default_factory=dict)  # where let-go fingers go
-    # per let-go finger, its postures clear of the object, clearest first
-    clear_parks: dict[str, np.ndarray] = field(default_factory=dict)
     releases: dict[tuple, Release | PlanningError] = field(default_factory=dict)
     joins: dict[tuple, tuple[Join, Holding] | None] = field(default_factory=dict)
 
