@@ -30,12 +30,17 @@ from typing import Any
 import numpy as np
 
 from .numba_jit import compile_together
-from .segments_numba import clip01, segment_offset
 
 __all__ = ["available", "bounds", "bounds_python", "wanted"]
 
 _compiled: Callable[..., Any] | None = None
 _failed = False
+_EPS = 1e-18  # squared segment lengths at or below this are points [m^2]
+
+
+def _clip01(x):
+    """``x`` clipped to ``[0, 1]`` (as ``np.clip``)."""
+    return min(max(x, 0.0), 1.0)
 
 
 def _place(R, p, local, r, g, out):
@@ -98,17 +103,30 @@ def _near_pair_bound(R, p, c, a_loc, b_loc, params, rad, r, g1, g2, w):
     _place(R, p, b_loc, r, g1, b1)
     _place(R, p, a_loc, r, g2, a2)
     _place(R, p, b_loc, r, g2, b2)
-    x0, x1, x2 = segment_offset(
-        b1[0] - a1[0],
-        b1[1] - a1[1],
-        b1[2] - a1[2],
-        b2[0] - a2[0],
-        b2[1] - a2[1],
-        b2[2] - a2[2],
-        a1[0] - a2[0],
-        a1[1] - a2[1],
-        a1[2] - a2[2],
-    )
+    # Ericson 5.1.9, as distances._segment_distance_soa
+    d10, d11, d12 = b1[0] - a1[0], b1[1] - a1[1], b1[2] - a1[2]
+    d20, d21, d22 = b2[0] - a2[0], b2[1] - a2[1], b2[2] - a2[2]
+    r0, r1, r2 = a1[0] - a2[0], a1[1] - a2[1], a1[2] - a2[2]
+    a = d10 * d10 + d11 * d11 + d12 * d12
+    e = d20 * d20 + d21 * d21 + d22 * d22
+    b = d10 * d20 + d11 * d21 + d12 * d22
+    cc = d10 * r0 + d11 * r1 + d12 * r2
+    f = d20 * r0 + d21 * r1 + d22 * r2
+    a_ok, e_ok = a > _EPS, e > _EPS
+    a_safe = a if a_ok else 1.0
+    e_safe = e if e_ok else 1.0
+    denom = a * e - b * b
+    s = _clip01((b * f - cc * e) / denom) if denom > _EPS else 0.0
+    if not a_ok:
+        s = 0.0
+    t = (b * s + f) / e_safe if e_ok else 0.0
+    redo = t < 0.0 or t > 1.0 or not e_ok
+    t = _clip01(t)
+    if redo:
+        s = _clip01((t * b - cc) / a_safe) if a_ok else 0.0
+    x0 = r0 + s * d10 - t * d20
+    x1 = r1 + s * d11 - t * d21
+    x2 = r2 + s * d12 - t * d22
     seg = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
     lb = seg - rad[g1] - rad[g2]
     if not seg > 1e-12:
@@ -165,8 +183,7 @@ def _compile() -> Callable[..., Any] | None:
     global _compiled, _failed
     if _compiled is None and not _failed:
         compiled = compile_together(
-            (clip01, segment_offset, _place, _support, _object_bound, _near_pair_bound),
-            (bounds_python,),
+            (_clip01, _place, _support, _object_bound, _near_pair_bound), (bounds_python,)
         )
         if compiled is None:
             _failed = True

@@ -19,29 +19,52 @@ from typing import Any
 import numpy as np
 
 from .numba_jit import compile_together
-from .segments_numba import clip01, segment_offset
 
 __all__ = ["available", "gaps", "gaps_python"]
 
 _compiled: Callable[..., Any] | None = None
 _failed = False
+_EPS = 1e-18  # squared segment lengths at or below this are points [m^2]
+
+
+def _clip01(x):
+    """``x`` clipped to ``[0, 1]`` (as ``np.clip``)."""
+    return min(max(x, 0.0), 1.0)
 
 
 def _segment_distance(a1, b1, a2, b2, n, i, nb, j):
     """Distance between segment ``i`` of ``(a1, b1)`` at row ``n`` and segment ``j`` of
     ``(a2, b2)`` at row ``nb``: the operations of
     :func:`~regrasp_pin.model.distances._segment_distance_soa`, one pair."""
-    x0, x1, x2 = segment_offset(
-        b1[0, i, n] - a1[0, i, n],
-        b1[1, i, n] - a1[1, i, n],
-        b1[2, i, n] - a1[2, i, n],
-        b2[0, j, nb] - a2[0, j, nb],
-        b2[1, j, nb] - a2[1, j, nb],
-        b2[2, j, nb] - a2[2, j, nb],
-        a1[0, i, n] - a2[0, j, nb],
-        a1[1, i, n] - a2[1, j, nb],
-        a1[2, i, n] - a2[2, j, nb],
-    )
+    d10 = b1[0, i, n] - a1[0, i, n]
+    d11 = b1[1, i, n] - a1[1, i, n]
+    d12 = b1[2, i, n] - a1[2, i, n]
+    d20 = b2[0, j, nb] - a2[0, j, nb]
+    d21 = b2[1, j, nb] - a2[1, j, nb]
+    d22 = b2[2, j, nb] - a2[2, j, nb]
+    r0 = a1[0, i, n] - a2[0, j, nb]
+    r1 = a1[1, i, n] - a2[1, j, nb]
+    r2 = a1[2, i, n] - a2[2, j, nb]
+    a = d10 * d10 + d11 * d11 + d12 * d12
+    e = d20 * d20 + d21 * d21 + d22 * d22
+    b = d10 * d20 + d11 * d21 + d12 * d22
+    c = d10 * r0 + d11 * r1 + d12 * r2
+    f = d20 * r0 + d21 * r1 + d22 * r2
+    a_ok, e_ok = a > _EPS, e > _EPS
+    a_safe = a if a_ok else 1.0
+    e_safe = e if e_ok else 1.0
+    denom = a * e - b * b
+    s = _clip01((b * f - c * e) / denom) if denom > _EPS else 0.0
+    if not a_ok:
+        s = 0.0
+    t = (b * s + f) / e_safe if e_ok else 0.0
+    redo = t < 0.0 or t > 1.0 or not e_ok
+    t = _clip01(t)
+    if redo:
+        s = _clip01((t * b - c) / a_safe) if a_ok else 0.0
+    x0 = r0 + s * d10 - t * d20
+    x1 = r1 + s * d11 - t * d21
+    x2 = r2 + s * d12 - t * d22
     return math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
 
 
@@ -78,7 +101,7 @@ def _compile() -> Callable[..., Any] | None:
     """The compiled :func:`gaps_python` (cached on disk), or None without numba."""
     global _compiled, _failed
     if _compiled is None and not _failed:
-        compiled = compile_together((clip01, segment_offset, _segment_distance), (gaps_python,))
+        compiled = compile_together((_clip01, _segment_distance), (gaps_python,))
         if compiled is None:
             _failed = True
             return None

@@ -15,25 +15,13 @@ def compile_together(
 ) -> dict[str, Callable[..., Any]] | None:
     """The ``kernels`` compiled with numba (cached on disk, releasing the GIL), by name,
     each calling the compiled versions of the others and of the ``helpers`` (inlined)
-    in one namespace, the kernels' module's, with the globals that helpers from other
-    modules read (a name bound to something else there is an error); None when numba
-    is not installed. The functions must come in the order in which they call each other
-    (callees first)."""
+    in one namespace, the kernels' module's; None when numba is not installed. The
+    functions must come in the order in which they call each other (callees first)."""
     try:
         import numba
     except ImportError:
         return None
     glb = dict(kernels[0].__globals__)
-    for f in helpers:  # a helper from another module brings the names it reads
-        for name in f.__code__.co_names:
-            if (
-                name in f.__globals__
-                and glb.setdefault(name, f.__globals__[name]) is not (f.__globals__[name])
-            ):
-                raise ValueError(
-                    f"compile_together: {f.__name__} reads {name!r}, which the kernels' "
-                    "module binds to something else"
-                )
     for f in (*helpers, *kernels):
         if f in kernels:
             jit = numba.njit(cache=True, nogil=True, inline="never")
