@@ -76,7 +76,7 @@ def test_compiled_loop_gives_numpys_bits(hand):
     _check_same_bits(hand, 1, 8)
 
 
-def test_the_verifications_bounds_are_the_same_on_both_backends(hand, backend):
+def test_the_verifications_bounds_read_the_same_placements_on_both_backends(hand, backend):
     """The bounds of one finger's dense motion against the object and the other fingers
     (:class:`~regrasp_pin.model.distances.PairDistances`) read the placements: the same
     bits on the numba backend when numpy computes the bounds on both (the compiled

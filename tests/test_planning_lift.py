@@ -147,26 +147,33 @@ def test_directions_apart_lead_away_from_a_neighbour_the_furthest_first(index, s
     returned leans towards it, the first leans away, their tops stand further from it
     than the normal's by the gain (forward kinematics), the furthest first, and no
     direction left out ends further than the last one returned."""
-    q, contact = _contact_in_reach(index, seed)
-    p, n = contact
+    q, (p_palm, n_palm) = _contact_in_reach(index, seed)
+    # the contact in an object frame turned and moved from the palm's
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()
+    T[:3, 3] = [0.004, -0.003, 0.002]
+    p, n = T[:3, :3].T @ (p_palm - T[:3, 3]), T[:3, :3].T @ n_palm
+    contact = (p, n)
     side = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
     side /= np.linalg.norm(side)
-    neighbour = p + 0.008 * side
+    neighbour = T[:3, :3] @ (p + 0.008 * side) + T[:3, 3]  # palm frame
     height = 0.004
 
     def gap(qk: np.ndarray) -> float:
         return float(np.linalg.norm(index.fk(qk[None])[0] - neighbour))
 
-    T = np.eye(4)
     dirs = lift.directions_apart(index, T, contact, q, height, gap, IK_TOL_M)
     assert 1 <= len(dirs) <= lift.MAX_APART
     assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0)
     assert dirs[0] @ side < 0.0  # the first leans away from the neighbour
     assert np.all(dirs @ side <= 1e-9)  # none towards it
 
-    def top_gap(d: np.ndarray) -> float:
+    def top(d: np.ndarray) -> np.ndarray:
         local = p + index.tip_radius * n + height / float(d @ n) * d
-        res = index.ik(local[None], q, tol_m=IK_TOL_M, restarts=False)
+        return T[:3, :3] @ local + T[:3, 3]
+
+    def top_gap(d: np.ndarray) -> float:
+        res = index.ik(top(d)[None], q, tol_m=IK_TOL_M, restarts=False)
         assert res.error_m[0] <= IK_TOL_M
         return gap(res.q[0])
 
@@ -180,8 +187,7 @@ def test_directions_apart_lead_away_from_a_neighbour_the_furthest_first(index, s
         for az in 2.0 * np.pi * np.arange(lift.AZIMUTHS) / lift.AZIMUTHS:
             d = np.cos(tilt) * n + np.sin(tilt) * (np.cos(az) * e1 + np.sin(az) * e2)
             if not np.any(np.all(np.isclose(dirs, d), axis=1)):
-                local = p + index.tip_radius * n + height / float(d @ n) * d
-                res = index.ik(local[None], q, tol_m=IK_TOL_M, restarts=False)
+                res = index.ik(top(d)[None], q, tol_m=IK_TOL_M, restarts=False)
                 if res.error_m[0] <= IK_TOL_M:
                     assert gap(res.q[0]) <= gaps[-1] + 1e-9
 
@@ -190,3 +196,32 @@ def test_no_direction_apart_where_the_neighbours_do_not_care(index):
     q, contact = _contact_in_reach(index, 0)
     dirs = lift.directions_apart(index, np.eye(4), contact, q, 0.004, lambda qk: 0.01, IK_TOL_M)
     assert dirs.shape == (0, 3)
+
+
+def test_directions_apart_beat_the_baseline_given_and_are_within_reach(index):
+    """Where the normal's top is out of reach and the caller's back-off was tilted (its
+    gap the baseline): only reachable tops count, each beating the baseline by the
+    gain; with a baseline above every gap, none."""
+    T = np.eye(4)
+
+    def gap(qk: np.ndarray) -> float:
+        return 0.01 + float(index.fk(qk[None])[0] @ [1.0, 0.0, 0.0])
+
+    found = 0
+    for q, (p, n) in contacts_past_a_limit(index, seed=3):
+        normal = index.ik((p + (index.tip_radius + 0.004) * n)[None], q, tol_m=IK_TOL_M,
+                          restarts=False)  # fmt: skip
+        if normal.error_m[0] <= IK_TOL_M:
+            continue
+        dirs = lift.directions_apart(index, T, (p, n), q, 0.004, gap, IK_TOL_M, baseline_m=0.0)
+        for d in dirs:
+            res = index.ik((p + index.tip_radius * n + 0.004 / float(d @ n) * d)[None], q,
+                           tol_m=IK_TOL_M, restarts=False)  # fmt: skip
+            assert res.error_m[0] <= IK_TOL_M and gap(res.q[0]) >= lift.APART_GAIN_M
+        assert lift.directions_apart(
+            index, T, (p, n), q, 0.004, gap, IK_TOL_M, baseline_m=1.0
+        ).shape == (0, 3)
+        found += int(len(dirs) > 0)
+        if found == 3:
+            break
+    assert found == 3

@@ -28,6 +28,7 @@ from test_planning_regrasp import (
 import regrasp_pin.planning.regrasp as regrasp_module
 import regrasp_pin.planning.transfer as transfer_module
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError, UnfoldError
+from regrasp_pin.model.clearance import FingerClearance
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.planning.regrasp import RegraspParams
 from regrasp_pin.planning.timing import minimum_jerk
@@ -454,6 +455,13 @@ def test_sampled_vias_that_fail_leave_the_fixed_vias_failure_as_it_was(scenes, m
     assert (a.kind, a.measured, a.required, a.time_s) == (b.kind, b.measured, b.required, b.time_s)
 
 
+def heights_above_plane(f, q: np.ndarray, T: np.ndarray, contact) -> float:
+    """The fingertip centre's height above the contact's tangent plane minus the tip
+    radius, object pose ``T`` (forward kinematics) [m]."""
+    tip = T[:3, :3].T @ (f.fk(q[None])[0] - T[:3, 3])
+    return float((tip - contact[0]) @ contact[1]) - f.tip_radius
+
+
 def _tilted(n: np.ndarray, deg: float) -> np.ndarray:
     """A unit direction ``deg`` from ``n`` (object frame)."""
     side = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
@@ -488,8 +496,8 @@ def test_a_way_into_another_finger_is_tried_again_lifted_apart(scenes, checker, 
         lifted.append(lift_dir)
         return real_ends(m, tau, q_start, q_land, tol, shares, lift_dir)
 
-    def directions(f, T, contact, q, height, gap, tol, toward=None):
-        asked.append((contact[0], height, gap(q)))  # the finger's distance from the others
+    def directions(f, T, contact, q, height, gap, tol, toward=None, baseline_m=None):
+        asked.append((contact[0], height, T, q, gap(q), baseline_m))
         return np.array([_tilted(contact[1], 30.0)])
 
     monkeypatch.setattr(transfer_module, "_through_vias", crossed_unless_apart)
@@ -499,12 +507,20 @@ def test_a_way_into_another_finger_is_tried_again_lifted_apart(scenes, checker, 
     S = scene.sample
     i = scene.contact(p_object)
     p, n = S.points[i], S.normals[i]
-    [(at, height, gap)] = asked
-    assert np.array_equal(at, p) and height == PARAMS.clearance_m and np.isfinite(gap)
+    [(at, height, T_top, q_top, gap, baseline)] = asked
+    assert np.array_equal(at, p) and height == PARAMS.clearance_m
     recheck_transfer(checker, scene, moved.times_s, moved.q, 0.0, 0.8)
     f = checker.finger
     k = int(np.floor(LIFT_FRACTION * (len(moved.times_s) - 1) + 1e-9))  # where the lift ends
     T = scene.motion.pose(moved.times_s[k : k + 1])[0]
+    # judged where the lift along the normal ends, the others where they hold then,
+    # against that lift's own gap (an independent FingerClearance)
+    np.testing.assert_allclose(T_top, T, atol=1e-12)
+    fc = FingerClearance(scene.hand, FINGER)
+    q_full = scene.q_neutral(moved.times_s[k : k + 1])[0]
+    q_full[f.q_indices] = q_top
+    assert gap == pytest.approx(fc(q_full), abs=1e-12) and baseline == gap
+    assert np.linalg.norm(heights_above_plane(f, q_top, T, (p, n)) - PARAMS.clearance_m) < 1e-4
     tip = T[:3, :3].T @ (f.fk(moved.q[k : k + 1])[0] - T[:3, 3])
     d = _tilted(n, 30.0)
     want = p + f.tip_radius * n + PARAMS.clearance_m / float(d @ n) * d

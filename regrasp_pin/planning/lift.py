@@ -18,7 +18,7 @@ face before it travels. So the back-off is searched over directions:
 A back-off along the normal can also take the finger towards a neighbour holding
 beside it on the same face (the fingers' links converge as they curl). Where the
 caller found that, :func:`directions_apart` gives the tilted directions whose top
-stands further from the other fingers than the normal's, measured there.
+stands further from the other fingers than the back-off's it has, measured there.
 
 Along a direction ``d`` the tip centre rises to the same height above the contact's
 tangent plane as along the normal (it moves ``offset / (d . n)`` along ``d``): the
@@ -40,6 +40,7 @@ from ..model.hand import Finger
 __all__ = [
     "APART_GAIN_M",
     "AZIMUTHS",
+    "GAP_TOL_M",
     "MAX_APART",
     "MAX_TILTED",
     "TILTS_DEG",
@@ -61,6 +62,8 @@ MAX_APART = 3
 #: How much further from the other fingers than the normal's a tilted back-off's top
 #: must stand to be tried for that [m].
 APART_GAIN_M = 2e-4
+#: Gaps of directions apart closer than this are ties (broken by the smaller tilt) [m].
+GAP_TOL_M = 1e-9
 #: First-order shares of the move within the joint limits closer than this are ties,
 #: broken by the smaller tilt, then the azimuth's order [-].
 _SHARE_TOL = 1e-3
@@ -120,29 +123,34 @@ def directions_apart(
     gap: Callable[[np.ndarray], float],
     ik_tol_m: float,
     toward: np.ndarray | None = None,
+    baseline_m: float | None = None,
 ) -> np.ndarray:
     """Directions ``(D, 3)`` (object frame, unit) tilted from the contact's outward
-    normal along which the back-off ends further from the other fingers than along the
-    normal, the furthest first: where backing off along the normal takes the finger
+    normal along which the back-off ends further from the other fingers than the
+    back-off the caller has, the furthest first: where backing off took the finger
     towards a neighbour (fingers side by side on one face).
 
     Each direction of ``TILTS_DEG`` x ``AZIMUTHS`` (:func:`tilted_directions`'
     directions, unranked) is judged at the back-off's top, the tip centre ``height_m``
-    above the tangent plane at the object pose ``T`` ``(4, 4)``, solved from ``q``
-    ``(k,)`` [rad]: its ``gap`` (configuration -> distance from the other fingers [m])
-    must exceed the normal's by ``APART_GAIN_M`` (an unreachable top has none); at most
-    ``MAX_APART`` are returned, gaps within a nanometre by the smaller tilt, then the
-    azimuth's order.
+    above the tangent plane at the object pose ``T``, by one IK solve from ``q`` (the
+    back-off itself follows the direction sample by sample, and a redundant finger may
+    end elsewhere; its Coal check judges it): its ``gap`` must exceed ``baseline_m`` by
+    ``APART_GAIN_M``, and an unreachable top has none. At most ``MAX_APART`` are
+    returned; gaps within ``GAP_TOL_M`` of the furthest left are ties, broken by the
+    smaller tilt, then the azimuth's order.
 
     Args:
         f: The finger.
-        T: The object's pose in the palm frame at the back-off's top.
+        T: ``(4, 4)`` the object's pose in the palm frame at the back-off's top.
         contact: ``(point, outward normal)``, object frame [m].
-        q: The finger's configuration to solve from [rad].
+        q: ``(k,)`` the finger's configuration to solve from [rad].
         height_m: How high above the tangent plane the back-off goes [m].
-        gap: The finger's distance from the other fingers at a configuration [m].
+        gap: The finger's distance from the other fingers at a configuration ``(k,)``
+            [m].
         ik_tol_m: IK tolerance of the tops [m].
         toward: As :func:`tilted_directions`': the first azimuth's direction.
+        baseline_m: The gap to beat [m]; None: the normal's top's (-inf where it is
+            out of reach).
     """
     p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
     n = n / np.linalg.norm(n)
@@ -160,19 +168,20 @@ def directions_apart(
     gaps = np.array(
         [gap(res.q[i]) if res.error_m[i] <= ik_tol_m else -np.inf for i in range(len(dirs))]
     )
-    better = np.flatnonzero(gaps[1:] >= gaps[0] + APART_GAIN_M) + 1
-    order = np.lexsort((better, tilt[better], -np.round(gaps[better], 9)))
+    base = gaps[0] if baseline_m is None else float(baseline_m)
+    better = np.flatnonzero(np.isfinite(gaps[1:]) & (gaps[1:] >= base + APART_GAIN_M)) + 1
+    order = _ranked(gaps[better], tilt[better], GAP_TOL_M)
     return dirs[better[order][:MAX_APART]]
 
 
-def _ranked(share: np.ndarray, tilt: np.ndarray) -> list[int]:
-    """Indices by decreasing ``share``, shares within ``_SHARE_TOL`` of the best left
+def _ranked(share: np.ndarray, tilt: np.ndarray, tol: float = _SHARE_TOL) -> list[int]:
+    """Indices by decreasing ``share``, shares within ``tol`` of the best left
     counting as ties, broken by the smaller tilt, then the index."""
     left = list(range(len(share)))
     order = []
     while left:
         best = max(share[i] for i in left)
-        pick = min((i for i in left if share[i] >= best - _SHARE_TOL), key=lambda i: (tilt[i], i))
+        pick = min((i for i in left if share[i] >= best - tol), key=lambda i: (tilt[i], i))
         order.append(pick)
         left.remove(pick)
     return order

@@ -38,11 +38,12 @@ is checked against the joint velocity limits and verified with Coal exactly as a
 other links clear of the object by ``clearance_m`` during the transfer, allowed to touch
 only at lift-off and landing, the other fingers clear, joints within their limits).
 
-Where every via crosses another finger (``finger-collision``), the lift may be what
-took the finger towards it (a neighbour holding beside it on the same face: the
-fingers' links converge as they curl): the transfer is tried again lifted off along
-the tilted directions whose lift ends further from the other fingers
-(:func:`~.lift.directions_apart`), the first failure standing if none passes.
+Where the transfer fails for another finger (``finger-collision``, the kind of its
+last Coal failure), the lift may be what took the finger towards it (a neighbour
+holding beside it on the same face: the fingers' links converge as they curl): the
+transfer is tried again, with the even split, lifted off along the tilted directions
+whose lift ends further from the other fingers (:func:`~.lift.directions_apart`), the
+first failure standing if none passes.
 """
 
 from __future__ import annotations
@@ -166,7 +167,8 @@ def plan_transfer(
             or no via passes the Coal check within the velocity limits: ``velocity`` if
             one that is too fast passes its geometry (the least too fast: a longer
             duration may let it pass), else the kind, measured and required values
-            of the last Coal failure.
+            of the last Coal failure; a ``finger-collision`` only once no lift apart
+            passes either (module docstring).
     """
     f = hand.finger(finger)
     n_t = max(int(np.ceil(duration_s / sample_dt_s)), 8) + 1
@@ -195,7 +197,7 @@ def plan_transfer(
         failure = exc
     # the finger's way crosses another finger's: lifted off P away from the others
     # (their failures aside, the first one's stands)
-    for d in _lifts_apart(moving, tau, q_start, ik_tol_m, ends):
+    for d in _lifts_apart(moving, ik_tol_m, ends):
         try:
             apart = _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, even, d)
             return _through_vias(moving, apart)
@@ -228,12 +230,11 @@ def _even_or_paced(
         raise failure from None
 
 
-def _lifts_apart(
-    m: _Moving, tau: np.ndarray, q_start: np.ndarray, ik_tol_m: float, ends: _Ends
-) -> np.ndarray:
-    """Directions (object frame) to back off from P along that end the lift further
-    from the other fingers than ``ends``' lift along the normal does
-    (:func:`~.lift.directions_apart`, judged where the lift ends, the others holding)."""
+def _lifts_apart(m: _Moving, ik_tol_m: float, ends: _Ends) -> np.ndarray:
+    """Unit directions ``(D, 3)`` (object frame) to back off from P along, whose lift
+    ends further from the other fingers than ``ends``' lift does (along the normal, or
+    the tilted direction :func:`~.lift.back_off` took): :func:`~.lift.directions_apart`,
+    judged where the lift ends, the others holding."""
     i_a = int(np.flatnonzero(ends.lift)[-1])
     fingers = FingerClearance.shared(m.hand, m.f.name)
     q_full = np.array(m.q_others[i_a], float)
@@ -242,8 +243,9 @@ def _lifts_apart(
         q_full[m.f.q_indices] = q
         return float(fingers(q_full))
 
+    q_top = ends.q_lift[-1]
     return directions_apart(
-        m.f, m.T[i_a], m.P, ends.q_lift[-1], m.clearance_m, gap, ik_tol_m, m.Q[0]
+        m.f, m.T[i_a], m.P, q_top, m.clearance_m, gap, ik_tol_m, m.Q[0], gap(q_top)
     )
 
 

@@ -159,18 +159,17 @@ def local_manifold_threads(workers: int) -> int:
 
 
 @contextmanager
-def _environ_kept(environ: dict[str, Any]) -> Any:
-    """This process's environment with the variables of ``environ`` set to its values
-    (as strings; None: left as it is) inside, and as it was before on leaving.
+def _environ_kept() -> Any:
+    """This process's environment as it was before, on leaving.
 
     A nanny of a local cluster copies its ``pre-spawn-environ`` (and a
     ``PYTHONHASHSEED``) into the environment of the process that starts it, this one,
     and leaves them there, and a later nanny prefers a variable of the environment to
     its configuration: without this, a second cluster of this process gave its workers
-    the first one's manifold threads.
+    the first one's manifold threads. A variable the user set before stays theirs
+    (the environment's value wins, as distributed decides).
     """
     before = dict(os.environ)
-    os.environ.update({key: str(value) for key, value in environ.items() if value is not None})
     try:
         yield
     finally:
@@ -199,7 +198,7 @@ def _client(workers: int | None, scheduler: str | None) -> Any:
         "distributed.worker.daemon": False,
         "distributed.nanny.pre-spawn-environ": environ,
     }
-    with dask.config.set(settings), _environ_kept(environ):
+    with dask.config.set(settings), _environ_kept():
         if scheduler is not None:
             client = distributed.Client(scheduler)
             try:
