@@ -18,7 +18,7 @@ face before it travels. So the back-off is searched over directions:
 A back-off along the normal can also take the finger towards a neighbour holding
 beside it on the same face (the fingers' links converge as they curl). Where the
 caller found that, :func:`directions_apart` gives the tilted directions whose top
-stands further from the other fingers than the back-off's it has, measured there.
+stands further from the other fingers than the caller's back-off does, measured there.
 
 Along a direction ``d`` the tip centre rises to the same height above the contact's
 tangent plane as along the normal (it moves ``offset / (d . n)`` along ``d``): the
@@ -59,8 +59,8 @@ AZIMUTHS = 8
 MAX_TILTED = 4
 #: Most directions away from the other fingers returned by :func:`directions_apart`.
 MAX_APART = 3
-#: How much further from the other fingers than the normal's a tilted back-off's top
-#: must stand to be tried for that [m].
+#: How much further from the other fingers than the caller's back-off a tilted
+#: back-off's top must stand to be tried for that [m].
 APART_GAIN_M = 2e-4
 #: Gaps of directions apart closer than this are ties (broken by the smaller tilt) [m].
 GAP_TOL_M = 1e-9
