@@ -92,16 +92,7 @@ def tilted_directions(
             points along the surface towards it (None, or right above the contact:
             a fixed basis).
     """
-    n = np.asarray(contact[1], float)
-    n = n / np.linalg.norm(n)
-    e1 = _tangent_towards(n, None if toward is None else np.asarray(toward, float) - contact[0])
-    e2 = np.cross(n, e1)
-    azimuths = 2.0 * np.pi * np.arange(AZIMUTHS) / AZIMUTHS
-    tilts = np.radians(np.asarray(TILTS_DEG, float))
-    tilt, az = np.repeat(tilts, AZIMUTHS), np.tile(azimuths, tilts.size)
-    dirs = np.cos(tilt)[:, None] * n + np.sin(tilt)[:, None] * (
-        np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2
-    )
+    dirs, tilt = _tilted_grid(contact, toward)
     _, J = f.jacobian(q)
     R = np.asarray(T, float)[:3, :3]
     lo = np.minimum(f.lower - q, 0.0)  # a joint at (or past) a limit moves only back
@@ -112,6 +103,26 @@ def tilted_directions(
         step = lsq_linear(J, move, bounds=(lo, hi)).x
         share[i] = float(move @ (J @ step)) / float(move @ move)
     return dirs[_ranked(share, tilt)[:MAX_TILTED]]
+
+
+def _tilted_grid(
+    contact: tuple[np.ndarray, np.ndarray], toward: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The directions ``(D, 3)`` (object frame, unit) tilted from the contact's outward
+    normal by each of ``TILTS_DEG`` at ``AZIMUTHS`` azimuths about it (the first along
+    the surface towards ``toward``, see :func:`tilted_directions`), tilt by tilt, and
+    their tilts ``(D,)`` [rad]."""
+    n = np.asarray(contact[1], float)
+    n = n / np.linalg.norm(n)
+    e1 = _tangent_towards(n, None if toward is None else np.asarray(toward, float) - contact[0])
+    e2 = np.cross(n, e1)
+    azimuths = 2.0 * np.pi * np.arange(AZIMUTHS) / AZIMUTHS
+    tilts = np.radians(np.asarray(TILTS_DEG, float))
+    tilt, az = np.repeat(tilts, AZIMUTHS), np.tile(azimuths, tilts.size)
+    dirs = np.cos(tilt)[:, None] * n + np.sin(tilt)[:, None] * (
+        np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2
+    )
+    return dirs, tilt
 
 
 def directions_apart(
@@ -154,14 +165,8 @@ def directions_apart(
     """
     p, n = np.asarray(contact[0], float), np.asarray(contact[1], float)
     n = n / np.linalg.norm(n)
-    e1 = _tangent_towards(n, None if toward is None else np.asarray(toward, float) - p)
-    e2 = np.cross(n, e1)
-    azimuths = 2.0 * np.pi * np.arange(AZIMUTHS) / AZIMUTHS
-    tilt = np.r_[0.0, np.repeat(np.radians(np.asarray(TILTS_DEG, float)), AZIMUTHS)]
-    az = np.r_[0.0, np.tile(azimuths, len(TILTS_DEG))]
-    dirs = np.cos(tilt)[:, None] * n + np.sin(tilt)[:, None] * (
-        np.cos(az)[:, None] * e1 + np.sin(az)[:, None] * e2
-    )  # the normal first
+    tilted, tilts = _tilted_grid(contact, toward)
+    dirs, tilt = np.vstack([n, tilted]), np.r_[0.0, tilts]  # the normal first
     local = p + f.tip_radius * n + (height_m / (dirs @ n))[:, None] * dirs
     T = np.asarray(T, float)
     res = f.ik(local @ T[:3, :3].T + T[:3, 3], np.asarray(q, float), tol_m=ik_tol_m, restarts=False)
