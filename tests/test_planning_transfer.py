@@ -154,6 +154,35 @@ def test_too_short_a_transfer_is_a_velocity_failure_with_its_numbers(scenes):
     assert exc.measured > exc.required > 0.0
 
 
+def test_a_failure_the_caller_drops_skips_the_too_fast_vias_coal_checks(scenes, monkeypatch):
+    # 0.04 s: every via is too fast; the reported failure Coal-checks them to decide
+    # between their velocity failure and their geometry's; a dropped one (a retry's)
+    # is a too fast via's velocity failure, without a Coal check
+    real_vias, real_verify = transfer_module._through_vias, transfer_module.verify_or_raise
+    checks: list[int] = []
+    outcomes: dict[bool, PlanningError] = {}
+
+    def counted(*args, **kwargs):
+        checks[-1] += 1
+        return real_verify(*args, **kwargs)
+
+    def both(m, ends, reported=True):
+        for flag in (True, False):
+            checks.append(0)
+            with pytest.raises(PlanningError) as info:
+                real_vias(m, ends, flag)
+            outcomes[flag] = info.value
+        raise outcomes[True]
+
+    monkeypatch.setattr(transfer_module, "verify_or_raise", counted)
+    monkeypatch.setattr(transfer_module, "_through_vias", both)
+    with pytest.raises(PlanningError):
+        transfer(scenes["edge-static"], *CASES[4][1:], duration_s=0.04)
+    assert checks[0] > 0 and checks[1] == 0
+    assert outcomes[False].kind == FailureKind.VELOCITY
+    assert outcomes[False].measured > outcomes[False].required > 0.0
+
+
 @pytest.mark.parametrize(
     ("scene_name", "case", "duration_s"),
     [("upright-moving", CASES[3], 0.2), ("edge-moving", CASES[5], 0.25)],
@@ -487,10 +516,10 @@ def test_a_way_into_another_finger_is_tried_again_lifted_apart(scenes, checker, 
     lifted: list = []
     asked: list = []
 
-    def crossed_unless_apart(m, ends):
+    def crossed_unless_apart(m, ends, reported=True):
         if lifted[-1] is None:
             raise _crossing()
-        return real_vias(m, ends)
+        return real_vias(m, ends, reported)
 
     def ends_of(m, tau, q_start, q_land, tol, shares, lift_dir=None):
         lifted.append(lift_dir)
@@ -531,7 +560,7 @@ def test_when_no_lift_apart_passes_the_first_failure_stands(scenes, monkeypatch)
     scene, case = scenes["upright-moving"], CASES[3][1:]
     first, tried = _crossing(), []
 
-    def crossed(m, ends):
+    def crossed(m, ends, reported=True):
         tried.append(ends)
         if len(tried) == 1:
             raise first

@@ -200,7 +200,7 @@ def plan_transfer(
     for d in _lifts_apart(moving, ik_tol_m, ends):
         try:
             apart = _lift_and_approach(moving, tau, q_start, q_land, ik_tol_m, even, d)
-            return _through_vias(moving, apart)
+            return _through_vias(moving, apart, reported=False)
         except PlanningError:
             continue
     raise failure
@@ -225,7 +225,8 @@ def _even_or_paced(
             raise
         failure = exc
     try:
-        return _through_vias(m, _lift_and_approach(m, tau, q_start, q_land, ik_tol_m, paced))
+        paced_ends = _lift_and_approach(m, tau, q_start, q_land, ik_tol_m, paced)
+        return _through_vias(m, paced_ends, reported=False)
     except PlanningError:
         raise failure from None
 
@@ -269,10 +270,12 @@ class _Moving:
     finger_clearance_m: float
 
 
-def _through_vias(m: _Moving, ends: _Ends) -> Transfer:
+def _through_vias(m: _Moving, ends: _Ends, reported: bool = True) -> Transfer:
     """The first trajectory through a via, between the lift and the approach ``ends``,
     that is within the velocity limits and passes its Coal check (module docstring);
-    else the failure :func:`plan_transfer` raises."""
+    else the failure :func:`plan_transfer` raises (``reported`` False, for a caller
+    that drops the failure: the last Coal failure, else a too fast via's, without the
+    Coal checks of the too fast vias that :func:`_reported_failure` would make)."""
     hand, obj, f, times, T, P, Q = m.hand, m.obj, m.f, m.times, m.T, m.P, m.Q
     finger, clearance_m, finger_clearance_m = f.name, m.clearance_m, m.finger_clearance_m
     lift, land, q_lift, q_app = ends.lift, ends.land, ends.q_lift, ends.q_app
@@ -348,6 +351,8 @@ def _through_vias(m: _Moving, ends: _Ends) -> Transfer:
             return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
         if failure is not None and not math.isnan(height):
             failures.append(failure)
+    if not reported:
+        raise failures[-1] if failures else too_fast[0][2]
     raise _reported_failure(too_fast, failures, coal_failure)
 
 
