@@ -41,12 +41,13 @@ from ._validate import positive_int
 from .exceptions import ContactError, FailureKind, PlanningError
 from .plan import Plan
 from .planning.planner import ManipulationPlan, PlannerParams, plan_manipulation
+from .planning.setup import PlanSetup, plan_setup
 from .scenarios import Scenario, contacts_held_through
 
 __all__ = ["HOLD_THROUGH", "GraspBackup", "plan_scenario", "recorded_backups"]
 
-#: plan_scenario's ``progress`` and ``on_backup``
-_Report = tuple[Callable[[float], None] | None, Callable[[str, str], None] | None]
+#: plan_scenario's ``progress`` and ``on_backup``, and the setup its plans share
+_Report = tuple[Callable[[float], None] | None, Callable[[str, str], None] | None, PlanSetup]
 
 #: A failure of this kind means that the others do not hold without the finger: its
 #: backup starts it on a contact it holds to the end instead of anywhere else
@@ -105,6 +106,9 @@ def plan_scenario(
     The backups share the search budget: each gets the steps that the plans before it
     left (``PlannerParams.max_steps``) and what their planning left of ``budget_s``
     [s] (a backup's grasp search is not counted; none left: outcome ``"no-time"``).
+    What every plan builds before its search is built once
+    (:func:`~regrasp_pin.planning.setup.plan_setup`): the backups plan the same hand,
+    object and motion.
 
     Args:
         scenario: The scenario (its ``grasp``; ``grasp_search`` to back up).
@@ -130,13 +134,21 @@ def plan_scenario(
     backups = positive_int(grasp_backups, "grasp_backups", minimum=0)
     params = params or scenario.params
     t0 = time.perf_counter()
-    first = _plan(scenario, params, progress)
+    # built once: each backup plans the same hand, object and motion
+    setup = plan_setup(scenario.hand, scenario.obj, scenario.motion, params)
+    first = _plan(scenario, _spent(params, time.perf_counter() - t0), progress, setup)
     if isinstance(first, ManipulationPlan):
         first.plan.summary["grasp_backups"] = []
         return first
     tried: list[GraspBackup] = []
     planned = _back_up(
-        scenario, params, first, backups, tried, time.perf_counter() - t0, (progress, on_backup)
+        scenario,
+        params,
+        first,
+        backups,
+        tried,
+        time.perf_counter() - t0,
+        (progress, on_backup, setup),
     )
     record = [b.to_dict() for b in tried]
     if planned is not None:
@@ -162,9 +174,13 @@ def recorded_backups(
 
 
 def _plan(
-    scenario: Scenario, params: PlannerParams, progress: Callable[[float], None] | None
+    scenario: Scenario,
+    params: PlannerParams,
+    progress: Callable[[float], None] | None,
+    setup: PlanSetup,
 ) -> ManipulationPlan | PlanningError:
-    """The scenario planned: its plan, or its PlanningError (other errors raise)."""
+    """The scenario planned: its plan, or its PlanningError (other errors raise);
+    ``setup`` is used if it was built for the scenario's hand, object and motion."""
     try:
         return plan_manipulation(
             scenario.hand,
@@ -173,9 +189,17 @@ def _plan(
             grasp=scenario.grasp,
             params=params,
             progress=progress,
+            setup=setup if setup.made_for(scenario.hand, scenario.obj, scenario.motion) else None,
         )
     except PlanningError as exc:
         return exc
+
+
+def _spent(params: PlannerParams, elapsed_s: float) -> PlannerParams:
+    """``params`` with ``elapsed_s`` [s] taken off its wall-clock budget (if any)."""
+    if params.budget_s is None:
+        return params
+    return dataclasses.replace(params, budget_s=max(params.budget_s - elapsed_s, 0.0))
 
 
 def _steps_spent(exc: PlanningError) -> int:
@@ -272,7 +296,7 @@ def _back_up(
     """Plan again from other initial grasps after ``exc`` (see :func:`plan_scenario`),
     appending each backup to ``tried``; the first full plan, or None. ``planning_s``
     is the wall time the planning took so far [s]; ``report``: :func:`plan_scenario`'s
-    ``progress`` and ``on_backup``."""
+    ``progress`` and ``on_backup``, and the plans' setup."""
     avoid: dict[str, list[np.ndarray]] = {}
     spent = _steps_spent(exc)
     while len(tried) < backups:
@@ -323,12 +347,12 @@ def _one_backup(
         return record(outcome=started, choose_s=choose_s), None
     if params.budget_s is not None and params.budget_s <= 0:
         return record(outcome="no-time", choose_s=choose_s), None
-    progress, on_backup = report
+    progress, on_backup, setup = report
     if on_backup is not None:
         on_backup(finger, exc.kind.value)
     t0 = time.perf_counter()
     try:
-        planned = _plan(started, params, progress)
+        planned = _plan(started, params, progress, setup)
     except Exception as bug:  # recorded (a typed error by its kind); the first failure stands
         kind = getattr(bug, "kind", None)
         failed = (

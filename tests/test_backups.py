@@ -72,13 +72,24 @@ class Scripted:
     """``plan_manipulation`` replaced by outcomes in turn: a failure (``fails``), an
     exception to raise as it is, or ``"ok"`` (a full plan)."""
 
-    def __init__(self, monkeypatch, *outcomes):
-        self.outcomes, self.calls, self.raised = list(outcomes), [], []
+    def __init__(self, monkeypatch, *outcomes, setup_s=0.0):
+        self.outcomes, self.calls, self.raised, self.setups = list(outcomes), [], [], []
         monkeypatch.setattr(backups, "plan_manipulation", self)
+        monkeypatch.setattr(backups, "plan_setup", self.setup)
+        self.setup_s = setup_s
 
-    def __call__(self, hand, obj, motion, *, grasp, params, progress=None):
+    def setup(self, hand, obj, motion, params):
+        """A stand-in for plan_setup that takes ``setup_s``, built for ``motion``."""
+        time.sleep(self.setup_s)
+        built = SimpleNamespace(made_for=lambda h, o, m: m is motion)
+        self.setups.append(built)
+        return built
+
+    def __call__(self, hand, obj, motion, *, grasp, params, progress=None, setup=None):
         self.calls.append(
-            SimpleNamespace(motion=motion, grasp=grasp, params=params, progress=progress)
+            SimpleNamespace(
+                motion=motion, grasp=grasp, params=params, progress=progress, setup=setup
+            )
         )
         out = self.outcomes.pop(0)
         if out == "ok":
@@ -281,12 +292,14 @@ def test_a_backup_gets_what_the_planning_left_of_the_wall_clock_budget(scen, mon
         time.sleep(0.05)
         return fails("index", FailureKind.NO_CANDIDATE)(grasp)
 
-    planner = Scripted(monkeypatch, slow, "ok")
+    planner = Scripted(monkeypatch, slow, "ok", setup_s=0.03)
     params = dataclasses.replace(scen.params, budget_s=10.0)
     seen = []
     plan_scenario(scen, params=params, progress=seen.append)
     first, again = planner.calls
-    assert first.params.budget_s == 10.0 and 9.0 < again.params.budget_s <= 10.0 - 0.05
+    # the setup built for both counts against the first plan's budget
+    assert 9.0 < first.params.budget_s <= 10.0 - 0.03
+    assert 9.0 < again.params.budget_s <= first.params.budget_s - 0.05
     assert first.progress is again.progress  # the caller's, for every plan
 
 
@@ -321,6 +334,19 @@ def test_an_unexpected_error_in_a_backup_is_its_outcome(scen, monkeypatch):
     assert failed.value is planner.raised[0] and len(planner.calls) == 2
     [b] = failed.value.partial.summary["grasp_backups"]
     assert b["outcome"] == "exception:RuntimeError: broken on purpose"
+
+
+def test_the_plans_share_one_setup_built_for_the_scenario(scen, monkeypatch):
+    planner = Scripted(
+        monkeypatch,
+        fails("ring", FailureKind.NO_CANDIDATE),
+        fails("ring", FailureKind.VELOCITY),
+        "ok",
+    )
+    plan_scenario(scen, grasp_backups=2)
+    [built] = planner.setups
+    assert [c.setup for c in planner.calls] == [built] * 3
+    assert len({id(c.grasp) for c in planner.calls}) == 3  # three grasps, one setup
 
 
 def test_a_full_first_plan_lists_no_backup(scen, monkeypatch):

@@ -11,6 +11,8 @@ carries every failed attempt and the partial plan:
   joint-space fallback verified the same way;
 - :mod:`.planner`: the whole hand over the whole motion (:func:`plan_manipulation`):
   which finger lets go when, and backtracking; its parameters in :mod:`.params`;
+  what it builds before its search, whatever the grasp, in :mod:`.setup`
+  (:func:`plan_setup`, built once to plan from several grasps);
 - :mod:`.state`: where a plan stands and the triggers that follow from it;
 - :mod:`.letgo`: a finger with no verified regrasp lets go, or hands over to an idle
   finger;
@@ -28,11 +30,13 @@ from .planner import ManipulationPlan, PlannerParams, plan_manipulation
 from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import LiftOffWindow, lift_off_window, start_times
 from .search import RegraspSearch, SearchBudget
+from .setup import PlanSetup, plan_setup
 from .transfer import Transfer, plan_transfer
 
 __all__ = [
     "LiftOffWindow",
     "ManipulationPlan",
+    "PlanSetup",
     "PlannerParams",
     "RegraspParams",
     "RegraspResult",
@@ -44,6 +48,7 @@ __all__ = [
     "lift_off_window",
     "plan_manipulation",
     "plan_regrasp",
+    "plan_setup",
     "plan_transfer",
     "start_times",
 ]

@@ -48,9 +48,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exceptions import FailureKind, PlanningError
-from ..grasp.holding import rest_configuration, start_holding
+from ..grasp.holding import start_holding
 from ..grasp.initial import Grasp, initial_grasp
-from ..grasp.manifold import Manifold, build_manifolds
+from ..grasp.manifold import Manifold
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
@@ -60,12 +60,13 @@ from ..verify.finger_motion import PENETRATION_TOL_M
 from ..verify.plan_check import phase_gaps
 from .advance import Step, advance, contenders
 from .assembly import joint_speed_failure, object_penetration_failure, plan_until
-from .feasibility import first_infeasibility, must_hold_runs, no_plan_exists
+from .feasibility import first_infeasibility, no_plan_exists
 from .params import PlannerParams
 from .recovery import recover
 from .regrasp import RegraspResult
 from .schedule import TIME_TOL_S
 from .search import RegraspSearch, SearchBudget
+from .setup import PlanSetup, plan_setup
 from .state import PlanContext, PlanState, pending_triggers
 
 __all__ = ["ManipulationPlan", "PlannerParams", "plan_manipulation"]
@@ -102,6 +103,7 @@ def plan_manipulation(
     grasp: Grasp | None = None,
     params: PlannerParams | None = None,
     progress: Callable[[float], None] | None = None,
+    setup: PlanSetup | None = None,
 ) -> ManipulationPlan:
     """Plan the whole hand over the whole motion.
 
@@ -113,13 +115,17 @@ def plan_manipulation(
         params: :class:`PlannerParams`.
         progress: Called with the planned time [s] as planning advances (e.g. to
             drive a progress bar).
+        setup: What the plan builds before its search, built once by
+            :func:`~.setup.plan_setup` for planning from several grasps (the same
+            plan as without it); None: built here.
 
     Returns:
         A :class:`ManipulationPlan`.
 
     Raises:
         InputError: a part of the wrong type, a motion that takes the object more than
-            1 m from the palm (lengths in millimetres by mistake).
+            1 m from the palm (lengths in millimetres by mistake), a ``setup`` built
+            for another hand, object, motion or parameters.
         ContactError: no initial grasp.
         PlanningError: the motion cannot be achieved; ``kind`` says why, ``attempts``
             holds every failed attempt of the last search and ``partial`` the plan up
@@ -129,24 +135,14 @@ def plan_manipulation(
     scene = Scene(hand, obj, motion)  # checks types and scale before any work
     params = params or PlannerParams()
     budget = SearchBudget.of(params.max_steps, params.budget_s)  # the whole call
-    active = tuple(params.fingers) if params.fingers else hand.finger_names
-    for name in active:
-        hand.finger(name)  # raises UnknownNameError listing the valid names
-    base_q = rest_configuration(
-        hand, obj, motion, [n for n in hand.finger_names if n not in active]
-    )
-    stage: dict[str, float] = {}
-    t0 = time.perf_counter()
-    sample = obj.sample_surface(params.sample_spacing_m)
-    n_m = max(int(round(motion.duration_s / params.manifold_dt_s)), 1) + 1
-    m_times = np.linspace(motion.t_start, motion.t_end, n_m)
-    manifolds = build_manifolds(
-        hand, active, sample, motion, m_times, contact=params.contact, threads=params.threads
-    )
-    stage["manifolds"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    every, runs = must_hold_runs(hand, obj, motion, sample, m_times, manifolds, params)
-    stage["must hold"] = time.perf_counter() - t0
+    if setup is None:
+        setup = plan_setup(hand, obj, motion, params)
+    else:
+        setup.check(hand, obj, motion, params)
+    stage = dict(setup.stage_s)  # the setup's stages as they took, if built once for several
+    active, base_q, sample = setup.active, setup.base_q, setup.sample
+    manifolds, runs = setup.manifolds, setup.runs
+    every = dict(setup.every)  # a join adds its finger's manifold to the plan's own
     t0 = time.perf_counter()
     if grasp is None:
         grasp = initial_grasp(

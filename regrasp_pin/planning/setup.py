@@ -1,0 +1,147 @@
+"""What a plan builds before it searches, whatever its initial grasp.
+
+:func:`~.planner.plan_manipulation` first samples the object's surface, builds the
+taking-part fingers' manifolds on the manifold grid and proves where a finger must
+hold (:func:`~.feasibility.must_hold_runs`); none of it depends on the initial grasp.
+A caller that plans the same hand, object and motion from several grasps (the backups
+of :func:`~regrasp_pin.backups.plan_scenario`) builds it once with :func:`plan_setup`
+and passes it to each plan (``setup=``): the plans are the same as without it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import InputError
+from ..grasp.holding import rest_configuration
+from ..grasp.manifold import Manifold, build_manifolds
+from ..grasp.necessity import MustHold
+from ..model.hand import Hand
+from ..model.motion import ObjectMotion
+from ..model.objects import ConvexObject, SurfaceSample
+from ..model.scene import Scene
+from .feasibility import must_hold_runs
+from .params import PlannerParams
+
+__all__ = ["PlanSetup", "plan_setup"]
+
+
+@dataclass(frozen=True)
+class PlanSetup:
+    """The grasp-independent part of a plan (:func:`plan_setup`).
+
+    Attributes:
+        hand: The hand it was built for.
+        obj: The object.
+        motion: The motion.
+        active: The fingers that take part.
+        base_q: ``(nq,)`` the hand with the idle fingers at rest [rad].
+        sample: The surface sample.
+        manifolds: The taking-part fingers' manifolds on the manifold grid.
+        every: The manifolds of every finger that could hold (idle ones included where
+            they may join).
+        runs: The runs in which a finger cannot let go.
+        stage_s: The time each part took [s] (``"manifolds"``, ``"must hold"``).
+        key: What of the planner's parameters it was built with (:meth:`check`).
+    """
+
+    hand: Hand
+    obj: ConvexObject
+    motion: ObjectMotion
+    active: tuple[str, ...]
+    base_q: np.ndarray
+    sample: SurfaceSample
+    manifolds: dict[str, Manifold]
+    every: dict[str, Manifold]
+    runs: list[MustHold]
+    stage_s: dict[str, float]
+    key: tuple[Any, ...]
+
+    def made_for(self, hand: Hand, obj: ConvexObject, motion: ObjectMotion) -> bool:
+        """Whether it was built for these hand, object and motion objects."""
+        return self.hand is hand and self.obj is obj and self.motion is motion
+
+    def check(
+        self, hand: Hand, obj: ConvexObject, motion: ObjectMotion, params: PlannerParams
+    ) -> None:
+        """Raise InputError unless this setup was built for ``hand``, ``obj``,
+        ``motion`` (the same objects) and parameters that build the same (``params``'
+        fingers, sampling, manifold grid, contact model, friction, proof and release
+        settings, shortest regrasp)."""
+        if not self.made_for(hand, obj, motion):
+            raise InputError(
+                "setup",
+                "was built for another hand, object or motion",
+                "plan_setup() of the same hand, object and motion objects",
+            )
+        if self.key != _key(hand, params):
+            raise InputError(
+                "setup",
+                "was built with other planner parameters",
+                "plan_setup() with the same fingers, sample_spacing_m, manifold_dt_s, "
+                "contact, mu, release, prove_infeasible and regrasp.duration_s",
+            )
+
+
+def plan_setup(
+    hand: Hand, obj: ConvexObject, motion: ObjectMotion, params: PlannerParams | None = None
+) -> PlanSetup:
+    """Build the grasp-independent part of a plan (module docstring).
+
+    Args:
+        hand: The hand.
+        obj: The object.
+        motion: The object's motion.
+        params: :class:`~.params.PlannerParams` (default ones if None).
+
+    Returns:
+        The :class:`PlanSetup`, for ``plan_manipulation(..., setup=...)`` with the same
+        hand, object, motion and parameters that build the same.
+
+    Raises:
+        InputError: a part of the wrong type, a motion that takes the object more than
+            1 m from the palm (as :func:`~.planner.plan_manipulation`).
+        UnknownNameError: a finger of ``params.fingers`` that the hand does not have.
+    """
+    Scene(hand, obj, motion)  # checks types and scale before any work
+    params = params or PlannerParams()
+    active = tuple(params.fingers) if params.fingers else hand.finger_names
+    for name in active:
+        hand.finger(name)  # raises UnknownNameError listing the valid names
+    base_q = rest_configuration(
+        hand, obj, motion, [n for n in hand.finger_names if n not in active]
+    )
+    stage: dict[str, float] = {}
+    t0 = time.perf_counter()
+    sample = obj.sample_surface(params.sample_spacing_m)
+    n_m = max(int(round(motion.duration_s / params.manifold_dt_s)), 1) + 1
+    m_times = np.linspace(motion.t_start, motion.t_end, n_m)
+    manifolds = build_manifolds(
+        hand, active, sample, motion, m_times, contact=params.contact, threads=params.threads
+    )
+    stage["manifolds"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    every, runs = must_hold_runs(hand, obj, motion, sample, m_times, manifolds, params)
+    stage["must hold"] = time.perf_counter() - t0
+    return PlanSetup(
+        hand, obj, motion, active, base_q, sample, manifolds, every, runs, stage, _key(hand, params)
+    )
+
+
+def _key(hand: Hand, params: PlannerParams) -> tuple[Any, ...]:
+    """What in ``params`` the setup depends on."""
+    active = tuple(params.fingers) if params.fingers else hand.finger_names
+    return (
+        active,
+        params.sample_spacing_m,
+        params.manifold_dt_s,
+        params.contact,
+        params.mu,
+        params.release,
+        params.prove_infeasible,
+        params.regrasp.duration_s,
+    )
