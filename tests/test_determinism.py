@@ -7,7 +7,8 @@ last bits of many reductions; and once with OpenBLAS's kernels for the CPU and o
 with an older family's (``OPENBLAS_CORETYPE``: AVX2 where the CPU has AVX-512, AVX
 without FMA where it has AVX2), which changes the last bits of matrix products. Both
 must give the same regrasps: the same fingers at the same times, landing on the same
-contacts (within 0.1 mm).
+contacts (within 0.1 mm). The same holds between the IK backends (numpy's loops and
+the compiled ones).
 """
 
 from __future__ import annotations
@@ -130,6 +131,16 @@ def test_plan_does_not_change_with_openblas_kernels(scenario, coretype):
     a = _as_installed(scenario)
     b = _run(scenario, {"OPENBLAS_CORETYPE": coretype})
     _assert_same_plan(a, b)
+
+
+@pytest.mark.parametrize("scenario", ["demo", "spec 0 5"])
+def test_plan_does_not_change_with_the_other_ik_backend(scenario):
+    """The compiled IK and placement loops (``REGRASP_PIN_IK_BACKEND=numba``, the
+    ``fast`` extra) against numpy's: an accelerator may not change a plan."""
+    pytest.importorskip("numba", reason="the numba backend needs the 'fast' extra")
+    installed = os.environ.get("REGRASP_PIN_IK_BACKEND", "numpy")
+    other = "numba" if installed == "numpy" else "numpy"
+    _assert_same_plan(_as_installed(scenario), _run(scenario, {"REGRASP_PIN_IK_BACKEND": other}))
 
 
 def _assert_same_plan(a: dict, b: dict) -> None:
