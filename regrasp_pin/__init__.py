@@ -52,6 +52,7 @@ from .placing import Placement, candidate_placements
 from .plan import ContactPhase, Plan, RegraspPhase
 from .planning.planner import ManipulationPlan, PlannerParams, plan_manipulation
 from .planning.regrasp import RegraspParams, RegraspResult, plan_regrasp
+from .planning.setup import PlanSetup, plan_setup
 from .planning.transfer import Transfer, plan_transfer
 from .polygon.approximate import PolygonResult, approximate_polygon
 from .polygon.deviation import deviation_matrix
@@ -94,6 +95,7 @@ __all__ = [
     "NewContact",
     "ObjectMotion",
     "Plan",
+    "PlanSetup",
     "PlannerParams",
     "PlanningError",
     "PolygonResult",
@@ -134,6 +136,7 @@ __all__ = [
     "Placement",
     "object_from_params",
     "plan_manipulation",
+    "plan_setup",
     "plan_regrasp",
     "plan_scenario",
     "plan_transfer",
