@@ -46,8 +46,8 @@ from .scenarios import Scenario, contacts_held_through
 
 __all__ = ["HOLD_THROUGH", "GraspBackup", "plan_scenario", "recorded_backups"]
 
-#: plan_scenario's ``progress`` and ``on_backup``, and the setup its plans share
-_Report = tuple[Callable[[float], None] | None, Callable[[str, str], None] | None, PlanSetup]
+#: plan_scenario's ``progress`` and ``on_backup``
+_Report = tuple[Callable[[float], None] | None, Callable[[str, str], None] | None]
 
 #: A failure of this kind means that the others do not hold without the finger: its
 #: backup starts it on a contact it holds to the end instead of anywhere else
@@ -148,7 +148,8 @@ def plan_scenario(
         backups,
         tried,
         time.perf_counter() - t0,
-        (progress, on_backup, setup),
+        (progress, on_backup),
+        setup,
     )
     record = [b.to_dict() for b in tried]
     if planned is not None:
@@ -179,8 +180,8 @@ def _plan(
     progress: Callable[[float], None] | None,
     setup: PlanSetup,
 ) -> ManipulationPlan | PlanningError:
-    """The scenario planned: its plan, or its PlanningError (other errors raise);
-    ``setup`` is used if it was built for the scenario's hand, object and motion."""
+    """The scenario planned from ``setup``: its plan, or its PlanningError (other
+    errors raise)."""
     try:
         return plan_manipulation(
             scenario.hand,
@@ -189,7 +190,7 @@ def _plan(
             grasp=scenario.grasp,
             params=params,
             progress=progress,
-            setup=setup if setup.made_for(scenario.hand, scenario.obj, scenario.motion) else None,
+            setup=setup,
         )
     except PlanningError as exc:
         return exc
@@ -292,11 +293,13 @@ def _back_up(
     tried: list[GraspBackup],
     planning_s: float,
     report: _Report,
+    setup: PlanSetup,
 ) -> ManipulationPlan | None:
     """Plan again from other initial grasps after ``exc`` (see :func:`plan_scenario`),
     appending each backup to ``tried``; the first full plan, or None. ``planning_s``
     is the wall time the planning took so far [s]; ``report``: :func:`plan_scenario`'s
-    ``progress`` and ``on_backup``, and the plans' setup."""
+    ``progress`` and ``on_backup``; ``setup``: the one every plan shares (a backup
+    keeps the scenario's hand, object and motion)."""
     avoid: dict[str, list[np.ndarray]] = {}
     spent = _steps_spent(exc)
     while len(tried) < backups:
@@ -306,7 +309,7 @@ def _back_up(
             return None
         remaining_s = None if params.budget_s is None else max(params.budget_s - planning_s, 0.0)
         budget = dataclasses.replace(params, max_steps=left, budget_s=remaining_s)
-        backup, outcome = _one_backup(scenario, budget, exc, finger, avoid, report)
+        backup, outcome = _one_backup(scenario, budget, exc, finger, avoid, report, setup)
         tried.append(backup)
         planning_s += backup.plan_s
         if outcome is None or isinstance(outcome, ManipulationPlan):
@@ -323,6 +326,7 @@ def _one_backup(
     finger: str,
     avoid: dict[str, list[np.ndarray]],
     report: _Report,
+    setup: PlanSetup,
 ) -> tuple[GraspBackup, ManipulationPlan | tuple[PlanningError, Scenario] | None]:
     """One backup of ``finger`` after ``exc``, planned with ``params`` (the budget
     left): its record and its full plan, or its failure and scenario (to back up
@@ -347,7 +351,7 @@ def _one_backup(
         return record(outcome=started, choose_s=choose_s), None
     if params.budget_s is not None and params.budget_s <= 0:
         return record(outcome="no-time", choose_s=choose_s), None
-    progress, on_backup, setup = report
+    progress, on_backup = report
     if on_backup is not None:
         on_backup(finger, exc.kind.value)
     t0 = time.perf_counter()

@@ -79,9 +79,9 @@ class Scripted:
         self.setup_s = setup_s
 
     def setup(self, hand, obj, motion, params):
-        """A stand-in for plan_setup that takes ``setup_s``, built for ``motion``."""
+        """A stand-in for plan_setup that takes ``setup_s``."""
         time.sleep(self.setup_s)
-        built = SimpleNamespace(made_for=lambda h, o, m: m is motion)
+        built = SimpleNamespace(motion=motion)
         self.setups.append(built)
         return built
 

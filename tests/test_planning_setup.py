@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import CONE_60
 
 from regrasp_pin import make_scenario, plan_manipulation
 from regrasp_pin.exceptions import InputError, PlanningError
@@ -61,14 +62,18 @@ def test_plans_from_one_setup_are_the_plans_without_it(scen, other_grasp):
 def test_a_setup_for_another_motion_or_parameters_is_an_input_error(scen):
     setup = plan_setup(scen.hand, scen.obj, scen.motion, scen.params)
     other_motion = make_scenario("five_finger", "hexagon", angle_deg=60, rate_deg_s=40).motion
-    with pytest.raises(InputError, match="setup"):
+    with pytest.raises(InputError, match="setup.*another motion"):
         plan_manipulation(
             scen.hand, scen.obj, other_motion, grasp=scen.grasp, params=scen.params, setup=setup
         )
     coarser = dataclasses.replace(scen.params, sample_spacing_m=0.004)
-    with pytest.raises(InputError, match="sample_spacing_m"):
+    with pytest.raises(InputError, match="sample_spacing_m 0.002 != 0.004"):
         plan_manipulation(
             scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=coarser, setup=setup
+        )
+    with pytest.raises(InputError, match="setup.*PlanSetup"):
+        plan_manipulation(
+            scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params, setup={}
         )
     # the search's own settings are free: a setup serves any budget
     fewer = dataclasses.replace(scen.params, max_steps=1, budget_s=5.0)
@@ -86,3 +91,24 @@ def test_the_setup_holds_the_taking_part_fingers_manifolds(scen):
         np.testing.assert_allclose(
             m.times_s, np.linspace(scen.motion.t_start, scen.motion.t_end, n_m), atol=1e-12
         )
+
+
+def test_a_finger_that_joins_adds_its_manifold_to_the_plan_not_to_the_setup():
+    # -80 deg at 10 deg/s, searched without the proof of what must hold (whose
+    # manifolds would include the idle little finger): the little finger joins, and
+    # its manifold is built by the plan that joins it
+    scen = make_scenario("five_finger", "hexagon", angle_deg=-80, rate_deg_s=10, contact=CONE_60)
+    params = dataclasses.replace(scen.params, prove_infeasible=False)
+    setup = plan_setup(scen.hand, scen.obj, scen.motion, params)
+    assert "little" not in setup.every
+    joins = []
+    for _ in range(2):  # the second plan from the same setup plans as the first
+        try:
+            plan = plan_manipulation(
+                scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=params, setup=setup
+            ).plan
+        except PlanningError as exc:
+            plan = exc.partial
+        joins.append([p.t_start for p in plan.phases["little"] if p.kind == "join"])
+        assert "little" not in setup.every and list(setup.manifolds) == list(params.fingers)
+    assert joins[0] and joins[0] == joins[1]

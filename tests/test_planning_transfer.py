@@ -199,7 +199,15 @@ def test_where_the_even_split_is_too_fast_the_parts_are_paced_within_the_limits(
         transfer(scene, *case[1:], duration_s=duration_s)
     assert info.value.kind == FailureKind.VELOCITY
     monkeypatch.undo()
+    real_vias, flags = transfer_module._through_vias, []
+
+    def recorded(m, ends, reported=True):
+        flags.append(reported)
+        return real_vias(m, ends, reported)
+
+    monkeypatch.setattr(transfer_module, "_through_vias", recorded)
     moved = transfer(scene, *case[1:], duration_s=duration_s)
+    assert flags == [True, False]  # the paced retry's failure would be dropped
     t_lift, t_land = moved.keyframe_times_s[1], moved.keyframe_times_s[-2]
     shares = (t_lift / duration_s, 1.0 - t_land / duration_s)
     assert shares != pytest.approx((LIFT_FRACTION, LIFT_FRACTION))
@@ -515,8 +523,10 @@ def test_a_way_into_another_finger_is_tried_again_lifted_apart(scenes, checker, 
     real_vias, real_ends = transfer_module._through_vias, transfer_module._lift_and_approach
     lifted: list = []
     asked: list = []
+    flags: list = []
 
     def crossed_unless_apart(m, ends, reported=True):
+        flags.append(reported)
         if lifted[-1] is None:
             raise _crossing()
         return real_vias(m, ends, reported)
@@ -533,6 +543,7 @@ def test_a_way_into_another_finger_is_tried_again_lifted_apart(scenes, checker, 
     monkeypatch.setattr(transfer_module, "_lift_and_approach", ends_of)
     monkeypatch.setattr(transfer_module, "directions_apart", directions)
     moved = transfer(scene, p_object, q_object)
+    assert flags == [True, False]  # the lift apart's failure would be dropped
     S = scene.sample
     i = scene.contact(p_object)
     p, n = S.points[i], S.normals[i]
@@ -561,7 +572,7 @@ def test_when_no_lift_apart_passes_the_first_failure_stands(scenes, monkeypatch)
     first, tried = _crossing(), []
 
     def crossed(m, ends, reported=True):
-        tried.append(ends)
+        tried.append(reported)
         if len(tried) == 1:
             raise first
         raise PlanningError("other", finger=FINGER, kind=FailureKind.OBJECT_CLEARANCE)
@@ -569,4 +580,5 @@ def test_when_no_lift_apart_passes_the_first_failure_stands(scenes, monkeypatch)
     monkeypatch.setattr(transfer_module, "_through_vias", crossed)
     with pytest.raises(PlanningError) as info:
         transfer(scene, *case)
-    assert info.value is first and len(tried) > 1  # directions apart were tried
+    # directions apart were tried, their failures dropped unreported
+    assert info.value is first and tried[0] and len(tried) > 1 and not any(tried[1:])

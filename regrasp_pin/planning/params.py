@@ -38,8 +38,9 @@ class PlannerParams:
             step took 20-45 ms on average as measured (the suites' plans that spent 400
             steps took 8-17 s), so 800 steps take about 35 s at most.
         budget_s: An optional wall-clock limit of the whole call [s] (manifolds and
-            tracking included) on top of ``max_steps``, with the same effect; None (the
-            default): none, so that the outcome never depends on the machine's speed.
+            tracking included; a setup built before the call, ``setup=``, is not) on
+            top of ``max_steps``, with the same effect; None (the default): none, so
+            that the outcome never depends on the machine's speed.
         exit_tolerance_s: New contacts whose exit times differ by less than this are
             ties, broken by the shorter move (see
             :func:`~regrasp_pin.grasp.choice.choose_new_contact`).

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..exceptions import FailureKind, PlanningError
+from ..exceptions import FailureKind, InputError, PlanningError
 from ..grasp.holding import start_holding
 from ..grasp.initial import Grasp, initial_grasp
 from ..grasp.manifold import Manifold
@@ -84,7 +84,9 @@ class ManipulationPlan:
         grasp: The initial grasp.
         manifolds: The joint-space manifolds per finger.
         sample: The surface sample.
-        stage_s: Time spent per stage [s].
+        stage_s: Time spent per stage [s]; ``"manifolds"`` and ``"must hold"`` as
+            they took in its setup (:func:`~.setup.plan_setup`), which may have been
+            built once for several plans.
     """
 
     plan: Plan
@@ -116,8 +118,9 @@ def plan_manipulation(
         progress: Called with the planned time [s] as planning advances (e.g. to
             drive a progress bar).
         setup: What the plan builds before its search, built once by
-            :func:`~.setup.plan_setup` for planning from several grasps (the same
-            plan as without it); None: built here.
+            :func:`~.setup.plan_setup` for planning from several grasps: the same plan
+            as without it (a wall-clock ``params.budget_s`` then counts only this
+            call's own work); None: built here.
 
     Returns:
         A :class:`ManipulationPlan`.
@@ -137,6 +140,8 @@ def plan_manipulation(
     budget = SearchBudget.of(params.max_steps, params.budget_s)  # the whole call
     if setup is None:
         setup = plan_setup(hand, obj, motion, params)
+    elif not isinstance(setup, PlanSetup):
+        raise InputError("setup", f"is a {type(setup).__name__}", "a PlanSetup from plan_setup()")
     else:
         setup.check(hand, obj, motion, params)
     stage = dict(setup.stage_s)  # the setup's stages as they took, if built once for several

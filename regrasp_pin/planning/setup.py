@@ -46,7 +46,8 @@ class PlanSetup:
             they may join).
         runs: The runs in which a finger cannot let go.
         stage_s: The time each part took [s] (``"manifolds"``, ``"must hold"``).
-        key: What of the planner's parameters it was built with (:meth:`check`).
+        key: What of the planner's parameters it was built with, by name
+            (:meth:`check`).
     """
 
     hand: Hand
@@ -59,31 +60,31 @@ class PlanSetup:
     every: dict[str, Manifold]
     runs: list[MustHold]
     stage_s: dict[str, float]
-    key: tuple[Any, ...]
-
-    def made_for(self, hand: Hand, obj: ConvexObject, motion: ObjectMotion) -> bool:
-        """Whether it was built for these hand, object and motion objects."""
-        return self.hand is hand and self.obj is obj and self.motion is motion
+    key: dict[str, Any]
 
     def check(
         self, hand: Hand, obj: ConvexObject, motion: ObjectMotion, params: PlannerParams
     ) -> None:
-        """Raise InputError unless this setup was built for ``hand``, ``obj``,
+        """Raise InputError unless this setup was built for ``hand``, ``obj`` and
         ``motion`` (the same objects) and parameters that build the same (``params``'
-        fingers, sampling, manifold grid, contact model, friction, proof and release
-        settings, shortest regrasp)."""
-        if not self.made_for(hand, obj, motion):
+        fingers, sampling, manifold grid, contact model, friction, release and proof
+        settings, shortest regrasp); the message names what differs."""
+        given = {"hand": hand, "obj": obj, "motion": motion}
+        built = {"hand": self.hand, "obj": self.obj, "motion": self.motion}
+        other = [name for name in given if given[name] is not built[name]]
+        if other:
             raise InputError(
                 "setup",
-                "was built for another hand, object or motion",
+                f"was built for another {', '.join(other)}",
                 "plan_setup() of the same hand, object and motion objects",
             )
-        if self.key != _key(hand, params):
+        now = _key(hand, params)
+        changed = [f"{k} {self.key[k]!r} != {now[k]!r}" for k in now if now[k] != self.key[k]]
+        if changed:
             raise InputError(
                 "setup",
-                "was built with other planner parameters",
-                "plan_setup() with the same fingers, sample_spacing_m, manifold_dt_s, "
-                "contact, mu, release, prove_infeasible and regrasp.duration_s",
+                f"was built with other planner parameters ({'; '.join(changed)})",
+                "plan_setup() with these params",
             )
 
 
@@ -132,16 +133,15 @@ def plan_setup(
     )
 
 
-def _key(hand: Hand, params: PlannerParams) -> tuple[Any, ...]:
-    """What in ``params`` the setup depends on."""
-    active = tuple(params.fingers) if params.fingers else hand.finger_names
-    return (
-        active,
-        params.sample_spacing_m,
-        params.manifold_dt_s,
-        params.contact,
-        params.mu,
-        params.release,
-        params.prove_infeasible,
-        params.regrasp.duration_s,
-    )
+def _key(hand: Hand, params: PlannerParams) -> dict[str, Any]:
+    """What in ``params`` the setup depends on, by name."""
+    return {
+        "fingers": tuple(params.fingers) if params.fingers else tuple(hand.finger_names),
+        "sample_spacing_m": params.sample_spacing_m,
+        "manifold_dt_s": params.manifold_dt_s,
+        "contact": params.contact,
+        "mu": params.mu,
+        "release": params.release,
+        "prove_infeasible": params.prove_infeasible,
+        "regrasp.duration_s": params.regrasp.duration_s,
+    }
