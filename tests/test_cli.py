@@ -206,9 +206,9 @@ def test_a_plan_from_a_backup_says_so(tmp_path, capsys, monkeypatch):
 
     plan, kept = backups.plan_manipulation, []
 
-    def first_fails(hand, obj, motion, *, grasp, params, progress=None):
+    def first_fails(hand, obj, motion, *, grasp, params, progress=None, setup=None):
         if not kept:  # the demo's own plan, once
-            kept.append((plan(hand, obj, motion, grasp=grasp, params=params), grasp))
+            kept.append((plan(hand, obj, motion, grasp=grasp, params=params, setup=setup), grasp))
         result, first = kept[0]
         for t in (0.6, 0.3, 0.9) if progress is not None else ():
             progress(t)  # the search backtracks: not a backup
