@@ -18,6 +18,7 @@ from regrasp_pin.exceptions import Attempt, FailureKind, PlanningError
 from regrasp_pin.grasp.holding import holding_q
 from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.model.scene import Scene
+from regrasp_pin.planning import search as search_module
 from regrasp_pin.planning.search import RegraspSearch, SearchBudget
 
 FINGER = "index"
@@ -224,3 +225,26 @@ def test_a_q_that_cannot_land_in_time_is_not_chosen(problem):
     assert found.result.report.ok
     assert found.result.t_end <= start + 0.12 + 1e-9
     assert all(a.kind != FailureKind.TOO_LATE for a in found.attempts)
+
+
+def test_a_q_is_kept_clear_of_the_others_where_they_are_when_it_is_judged(problem, monkeypatch):
+    """The choice judges a candidate by the finger's joint coordinates at the
+    manifold's first time at or after the arrival; the other fingers it must clear are
+    taken where they hold at that same time, not at the arrival (which the grid rounds
+    up by up to a manifold step: the hand moves on with the object meanwhile)."""
+    real, seen = search_module.choose_new_contact, []
+
+    def spy(hand, obj, manifold, sample, t_arrive_s, **kwargs):
+        seen.append((manifold, t_arrive_s, kwargs["q_hand_arrive"], kwargs["lasting"].args[2]))
+        return real(hand, obj, manifold, sample, t_arrive_s, **kwargs)
+
+    monkeypatch.setattr(search_module, "choose_new_contact", spy)
+    problem(fresh=True)
+    off_grid = 0
+    for manifold, t_arrive, q_arrive, q_hand in seen:
+        t_grid = manifold.times_s[manifold.time_index(t_arrive)]
+        np.testing.assert_array_equal(q_arrive, q_hand(np.array([t_grid]))[0])
+        if t_grid - t_arrive > 1e-6:
+            off_grid += 1
+            assert not np.allclose(q_arrive, q_hand(np.array([t_arrive]))[0], atol=1e-6)
+    assert seen and off_grid  # the arrivals the test is about

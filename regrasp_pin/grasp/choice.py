@@ -230,8 +230,9 @@ def choose_new_contact(
         exclude_points_radius_m: Radius around each of ``exclude_points_object``
             [m]; default ``exclude_radius_m``.
         q_hand_arrive: ``(nq,)`` hand configuration at arrival (the other fingers
-            holding); when given, Q must put the finger at least ``finger_clearance_m``
-            from the other fingers (Coal).
+            holding), at the manifold time whose joint coordinates judge the finger
+            there (the first at or after ``t_arrive_s``); when given, Q must put the
+            finger at least ``finger_clearance_m`` from the other fingers (Coal).
         finger_clearance_m: See ``q_hand_arrive`` [m].
         exit_tolerance_s: With a positive value, exit times that differ by less than
             this are ties, broken by the shorter distance from P and then the margin

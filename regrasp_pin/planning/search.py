@@ -298,12 +298,14 @@ class RegraspSearch:
         Raises:
             ContactError: no candidate (``too-late``: none that lands in time).
         """
-        f = self.scene.hand.finger(finger)
+        f, m = self.scene.hand.finger(finger), self.manifolds[finger]
         landing_s, land_by_s = landing if landing is not None else (None, math.inf)
+        # the others where they hold at the manifold time the finger is judged at
+        t_grid = m.times_s[m.time_index(t_arrive)]
         return choose_new_contact(
             self.scene.hand,
             self.scene.obj,
-            self.manifolds[finger],
+            m,
             self.sample,
             t_arrive,
             P_object=P[0],
@@ -314,7 +316,7 @@ class RegraspSearch:
             exclude_radius_m=f.tip_radius,
             exclude_points_object=np.array(excluded) if excluded else None,
             exclude_points_radius_m=self._exclude_radius(finger),
-            q_hand_arrive=q_hand(np.array([t_arrive]))[0],
+            q_hand_arrive=q_hand(np.array([t_grid]))[0],
             finger_clearance_m=LANDING_FINGER_CLEARANCE_M,
             exit_tolerance_s=self.exit_tolerance_s,
             lasting=functools.partial(self._clear_of_others, finger, list(others), q_hand),
