@@ -15,6 +15,7 @@ from conftest import held_grasp
 
 from regrasp_pin import make_scenario
 from regrasp_pin.exceptions import Attempt, FailureKind, PlanningError
+from regrasp_pin.grasp import choice as choice_module
 from regrasp_pin.grasp.holding import holding_q
 from regrasp_pin.grasp.manifold import build_manifold
 from regrasp_pin.model.scene import Scene
@@ -231,20 +232,33 @@ def test_a_q_is_kept_clear_of_the_others_where_they_are_when_it_is_judged(proble
     """The choice judges a candidate by the finger's joint coordinates at the
     manifold's first time at or after the arrival; the other fingers it must clear are
     taken where they hold at that same time, not at the arrival (which the grid rounds
-    up by up to a manifold step: the hand moves on with the object meanwhile)."""
-    real, seen = search_module.choose_new_contact, []
+    up by up to a manifold step: the hand moves on with the object meanwhile). Read in
+    the screen itself: the row of the finger's coordinates and the hand it is paired
+    with."""
+    real_choose, real_screen = search_module.choose_new_contact, choice_module._Screen
+    calls, screens = [], []
+
+    class Screen(real_screen):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            screens.append(self.clearances[0][1:])  # (hand, row) of the arrival test
 
     def spy(hand, obj, manifold, sample, t_arrive_s, **kwargs):
-        seen.append((manifold, t_arrive_s, kwargs["q_hand_arrive"], kwargs["lasting"].args[2]))
-        return real(hand, obj, manifold, sample, t_arrive_s, **kwargs)
+        calls.append((manifold, t_arrive_s, kwargs["lasting"].args[2], len(screens)))
+        return real_choose(hand, obj, manifold, sample, t_arrive_s, **kwargs)
 
     monkeypatch.setattr(search_module, "choose_new_contact", spy)
+    monkeypatch.setattr(choice_module, "_Screen", Screen)
     problem(fresh=True)
     off_grid = 0
-    for manifold, t_arrive, q_arrive, q_hand in seen:
-        t_grid = manifold.times_s[manifold.time_index(t_arrive)]
-        np.testing.assert_array_equal(q_arrive, q_hand(np.array([t_grid]))[0])
-        if t_grid - t_arrive > 1e-6:
+    for manifold, t_arrive, q_hand, n_before in calls:
+        if n_before == len(screens):
+            continue  # no screen was built: nothing to judge
+        q_arrive, row = screens[n_before]
+        t_row = manifold.times_s[row]
+        assert t_row >= t_arrive - 1e-9 and (row == 0 or manifold.times_s[row - 1] < t_arrive)
+        np.testing.assert_array_equal(q_arrive, q_hand(np.array([t_row]))[0])
+        if t_row - t_arrive > 1e-6:
             off_grid += 1
             assert not np.allclose(q_arrive, q_hand(np.array([t_arrive]))[0], atol=1e-6)
-    assert seen and off_grid  # the arrivals the test is about
+    assert off_grid  # the arrivals the test is about

@@ -67,7 +67,7 @@ def test_a_setup_for_another_motion_or_parameters_is_an_input_error(scen):
             scen.hand, scen.obj, other_motion, grasp=scen.grasp, params=scen.params, setup=setup
         )
     coarser = dataclasses.replace(scen.params, sample_spacing_m=0.004)
-    with pytest.raises(InputError, match="sample_spacing_m 0.002 != 0.004"):
+    with pytest.raises(InputError, match="sample_spacing_m built 0.002, given 0.004"):
         plan_manipulation(
             scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=coarser, setup=setup
         )

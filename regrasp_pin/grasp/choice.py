@@ -231,8 +231,9 @@ def choose_new_contact(
             [m]; default ``exclude_radius_m``.
         q_hand_arrive: ``(nq,)`` hand configuration at arrival (the other fingers
             holding), at the manifold time whose joint coordinates judge the finger
-            there (the first at or after ``t_arrive_s``); when given, Q must put the
-            finger at least ``finger_clearance_m`` from the other fingers (Coal).
+            there (:func:`judging_time`, the first at or after ``t_arrive_s``); when
+            given, Q must put the finger at least ``finger_clearance_m`` from the other
+            fingers (Coal).
         finger_clearance_m: See ``q_hand_arrive`` [m].
         exit_tolerance_s: With a positive value, exit times that differ by less than
             this are ties, broken by the shorter distance from P and then the margin
@@ -418,6 +419,13 @@ def _arrival_clearance(
     time ``ka``, the distances ``(C,)`` [m] of the finger's other links and of its
     fingertip link to the object, from ``distances`` (exact below the requirements)."""
     return lambda points: distances(np.full(points.size, ka), points)
+
+
+def judging_time(manifold: Manifold, t_arrive_s: float) -> float:
+    """The manifold time [s] at which :func:`choose_new_contact` judges a landing at
+    ``t_arrive_s`` [s]: the first at or after it (raises InputError outside the
+    manifold's times); ``q_hand_arrive`` belongs to it."""
+    return float(manifold.times_s[_arrival_indices(manifold, t_arrive_s)[0]])
 
 
 def _arrival_indices(manifold: Manifold, t_arrive_s: float) -> tuple[int, int]:

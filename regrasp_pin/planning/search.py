@@ -38,7 +38,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..exceptions import Attempt, ContactError, FailureKind, PlanningError
-from ..grasp.choice import NewContact, Room, choose_new_contact
+from ..grasp.choice import NewContact, Room, choose_new_contact, judging_time
 from ..grasp.contact import ContactModel
 from ..grasp.manifold import Manifold
 from ..grasp.screening import ManifoldClearance, ScreeningEpsilons
@@ -300,8 +300,7 @@ class RegraspSearch:
         """
         f, m = self.scene.hand.finger(finger), self.manifolds[finger]
         landing_s, land_by_s = landing if landing is not None else (None, math.inf)
-        # the others where they hold at the manifold time the finger is judged at
-        t_grid = m.times_s[m.time_index(t_arrive)]
+        t_judged = judging_time(m, t_arrive)  # the others where they hold then
         return choose_new_contact(
             self.scene.hand,
             self.scene.obj,
@@ -316,7 +315,7 @@ class RegraspSearch:
             exclude_radius_m=f.tip_radius,
             exclude_points_object=np.array(excluded) if excluded else None,
             exclude_points_radius_m=self._exclude_radius(finger),
-            q_hand_arrive=q_hand(np.array([t_grid]))[0],
+            q_hand_arrive=q_hand(np.array([t_judged]))[0],
             finger_clearance_m=LANDING_FINGER_CLEARANCE_M,
             exit_tolerance_s=self.exit_tolerance_s,
             lasting=functools.partial(self._clear_of_others, finger, list(others), q_hand),

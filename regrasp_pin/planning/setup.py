@@ -79,7 +79,9 @@ class PlanSetup:
                 "plan_setup() of the same hand, object and motion objects",
             )
         now = _key(hand, params)
-        changed = [f"{k} {self.key[k]!r} != {now[k]!r}" for k in now if now[k] != self.key[k]]
+        changed = [
+            f"{k} built {self.key[k]!r}, given {now[k]!r}" for k in now if now[k] != self.key[k]
+        ]
         if changed:
             raise InputError(
                 "setup",
