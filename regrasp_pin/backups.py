@@ -307,8 +307,7 @@ def _back_up(
         left = params.max_steps - spent
         if finger is None or left <= 0:
             return None
-        remaining_s = None if params.budget_s is None else max(params.budget_s - planning_s, 0.0)
-        budget = dataclasses.replace(params, max_steps=left, budget_s=remaining_s)
+        budget = _spent(dataclasses.replace(params, max_steps=left), planning_s)
         backup, outcome = _one_backup(scenario, budget, exc, finger, avoid, report, setup)
         tried.append(backup)
         planning_s += backup.plan_s

@@ -99,6 +99,16 @@ class Scripted:
         raise exc
 
 
+def _two_ring_backups(monkeypatch) -> Scripted:
+    """Two failures at the ring finger, then a full plan."""
+    return Scripted(
+        monkeypatch,
+        fails("ring", FailureKind.NO_CANDIDATE),
+        fails("ring", FailureKind.VELOCITY),
+        "ok",
+    )
+
+
 def _apart(a, b):
     return float(np.linalg.norm(np.asarray(a) - np.asarray(b)))
 
@@ -304,12 +314,7 @@ def test_a_backup_gets_what_the_planning_left_of_the_wall_clock_budget(scen, mon
 
 
 def test_the_caller_hears_of_each_backup_as_it_starts_planning(scen, monkeypatch):
-    planner = Scripted(
-        monkeypatch,
-        fails("ring", FailureKind.NO_CANDIDATE),
-        fails("ring", FailureKind.VELOCITY),
-        "ok",
-    )
+    planner = _two_ring_backups(monkeypatch)
     heard = []
     plan_scenario(
         scen, grasp_backups=2, on_backup=lambda *a: heard.append((*a, len(planner.calls)))
@@ -337,12 +342,7 @@ def test_an_unexpected_error_in_a_backup_is_its_outcome(scen, monkeypatch):
 
 
 def test_the_plans_share_one_setup_built_for_the_scenario(scen, monkeypatch):
-    planner = Scripted(
-        monkeypatch,
-        fails("ring", FailureKind.NO_CANDIDATE),
-        fails("ring", FailureKind.VELOCITY),
-        "ok",
-    )
+    planner = _two_ring_backups(monkeypatch)
     plan_scenario(scen, grasp_backups=2)
     [built] = planner.setups
     assert [c.setup for c in planner.calls] == [built] * 3

@@ -112,7 +112,8 @@ def plan_setup(
     """
     Scene(hand, obj, motion)  # checks types and scale before any work
     params = params or PlannerParams()
-    active = tuple(params.fingers) if params.fingers else hand.finger_names
+    key = _key(hand, params)
+    active = key["fingers"]
     for name in active:
         hand.finger(name)  # raises UnknownNameError listing the valid names
     base_q = rest_configuration(
@@ -130,9 +131,7 @@ def plan_setup(
     t0 = time.perf_counter()
     every, runs = must_hold_runs(hand, obj, motion, sample, m_times, manifolds, params)
     stage["must hold"] = time.perf_counter() - t0
-    return PlanSetup(
-        hand, obj, motion, active, base_q, sample, manifolds, every, runs, stage, _key(hand, params)
-    )
+    return PlanSetup(hand, obj, motion, active, base_q, sample, manifolds, every, runs, stage, key)
 
 
 def _key(hand: Hand, params: PlannerParams) -> dict[str, Any]:
