@@ -1343,29 +1343,39 @@ def test_spread_out_points_exactly_a_spacing_apart_are_near_wherever_they_lie():
 
 class _TableGaps:
     """Pairwise finger distances from a table: (finger, point, finger, point) -> [m],
-    and lower bounds on them (the table less a random slack of up to 2 mm) for the
-    search's shortcut: candidates clear of every picked finger by their bounds alone."""
+    lower bounds on them (the table less a random slack of up to 2 mm) for the
+    search's shortcut (candidates clear of every picked finger by their bounds alone),
+    and the distances known without measuring: those of the candidates measured before
+    (:meth:`smallest`), NaN for the others."""
 
     def __init__(self, table, ids, gap_m, seed):
-        self.table, self.ids, self.gap_m = table, ids, gap_m
+        self.table, self.ids, self.clear_m = table, ids, gap_m
         rng = np.random.default_rng(seed)
         self.slack = {key: rng.uniform(0.0, 0.002) for key in sorted(table)}
+        self.measured = set()
 
     def smallest(self, finger, i, picked):
+        # as _PairGaps.smallest: a bound at or above the threshold stands for the distance
         self.calls = getattr(self, "calls", 0) + 1
-        return min((self.table[finger, i, o, j] for o, j in picked.items()), default=np.inf)
-
-    def clear_of(self, finger, picked):
-        return np.array(
-            [
-                all(
-                    self.table[finger, i, o, j] - self.slack[finger, i, o, j] >= self.gap_m
-                    for o, j in picked.items()
-                )
-                for i in self.ids[finger]
-            ],
-            bool,
+        keys = [(finger, int(i), o, j) for o, j in picked.items()]
+        self.measured.update(keys)
+        lower = [self.table[k] - self.slack[k] for k in keys]
+        return min(
+            (
+                lb if lb >= self.clear_m else self.table[k]
+                for k, lb in zip(keys, lower, strict=True)
+            ),
+            default=np.inf,
         )
+
+    def columns(self, finger, picked):
+        keys = [[(finger, int(i), o, j) for o, j in picked.items()] for i in self.ids[finger]]
+        lower = np.array([[self.table[k] - self.slack[k] for k in row] for row in keys])
+        exact = np.array(
+            [[self.table[k] if k in self.measured else np.nan for k in row] for row in keys]
+        )
+        shape = (len(self.ids[finger]), len(picked))
+        return lower.reshape(shape), exact.reshape(shape)
 
 
 def _table_problem(rng, n, high_m):
@@ -1405,6 +1415,32 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
         assert admissible([int(ids[f][found[f]]) for f in names])
     else:
         assert search.refused > 0 and search.closest < gap_m
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_combination_search_a_finger_too_close_in_one_batch_is_the_loop_over_candidates(seed):
+    """``_too_close`` decides from the bounds and the distances known, and measures the
+    rest: the same answer (None, or every spaced candidate's gap) as measuring each
+    spaced candidate in turn, whichever distances were measured before."""
+    rng = np.random.default_rng(200 + seed)
+    names, ids, per_finger, pts, table = _table_problem(rng, 8, 0.0015)
+    sep, gap_m = 0.02, 0.001
+    for _ in range(30):
+        gaps = _TableGaps(table, ids, gap_m, seed)
+        search = _CombinationSearch(per_finger, pts, sep, gaps, gap_m)
+        name, *others = rng.permutation(names)
+        picked = {o: int(rng.choice(ids[o])) for o in others[: rng.integers(1, 4)]}
+        for i in rng.choice(ids[name], 3):  # some distances measured before
+            gaps.smallest(name, int(i), picked)
+        spaced = [
+            int(i)
+            for i in ids[name]
+            if all(np.linalg.norm(pts[i] - pts[j]) >= sep for j in picked.values())
+        ]
+        reference = _TableGaps(table, ids, gap_m, seed)  # the same bounds, its own memo
+        every = [reference.smallest(name, i, picked) for i in spaced]
+        expected = None if any(g >= gap_m for g in every) else every
+        assert search._too_close(name, picked) == expected
 
 
 def test_combination_search_contacts_exactly_the_separation_apart_are_apart_anywhere():

@@ -609,19 +609,29 @@ class _CombinationSearch:
 
     def _too_close(self, name: str, picked: Mapping[str, int]) -> list[float] | None:
         """None if some candidate of ``name`` is spaced from and clear of ``picked``;
-        else the finger gaps [m] of its spaced candidates (all too small)."""
+        else the finger gaps [m] of its spaced candidates (all too small).
+
+        One batch over the candidates: the capsule bounds and the distances already
+        measured decide most of them; Coal measures the rest, a candidate at a time in
+        candidate order, until one is clear (the same gaps as :meth:`_PairGaps.smallest`
+        candidate by candidate)."""
         ids, rows = self.per_finger[name][0], self._rows[name]
         taken = np.array([self._row[j] for j in picked.values()], int)
         spaced = ~self._near[np.ix_(rows, taken)].any(axis=1)
-        if (spaced & self.gaps.clear_of(name, picked)).any():
+        lower, exact = self.gaps.columns(name, picked)
+        far = lower >= self.gaps.clear_m
+        if (spaced & far.all(axis=1)).any():
             return None  # a spaced candidate is clear by its capsule bounds alone
-        gaps: list[float] = []
-        for i in ids[spaced]:
-            g = self.gaps.smallest(name, int(i), picked)
-            if g >= self.min_gap_m:
+        cand = np.flatnonzero(spaced)
+        gaps = np.where(far, lower, exact)[cand].min(axis=1, initial=np.inf)
+        unknown = np.isnan(gaps)  # a pair below the bound's threshold not measured yet
+        if (gaps[~unknown] >= self.min_gap_m).any():
+            return None
+        for r in np.flatnonzero(unknown):
+            gaps[r] = self.gaps.smallest(name, int(ids[cand[r]]), picked)
+            if gaps[r] >= self.min_gap_m:
                 return None
-            gaps.append(g)
-        return gaps
+        return gaps.tolist()
 
     def _extend(
         self,
@@ -710,19 +720,20 @@ class _PairGaps:
     ):
         self.hand, self.q = hand, q
         self._checks: dict[tuple[str, str], FingerClearance] = {}
-        self._cache: dict[tuple[str, int, str, int], float] = {}
+        self._exact: dict[tuple[str, str], np.ndarray] = {}
         self._neutral = hand.neutral()
         self._cand = {n: np.asarray(c, dtype=np.int64) for n, c in candidates.items()}
         self._row = {n: {int(i): r for r, i in enumerate(c)} for n, c in self._cand.items()}
-        self._clear = float(exact_below_m) + _CLEAR_SLACK_M
+        self.clear_m = float(exact_below_m) + _CLEAR_SLACK_M
         self._bounds: dict[tuple[str, str], np.ndarray] = {}
 
     def pair(self, a: str, ia: int, b: str, ib: int) -> float:
         """Distance [m] between finger ``a`` at candidate ``ia`` and ``b`` at ``ib``."""
         if b < a:
             a, ia, b, ib = b, ib, a, ia
-        key = (a, ia, b, ib)
-        if key not in self._cache:
+        exact, ra, rb = self._exact_of(a, b), self._row[a][ia], self._row[b][ib]
+        d = exact[ra, rb]
+        if np.isnan(d):
             if (a, b) not in self._checks:
                 self._checks[(a, b)] = FingerClearance(self.hand, a, others=[b])
             qa, qb = self.q[a][:, ia], self.q[b][:, ib]
@@ -734,8 +745,32 @@ class _PairGaps:
                 q[self.hand.finger(a).q_indices] = qa[k]
                 q[self.hand.finger(b).q_indices] = qb[k]
                 d = min(d, self._checks[(a, b)](q))
-            self._cache[key] = d
-        return self._cache[key]
+            exact[ra, rb] = d
+        return float(d)
+
+    def _exact_of(self, a: str, b: str) -> np.ndarray:
+        """The distances of :meth:`pair` measured so far, ``(n_a, n_b)`` for ``a < b``
+        (rows and columns in candidate order; NaN: not measured)."""
+        exact = self._exact.get((a, b))
+        if exact is None:
+            shape = (self._cand[a].size, self._cand[b].size)
+            exact = self._exact[(a, b)] = np.full(shape, np.nan)
+        return exact
+
+    def columns(self, finger: str, picked: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, exact)``, each ``(n, len(picked))`` [m]: for every candidate of
+        ``finger`` (rows, in candidate order) and each picked finger at its contact
+        (columns, in ``picked``'s order), the capsule lower bound of :meth:`pair` and
+        its distance as measured so far (NaN: not measured)."""
+        n = self._cand[finger].size
+        lower, exact = np.empty((n, len(picked))), np.empty((n, len(picked)))
+        for c, (o, j) in enumerate(picked.items()):
+            r = self._row[o][j]
+            lower[:, c] = self.bounds(finger, o)[:, r]
+            exact[:, c] = (
+                self._exact_of(finger, o)[:, r] if finger < o else self._exact_of(o, finger)[r, :]
+            )
+        return lower, exact
 
     def bounds(self, a: str, b: str) -> np.ndarray:
         """Capsule lower bounds ``(n_a, n_b)`` [m] on :meth:`pair` for every candidate
@@ -767,7 +802,7 @@ class _PairGaps:
             list(fa.geometry_ids),
             [g for g in fb.geometry_ids if g not in own],
             q_rows,
-            cap_m=self._clear,
+            cap_m=self.clear_m,
             q_b=q_b,
             rows_b=rows_b.reshape(-1),
         ).reshape(n_t, n_a, n_b)
@@ -783,13 +818,5 @@ class _PairGaps:
         out = np.inf
         for o, j in picked.items():
             lb = self._bound(finger, i, o, j)
-            out = min(out, lb if lb >= self._clear else self.pair(finger, i, o, j))
+            out = min(out, lb if lb >= self.clear_m else self.pair(finger, i, o, j))
         return out
-
-    def clear_of(self, finger: str, picked: Mapping[str, int]) -> np.ndarray:
-        """``(n,)`` whether each candidate of ``finger`` (in candidate order) is, by the
-        capsule bounds alone, clear of every picked finger above the threshold."""
-        clear = np.ones(self._cand[finger].size, bool)
-        for o, j in picked.items():
-            clear &= self.bounds(finger, o)[:, self._row[o][j]] >= self._clear
-        return clear
