@@ -807,3 +807,27 @@ def test_a_polygon_asked_for_again_is_the_one_computed_before(monkeypatch):
     assert np.array_equal(again.vertices, direct.vertices)
     regrasp_module._polygon(pts, 8, "max", "hopfield")
     assert calls == [7, 8]  # another m is another polygon
+
+
+def test_object_clearance_variants_follow_where_the_clearance_was_lost():
+    """The planned curve that cuts the inflated surface's corners gets more waypoints
+    (then more inflation once ``max_m`` is reached); a motion whose Coal check finds the
+    finger nearer the object than the curve gets more inflation at once, with the
+    waypoints as at first, up to the largest inflation, and then no variant."""
+    base = RegraspParams()
+    curve = PlanningError("the waypoint curve", kind=FailureKind.OBJECT_CLEARANCE)
+    coal = VerificationError("Coal check failed", kind=FailureKind.OBJECT_CLEARANCE)
+    nxt = regrasp_module._next_variant
+    assert nxt(base, curve, base) == dataclasses.replace(base, m=base.m + 2)
+    at_max = dataclasses.replace(base, m=base.max_m)
+    inflated = dataclasses.replace(base, inflation_factor=1.5 * base.inflation_factor)
+    assert nxt(at_max, curve, base) == inflated
+    assert nxt(base, coal, base) == inflated
+    assert nxt(dataclasses.replace(base, m=base.m + 2), coal, base) == inflated
+    factors, p = [base.inflation_factor], base
+    while (p := nxt(p, coal, base)) is not None:
+        assert p.m == base.m
+        factors.append(p.inflation_factor)
+    top = base.inflation_factor * regrasp_module._MAX_INFLATION_FACTOR
+    assert factors[-1] <= top + 1e-9 < 1.5 * factors[-1]
+    assert len(factors) == 3  # 1.6, 2.4 and 3.6 with the defaults

@@ -24,11 +24,12 @@ at ``t_start + duration`` while the object keeps moving:
    the object; joint limits and velocity limits are checked too.
 
 A failed candidate is changed by what failed (its :class:`~.exceptions.FailureKind`):
-a curve that cuts into the clearance gets more waypoints, then more inflation; a finger
-that comes near another finger keeps a wider gap from it on the grid (and a grid with
-no route keeps a narrower one); a finger near its joint limits is rerouted more
-strongly. A failure that only another duration can fix (velocity) ends the variants at
-once, for the caller
+a curve that cuts into the clearance gets more waypoints, then more inflation; a motion
+whose Coal check finds the finger nearer the object than its curve (the fingertip's
+link, another link) gets more inflation at once; a finger that comes near another
+finger keeps a wider gap from it on the grid (and a grid with no route keeps a narrower
+one); a finger near its joint limits is rerouted more strongly. A failure that only
+another duration can fix (velocity) ends the variants at once, for the caller
 (:mod:`.planning.search`). When no variant passes for another reason, the joint-space
 fallback (:mod:`.transfer`: lift off P, a joint-space move through a raised via, come
 down onto Q; not in the paper) is tried, verified by the same
@@ -474,7 +475,7 @@ def _surface_variants(
             log.debug("regrasp %s variant failed: %s", task.finger.name, exc)
             if exc.kind in CALLER_KINDS:
                 break
-            nxt = _next_variant(p_try, exc.kind, params)
+            nxt = _next_variant(p_try, exc, params)
             if nxt is None or _variant_key(nxt) in tried:
                 break
             p_try = nxt
@@ -584,17 +585,25 @@ def _describe(p: RegraspParams) -> str:
     )
 
 
-def _next_variant(p: RegraspParams, kind: FailureKind, base: RegraspParams) -> RegraspParams | None:
-    """The path variant that addresses a failure of ``kind``, or None if none is left.
+def _next_variant(
+    p: RegraspParams, failure: PlanningError, base: RegraspParams
+) -> RegraspParams | None:
+    """The path variant that addresses ``failure`` (by its kind), or None if none is
+    left.
 
-    Too little clearance from the object: more waypoints (the curve cuts fewer
-    corners), then more inflation. Too close to another finger: a wider forbidden gap
-    around the other fingers on the grid. Near a joint limit or out of reach: a
-    stronger joint-limit cost. No route on the grid: only the other fingers' capsules
-    themselves stay forbidden.
+    Too little clearance from the object in the planned waypoint curve itself (it cuts
+    the inflated surface's corners): more waypoints. Too little in the Coal check of
+    the motion (a :class:`~regrasp_pin.exceptions.VerificationError`: the fingertip's
+    link, or another link, nearer the object than the curve that keeps its clearance):
+    more inflation, the waypoints as at first (more waypoints would bring the curve
+    nearer the inflated surface, not farther from the object). Too close to another
+    finger: a wider forbidden gap around the other fingers on the grid. Near a joint
+    limit or out of reach: a stronger joint-limit cost. No route on the grid: only the
+    other fingers' capsules themselves stay forbidden.
     """
+    kind = failure.kind
     if kind == FailureKind.OBJECT_CLEARANCE:
-        if p.m + 2 <= p.max_m:
+        if not isinstance(failure, VerificationError) and p.m + 2 <= p.max_m:
             return replace(p, m=p.m + 2)
         infl = p.inflation_factor * 1.5
         if infl <= base.inflation_factor * _MAX_INFLATION_FACTOR + 1e-9:
