@@ -539,17 +539,18 @@ def test_a_neighbour_regrasps_first_to_free_a_finger_that_must_let_go(tmp_path):
 
 
 def test_a_faster_regrasp_lands_before_another_hold_is_lost(tmp_path):
-    """Suite spec 51 (the Allegro turning a heptagonal prism -80 deg at 36 deg/s while
-    it drifts): a finger must regrasp and land before another finger's hold is lost,
-    sooner than a regrasp of the shortest duration (0.25 s) could. A faster one (as
-    short as rush_duration_s, within the joint velocity limits) lands in time. The plan
-    (full, or the part planned before a later failure) passes the independent
+    """Suite spec 57 (the Allegro turning a hexagonal prism +205 deg at 41 deg/s about
+    an axis through it): a finger must regrasp and land before another finger's hold
+    is lost, sooner than a regrasp of the shortest duration (0.25 s) could. A faster
+    one (as short as rush_duration_s, within the joint velocity limits) lands in time.
+    The plan (full, or the part planned before a later failure) passes the independent
     re-check. Without faster regrasps, every regrasp takes the shortest duration at
-    least. (Spec 81 showed this until regrasps were paced by their joints, spec 54
-    with 60 deg pad cones until a finger that let go could join again, and spec 78
-    until the grasp search's spacing ties and the IK's restart ties were decided on
-    every machine alike: their plans no longer need a faster regrasp.)"""
-    scen = build_scenario(generate_specs(52, seed=0)[51])
+    least. (Spec 51 showed this until a Coal failure of a finger nearer the object than
+    its curve got more inflation at once, spec 81 until regrasps were paced by their
+    joints, spec 54 with 60 deg pad cones until a finger that let go could join again,
+    and spec 78 until the grasp search's spacing ties and the IK's restart ties were
+    decided on every machine alike: their plans no longer need a faster regrasp.)"""
+    scen = build_scenario(generate_specs(58, seed=0)[57])
     try:
         planned = plan_manipulation(
             scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params
