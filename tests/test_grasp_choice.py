@@ -50,6 +50,7 @@ from regrasp_pin.grasp.contact import ContactModel, tip_targets
 from regrasp_pin.grasp.initial import (
     _CombinationSearch,
     _grasp_score,
+    _PairGaps,
     _spread_out,
     _start_candidates,
     initial_grasp,
@@ -1441,6 +1442,43 @@ def test_combination_search_a_finger_too_close_in_one_batch_is_the_loop_over_can
         every = [reference.smallest(name, i, picked) for i in spaced]
         expected = None if any(g >= gap_m for g in every) else every
         assert search._too_close(name, picked) == expected
+
+
+def test_pair_gaps_columns_are_the_bounds_and_the_distances_measured_so_far():
+    """``_PairGaps.columns``: for each candidate of a finger (rows) and each picked
+    finger (columns), the capsule bound of that pair and its Coal distance once
+    measured (NaN before), whichever of the two fingers comes first by name and with
+    candidate counts that differ per finger (a row and a column swapped would not
+    fit). The distances are those of a store that measured every pair."""
+    hand = Hand.five_finger()
+    rng = np.random.default_rng(12)
+    names = ["index", "middle", "thumb"]
+    q = {}
+    for n in names:
+        f = hand.finger(n)
+        q[n] = rng.uniform(f.lower, f.upper, (2, 30, f.k))
+    cand = {
+        n: rng.choice(30, size, replace=False) for n, size in zip(names, (5, 3, 4), strict=True)
+    }
+    every = _PairGaps(hand, q, cand, 0.002)
+    for finger in names:
+        gaps = _PairGaps(hand, q, cand, 0.002)
+        picked = {o: int(cand[o][-1]) for o in names if o != finger}
+        measured = [(int(i), o) for i in cand[finger][::2] for o in picked]
+        for i, o in measured:  # in either order of the two fingers
+            if o < finger:
+                gaps.pair(o, picked[o], finger, i)
+            else:
+                gaps.pair(finger, i, o, picked[o])
+        lower, exact = gaps.columns(finger, picked)
+        assert lower.shape == exact.shape == (cand[finger].size, len(picked))
+        for r, i in enumerate(cand[finger]):
+            for c, (o, j) in enumerate(picked.items()):
+                assert lower[r, c] == gaps._bound(finger, int(i), o, j)
+                if (int(i), o) in measured:
+                    assert exact[r, c] == every.pair(finger, int(i), o, j)
+                else:
+                    assert np.isnan(exact[r, c])
 
 
 def test_combination_search_contacts_exactly_the_separation_apart_are_apart_anywhere():

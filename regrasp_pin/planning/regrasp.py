@@ -25,10 +25,11 @@ at ``t_start + duration`` while the object keeps moving:
 
 A failed candidate is changed by what failed (its :class:`~.exceptions.FailureKind`):
 a curve that cuts into the clearance gets more waypoints, then more inflation; a motion
-whose Coal check finds the finger nearer the object than its curve (the fingertip's
-link, another link) gets more inflation at once; a finger that comes near another
-finger keeps a wider gap from it on the grid (and a grid with no route keeps a narrower
-one); a finger near its joint limits is rerouted more strongly. A failure that only
+whose Coal check finds the finger nearer the object than required while its curve keeps
+the clearance (the fingertip's link or sphere, another link) gets more inflation at
+once; a finger that comes near another finger keeps a wider gap from it on the grid
+(and a grid with no route keeps a narrower one); a finger near its joint limits is
+rerouted more strongly. A failure that only
 another duration can fix (velocity) ends the variants at once, for the caller
 (:mod:`.planning.search`). When no variant passes for another reason, the joint-space
 fallback (:mod:`.transfer`: lift off P, a joint-space move through a raised via, come
@@ -593,10 +594,12 @@ def _next_variant(
 
     Too little clearance from the object in the planned waypoint curve itself (it cuts
     the inflated surface's corners): more waypoints. Too little in the Coal check of
-    the motion (a :class:`~regrasp_pin.exceptions.VerificationError`: the fingertip's
-    link, or another link, nearer the object than the curve that keeps its clearance):
-    more inflation, the waypoints as at first (more waypoints would bring the curve
-    nearer the inflated surface, not farther from the object). Too close to another
+    the motion while the curve keeps its clearance (a
+    :class:`~regrasp_pin.exceptions.VerificationError`: the fingertip's link or sphere,
+    or another link, nearer the object than required): more inflation, the waypoints as
+    at first (more waypoints only make the fingertip follow the inflated surface more
+    closely; they do not lift a link, nor the tip where the IK's flight tolerance lets
+    it off the curve). Too close to another
     finger: a wider forbidden gap around the other fingers on the grid. Near a joint
     limit or out of reach: a stronger joint-limit cost. No route on the grid: only the
     other fingers' capsules themselves stay forbidden.
