@@ -38,7 +38,6 @@ class PlanSetup:
         hand: The hand it was built for.
         obj: The object.
         motion: The motion.
-        active: The fingers that take part.
         base_q: ``(nq,)`` the hand with the idle fingers at rest [rad].
         sample: The surface sample.
         manifolds: The taking-part fingers' manifolds on the manifold grid.
@@ -53,7 +52,6 @@ class PlanSetup:
     hand: Hand
     obj: ConvexObject
     motion: ObjectMotion
-    active: tuple[str, ...]
     base_q: np.ndarray
     sample: SurfaceSample
     manifolds: dict[str, Manifold]
@@ -61,6 +59,11 @@ class PlanSetup:
     runs: list[MustHold]
     stage_s: dict[str, float]
     key: dict[str, Any]
+
+    @property
+    def active(self) -> tuple[str, ...]:
+        """The fingers that take part (as built: ``key["fingers"]``)."""
+        return self.key["fingers"]
 
     def check(
         self, hand: Hand, obj: ConvexObject, motion: ObjectMotion, params: PlannerParams
@@ -131,7 +134,7 @@ def plan_setup(
     t0 = time.perf_counter()
     every, runs = must_hold_runs(hand, obj, motion, sample, m_times, manifolds, params)
     stage["must hold"] = time.perf_counter() - t0
-    return PlanSetup(hand, obj, motion, active, base_q, sample, manifolds, every, runs, stage, key)
+    return PlanSetup(hand, obj, motion, base_q, sample, manifolds, every, runs, stage, key)
 
 
 def _key(hand: Hand, params: PlannerParams) -> dict[str, Any]:
