@@ -669,6 +669,33 @@ def test_a_regrasp_too_fast_when_paced_by_its_length_passes_paced_by_its_joints(
     assert info.value.kind == FailureKind.VELOCITY
 
 
+def test_the_cruise_law_lands_a_regrasp_sooner_within_the_same_velocity_limits(scenes, checker):
+    """In 0.12 s the index's regrasp outruns a joint's limit by minimum jerk, paced by
+    its joints or not; by the cruise law (its peak speed 1.43 instead of 1.875 times the
+    mean) the same regrasp passes: the independent re-check, joint velocity limits
+    included, and each waypoint reached at its own time (within the IK's flight
+    tolerance: the executed motion, not the curve, is what the Coal check verifies)."""
+    scene = scenes["upright-moving"]
+    i_p = scene.contact((0.02, 0.025, -0.019))
+    i_q = scene.contact((0.02, 0.025, -0.003))
+    with pytest.raises(PlanningError) as info:
+        scene.plan(i_p, i_q, params=RegraspParams(duration_s=0.12), route="surface")
+    assert info.value.kind == FailureKind.VELOCITY
+    params = RegraspParams(duration_s=0.12, time_law="cruise")
+    result = scene.plan(i_p, i_q, params=params, route="surface")
+    assert result.params.time_law == "cruise"
+    assert result.t_end - result.t_start == pytest.approx(0.12, abs=1e-12)
+    recheck(checker, scene, result)  # includes the joint velocity limits
+    t_i = result.waypoint_times_s
+    q_full = np.tile(scene.hand.neutral(), (len(t_i), 1))
+    q_full[:, checker.finger.q_indices] = interp_q(result, t_i)
+    T = scene.motion.pose(t_i)
+    expected = np.einsum("nij,nj->ni", T[:, :3, :3], result.waypoints_object) + T[:, :3, 3]
+    tip = checker.tip_palm(q_full)
+    assert_close(tip, expected, atol=params.flight_ik_tol_m, what="tip at T(t_i) waypoint_i")
+    assert_close(tip[[0, -1]], expected[[0, -1]], atol=params.ik_tol_m, what="tip at P and Q")
+
+
 # ---------------------------------------------------------------------- 6. minimum jerk
 def test_minimum_jerk_is_0_to_1_monotone_with_zero_velocity_and_acceleration_at_the_ends():
     assert_close(minimum_jerk(np.array([0.0, 0.5, 1.0])), [0.0, 0.5, 1.0], atol=1e-15)
@@ -724,6 +751,7 @@ def test_bad_input_raises_input_error_naming_the_argument(scenes):
         ("clearance_m", dict(params=RegraspParams(clearance_m=0.0))),
         ("clearance_m", dict(params=RegraspParams(clearance_m=-0.001))),
         ("m", dict(params=RegraspParams(m=1))),
+        ("time_law", dict(params=RegraspParams(time_law="trapezoid"))),
         ("t_start", dict(t_start=0.6)),  # [0.6, 1.1] s leaves the 1 s motion
         ("t_start", dict(t_start=-0.1)),
     ]

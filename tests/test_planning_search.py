@@ -7,6 +7,7 @@ searches a regrasp. The landing check is the caller's judgement of a verified re
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import numpy as np
@@ -37,9 +38,13 @@ def problem():
         for n in p.fingers
     }
 
-    def new_search():
+    def new_search(time_law="minimum-jerk"):
         return RegraspSearch(
-            Scene(hand, scen.obj, motion), manifolds, sample, regrasp=p.regrasp, contact=p.contact
+            Scene(hand, scen.obj, motion),
+            manifolds,
+            sample,
+            regrasp=dataclasses.replace(p.regrasp, time_law=time_law),
+            contact=p.contact,
         )
 
     kept = new_search()  # one search for every test: what it measured stays with it
@@ -56,8 +61,8 @@ def problem():
             )
         return q
 
-    def find(fresh=False, **kwargs):
-        search = new_search() if fresh else kept
+    def find(fresh=False, time_law="minimum-jerk", **kwargs):
+        search = new_search(time_law) if fresh or time_law != "minimum-jerk" else kept
         return search.find(
             FINGER,
             (h.p, h.n),
@@ -262,3 +267,21 @@ def test_a_q_is_kept_clear_of_the_others_where_they_are_when_it_is_judged(proble
             off_grid += 1
             assert not np.allclose(q_arrive, q_hand(np.array([t_arrive]))[0], atol=1e-6)
     assert off_grid  # the arrivals the test is about
+
+
+def test_by_the_cruise_law_a_regrasp_lands_sooner_within_the_same_limits(problem):
+    """Allowed 0.12 s to land (and regrasps as short as 0.1 s), the demo's first index
+    regrasp by the cruise law (``RegraspParams.time_law``) lands sooner than by minimum
+    jerk, its joints within their velocity limits and its motion verified by Coal."""
+    start = problem().result.t_start
+    kw = dict(end_by_s=start + 0.12, shortest_s=0.1, fresh=True)
+    smooth = problem(**kw)
+    fast = problem(time_law="cruise", **kw)
+    assert smooth.result.params.time_law == "minimum-jerk"
+    assert fast.result.params.time_law == "cruise" and fast.result.report.ok
+    assert fast.result.t_end < smooth.result.t_end - 1e-9  # here 0.10 s against 0.11 s
+    assert fast.result.t_end <= start + 0.12 + 1e-9
+    r = fast.result
+    speeds = np.abs(np.diff(r.q, axis=0)) / np.diff(r.times_s)[:, None]
+    limit = make_scenario("five_finger", "hexagon").hand.finger(FINGER).velocity_limit
+    assert np.all(speeds <= limit * (1 + 1e-9))

@@ -1,38 +1,101 @@
-"""Regrasp timing: minimum-jerk progress and durations from joint velocity limits."""
+"""Regrasp timing: the time laws' progress and durations from joint velocity limits."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from regrasp_pin.exceptions import FailureKind, PlanningError
+from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
 from regrasp_pin.planning.timing import (
+    CRUISE_ACCEL,
+    CRUISE_PEAK,
+    CRUISE_RAMP,
     MJ_PEAK,
     PATH_FACTOR,
     STRETCH_MARGIN,
+    TIME_LAWS,
     check_joint_speed,
+    cruise,
     duration_for_move,
     durations_for_moves,
     inverse_minimum_jerk,
+    inverse_progress,
     joint_paced,
     minimum_jerk,
     next_duration,
+    peak_ratio,
+    progress,
     stretched_duration,
     velocity_blend,
 )
 
 
-def _peak_speed(dq: np.ndarray, duration: float) -> np.ndarray:
-    """Peak joint speeds [rad/s] of a straight joint move with minimum-jerk timing,
-    by finite differences of the sampled trajectory."""
+def _peak_speed(dq: np.ndarray, duration: float, law: str = "minimum-jerk") -> np.ndarray:
+    """Peak joint speeds [rad/s] of a straight joint move by the time ``law``, by
+    finite differences of the sampled trajectory."""
     t = np.linspace(0.0, duration, 20001)
-    q = minimum_jerk(t / duration)[:, None] * dq[None]
+    q = progress(t / duration, law)[:, None] * dq[None]
     return np.abs(np.diff(q, axis=0) / np.diff(t)[:, None]).max(axis=0)
 
 
 def test_mj_peak_is_the_peak_over_mean_speed_of_minimum_jerk():
     v = _peak_speed(np.array([1.0]), 1.0)[0]
     assert v == pytest.approx(MJ_PEAK, rel=1e-6)
+
+
+def test_the_cruise_law_peaks_at_its_ratio_with_its_acceleration_and_is_smooth():
+    """The cruise law rises from 0 to 1 with its speed and acceleration zero at both
+    ends and continuous (the ramps meet the cruise where minimum jerk's speed is at its
+    top and its acceleration 0); its peak speed and acceleration, measured by finite
+    differences, are CRUISE_PEAK and CRUISE_ACCEL; its middle is a constant speed."""
+    n = 200_000
+    tau = np.linspace(0.0, 1.0, n + 1)
+    s = cruise(tau)
+    assert s[0] == 0.0 and s[-1] == pytest.approx(1.0, abs=1e-15)
+    assert np.all(np.diff(s) >= 0.0) and np.all(np.diff(s[::1000]) > 0.0)
+    v = np.diff(s) * n  # at the midpoints
+    a = np.diff(v) * n
+    assert v.max() == pytest.approx(CRUISE_PEAK, rel=1e-6)
+    assert np.abs(a).max() == pytest.approx(CRUISE_ACCEL, rel=1e-3)
+    assert v[0] < 1e-9 and v[-1] < 1e-9 and abs(a[0]) < 1e-3 and abs(a[-1]) < 1e-3
+    assert np.abs(np.diff(v)).max() < 1e-3  # no jump of the speed anywhere
+    assert np.abs(np.diff(a)).max() < 2e-3  # nor of the acceleration
+    middle = (tau[:-1] > CRUISE_RAMP + 1e-3) & (tau[1:] < 1.0 - CRUISE_RAMP - 1e-3)
+    np.testing.assert_allclose(v[middle], CRUISE_PEAK, rtol=1e-9)
+    # the same move in less time than minimum jerk's within the same speed limit
+    assert CRUISE_PEAK / MJ_PEAK == pytest.approx(0.762, abs=1e-3)
+    assert _peak_speed(np.array([1.0]), 1.0, "cruise")[0] == pytest.approx(CRUISE_PEAK, rel=1e-6)
+
+
+@pytest.mark.parametrize("law", TIME_LAWS)
+def test_inverse_progress_round_trips(law):
+    tau = np.linspace(0.0, 1.0, 101)
+    np.testing.assert_allclose(inverse_progress(progress(tau, law), law), tau, atol=2e-3)
+
+
+def test_an_unknown_time_law_is_refused_by_name():
+    with pytest.raises(InputError, match="time_law") as err:
+        progress(np.array([0.5]), "bang-bang")
+    assert "cruise" in err.value.expected
+    with pytest.raises(InputError, match="time_law"):
+        peak_ratio("linear")
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_durations_for_moves_by_the_cruise_law_keep_its_moves_under_the_limits(seed):
+    """The cruise law's durations keep every path-factor-longer move under the limits,
+    one step less would not, and they are never longer than minimum jerk's."""
+    rng = np.random.default_rng(seed)
+    q_from, q_to = rng.uniform(-1, 1, 4), rng.uniform(-1, 1, (6, 4))
+    vmax = rng.uniform(1.0, 3.0, 4)
+    fast = durations_for_moves(q_from, q_to, vmax, minimum_s=0.2, dt_s=0.01, law="cruise")
+    smooth = durations_for_moves(q_from, q_to, vmax, minimum_s=0.2, dt_s=0.01)
+    assert np.all(fast <= smooth + 1e-12) and np.any(fast < smooth - 1e-9)
+    for D, q in zip(fast, q_to, strict=True):
+        dq = PATH_FACTOR * (q - q_from)
+        assert np.all(_peak_speed(dq, D, "cruise") <= vmax * (1 + 1e-6))
+        if D > 0.2 + 1e-9:
+            assert np.any(_peak_speed(dq, D - 0.01, "cruise") > vmax)
 
 
 def test_inverse_minimum_jerk_round_trips():

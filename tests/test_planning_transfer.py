@@ -391,6 +391,12 @@ def test_route_selects_the_surface_path_the_fallback_or_both(scenes, monkeypatch
     # the fallback alone, even where the surface path passes
     only = scene.plan(i_p, i_q, q_land=q_land, route="joint-space")
     assert only.route == "joint-space" and not only.attempts
+    # asked for the cruise law, the transfer's move keeps minimum jerk and says so: the
+    # same trajectory
+    cruise = scene.plan(
+        i_p, i_q, q_land=q_land, route="joint-space", params=RegraspParams(time_law="cruise")
+    )
+    assert cruise.params.time_law == "minimum-jerk" and np.array_equal(cruise.q, only.q)
     monkeypatch.setattr(regrasp_module, "surface_path", _fails_with(FailureKind.OBJECT_CLEARANCE))
     # the surface path alone: its failure, and no transfer tried
     with pytest.raises(PlanningError) as info:

@@ -528,6 +528,7 @@ def _apply(
             "trigger_time_s": t_trig,
             "waypoint_times_s": res.waypoint_times_s.tolist(),
             "route": res.route,
+            "time_law": res.params.time_law,
             "grid_path_object": []
             if res.grid_path is None
             else res.grid_path.points_object.tolist(),

@@ -333,14 +333,15 @@ class RegraspSearch:
     ) -> tuple[Callable[[np.ndarray], np.ndarray], float]:
         """``landing`` for :meth:`choose`: a regrasp of ``finger`` from ``q_from`` [rad]
         lifting off at ``start`` [s] lands no sooner than its duration within the joint
-        velocity limits allows (:func:`~.timing.duration_for_move`, at least
-        ``shortest`` [s]), and must land by ``end_by`` [s], as the search checks after
-        choosing."""
+        velocity limits allows (:func:`~.timing.duration_for_move` by the regrasps' time
+        law, at least ``shortest`` [s]), and must land by ``end_by`` [s], as the search
+        checks after choosing."""
         vlim = self.scene.hand.finger(finger).velocity_limit
+        law = self.regrasp.time_law
 
         def landing_s(q_to: np.ndarray) -> np.ndarray:
             return start + durations_for_moves(
-                q_from, q_to, vlim, minimum_s=shortest, dt_s=self.dt_s
+                q_from, q_to, vlim, minimum_s=shortest, dt_s=self.dt_s, law=law
             )
 
         return landing_s, end_by + TIME_TOL_S
@@ -442,15 +443,14 @@ class RegraspSearch:
             attempts.append(exc.as_attempt(where))
             return None
         chosen_for = call.shortest_s
+        law = self.regrasp.time_law
         duration = duration_for_move(
-            q0, choice.q_arrive, f.velocity_limit, minimum_s=chosen_for, dt_s=self.dt_s
+            q0, choice.q_arrive, f.velocity_limit, minimum_s=chosen_for, dt_s=self.dt_s, law=law
         )
         speeds: list[tuple[float, float]] = []  # (duration, peak speed / limit) of this Q
         stretches, route = 0, "auto"
         while True:
-            what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
-            if route != "auto":
-                what += f" ({route})"
+            what = _what(where, choice, duration, route)
             if start + duration > call.end_by + TIME_TOL_S:
                 attempts.append(
                     Attempt(
@@ -485,7 +485,7 @@ class RegraspSearch:
                 if not np.array_equal(again.p_object, choice.p_object):
                     speeds.clear()  # another Q: another path
                 choice = again
-                what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
+                what = _what(where, choice, duration, route)
             try:
                 result = self._plan_once(call, start, choice, q0, duration, route, what)
             except PlanningError as exc:
@@ -603,3 +603,10 @@ class RegraspSearch:
             required=None if last is None else last.required,
             attempts=attempts,
         )
+
+
+def _what(where: str, choice: NewContact, duration: float, route: str) -> str:
+    """An attempt's description: its lift-off, Q, duration [s], and its route when it
+    is not the first one tried."""
+    what = f"{where}, Q={np.round(choice.p_object, 4).tolist()}, {duration:.2f} s"
+    return what + (f" ({route})" if route != "auto" else "")

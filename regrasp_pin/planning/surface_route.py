@@ -24,7 +24,7 @@ from ..model.scene import Scene
 from ..surface.grid import SurfaceGrid
 from ..surface.inflation import TipPath, grid_inflation, inflate_path
 from ..surface.path import GridPath, shortest_grid_path
-from .timing import inverse_minimum_jerk
+from .timing import inverse_progress
 
 if TYPE_CHECKING:
     from .regrasp import RegraspParams
@@ -79,7 +79,7 @@ def surface_path(task: RegraspTask, p: RegraspParams) -> tuple[GridPath, TipPath
     uvP, uvQ = grid.uv[grid.p_index], grid.uv[grid.q_index]
     d = uvQ - uvP
     s = np.clip((grid.uv - uvP) @ d / max(float(d @ d), 1e-18), 0.0, 1.0)
-    t_nodes = t_start + p.duration_s * inverse_minimum_jerk(s)
+    t_nodes = t_start + p.duration_s * inverse_progress(s, p.time_law)
     from_p = np.linalg.norm(grid.uv - uvP, axis=1)
     from_q = np.linalg.norm(grid.uv - uvQ, axis=1)
     T = task.scene.motion.pose(t_nodes)
