@@ -28,7 +28,7 @@ scenarios (both runs in this run, one after the other) and printed.
 
 Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
 [--out out/suite] [--jobs 1] [--speedup K] [--max-steps 800] [--grasp-backups 1] [--budget S]
-[--baseline old/results.jsonl]``.
+[--time-law minimum-jerk|cruise] [--baseline old/results.jsonl]``.
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ import numpy as np
 from machine import machine_line
 
 from regrasp_pin.planning.planner import PlannerParams
+from regrasp_pin.planning.timing import TIME_LAWS
 from regrasp_pin.scenarios import HANDS
 from regrasp_pin.suite import (
     ScenarioResult,
@@ -149,6 +150,12 @@ def parse_args() -> argparse.Namespace:
         "budget is the same on every machine, a time limit is not)",
     )
     parser.add_argument(
+        "--time-law",
+        choices=TIME_LAWS,
+        help="the regrasps' time law (RegraspParams.time_law; default: the scenarios' own, "
+        "minimum-jerk)",
+    )
+    parser.add_argument(
         "--baseline", type=Path, help="a previous results.jsonl (or its folder) to compare"
     )
     args = parser.parse_args()
@@ -188,11 +195,14 @@ def main() -> None:
         what = f"suite seed {args.seed}: {n} scenarios with an initial grasp"
     steps = args.max_steps or PlannerParams.max_steps
     limit = "" if args.budget is None else f" and {args.budget:g} s"
+    if args.time_law is not None:
+        limit += f", time law {args.time_law}"
     kw = {
         "skip_no_grasp": skip,
         "max_steps": args.max_steps,
         "budget_s": args.budget,
         "grasp_backups": args.grasp_backups,
+        "time_law": args.time_law,
     }
     k = args.speedup if args.speedup is not None else (8 if args.jobs > 1 else 0)
     measured = None

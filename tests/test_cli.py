@@ -261,6 +261,29 @@ def test_grasp_backups_must_be_a_whole_number(command, capsys):
     assert "--grasp-backups: '-1' is not a whole number >= 0" in capsys.readouterr().err
 
 
+def test_plan_by_the_cruise_time_law(tmp_path, capsys):
+    """``--time-law cruise`` reaches every regrasp (the law's own trajectories are
+    tested in test_planning_regrasp and test_planning_search): the plan file records it
+    for each, the table says so, and the plan passes its re-check from the file (joint
+    speeds included)."""
+    from regrasp_pin.verify.plan_check import recheck_plan
+
+    argv = ["plan", "--angle", "60", "--time-law", "cruise", "--out", str(tmp_path)]
+    assert main([*argv, "--no-plots", "--no-viewer"]) == 0
+    assert "by the cruise time law (RegraspParams.time_law)" in capsys.readouterr().out
+    plan = Plan.load(tmp_path / "plan.json")
+    regrasps = plan.regrasps()
+    assert regrasps and all(p.extra["time_law"] == "cruise" for p in regrasps)
+    assert recheck_plan(plan).ok
+
+
+def test_an_unknown_time_law_is_refused_by_the_parser(capsys):
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args(["plan", "--time-law", "linear"])
+    assert stop.value.code == 2
+    assert "--time-law: invalid choice: 'linear'" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     ("argv", "option"),
     [

@@ -227,7 +227,12 @@ def test_a_line_cut_short_is_dropped_on_resume(tmp_path):
 
 @pytest.mark.parametrize(
     ("kwargs", "argument"),
-    [({"n": -1}, "n"), ({"workers": 0}, "workers"), ({"timeout_s": 0.0}, "timeout_s")],
+    [
+        ({"n": -1}, "n"),
+        ({"workers": 0}, "workers"),
+        ({"timeout_s": 0.0}, "timeout_s"),
+        ({"time_law": "linear"}, "time_law"),
+    ],
 )
 def test_bad_arguments_are_named(tmp_path, kwargs, argument):
     with pytest.raises(InputError, match=argument):

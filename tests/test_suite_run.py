@@ -113,6 +113,8 @@ def test_bad_backups_name_the_argument():
     spec = _spec(34, "five_finger")
     with pytest.raises(InputError, match="grasp_backups"):
         run_scenario(spec, grasp_backups=-1)
+    with pytest.raises(InputError, match="time_law"):
+        run_scenario(spec, time_law="linear")
 
 
 def test_an_error_while_building_a_backup_is_its_outcome(s034, monkeypatch):

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
+from typing import Any
 
 BUNDLED_HANDS = ("five_finger", "allegro")
 HAND_METAVAR = "{five_finger,allegro,FILE.json}"
@@ -68,3 +70,25 @@ def add_grasp_backups(group: argparse.ArgumentParser | argparse._ArgumentGroup) 
         "from another initial grasp, up to K times, on the rest of the step budget "
         "(default: 1; 0: never)",
     )  # fmt: skip
+
+
+def add_time_law(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """The ``--time-law LAW`` option (``RegraspParams.time_law``)."""
+    from ..planning.timing import TIME_LAWS
+
+    group.add_argument(
+        "--time-law", choices=TIME_LAWS, default=None,
+        help="how a regrasp spreads its progress over its duration: minimum-jerk (the "
+        "default, the smoothest) or cruise (a regrasp bound by its joints' velocity limits "
+        "lands in 0.76 of the time, with larger accelerations)",
+    )  # fmt: skip
+
+
+def with_time_law(params: Any, time_law: str | None) -> Any:
+    """``params`` (:class:`~regrasp_pin.planning.params.PlannerParams`) with its
+    regrasps' ``time_law`` (None: as they are)."""
+    if time_law is None:
+        return params
+    return dataclasses.replace(
+        params, regrasp=dataclasses.replace(params.regrasp, time_law=time_law).validate()
+    )

@@ -8,7 +8,15 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
-from ._args import HAND_METAVAR, add_grasp_backups, hand_argument, output_file, output_folder
+from ._args import (
+    HAND_METAVAR,
+    add_grasp_backups,
+    add_time_law,
+    hand_argument,
+    output_file,
+    output_folder,
+    with_time_law,
+)
 from .summary import plan_summary, print_table, report_failure, write_figures
 
 if TYPE_CHECKING:
@@ -56,6 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--html", metavar="FILE", help="export the plan as static HTML")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_grasp_backups(parser)
+    add_time_law(parser)
 
 
 def _scenario(args: argparse.Namespace) -> Scenario:
@@ -100,7 +109,11 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         result = plan_scenario(
-            scen, grasp_backups=args.grasp_backups, progress=progress, on_backup=on_backup
+            scen,
+            params=with_time_law(scen.params, args.time_law),
+            grasp_backups=args.grasp_backups,
+            progress=progress,
+            on_backup=on_backup,
         )
     except PlanningError as exc:
         if bar is not None:

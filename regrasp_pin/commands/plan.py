@@ -9,7 +9,14 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ._args import HAND_METAVAR, add_grasp_backups, hand_argument, output_folder
+from ._args import (
+    HAND_METAVAR,
+    add_grasp_backups,
+    add_time_law,
+    hand_argument,
+    output_folder,
+    with_time_law,
+)
 
 if TYPE_CHECKING:
     from ..model.objects import ConvexObject
@@ -83,6 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     search = parser.add_argument_group("the search")
     search.add_argument("--seed", type=int, default=0, help="seed of the searches (default: 0)")
     add_grasp_backups(search)
+    add_time_law(search)
 
 
 def load_object(spec: str, scale: float, hand: str) -> tuple[ConvexObject, str | None]:
@@ -157,7 +165,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.json:
         print(scen.description)
     try:
-        result = plan_scenario(scen, grasp_backups=args.grasp_backups)
+        result = plan_scenario(
+            scen,
+            params=with_time_law(scen.params, args.time_law),
+            grasp_backups=args.grasp_backups,
+        )
     except (PlanningError, ContactError) as exc:
         return report_failure(scen, exc, out, args.json, time.perf_counter() - t0)
     plan_path = result.plan.save(out / "plan.json")

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._args import HAND_METAVAR, add_grasp_backups, hand_argument, output_folder
+from ._args import HAND_METAVAR, add_grasp_backups, add_time_law, hand_argument, output_folder
 
 NAME = "suite"
 HELP = (
@@ -67,6 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the planner's search budget in steps (default: PlannerParams.max_steps)",
     )  # fmt: skip
     add_grasp_backups(where)
+    add_time_law(where)
     report = parser.add_argument_group("report")
     report.add_argument(
         "--report", metavar="DIR", type=Path, default=None,
@@ -153,6 +154,7 @@ def run(args: argparse.Namespace) -> int:
             skip_no_grasp=skip,
             max_steps=args.max_steps,
             grasp_backups=args.grasp_backups,
+            time_law=args.time_law,
             on_result=progress,
         )
     except KeyboardInterrupt:

@@ -45,6 +45,7 @@ def summary_rows(result: ManipulationPlan) -> list[dict]:
                 "path_length_mm": 1e3 * r.path_length_m,
                 "waypoints": int(r.waypoints_object.shape[0]),
                 "route": r.route,
+                "time_law": r.params.time_law,
                 "min_clearance_mm": 1e3 * r.min_clearance_m,
                 "planning_ms": r.planning_ms,
                 "verified": bool(r.report.ok),
@@ -183,6 +184,9 @@ def print_table(rows: list[dict], summary: dict) -> None:
             f"min clearance {min(r['min_clearance_mm'] for r in rows):.2f} mm, "
             f"planning {sum(r['planning_ms'] for r in rows):.0f} ms"
         )
+        laws = sorted({r.get("time_law", "minimum-jerk") for r in rows} - {"minimum-jerk"})
+        if laws:
+            print(f"by the {', '.join(laws)} time law (RegraspParams.time_law)")
     for rel in summary["releases"]:
         print(
             f"{rel['finger']} lets go at t={rel['t_s']:.2f} s (no verified regrasp), "

@@ -39,6 +39,7 @@ from .._validate import positive, positive_int
 from ..exceptions import InputError, MissingExtraError
 from ..grasp.manifold import THREADS_ENV, manifold_threads
 from ..model.ik import IK_BACKEND_ENV
+from ..planning.timing import TIME_LAWS
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
 from .specs import ScenarioSpec
@@ -245,6 +246,7 @@ def run_suite(
     max_steps: int | None = None,
     budget_s: float | None = None,
     grasp_backups: int = 1,
+    time_law: str | None = None,
     on_result: Callable[[ScenarioResult, int, int], None] | None = None,
     task: Task = run_scenario,
 ) -> SuiteRun:
@@ -271,19 +273,21 @@ def run_suite(
         budget_s: An optional wall-clock limit of each planning [s].
         grasp_backups: Most initial grasps a failed scenario backs up to
             (:func:`~.run.run_scenario`; 0: none).
+        time_law: The regrasps' time law (``RegraspParams.time_law``; None: the
+            scenario's own).
         on_result: Called with ``(result, counted, n)`` as each result arrives
             (skipped ones included, ``counted`` unchanged); it may raise
             KeyboardInterrupt to stop the run, as Ctrl-C does.
-        task: ``task(spec, out_dir=, max_steps=, budget_s=, grasp_backups=) ->
-            ScenarioResult``, a
+        task: ``task(spec, out_dir=, max_steps=, budget_s=, grasp_backups=,
+            time_law=) -> ScenarioResult``, a
             module-level function; default :func:`~.run.run_scenario`.
 
     Returns:
         The :class:`SuiteRun`.
 
     Raises:
-        InputError: bad ``n``, ``workers``, ``timeout_s`` or ``grasp_backups``; dask not
-            installed.
+        InputError: bad ``n``, ``workers``, ``timeout_s``, ``grasp_backups`` or
+            ``time_law``; dask not installed.
         KeyboardInterrupt: the run was stopped; the finished results are on disk.
     """
     specs = list(specs)
@@ -291,6 +295,8 @@ def run_suite(
     if workers is not None:
         positive_int(workers, "workers")
     positive_int(grasp_backups, "grasp_backups", minimum=0)
+    if time_law is not None and time_law not in TIME_LAWS:
+        raise InputError("time_law", f"{time_law!r} is not a time law", f"one of {TIME_LAWS}")
     limit = None if timeout_s is None else positive(timeout_s, "timeout_s")
     ledger = _Ledger(Path(out), specs, resume=resume, skip_no_grasp=skip_no_grasp)
     run = SuiteRun([], [], 0.0, 0, ledger.size)
@@ -299,6 +305,7 @@ def run_suite(
         "max_steps": max_steps,
         "budget_s": budget_s,
         "grasp_backups": grasp_backups,
+        "time_law": time_law,
     }
     t_start = time.perf_counter()
     try:

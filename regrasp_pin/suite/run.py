@@ -17,8 +17,9 @@ import numpy as np
 
 from .._validate import known_fields, positive, positive_int
 from ..backups import plan_scenario, recorded_backups
-from ..exceptions import ContactError, FailureKind, PlanningError
+from ..exceptions import ContactError, FailureKind, InputError, PlanningError
 from ..plan import Plan
+from ..planning.timing import TIME_LAWS
 from ..scenarios import hand_label
 from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
@@ -189,6 +190,7 @@ def run_scenario(
     max_steps: int | None = None,
     budget_s: float | None = None,
     grasp_backups: int = 1,
+    time_law: str | None = None,
 ) -> ScenarioResult:
     """Build and plan one spec; re-check a full plan from its saved file.
 
@@ -214,13 +216,21 @@ def run_scenario(
         budget_s: An optional wall-clock limit of the planning [s]
             (``PlannerParams.budget_s``; None: none), shared by the backups.
         grasp_backups: Most initial grasps to back up to (0: none).
+        time_law: The regrasps' time law (``RegraspParams.time_law``; None: the
+            scenario's own).
 
     Returns:
         The :class:`ScenarioResult`.
+
+    Raises:
+        InputError: a bad ``max_steps``, ``budget_s``, ``grasp_backups`` or
+            ``time_law`` (before any work).
     """
     steps = None if max_steps is None else positive_int(max_steps, "max_steps")
     budget = None if budget_s is None else positive(budget_s, "budget_s")
     backups = positive_int(grasp_backups, "grasp_backups", minimum=0)
+    if time_law is not None and time_law not in TIME_LAWS:
+        raise InputError("time_law", f"{time_law!r} is not a time law", f"one of {TIME_LAWS}")
     result = outcome_template(spec)
     t0 = time.perf_counter()
     try:
@@ -238,6 +248,10 @@ def run_scenario(
         max_steps=scen.params.max_steps if steps is None else steps,
         budget_s=budget,
     )
+    if time_law is not None:
+        params = dataclasses.replace(
+            params, regrasp=dataclasses.replace(params.regrasp, time_law=time_law)
+        )
 
     t0 = time.perf_counter()
     try:
