@@ -130,13 +130,12 @@ class RegraspParams:
         flight_ik_tol_m: IK tolerance in flight [m]: the executed motion, not the
             planned curve, is what the Coal check verifies.
         max_variants: Most path variants tried for one P, Q and duration.
-        time_law: How the fingertip's progress along the surface path is spread over
-            the duration (:data:`~.timing.TIME_LAWS`): ``"minimum-jerk"`` (the
-            smoothest), or ``"cruise"``, which peaks at 1.43 instead of 1.875 times its
-            mean speed (a velocity-bound regrasp in 0.76 of the time, with larger
-            accelerations; the planner's search computes the durations by the same
-            law). The joint-space fallback's move keeps minimum jerk: through its via
-            the joints do not move evenly, and the cruise law can move them faster.
+        time_law: How the fingertip's progress along the path (or the joint-space
+            fallback's move) is spread over the duration (:data:`~.timing.TIME_LAWS`):
+            ``"minimum-jerk"`` (the smoothest), or ``"cruise"``, which peaks at 1.43
+            instead of 1.875 times its mean speed (a velocity-bound regrasp in 0.76 of
+            the time, with larger accelerations; the planner's search computes the
+            durations by the same law).
     """
 
     duration_s: float = 0.5
@@ -391,6 +390,7 @@ def plan_regrasp(
                 finger_clearance_m=params.finger_clearance_m,
                 ik_tol_m=params.ik_tol_m,
                 sample_dt_s=params.sample_dt_s,
+                time_law=params.time_law,
             )
         except PlanningError as exc:
             attempts.append(exc.as_attempt("joint-space transfer"))
@@ -519,8 +519,7 @@ def _transferred(
     stages: _Stages,
     attempts: list[Attempt],
 ) -> RegraspResult:
-    """The :class:`RegraspResult` of a verified joint-space transfer (its ``params`` by
-    the minimum-jerk law its move follows)."""
+    """The :class:`RegraspResult` of a verified joint-space transfer."""
     return RegraspResult(
         finger=finger,
         t_start=t_start,
@@ -540,7 +539,7 @@ def _transferred(
         tip_object=moved.tip_object,
         report=moved.report,
         min_clearance_m=moved.min_clearance_m,
-        params=replace(params, time_law="minimum-jerk"),  # the transfer's move
+        params=params,
         stage_ms=dict(stages.ms),
         attempts=tuple(attempts),
         route="joint-space",

@@ -12,10 +12,10 @@ release and a join take (:mod:`.release`, :mod:`.join`):
    that, along a direction tilted from it (:func:`~.lift.back_off`);
 2. *transfer*: a move in the finger's joint space to the configuration above Q, through
    a via configuration whose fingertip is raised away from the object (none: a straight
-   move), shape-preserving (PCHIP) through the three configurations, minimum-jerk in
-   time, plus a drift that fades in and out (zero at both ends) so that the joint
-   velocities are continuous with the lift's and the approach's, which follow the
-   moving object;
+   move), shape-preserving (PCHIP) through the three configurations, by the regrasp's
+   time law (:mod:`.timing`: minimum jerk, or the faster cruise), plus a drift that
+   fades in and out (zero at both ends) so that the joint velocities are continuous
+   with the lift's and the approach's, which follow the moving object;
 3. *approach*: over the last ``LIFT_FRACTION`` the fingertip comes down onto Q the same
    way (along its normal, or tilted) and touches Q at the landing time.
 
@@ -63,7 +63,7 @@ from ..model.objects import ConvexObject
 from ..verify.finger_motion import VerificationReport
 from .lift import along, back_off, directions_apart
 from .release import verify_or_raise
-from .timing import MJ_PEAK, check_joint_speed, minimum_jerk, velocity_blend
+from .timing import check_joint_speed, minimum_jerk, peak_ratio, progress, velocity_blend
 
 __all__ = ["LIFT_FRACTION", "VIA_HEIGHTS", "Transfer", "plan_transfer"]
 
@@ -135,6 +135,7 @@ def plan_transfer(
     finger_clearance_m: float,
     ik_tol_m: float,
     sample_dt_s: float,
+    time_law: str = "minimum-jerk",
 ) -> Transfer:
     """Plan and verify ``finger``'s joint-space regrasp from P to Q (module docstring).
 
@@ -158,6 +159,9 @@ def plan_transfer(
         finger_clearance_m: Clearance from the other fingers [m].
         ik_tol_m: IK tolerance along the lift and the approach [m].
         sample_dt_s: Time step of the trajectory [s].
+        time_law: The move's time law (:data:`~.timing.TIME_LAWS`). Through a via the
+            joints turn unevenly, and the cruise law, faster near the move's ends, may
+            move them faster than minimum jerk does.
 
     Returns:
         The verified :class:`Transfer`.
@@ -185,6 +189,7 @@ def plan_transfer(
         clearance_m,
         link_clearance_m,
         finger_clearance_m,
+        time_law,
     )
     tau = np.linspace(0.0, 1.0, n_t)
     even = (LIFT_FRACTION, LIFT_FRACTION)
@@ -220,7 +225,11 @@ def _even_or_paced(
     try:
         return _through_vias(m, ends)
     except PlanningError as exc:
-        paced = _paced_shares(m.f, m.times, ends) if exc.kind == FailureKind.VELOCITY else None
+        paced = (
+            _paced_shares(m.f, m.times, ends, peak_ratio(m.time_law))
+            if exc.kind == FailureKind.VELOCITY
+            else None
+        )
         if paced is None:
             raise
         failure = exc
@@ -254,8 +263,8 @@ def _lifts_apart(m: _Moving, ik_tol_m: float, ends: _Ends) -> np.ndarray:
 class _Moving:
     """What a transfer's trajectories are judged by: the finger, its sample times
     ``(S,)`` [s], the object's poses ``(S, 4, 4)``, the contacts P and Q (object frame
-    [m]), the hand ``(S, nq)`` [rad] with the other fingers holding, and the
-    clearances [m]."""
+    [m]), the hand ``(S, nq)`` [rad] with the other fingers holding, the clearances
+    [m], and the move's time law."""
 
     hand: Hand
     obj: ConvexObject
@@ -268,6 +277,7 @@ class _Moving:
     clearance_m: float
     link_clearance_m: float
     finger_clearance_m: float
+    time_law: str = "minimum-jerk"
 
 
 def _through_vias(m: _Moving, ends: _Ends, reported: bool = True) -> Transfer:
@@ -283,7 +293,7 @@ def _through_vias(m: _Moving, ends: _Ends, reported: bool = True) -> Transfer:
     i_m = (i_a + i_b) // 2  # the via's sample
     q_a, q_b = q_lift[-1], q_app[0]
     mid = times[i_a : i_b + 1]
-    s = minimum_jerk((mid - mid[0]) / (mid[-1] - mid[0]))
+    s = progress((mid - mid[0]) / (mid[-1] - mid[0]), m.time_law)
     v_lift = (q_lift[-1] - q_lift[-2]) / (times[i_a] - times[i_a - 1])
     v_approach = (q_app[1] - q_app[0]) / (times[i_b + 1] - times[i_b])
     drift = velocity_blend(mid, v_lift, v_approach)
@@ -398,14 +408,16 @@ def _lift_and_approach(
     return _Ends(lift, land, q_lift, q_app[::-1])
 
 
-def _paced_shares(f: Finger, times: np.ndarray, ends: _Ends) -> tuple[float, float] | None:
+def _paced_shares(
+    f: Finger, times: np.ndarray, ends: _Ends, peak: float
+) -> tuple[float, float] | None:
     """Shares of the duration for the lift and the approach that keep the joints within
     their velocity limits, after the split of ``ends`` (sampled at ``times`` ``(S,)``
     [s]) was too fast; None where no split is (or this one is not).
 
     Each part needs the time its fastest joint takes at its limit: its share times its
     peak speed share (the lift and the approach as backed off, the move between as a
-    straight minimum-jerk move, whose peak speed is ``MJ_PEAK`` times its mean). When
+    straight move by the time law, whose peak speed is ``peak`` times its mean). When
     the parts' needs, with ``PACE_MARGIN`` to spare, add up to at most the whole
     duration, each part gets its need (at least ``MIN_SHARE`` and two steps) and the
     time left is shared as the split shares it, rounded up to whole steps for the lift
@@ -419,7 +431,7 @@ def _paced_shares(f: Finger, times: np.ndarray, ends: _Ends) -> tuple[float, flo
     step = np.abs(ends.q_app[0] - ends.q_lift[-1])
     limit = np.where(f.velocity_limit > 0.0, f.velocity_limit, np.inf)
     t_mid = float(times[i_b] - times[i_a])
-    peak_mid = MJ_PEAK * float(np.max(step / limit)) / max(t_mid, 1e-12)
+    peak_mid = peak * float(np.max(step / limit)) / max(t_mid, 1e-12)
     if max(peak_lift, peak_land, peak_mid) <= 1.0:
         return None  # within the limits as far as this tells: not the split's fault
     need = split * np.array([peak_lift, peak_mid, peak_land]) * (1.0 + PACE_MARGIN)
