@@ -13,9 +13,9 @@ at ``t_start + duration`` while the object keeps moving:
 3. The waypoints are joined by a shape-preserving C1 curve (PCHIP, no overshoot)
    traversed by the regrasp's time law (minimum jerk by default, or the faster
    cruise: :mod:`.timing`), so the tip leaves P and reaches Q at rest relative to the
-   object; waypoint i is passed at time t_i, in step with the
-   object's motion (section 2.3). The progress is spent along the curve's length, or,
-   where that outruns a joint's velocity limit, along the joints' motion
+   object; waypoint i is passed at time t_i, in step with the object's motion
+   (section 2.3). The progress is spent along the curve's length, or, where that
+   outruns a joint's velocity limit, along the joints' motion
    (:func:`~.timing.joint_paced`). Each sample is moved to the palm frame with
    ``T_palm_object(t)`` and turned into joint angles by warm-started batched IK
    (:mod:`.follow`).
