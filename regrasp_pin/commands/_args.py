@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
-from typing import Any
 
 BUNDLED_HANDS = ("five_finger", "allegro")
 HAND_METAVAR = "{five_finger,allegro,FILE.json}"
@@ -82,13 +80,3 @@ def add_time_law(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> No
         "default, the smoothest) or cruise (a regrasp bound by its joints' velocity limits "
         "lands in 0.76 of the time, with larger accelerations)",
     )  # fmt: skip
-
-
-def with_time_law(params: Any, time_law: str | None) -> Any:
-    """``params`` (:class:`~regrasp_pin.planning.params.PlannerParams`) with its
-    regrasps' ``time_law`` (None: as they are)."""
-    if time_law is None:
-        return params
-    return dataclasses.replace(
-        params, regrasp=dataclasses.replace(params.regrasp, time_law=time_law).validate()
-    )

@@ -15,7 +15,6 @@ from ._args import (
     hand_argument,
     output_file,
     output_folder,
-    with_time_law,
 )
 from .summary import plan_summary, print_table, report_failure, write_figures
 
@@ -85,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     """Plan the demo scenario, print its table and write the outputs; return the exit status."""
     from ..backups import plan_scenario
     from ..exceptions import PlanningError
+    from ..planning.params import with_time_law
 
     t0 = time.perf_counter()
     out = output_folder(args.out, "--out")

@@ -15,7 +15,6 @@ from ._args import (
     add_time_law,
     hand_argument,
     output_folder,
-    with_time_law,
 )
 
 if TYPE_CHECKING:
@@ -154,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
     """Plan the problem; write the plan, figures and viewer page; return the exit status."""
     from ..backups import plan_scenario
     from ..exceptions import ContactError, PlanningError
+    from ..planning.params import with_time_law
     from .summary import plan_summary, print_table, report_failure, write_figures
 
     t0 = time.perf_counter()

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from .._validate import positive, positive_int
 from ..exceptions import InputError
 from ..grasp.contact import ContactModel
 from .regrasp import RegraspParams
+from .timing import checked_time_law
 
 __all__ = ["PlannerParams"]
 
@@ -116,3 +117,11 @@ class PlannerParams:
                 raise InputError(
                     f"PlannerParams.{name}", f"is {getattr(self, name)!r}", "True or False"
                 )
+
+
+def with_time_law(params: PlannerParams, time_law: str | None) -> PlannerParams:
+    """``params`` with its regrasps' ``time_law`` (:data:`~.timing.TIME_LAWS`; None: as
+    they are). Raises InputError naming ``time_law`` for another value."""
+    if time_law is None:
+        return params
+    return replace(params, regrasp=replace(params.regrasp, time_law=checked_time_law(time_law)))

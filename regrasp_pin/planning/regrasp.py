@@ -30,8 +30,8 @@ whose Coal check finds the finger nearer the object than required while its curv
 the clearance (the fingertip's link or sphere, another link) gets more inflation at
 once; a finger that comes near another finger keeps a wider gap from it on the grid
 (and a grid with no route keeps a narrower one); a finger near its joint limits is
-rerouted more strongly. A failure that only
-another duration can fix (velocity) ends the variants at once, for the caller
+rerouted more strongly. A failure that only another duration can fix (velocity) ends
+the variants at once, for the caller
 (:mod:`.planning.search`). When no variant passes for another reason, the joint-space
 fallback (:mod:`.transfer`: lift off P, a joint-space move through a raised via, come
 down onto Q; not in the paper) is tried, verified by the same
@@ -78,7 +78,7 @@ from ..surface.path import GridPath
 from ..verify.finger_motion import VerificationReport, verify_finger_motion
 from .follow import CurveSamples, follow_curve
 from .surface_route import RegraspTask, surface_path
-from .timing import TIME_LAWS, check_joint_speed, joint_paced, minimum_jerk, progress
+from .timing import check_joint_speed, checked_time_law, joint_paced, minimum_jerk, progress
 from .transfer import Transfer, plan_transfer
 
 __all__ = ["RegraspParams", "RegraspResult", "minimum_jerk", "plan_regrasp"]
@@ -179,10 +179,7 @@ class RegraspParams:
             )
         if not isinstance(self.max_variants, int) or self.max_variants < 1:
             raise InputError("max_variants", f"{self.max_variants!r}", "an integer >= 1")
-        if self.time_law not in TIME_LAWS:
-            raise InputError(
-                "time_law", f"{self.time_law!r} is not a time law", f"one of {TIME_LAWS}"
-            )
+        checked_time_law(self.time_law)
         return self
 
 
@@ -612,10 +609,10 @@ def _next_variant(
     or another link, nearer the object than required): more inflation, the waypoints as
     at first (more waypoints only make the fingertip follow the inflated surface more
     closely; they do not lift a link, nor the tip where the IK's flight tolerance lets
-    it off the curve). Too close to another
-    finger: a wider forbidden gap around the other fingers on the grid. Near a joint
-    limit or out of reach: a stronger joint-limit cost. No route on the grid: only the
-    other fingers' capsules themselves stay forbidden.
+    it off the curve). Too close to another finger: a wider forbidden gap around the
+    other fingers on the grid. Near a joint limit or out of reach: a stronger
+    joint-limit cost. No route on the grid: only the other fingers' capsules themselves
+    stay forbidden.
     """
     kind = failure.kind
     if kind == FailureKind.OBJECT_CLEARANCE:

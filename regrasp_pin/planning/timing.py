@@ -36,6 +36,7 @@ __all__ = [
     "PATH_FACTOR",
     "TIME_LAWS",
     "check_joint_speed",
+    "checked_time_law",
     "cruise",
     "duration_for_move",
     "durations_for_moves",
@@ -91,11 +92,15 @@ def cruise(tau: np.ndarray) -> np.ndarray:
 _LAWS = {"minimum-jerk": (minimum_jerk, MJ_PEAK), "cruise": (cruise, CRUISE_PEAK)}
 
 
+def checked_time_law(law: str) -> str:
+    """``law`` if it is one of ``TIME_LAWS``; else an InputError naming ``time_law``."""
+    if law not in _LAWS:
+        raise InputError("time_law", f"{law!r} is not a time law", f"one of {TIME_LAWS}")
+    return law
+
+
 def _law(law: str) -> tuple:
-    try:
-        return _LAWS[law]
-    except KeyError:
-        raise InputError("time_law", f"{law!r} is not a time law", f"one of {TIME_LAWS}") from None
+    return _LAWS[checked_time_law(law)]
 
 
 def progress(tau: np.ndarray, law: str = "minimum-jerk") -> np.ndarray:

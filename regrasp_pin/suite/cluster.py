@@ -39,7 +39,7 @@ from .._validate import positive, positive_int
 from ..exceptions import InputError, MissingExtraError
 from ..grasp.manifold import THREADS_ENV, manifold_threads
 from ..model.ik import IK_BACKEND_ENV
-from ..planning.timing import TIME_LAWS
+from ..planning.timing import checked_time_law
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
 from .specs import ScenarioSpec
@@ -295,8 +295,8 @@ def run_suite(
     if workers is not None:
         positive_int(workers, "workers")
     positive_int(grasp_backups, "grasp_backups", minimum=0)
-    if time_law is not None and time_law not in TIME_LAWS:
-        raise InputError("time_law", f"{time_law!r} is not a time law", f"one of {TIME_LAWS}")
+    if time_law is not None:
+        checked_time_law(time_law)
     limit = None if timeout_s is None else positive(timeout_s, "timeout_s")
     ledger = _Ledger(Path(out), specs, resume=resume, skip_no_grasp=skip_no_grasp)
     run = SuiteRun([], [], 0.0, 0, ledger.size)

@@ -17,9 +17,10 @@ import numpy as np
 
 from .._validate import known_fields, positive, positive_int
 from ..backups import plan_scenario, recorded_backups
-from ..exceptions import ContactError, FailureKind, InputError, PlanningError
+from ..exceptions import ContactError, FailureKind, PlanningError
 from ..plan import Plan
-from ..planning.timing import TIME_LAWS
+from ..planning.params import with_time_law
+from ..planning.timing import checked_time_law
 from ..scenarios import hand_label
 from ..verify.plan_check import recheck_plan
 from .build import build_scenario, finger_clearance
@@ -229,8 +230,8 @@ def run_scenario(
     steps = None if max_steps is None else positive_int(max_steps, "max_steps")
     budget = None if budget_s is None else positive(budget_s, "budget_s")
     backups = positive_int(grasp_backups, "grasp_backups", minimum=0)
-    if time_law is not None and time_law not in TIME_LAWS:
-        raise InputError("time_law", f"{time_law!r} is not a time law", f"one of {TIME_LAWS}")
+    if time_law is not None:
+        checked_time_law(time_law)
     result = outcome_template(spec)
     t0 = time.perf_counter()
     try:
@@ -243,15 +244,14 @@ def run_scenario(
     if scen.grasp is None:  # build_scenario always chooses one (or raises ContactError)
         raise AssertionError("build_scenario returned a scenario without a grasp")
     result.initial_finger_clearance_m = _start_clearance(scen)
-    params = dataclasses.replace(
-        scen.params,
-        max_steps=scen.params.max_steps if steps is None else steps,
-        budget_s=budget,
+    params = with_time_law(
+        dataclasses.replace(
+            scen.params,
+            max_steps=scen.params.max_steps if steps is None else steps,
+            budget_s=budget,
+        ),
+        time_law,
     )
-    if time_law is not None:
-        params = dataclasses.replace(
-            params, regrasp=dataclasses.replace(params.regrasp, time_law=time_law)
-        )
 
     t0 = time.perf_counter()
     try:
