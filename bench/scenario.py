@@ -27,7 +27,6 @@ import numpy as np
 from machine import machine_line
 
 import regrasp_pin.scenarios as scenarios
-import regrasp_pin.suite.build as suite_build
 from regrasp_pin.exceptions import ContactError
 from regrasp_pin.grasp.manifold import default_threads, forget_first_times
 from regrasp_pin.model.ik import set_ik_backend
@@ -78,13 +77,13 @@ def _build(spec: ScenarioSpec, reference: bool) -> tuple[float, dict[str, float]
         "with_idle_fingers": scenarios.with_idle_fingers,
         "initial_grasp": scenarios.initial_grasp,
     }
-    saved_gfm = suite_build.grasp_for_motion
+    saved_gfm = scenarios.grasp_for_motion
     scenarios.build_manifolds = timer.wrap("manifolds", saved["build_manifolds"])
     scenarios.must_hold = timer.wrap("must hold", saved["must_hold"])
     scenarios.with_idle_fingers = timer.wrap("must hold", saved["with_idle_fingers"])
     scenarios.initial_grasp = timer.wrap("initial grasp", saved["initial_grasp"])
     if reference:
-        suite_build.grasp_for_motion = functools.partial(saved_gfm, track_start=False)
+        scenarios.grasp_for_motion = functools.partial(saved_gfm, track_start=False)
     forget_first_times()  # each build solves its manifolds' first times itself
     try:
         t0 = time.perf_counter()
@@ -96,7 +95,7 @@ def _build(spec: ScenarioSpec, reference: bool) -> tuple[float, dict[str, float]
     finally:
         for name, fn in saved.items():
             setattr(scenarios, name, fn)
-        suite_build.grasp_for_motion = saved_gfm
+        scenarios.grasp_for_motion = saved_gfm
     stages = dict(timer.seconds)
     stages["other"] = wall - sum(stages.values())
     return wall, stages, out
