@@ -12,8 +12,9 @@ failure on a second line), then :func:`regrasp_pin.suite.summarize`, then, with
 ``--baseline``, the change against a previous ``results.jsonl``: full-plan rate, median
 planning times, the full plans won and lost with an exact sign test
 (:func:`regrasp_pin.suite.report.paired_change`), and every scenario whose outcome
-changed. Writes ``results.jsonl``
-(one :class:`~regrasp_pin.suite.ScenarioResult` per line, in spec order),
+changed; for a baseline of other scenarios (another hand or seed), the two full-plan
+rates with a Fisher exact test (:func:`regrasp_pin.suite.report.rate_difference`).
+Writes ``results.jsonl`` (one :class:`~regrasp_pin.suite.ScenarioResult` per line, in spec order),
 ``skipped.jsonl`` and ``summary.txt`` into ``--out``, with the plans and partial plans.
 
 ``--hand`` picks the hands (bundled names or JSON hand files such as
@@ -51,7 +52,7 @@ from regrasp_pin.suite import (
     summarize,
 )
 from regrasp_pin.suite.cluster import SuiteRun, run_suite
-from regrasp_pin.suite.report import paired_change, result_line
+from regrasp_pin.suite.report import paired_change, rate_difference, result_line
 
 
 def compare(results: list[ScenarioResult], baseline: list[ScenarioResult]) -> str:
@@ -67,6 +68,10 @@ def compare(results: list[ScenarioResult], baseline: list[ScenarioResult]) -> st
 
     old = {r.name: r for r in baseline}
     both = [r for r in results if r.name in old]
+    if not both:  # another hand or seed: the rates alone compare
+        return "against the baseline (no scenario in both runs): full plans " + (
+            rate_difference(results, baseline).line()
+        )
     out = [f"against the baseline ({len(both)} scenarios in both runs):"]
     k_new, k_old = sum(r.ok for r in both), sum(old[r.name].ok for r in both)
     out.append(f"  full plans          {k_old:4d} -> {k_new:4d} of {len(both)}")

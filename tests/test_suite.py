@@ -39,7 +39,7 @@ from regrasp_pin.suite import (
     summarize,
 )
 from regrasp_pin.suite.build import finger_clearance
-from regrasp_pin.suite.report import paired_change, rate_interval
+from regrasp_pin.suite.report import paired_change, rate_difference, rate_interval
 
 
 @pytest.fixture(scope="module")
@@ -327,6 +327,27 @@ def test_a_paired_change_is_a_sign_test_of_won_against_lost():
     new, old = runs([True, False], [True, False])
     assert paired_change(new, old).p_value == 1.0 and paired_change(new, old).won == 0
     assert paired_change(new, old[:1]).n == 1
+
+
+def test_a_rate_difference_is_fishers_exact_test():
+    """Runs over different scenarios: 4 of 4 against 0 of 4 is, with the margins fixed,
+    one of C(8, 4) = 70 equally likely tables, and as extreme as its mirror: p = 2 / 70;
+    equal rates give p = 1."""
+
+    def run(tag, oks):
+        return [
+            _result(f"{tag}{i}", "allegro", "box", "object-axis", ok) for i, ok in enumerate(oks)
+        ]
+
+    diff = rate_difference(run("a", [True] * 4), run("b", [False] * 4))
+    assert (diff.k, diff.n, diff.k_other, diff.n_other) == (4, 4, 0, 4)
+    assert diff.p_value == pytest.approx(2 / 70)
+    assert "4/4 100% against 0/4 0%" in diff.line() and "more than chance" in diff.line()
+    same = rate_difference(run("a", [True, False] * 5), run("b", [False, True] * 5))
+    assert same.p_value == pytest.approx(1.0) and "beyond chance" in same.line()
+    for a, b in (([], run("b", [True])), (run("a", [True]), [])):
+        with pytest.raises(InputError, match="results|other"):
+            rate_difference(a, b)
 
 
 def test_summary_gives_how_far_distance_failures_missed():

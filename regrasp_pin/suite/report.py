@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from numbers import Integral
 
 import numpy as np
-from scipy.stats import binomtest
+from scipy.stats import binomtest, fisher_exact
 
 from ..exceptions import FailureKind, InputError
 from ..planning.outcomes import DISTANCE_KINDS
@@ -16,7 +16,15 @@ from ..scenarios import HANDS
 from .run import ScenarioResult
 from .specs import MOTION_KINDS, OBJECT_KINDS
 
-__all__ = ["PairedChange", "paired_change", "rate_interval", "result_line", "summarize"]
+__all__ = [
+    "PairedChange",
+    "RateDifference",
+    "paired_change",
+    "rate_difference",
+    "rate_interval",
+    "result_line",
+    "summarize",
+]
 
 #: Confidence level of the full-plan rate's interval and of the paired comparison
 CONFIDENCE = 0.95
@@ -93,6 +101,61 @@ def paired_change(
     lost = sum(old[r.name] and not r.ok for r in both)
     p = binomtest(won, won + lost, 0.5).pvalue if won + lost else 1.0
     return PairedChange(n=len(both), won=won, lost=lost, p_value=float(min(p, 1.0)))
+
+
+@dataclass(frozen=True)
+class RateDifference:
+    """Two full-plan rates over different scenarios (another hand, another seed), and
+    whether they differ by more than chance.
+
+    Attributes:
+        k, n: Full plans and scenarios of the first run.
+        k_other, n_other: The same of the other run.
+        p_value: Two-sided Fisher exact test of the 2 x 2 table (full plan or not, by
+            run): how likely rates at least this far apart are when both runs draw from
+            one rate.
+    """
+
+    k: int
+    n: int
+    k_other: int
+    n_other: int
+    p_value: float
+
+    def line(self) -> str:
+        """The comparison in plain words, one line."""
+        verdict = (
+            "the rates differ by more than chance"
+            if self.p_value < 1.0 - CONFIDENCE
+            else "no difference beyond chance"
+        )
+        return (
+            f"{self.k}/{self.n} {self.k / self.n:.0%} against "
+            f"{self.k_other}/{self.n_other} {self.k_other / self.n_other:.0%} "
+            f"(Fisher exact p={self.p_value:.2g}: {verdict})"
+        )
+
+
+def rate_difference(
+    results: Sequence[ScenarioResult], other: Sequence[ScenarioResult]
+) -> RateDifference:
+    """The full-plan rates of two runs over different scenarios, compared
+    (:class:`RateDifference`); for the same scenarios, :func:`paired_change` is the
+    sharper test.
+
+    Raises:
+        InputError: a run without results.
+    """
+    if not results or not other:
+        raise InputError(
+            "results" if not results else "other",
+            "is empty",
+            "the results of a run with at least one scenario",
+        )
+    k, n = sum(r.ok for r in results), len(results)
+    k_o, n_o = sum(r.ok for r in other), len(other)
+    _, p = fisher_exact([[k, n - k], [k_o, n_o - k_o]])
+    return RateDifference(k, n, k_o, n_o, float(min(p, 1.0)))
 
 
 def _stats(values: Iterable[float | None], unit: str, scale: float = 1.0) -> str:
