@@ -22,7 +22,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from regrasp_pin import Hand, Plan, Prism, plan_scenario
-from regrasp_pin.scenarios import scenario_for_hand
+from regrasp_pin.planning.params import with_time_law
+from regrasp_pin.scenarios import scenario_for_hand, setup_time_law
 from regrasp_pin.verify.plan_check import recheck_plan
 
 HAND_FILE = Path(__file__).resolve().parent / "hands" / "shadow_hand.json"
@@ -41,7 +42,10 @@ def main(out: Path = Path("out/examples")) -> Path:
         hand, prism, fingers=FINGERS, angle_deg=ANGLE_DEG, rate_deg_s=RATE_DEG_S
     )
     print(scen.description)
-    plan = plan_scenario(scen)  # from another start if a finger fails on its first contact
+    # the hand file's time law (cruise: its 2 rad/s finger joints bind the regrasps)
+    params = with_time_law(scen.params, setup_time_law(str(HAND_FILE)))
+    # from another start if a finger fails on its first contact
+    plan = plan_scenario(scen, params=params)
     for r in plan.regrasps:
         print(
             f"  {r.finger:7} regrasps at t={r.t_start:.2f}-{r.t_end:.2f} s, "

@@ -43,6 +43,7 @@ from .model.motion import ObjectMotion
 from .model.objects import Box, ConvexObject, Prism, SurfaceSample
 from .planning.planner import PlannerParams
 from .planning.regrasp import RegraspParams
+from .planning.timing import TIME_LAWS
 
 __all__ = [
     "HANDS",
@@ -60,6 +61,7 @@ __all__ = [
     "scenario_for_hand",
     "scenario_params",
     "setup_fingers",
+    "setup_time_law",
     "setup_pose",
     "start_poses",
     "turn_about_thumb_contact",
@@ -412,23 +414,43 @@ def setup_fingers(hand: str) -> tuple[str, ...]:
     return tuple(_SETUP[hand]["fingers"])
 
 
+def setup_time_law(hand: str) -> str:
+    """How the regrasps of the hand's ready-made scenarios spread their progress
+    (``RegraspParams.time_law``): a hand file's ``scenario.time_law``, else the
+    default (minimum jerk). A hand whose regrasps are bound by slow joints may name the
+    cruise law (the Shadow Hand's file does; see docs/hands.md)."""
+    hand = _check_hand(hand)
+    if is_hand_file(hand):
+        return _file_scenario(*_file_key(hand))[2]
+    return RegraspParams().time_law
+
+
 @functools.cache
-def _file_scenario(hand_file: str, _mtime_ns: int) -> tuple[tuple[str, ...], float]:
-    """A hand file's ``scenario`` entry: the grasping fingers and the object scale."""
+def _file_scenario(hand_file: str, _mtime_ns: int) -> tuple[tuple[str, ...], float, str]:
+    """A hand file's ``scenario`` entry: the grasping fingers, the object scale and
+    the regrasps' time law."""
     import json
 
     spec = json.loads(Path(hand_file).read_text())
     entry = spec.get("scenario", {})
-    if not isinstance(entry, dict) or set(entry) - {"fingers", "object_scale"}:
+    if not isinstance(entry, dict) or set(entry) - {"fingers", "object_scale", "time_law"}:
         raise InputError(
-            f"{hand_file}: scenario", f"is {entry!r}", "{'fingers': [...], 'object_scale': k}"
+            f"{hand_file}: scenario",
+            f"is {entry!r}",
+            "{'fingers': [...], 'object_scale': k, 'time_law': law}",
         )
     names = tuple(spec.get("fingers", {}))
     fingers = tuple(entry.get("fingers", names))
     for n in fingers:
         if n not in names:
             raise UnknownNameError(f"{hand_file}: scenario.fingers", n, names)
-    return fingers, positive(entry.get("object_scale", 1.0), f"{hand_file}: scenario.object_scale")
+    scale = positive(entry.get("object_scale", 1.0), f"{hand_file}: scenario.object_scale")
+    law = entry.get("time_law", RegraspParams().time_law)
+    if law not in TIME_LAWS:
+        raise InputError(
+            f"{hand_file}: scenario.time_law", f"is {law!r}", f"one of {', '.join(TIME_LAWS)}"
+        )
+    return fingers, scale, law
 
 
 def grasp_for_motion(

@@ -101,6 +101,26 @@ def test_a_hand_files_scenario_entry_picks_fingers_and_scales_objects(tmp_path):
         setup_fingers(hand_file("extra", {"speed": 2}))
 
 
+def test_a_hand_files_scenario_entry_names_its_time_law(tmp_path):
+    """``scenario.time_law``: the law of a hand's ready-made scenarios (a bundled hand's
+    and a file's without one: minimum jerk); another value is refused by its key."""
+    from regrasp_pin.planning.regrasp import RegraspParams
+    from regrasp_pin.scenarios import setup_time_law
+
+    def hand_file(name, scenario):
+        path = tmp_path / f"{name}.json"
+        spec = {"urdf": str(five_finger_urdf_path()), "fingers": FIVE_FINGER_TIPS}
+        path.write_text(json.dumps({**spec, "tip_radius": 0.008, "scenario": scenario}))
+        return str(path)
+
+    assert setup_time_law(hand_file("cruise", {"time_law": "cruise"})) == "cruise"
+    default = RegraspParams().time_law
+    assert setup_time_law(hand_file("plain", {})) == default == "minimum-jerk"
+    assert setup_time_law("five_finger") == setup_time_law("allegro") == default
+    with pytest.raises(InputError, match="scenario.time_law.*minimum-jerk, cruise"):
+        setup_time_law(hand_file("typo", {"time_law": "fast"}))
+
+
 @pytest.mark.parametrize(("hand", "angle"), [("five_finger", 60.0), ("allegro", -100.0)])
 def test_the_grasp_search_maps_only_what_it_reads_and_picks_the_same_grasp(hand, angle):
     # StartTracking maps the entries initial_grasp reads exactly as the full manifolds

@@ -450,3 +450,17 @@ def test_hand_files_join_the_suite(tmp_path):
     missing = dataclasses.replace(mixed[1], hand=str(tmp_path / "gone.json"))
     with pytest.raises(ModelFileError, match="no such hand file"):
         build_scenario(missing)
+
+
+def test_a_hand_files_time_law_reaches_its_scenarios(tmp_path):
+    """A suite scenario of a hand file plans its regrasps by the file's
+    ``scenario.time_law``; a bundled hand's by the default law."""
+    from regrasp_pin.model.hand import FIVE_FINGER_TIPS, five_finger_urdf_path
+
+    path = tmp_path / "slow_hand.json"
+    spec = {"urdf": str(five_finger_urdf_path()), "fingers": FIVE_FINGER_TIPS, "tip_radius": 0.008}
+    path.write_text(json.dumps({**spec, "scenario": {"time_law": "cruise"}}))
+    own = neighbour_specs(hands=(str(path),))[0]
+    assert build_scenario(own).params.regrasp.time_law == "cruise"
+    bundled = neighbour_specs(hands=("five_finger",))[0]
+    assert build_scenario(bundled).params.regrasp.time_law == "minimum-jerk"

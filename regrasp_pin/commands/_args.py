@@ -77,6 +77,7 @@ def add_time_law(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> No
     group.add_argument(
         "--time-law", choices=TIME_LAWS, default=None,
         help="how a regrasp spreads its progress over its duration: minimum-jerk (the "
-        "default, the smoothest) or cruise (a regrasp bound by its joints' velocity limits "
-        "lands in 0.76 of the time, with larger accelerations)",
+        "smoothest) or cruise (a regrasp bound by its joints' velocity limits lands in 0.76 "
+        "of the time, with larger accelerations); default: the hand's (a hand file's "
+        "scenario.time_law, else minimum-jerk)",
     )  # fmt: skip

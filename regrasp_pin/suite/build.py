@@ -18,6 +18,7 @@ from ..model.clearance import FingerClearance
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
+from ..planning.params import with_time_law
 from ..scenarios import (
     GraspSearch,
     Scenario,
@@ -28,6 +29,7 @@ from ..scenarios import (
     scenario_params,
     setup_fingers,
     setup_pose,
+    setup_time_law,
     turn_about_thumb_contact,
 )
 from .specs import MAX_DRAWS_PER_SCENARIO, ScenarioSpec, generate_specs
@@ -82,11 +84,18 @@ def build_scenario(spec: ScenarioSpec, contact: ContactModel | None = None) -> S
             ``ContactModel()``: each finger's own pad cone).
 
     Returns:
-        The :class:`~regrasp_pin.scenarios.Scenario` (planner settings as make_scenario's).
+        The :class:`~regrasp_pin.scenarios.Scenario` (planner settings as make_scenario's,
+        the regrasps by the hand's time law: :func:`~regrasp_pin.scenarios.setup_time_law`).
 
     Raises:
         ContactError: no initial force-closure grasp.
     """
+    scen = _build(spec, contact)
+    return dataclasses.replace(scen, params=with_time_law(scen.params, setup_time_law(spec.hand)))
+
+
+def _build(spec: ScenarioSpec, contact: ContactModel | None) -> Scenario:
+    """:func:`build_scenario` but the time law."""
     h = suite_hand(spec.hand)
     o = spec.object.build()
     m = spec.motion
