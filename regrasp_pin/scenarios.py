@@ -43,7 +43,7 @@ from .model.motion import ObjectMotion
 from .model.objects import Box, ConvexObject, Prism, SurfaceSample
 from .planning.planner import PlannerParams
 from .planning.regrasp import RegraspParams
-from .planning.timing import TIME_LAWS
+from .planning.timing import checked_time_law
 
 __all__ = [
     "HANDS",
@@ -61,8 +61,8 @@ __all__ = [
     "scenario_for_hand",
     "scenario_params",
     "setup_fingers",
-    "setup_time_law",
     "setup_pose",
+    "setup_time_law",
     "start_poses",
     "turn_about_thumb_contact",
 ]
@@ -446,11 +446,7 @@ def _file_scenario(hand_file: str, _mtime_ns: int) -> tuple[tuple[str, ...], flo
             raise UnknownNameError(f"{hand_file}: scenario.fingers", n, names)
     scale = positive(entry.get("object_scale", 1.0), f"{hand_file}: scenario.object_scale")
     law = entry.get("time_law", RegraspParams().time_law)
-    if law not in TIME_LAWS:
-        raise InputError(
-            f"{hand_file}: scenario.time_law", f"is {law!r}", f"one of {', '.join(TIME_LAWS)}"
-        )
-    return fingers, scale, law
+    return fingers, scale, checked_time_law(law, f"{hand_file}: scenario.time_law")
 
 
 def grasp_for_motion(

@@ -92,10 +92,10 @@ def cruise(tau: np.ndarray) -> np.ndarray:
 _LAWS = {"minimum-jerk": (minimum_jerk, MJ_PEAK), "cruise": (cruise, CRUISE_PEAK)}
 
 
-def checked_time_law(law: str) -> str:
-    """``law`` if it is one of ``TIME_LAWS``; else an InputError naming ``time_law``."""
-    if law not in _LAWS:
-        raise InputError("time_law", f"{law!r} is not a time law", f"one of {TIME_LAWS}")
+def checked_time_law(law: str, argument: str = "time_law") -> str:
+    """``law`` if it is one of ``TIME_LAWS``; else an InputError naming ``argument``."""
+    if not isinstance(law, str) or law not in _LAWS:
+        raise InputError(argument, f"{law!r} is not a time law", f"one of {TIME_LAWS}")
     return law
 
 

@@ -95,7 +95,7 @@ def build_scenario(spec: ScenarioSpec, contact: ContactModel | None = None) -> S
 
 
 def _build(spec: ScenarioSpec, contact: ContactModel | None) -> Scenario:
-    """:func:`build_scenario` but the time law."""
+    """:func:`build_scenario`'s scenario before the hand's time law is set."""
     h = suite_hand(spec.hand)
     o = spec.object.build()
     m = spec.motion
