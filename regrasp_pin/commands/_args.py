@@ -81,3 +81,11 @@ def add_time_law(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> No
         "of the time, with larger accelerations); default: the hand's (a hand file's "
         "scenario.time_law, else minimum-jerk)",
     )  # fmt: skip
+
+
+def chosen_time_law(args: argparse.Namespace) -> str:
+    """The time law of ``--time-law``, or the hand's (``args.hand``'s:
+    :func:`~regrasp_pin.scenarios.setup_time_law`) when it is not given."""
+    from ..scenarios import setup_time_law
+
+    return args.time_law or setup_time_law(args.hand)

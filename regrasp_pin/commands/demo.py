@@ -12,6 +12,7 @@ from ._args import (
     HAND_METAVAR,
     add_grasp_backups,
     add_time_law,
+    chosen_time_law,
     hand_argument,
     output_file,
     output_folder,
@@ -85,7 +86,6 @@ def run(args: argparse.Namespace) -> int:
     from ..backups import plan_scenario
     from ..exceptions import PlanningError
     from ..planning.params import with_time_law
-    from ..scenarios import setup_time_law
 
     t0 = time.perf_counter()
     out = output_folder(args.out, "--out")
@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = plan_scenario(
             scen,
-            params=with_time_law(scen.params, args.time_law or setup_time_law(args.hand)),
+            params=with_time_law(scen.params, chosen_time_law(args)),
             grasp_backups=args.grasp_backups,
             progress=progress,
             on_backup=on_backup,

@@ -13,6 +13,7 @@ from ._args import (
     HAND_METAVAR,
     add_grasp_backups,
     add_time_law,
+    chosen_time_law,
     hand_argument,
     output_folder,
 )
@@ -154,7 +155,6 @@ def run(args: argparse.Namespace) -> int:
     from ..backups import plan_scenario
     from ..exceptions import ContactError, PlanningError
     from ..planning.params import with_time_law
-    from ..scenarios import setup_time_law
     from .summary import plan_summary, print_table, report_failure, write_figures
 
     t0 = time.perf_counter()
@@ -168,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = plan_scenario(
             scen,
-            params=with_time_law(scen.params, args.time_law or setup_time_law(args.hand)),
+            params=with_time_law(scen.params, chosen_time_law(args)),
             grasp_backups=args.grasp_backups,
         )
     except (PlanningError, ContactError) as exc:

@@ -57,6 +57,11 @@ def rate_interval(k: int, n: int, confidence: float = CONFIDENCE) -> tuple[float
     return float(ci.low), float(ci.high)
 
 
+def _beyond_chance(p_value: float) -> bool:
+    """Whether a test's ``p_value`` rejects chance at the report's :data:`CONFIDENCE`."""
+    return p_value < 1.0 - CONFIDENCE
+
+
 @dataclass(frozen=True)
 class PairedChange:
     """How the outcomes of the same scenarios changed between two runs.
@@ -80,7 +85,7 @@ class PairedChange:
         """The comparison in plain words, one line."""
         verdict = (
             "more than the noise of the search"
-            if self.p_value < 1.0 - CONFIDENCE
+            if _beyond_chance(self.p_value)
             else "within the noise of the search"
         )
         return (
@@ -126,7 +131,7 @@ class RateDifference:
         """The comparison in plain words, one line."""
         verdict = (
             "the rates differ by more than chance"
-            if self.p_value < 1.0 - CONFIDENCE
+            if _beyond_chance(self.p_value)
             else "no difference beyond chance"
         )
         return (
