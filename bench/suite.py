@@ -8,7 +8,9 @@ is built, planned, and a full plan is saved, reloaded and re-checked with Pinocc
 Coal alone (:func:`regrasp_pin.verify.plan_check.recheck_plan`).
 
 Prints one line per scenario as it finishes (outcome, regrasps, times; the reason of a
-failure on a second line), then :func:`regrasp_pin.suite.summarize`, then, with
+failure on a second line), then :func:`regrasp_pin.suite.summarize` and where the time
+went (:func:`regrasp_pin.suite.time_spent`: builds, planning with its setups, backups
+and searches, re-checks, summed over the scenarios), then, with
 ``--baseline``, the change against a previous ``results.jsonl``: full-plan rate, median
 planning times, the full plans won and lost with an exact sign test
 (:func:`regrasp_pin.suite.report.paired_change`), and every scenario whose outcome
@@ -50,6 +52,7 @@ from regrasp_pin.suite import (
     neighbour_specs,
     select_specs,
     summarize,
+    time_spent,
 )
 from regrasp_pin.suite.cluster import SuiteRun, run_suite
 from regrasp_pin.suite.report import paired_change, rate_difference, result_line
@@ -233,6 +236,7 @@ def main() -> None:
         if len(results) < n:
             text += f" -- only {len(results)} of {n} found in {len(specs)} draws"
     text += "\n" + done.describe().split("\n", 1)[1]
+    text += "\n" + time_spent(results, done.skipped)
     if measured:
         text += "\n" + measured
     if args.baseline is not None:

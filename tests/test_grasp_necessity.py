@@ -225,6 +225,10 @@ def test_planner_refuses_a_grasp_that_cannot_last(three_fingers):
     assert e.required == pytest.approx(scen.motion.duration_s, abs=1e-9)
     assert 0.0 <= e.measured <= e.required
     assert e.partial is not None and e.attempts == ()
+    # the partial plan says what the plan spent before the proof (as a full plan does)
+    stages = e.partial.summary["stage_s"]
+    assert {"manifolds", "must hold", "initial grasp", "tracking"} <= set(stages)
+    assert "regrasps" not in stages and all(v >= 0.0 for v in stages.values())
 
 
 def test_planner_grasp_search_says_when_no_contact_lasts(three_fingers):

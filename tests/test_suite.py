@@ -37,6 +37,7 @@ from regrasp_pin.suite import (
     neighbour_specs,
     run_scenario,
     summarize,
+    time_spent,
 )
 from regrasp_pin.suite.build import finger_clearance
 from regrasp_pin.suite.report import paired_change, rate_difference, rate_interval
@@ -276,6 +277,35 @@ def test_summary_counts():
     text = summarize(results)
     assert "full plans: 2/6" in text
     assert "proven to have no plan (kind infeasible): 1; full plans of the others: 2/5" in text
+
+
+def test_time_spent_sums_where_a_suites_time_went():
+    full = _result("a", "five_finger", "prism", "object-axis", True, plan_s=3.0)
+    full.stage_s = {"manifolds": 0.5, "must hold": 0.25, "regrasps": 2.0}
+    full.recheck_s = 0.7
+    failed = _result("b", "allegro", "box", "object-axis", False, "velocity", "plan", plan_s=6.0)
+    failed.stage_s = {"manifolds": 1.0, "must hold": 0.45, "regrasps": 4.0}
+    failed.build_s = 2.5  # of it 1.5 s the backup's grasp search (run_scenario adds it)
+    failed.backups = [{"outcome": "velocity", "choose_s": 1.5, "plan_s": 2.0}]
+    older = _result("c", "allegro", "mesh", "contact-axis", False, "no-candidate", "plan")
+    skipped = [
+        _result(n, "allegro", "box", "object-axis", False, "no-candidate", "grasp") for n in "de"
+    ]
+    text = time_spent([full, failed, older], skipped)
+    lines = text.splitlines()
+    # builds 0.5 + 2.5 + 0.5 and skipped 2 x 0.5; planning 3 + 6 + 1; re-checks 0.7
+    assert lines[0] == "time spent, summed over the scenarios: 15.2 s"
+    assert lines[1].split()[:3] == ["builds", "4.5", "s"]
+    assert "the scenarios' 3.5 s, of it the backups' grasp searches 1.5 s" in lines[1]
+    assert "the 2 specs skipped 1.0 s" in lines[1]
+    assert lines[2].split()[:3] == ["planning", "10.0", "s"]
+    assert "full plans 3.0 s, failures 7.0 s" in lines[2]
+    # the searches: 10 - (0.5 + 1.0) - (0.25 + 0.45) - the backup's plan 2.0
+    assert "manifolds 1.5 s and must-hold proofs 0.7 s" in lines[2]
+    assert "the backups' plans 2.0 s, the searches 5.8 s; 1 without stage times" in lines[2]
+    assert lines[3].split()[:3] == ["re-checks", "0.7", "s"]
+    assert "1 full plans" in lines[3]
+    assert time_spent([]).splitlines()[0] == "time spent, summed over the scenarios: 0.0 s"
 
 
 def test_the_rate_interval_is_wilsons():

@@ -60,6 +60,17 @@ def test_a_failure_on_a_start_contact_backs_up_once_and_keeps_the_first_failure(
     assert "backed up to another initial grasp" in text and "full plans after it: 0" in text
 
 
+def test_a_failure_records_the_time_of_its_first_plans_stages(s034):
+    # the partial plan's summary gives the stages up to the failure, and so does the
+    # result: the setup (manifolds, proof) and the search, within the planning's time
+    spec, alone, out = s034
+    partial = Plan.load(out / f"{spec.name}.partial.json")
+    assert partial.summary["stage_s"] == pytest.approx(alone.stage_s, abs=0.0)
+    assert {"manifolds", "must hold", "tracking", "regrasps"} <= set(alone.stage_s)
+    assert all(v >= 0.0 for v in alone.stage_s.values())
+    assert sum(alone.stage_s.values()) <= alone.plan_s
+
+
 def test_backups_share_the_step_budget(s034):
     # given only the steps the first plan spent, nothing is left for a backup
     spec, _, out = s034

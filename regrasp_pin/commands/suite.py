@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     require_scale()  # says which extra to install before anything is started
     from tqdm import tqdm
 
-    from ..suite import ScenarioResult, summarize
+    from ..suite import ScenarioResult, summarize, time_spent
     from ..suite.cluster import run_suite
     from ..suite.pages import write_report
     from ..suite.report import result_line
@@ -166,7 +166,9 @@ def run(args: argparse.Namespace) -> int:
         )
         return EXIT_INTERRUPTED
     bar.close()
-    text = summarize(done.results) + "\n" + done.describe()
+    text = "\n".join(
+        [summarize(done.results), done.describe(), time_spent(done.results, done.skipped)]
+    )
     (args.out / "summary.txt").write_text(text + "\n")
     files = write_report(args.out, done.results, viewer_pages=not args.no_viewer)
     print("\n" + text)

@@ -133,7 +133,7 @@ def plan_manipulation(
         PlanningError: the motion cannot be achieved; ``kind`` says why, ``attempts``
             holds every failed attempt of the last search and ``partial`` the plan up
             to the failure (its summary: the search steps spent, ``"search_steps"``,
-            and the backtracks).
+            the backtracks, and the time each stage took so far [s], ``"stage_s"``).
     """
     scene = Scene(hand, obj, motion)  # checks types and scale before any work
     params = params or PlannerParams()
@@ -204,7 +204,7 @@ def plan_manipulation(
     )
     infeasible = first_infeasibility(ctx, state, runs)
     if infeasible is not None:
-        raise no_plan_exists(ctx, infeasible, state)
+        raise _with_stages(no_plan_exists(ctx, infeasible, state), stage)
     t0 = time.perf_counter()
     steps: list[Step] = []
     backtracks = 0  # in all (the plan's summary)
@@ -233,7 +233,9 @@ def plan_manipulation(
                 cut_short = may_back_up and ctx.budget.exhausted
                 partial = plan_until(ctx, state, until)
                 # what the search spent, for a caller that shares a budget with it
-                partial.summary.update({"search_steps": ctx.budget.steps, "backtracks": backtracks})
+                partial.summary.update(
+                    search_steps=ctx.budget.steps, backtracks=backtracks, stage_s=dict(stage)
+                )
                 raise PlanningError(
                     (
                         f"the search budget ran out while backing up from a "
@@ -256,9 +258,7 @@ def plan_manipulation(
             progress(state.now)
     stage["regrasps"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    plan = _final_plan(ctx, state)
-    stage["assembly"] = time.perf_counter() - t0
+    plan = _assembled(ctx, state, stage)
     plan.summary.update(
         {
             "regrasps": len(state.regrasps),
@@ -275,6 +275,27 @@ def plan_manipulation(
     )
     taking_part = {n: m for n, m in every.items() if n in manifolds or n in state.joined}
     return ManipulationPlan(plan, list(state.regrasps), grasp, taking_part, sample, stage)
+
+
+def _assembled(ctx: PlanContext, state: PlanState, stage: dict[str, float]) -> Plan:
+    """:func:`_final_plan`, its time in ``stage["assembly"]`` [s]; its PlanningError (the
+    whole plan's joint speeds or penetration) with the stages (:func:`_with_stages`)."""
+    t0 = time.perf_counter()
+    try:
+        return _final_plan(ctx, state)
+    except PlanningError as exc:
+        _with_stages(exc, {**stage, "assembly": time.perf_counter() - t0})
+        raise
+    finally:
+        stage["assembly"] = time.perf_counter() - t0
+
+
+def _with_stages(exc: PlanningError, stage: dict[str, float]) -> PlanningError:
+    """``exc`` with the time each stage took so far [s] in its partial plan's summary
+    (``"stage_s"``, as a full plan's)."""
+    if isinstance(exc.partial, Plan):
+        exc.partial.summary["stage_s"] = dict(stage)
+    return exc
 
 
 def _starts(phases: list) -> dict[str, list[float]]:

@@ -27,7 +27,8 @@ many problems at once, the same ones on every machine.
   as a :class:`ScenarioResult`: failure kind, numbers, attempts, timings, and for a
   full plan the independent re-check of the saved plan file
   (:func:`~regrasp_pin.verify.plan_check.recheck_plan`).
-* :func:`summarize` (:mod:`.report`) turns results into a plain-text report.
+* :func:`summarize` (:mod:`.report`) turns results into a plain-text report, and
+  :func:`time_spent` says where a suite's time went.
 
 Object sizes are centred on the canonical objects of each hand
 (:func:`~regrasp_pin.scenarios.setup_objects`) and vary by +-10 %; motions turn by
@@ -37,7 +38,7 @@ generated spec samples the turn every ~2 deg (0.05-0.2 s) over its first 120 deg
 """
 
 from .build import build_scenario, suite_scenarios
-from .report import summarize
+from .report import summarize, time_spent
 from .run import ScenarioResult, load_results, run_scenario
 from .specs import (
     MAX_DRAWS_PER_SCENARIO,
@@ -67,4 +68,5 @@ __all__ = [
     "select_specs",
     "suite_scenarios",
     "summarize",
+    "time_spent",
 ]

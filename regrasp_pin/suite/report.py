@@ -24,6 +24,7 @@ __all__ = [
     "rate_interval",
     "result_line",
     "summarize",
+    "time_spent",
 ]
 
 #: Confidence level of the full-plan rate's interval and of the paired comparison
@@ -185,6 +186,63 @@ def _missed_by(kind: str | None, group: Sequence[ScenarioResult]) -> str:
         return ""
     lo, mid, hi = np.min(short), np.median(short), np.max(short)
     return f"; missed by {lo:.2f}-{hi:.2f} mm, median {mid:.2f} mm"
+
+
+#: The stages of a plan's setup, built before its search (``ScenarioResult.stage_s``)
+SETUP_STAGES = ("manifolds", "must hold")
+
+
+def time_spent(results: Sequence[ScenarioResult], skipped: Sequence[ScenarioResult] = ()) -> str:
+    """Where a suite's time went [s], summed over its scenarios, each in one process.
+
+    On one worker the sums add up to about the wall time, less the workers' start; on
+    several they are what each scenario took on its worker. Three lines:
+
+    - builds: of the scenarios (:func:`~.build.build_scenario`, with the backups' grasp
+      searches, given apart) and of the specs ``skipped`` without an initial grasp;
+    - planning: of the full plans and of the failures; of all of it, the setup of the
+      first plan (the fingers' manifolds and the must-hold proof, built before the
+      search and once for its backups: ``stage_s``), the backups' plans, and the rest:
+      the searches;
+    - the re-checks of the full plans.
+
+    Args:
+        results: The scenarios' results.
+        skipped: The specs skipped without an initial grasp (their ``build_s``).
+
+    Returns:
+        The lines (no trailing newline); a scenario without a setup time (a result
+        of an older version) is counted as searching, and their number is given.
+    """
+    res = list(results)
+
+    def total(values: Iterable[float | None]) -> float:
+        return float(sum(v for v in values if v is not None))
+
+    backups_choose = total(b.get("choose_s") for r in res for b in r.backups)
+    backups_plan = total(b.get("plan_s") for r in res for b in r.backups)
+    builds, skipped_s = total(r.build_s for r in res), total(r.build_s for r in skipped)
+    full = total(r.plan_s for r in res if r.ok)
+    failed = total(r.plan_s for r in res if not r.ok)
+    setup = {k: total(r.stage_s.get(k) for r in res) for k in SETUP_STAGES}
+    search = full + failed - sum(setup.values()) - backups_plan
+    rechecks = total(r.recheck_s for r in res)
+    without = sum(1 for r in res if r.plan_s is not None and not r.stage_s)
+    lines = [
+        f"time spent, summed over the scenarios: "
+        f"{builds + skipped_s + full + failed + rechecks:.1f} s",
+        f"  builds     {builds + skipped_s:8.1f} s  (the scenarios' {builds:.1f} s, of it the "
+        f"backups' grasp searches {backups_choose:.1f} s; the {len(skipped)} specs skipped "
+        f"{skipped_s:.1f} s)",
+        f"  planning   {full + failed:8.1f} s  (full plans {full:.1f} s, failures {failed:.1f} s; "
+        f"the setups' manifolds {setup['manifolds']:.1f} s and must-hold proofs "
+        f"{setup['must hold']:.1f} s, the backups' plans {backups_plan:.1f} s, "
+        f"the searches {search:.1f} s"
+        + (f"; {without} without stage times" if without else "")
+        + ")",
+        f"  re-checks  {rechecks:8.1f} s  ({sum(r.ok for r in res)} full plans)",
+    ]
+    return "\n".join(lines)
 
 
 def summarize(results: Sequence[ScenarioResult]) -> str:

@@ -73,7 +73,10 @@ class ScenarioResult:
         recheck_problems: Its problems.
         recheck_s: Its wall time [s].
         plan_path: Where the plan (or partial plan) was saved, if it was.
-        stage_s: The planner's time per stage [s] (full plans).
+        stage_s: The planner's time per stage [s] (``ManipulationPlan.stage_s``): of the
+            full plan, or of the first plan up to its failure (its partial plan's
+            ``summary["stage_s"]``); the setup's stages (``"manifolds"``, ``"must
+            hold"``) are built once for the backups too.
         spec: The spec (``ScenarioSpec.to_dict()``), to rebuild the scenario.
         backups: The initial grasps backed up to after a failure, in order
             (:meth:`~regrasp_pin.backups.GraspBackup.to_dict`): the failure's kind
@@ -298,6 +301,7 @@ def _record_partial(
     if not isinstance(partial, Plan):
         return
     phases = partial.regrasps()
+    result.stage_s = {k: float(v) for k, v in partial.summary.get("stage_s", {}).items()}
     result.n_regrasps = len(phases)
     result.regrasp_ms = [float(p.planning_ms) for p in phases]
     result.min_clearance_m = min((p.min_clearance_m for p in phases), default=None)
