@@ -210,24 +210,22 @@ def _dls_step_loop(J: np.ndarray, e: np.ndarray, err_sq: np.ndarray) -> np.ndarr
     return J[0] * x0 + J[1] * x1 + J[2] * x2  # (k, n)
 
 
-def _first_evaluation(
-    chain: FingerChain, q: np.ndarray, fast_trig: bool
-) -> tuple[np.ndarray, np.ndarray]:
+def _first_evaluation(chain: FingerChain, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tip positions ``(3, n)`` and Jacobians ``(3, k, n)`` at ``q`` ``(k, n)``, each run of
     consecutive equal starts (bit for bit) evaluated once: warm starts shared by a
     point's times, a common cold start. Each point's kernel result depends on that
     point alone, so the copies are the same bits as evaluating every column."""
     n = q.shape[1]
     if n < 2:
-        return chain.tip_soa(q, True, fast_trig)  # type: ignore[return-value]
+        return chain.tip_soa(q, True)  # type: ignore[return-value]
     bits = q.view(np.int64)
     new = np.empty(n, bool)
     new[0] = True
     np.any(bits[:, 1:] != bits[:, :-1], axis=0, out=new[1:])
     first = np.flatnonzero(new)
     if first.size > 0.8 * n:  # few repeats: not worth the copies
-        return chain.tip_soa(q, True, fast_trig)  # type: ignore[return-value]
-    p, J = chain.tip_soa(q.take(first, axis=1), True, fast_trig)
+        return chain.tip_soa(q, True)  # type: ignore[return-value]
+    p, J = chain.tip_soa(q.take(first, axis=1), True)
     counts = np.diff(np.append(first, n))
     return np.repeat(p, counts, axis=1), np.repeat(J, counts, axis=2)  # type: ignore[arg-type]
 
@@ -240,7 +238,6 @@ def _iterate(
     q: np.ndarray,
     tol_m: float,
     max_iter: int,
-    fast_trig: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Run DLS on component-major ``targets`` (3,n), ``q`` (k,n); return q, err, iters.
 
@@ -249,7 +246,7 @@ def _iterate(
     if ik_backend() == "numba":
         q = np.ascontiguousarray(q, dtype=np.float64)
         err, iters = ik_numba.iterate(
-            chain.packed(), lower, upper, targets, q, tol_m, max_iter, fast_trig, _CONSTS
+            chain.packed(), lower, upper, targets, q, tol_m, max_iter, _CONSTS
         )
         return q, err, int(iters)
     n = q.shape[1]
@@ -263,9 +260,9 @@ def _iterate(
     prev_sq = np.full(n, np.inf)
     while True:
         if iters == 0:
-            p, J = _first_evaluation(chain, qa, fast_trig)
+            p, J = _first_evaluation(chain, qa)
         else:  # the last evaluation only checks: no Jacobian (p is the same bits)
-            p, J_or_none = chain.tip_soa(qa, iters < max_iter, fast_trig)
+            p, J_or_none = chain.tip_soa(qa, iters < max_iter)
             J = cast(np.ndarray, J_or_none)  # None only when this is the last evaluation
         e = ta - p
         e2 = e * e
@@ -402,7 +399,7 @@ def solve_position_ik(
     q = np.clip(np.ascontiguousarray(q_init.T, dtype=float), lower[:, None], upper[:, None])
     # Inner iterations with single-precision trig to half the tolerance, then a
     # double-precision pass that checks every point and finishes the few that need it.
-    q, _, iters = _iterate(chain, lower, upper, targets, q, 0.5 * tol_m, max_iter, True)
+    q, _, iters = _iterate(chain, lower, upper, targets, q, 0.5 * tol_m, max_iter)
     q, err, it = _finish(chain, lower, upper, targets, q, tol_m, max_iter)
     iters += it
     if restarts:
@@ -415,7 +412,7 @@ def solve_position_ik(
             k = q.shape[0]
             q_try = np.repeat(seeds.T[:, :, None], bad.size, axis=2).reshape(k, -1)
             t_try = np.tile(targets.take(bad, axis=1), (1, ns))
-            q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter, True)
+            q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter)
             q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
             iters += it + it2
             e_try = e_try.reshape(ns, bad.size).T  # (point, seed)

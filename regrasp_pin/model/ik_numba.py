@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from .numba_jit import compile_together
+from .trig import cos_sin_scalar
 
 __all__ = ["available", "iterate", "iterate_python", "residuals", "residuals_python"]
 
@@ -30,15 +31,7 @@ _compiled_residuals: list[Callable[..., Any]] = []
 _failed = False
 
 
-def _cos_sin(theta, fast_trig):
-    """The cosine and sine of ``theta`` [rad], in single precision when ``fast_trig``."""
-    if fast_trig:
-        t32 = np.float32(theta)
-        return float(math.cos(t32)), float(math.sin(t32))
-    return math.cos(theta), math.sin(theta)
-
-
-def _fk_jacobian(chain, q, n, fast_trig, work):
+def _fk_jacobian(chain, q, n, work):
     """Tip position of point ``n`` into ``o`` and its Jacobian into ``J`` (3, k).
 
     Mirrors :meth:`FingerChain.forward_soa`: ``W' <- W' C_j Rz(theta_j)`` and
@@ -63,7 +56,7 @@ def _fk_jacobian(chain, q, n, fast_trig, work):
             theta = theta * scaling[jt]
         if offset[jt] != 0.0:
             theta = theta + offset[jt]
-        c, s = _cos_sin(theta, fast_trig)
+        c, s = cos_sin_scalar(theta)
         for i in range(3):
             m0 = W[i, 0]
             m1 = W[i, 1]
@@ -125,7 +118,7 @@ def _dls_step(J, free, e0, e1, e2, err_sq, lam0_sq, lam_err, dq):
         dq[c] = J[0, c] * x0 + J[1, c] * x1 + J[2, c] * x2 if free[c] else 0.0
 
 
-def iterate_python(chain_arrays, lower, upper, targets, q, tol_m, max_iter, fast_trig, consts):
+def iterate_python(chain_arrays, lower, upper, targets, q, tol_m, max_iter, consts):
     """DLS iterations on component-major ``targets`` (3, n) and ``q`` (k, n), in place.
 
     Args:
@@ -135,7 +128,6 @@ def iterate_python(chain_arrays, lower, upper, targets, q, tol_m, max_iter, fast
         q: ``(k, n)`` initial configurations [rad]; overwritten with the results.
         tol_m: Stop tolerance [m].
         max_iter: Iteration cap per point.
-        fast_trig: cos/sin in single precision.
         consts: ``(lambda0^2, lambda_err, max_step, stall_sq, stall_tol_factor)``.
 
     Returns:
@@ -158,7 +150,7 @@ def iterate_python(chain_arrays, lower, upper, targets, q, tol_m, max_iter, fast
         prev_sq = np.inf
         steps = 0
         while True:
-            _fk_jacobian(chain_arrays, q, p, fast_trig, work)
+            _fk_jacobian(chain_arrays, q, p, work)
             e0 = targets[0, p] - o[0]
             e1 = targets[1, p] - o[1]
             e2 = targets[2, p] - o[2]
@@ -199,7 +191,7 @@ def residuals_python(chain_arrays, targets, q):
     work = (np.empty((3, 3)), o, np.empty((nj, 3)), np.empty((nj, 3)), np.empty((3, k)))
     err = np.empty(n)
     for p in range(n):
-        _fk_jacobian(chain_arrays, q, p, False, work)
+        _fk_jacobian(chain_arrays, q, p, work)
         e0 = targets[0, p] - o[0]
         e1 = targets[1, p] - o[1]
         e2 = targets[2, p] - o[2]
@@ -212,7 +204,8 @@ def _compile() -> Callable[..., Any] | None:
     global _compiled, _failed
     if _compiled is None and not _failed:
         compiled = compile_together(
-            (_cos_sin, _jacobian, _fk_jacobian, _dls_step), (iterate_python, residuals_python)
+            (cos_sin_scalar, _jacobian, _fk_jacobian, _dls_step),
+            (iterate_python, residuals_python),
         )
         if compiled is None:
             _failed = True
@@ -227,7 +220,7 @@ def available() -> bool:
     return _compile() is not None
 
 
-def iterate(chain_arrays, lower, upper, targets, q, tol_m, max_iter, fast_trig, consts):
+def iterate(chain_arrays, lower, upper, targets, q, tol_m, max_iter, consts):
     """The compiled :func:`iterate_python` (same arguments and results).
 
     Raises:
@@ -244,7 +237,6 @@ def iterate(chain_arrays, lower, upper, targets, q, tol_m, max_iter, fast_trig, 
         q,
         float(tol_m),
         int(max_iter),
-        bool(fast_trig),
         consts,
     )
 

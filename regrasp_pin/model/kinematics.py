@@ -40,6 +40,7 @@ import pinocchio as pin
 
 from ..exceptions import InputError
 from . import placements_numba
+from .trig import cos_sin
 
 __all__ = ["FingerChain", "attached_placements", "attached_points", "attached_points_soa"]
 
@@ -263,40 +264,34 @@ class FingerChain:
         return axis, float(logs[0] @ axis)
 
     # ------------------------------------------------------------------ kernel
-    def forward_soa(self, qT: np.ndarray, want_jacobian: bool, fast_trig: bool = False):
+    def forward_soa(self, qT: np.ndarray, want_jacobian: bool):
         """Kernel on component-major arrays (internal; used by the batched IK).
 
         Args:
             qT: ``(k, N)`` configurations, one row per joint [rad].
             want_jacobian: Also return the Jacobian.
-            fast_trig: Evaluate cos/sin in single precision (about 10x faster here;
-                tip positions then carry errors of order 1e-8 m). The batched IK uses
-                it for its inner iterations and always finishes in double precision.
 
         Returns:
             ``p`` ``(3, N)`` tip positions [m], ``W`` ``(3, 3, N)`` (the last ``W'``), and
             ``J`` ``(3, k, N)`` [m/rad] or None.
         """
         n = qT.shape[1]
-        p, cols, J = self._kernel(qT, want_jacobian, fast_trig)
+        p, cols, J = self._kernel(qT, want_jacobian)
         W = np.empty((3, 3, n))
         for a in range(3):
             W[:, a] = cols[a]
         return p, W, J
 
-    def tip_soa(
-        self, qT: np.ndarray, want_jacobian: bool, fast_trig: bool = False
-    ) -> tuple[np.ndarray, np.ndarray | None]:
+    def tip_soa(self, qT: np.ndarray, want_jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`forward_soa` without ``W``: ``p`` ``(3, N)`` and ``J`` ``(3, k, N)`` or
         None, the same bits (internal; the batched IK's kernel)."""
-        p, _, J = self._kernel(qT, want_jacobian, fast_trig)
+        p, _, J = self._kernel(qT, want_jacobian)
         return p, J
 
     def _kernel(
         self,
         qT: np.ndarray,
         want_jacobian: bool,
-        fast_trig: bool,
         keep: dict[int, tuple[np.ndarray, list[np.ndarray]]] | None = None,
     ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray | None]:
         """``p`` ``(3, N)``, the columns of the last ``W'`` (``(3, N)`` or ``(3, 1)``
@@ -306,19 +301,13 @@ class FingerChain:
         docstring, term by term in a fixed order; products with constants skip exact
         terms (zero coefficients, unit factors) and a column that a constant product
         only moves is not copied. The first joint's constants broadcast over the
-        points, and all joints' angles, cosines and sines are computed in one batch.
+        points, and all joints' angles, cosines and sines are computed in one batch
+        (:func:`~.trig.cos_sin`: the same bits as the compiled IK's, on any CPU).
         ``keep`` (joint index -> filled with the origin and the ``W'`` columns after that
         joint) serves :func:`attached_placements`.
         """
         n = qT.shape[1]
-        theta = self._angles(qT)
-        if fast_trig:
-            t32 = theta.astype(np.float32)
-            cos = np.cos(t32).astype(np.float64)
-            sin = np.sin(t32).astype(np.float64)
-        else:
-            cos = np.cos(theta)
-            sin = np.sin(theta)
+        cos, sin = cos_sin(self._angles(qT))
         axes = []
         origins = []
         first = self._joints[0]
@@ -514,7 +503,7 @@ def _kernel_states(
         keep: dict[int, tuple[np.ndarray, list[np.ndarray]]] = {
             len(chains[j].path) - 1: (np.empty(0), []) for j in members
         }
-        host._kernel(np.ascontiguousarray(q[:, host.q_indices].T), False, False, keep)
+        host._kernel(np.ascontiguousarray(q[:, host.q_indices].T), False, keep)
         for j in members:
             yield (j, *keep[len(chains[j].path) - 1])
 

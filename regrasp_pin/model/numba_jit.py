@@ -15,13 +15,17 @@ def compile_together(
 ) -> dict[str, Callable[..., Any]] | None:
     """The ``kernels`` compiled with numba (cached on disk, releasing the GIL), by name,
     each calling the compiled versions of the others and of the ``helpers`` (inlined)
-    in one namespace, the kernels' module's; None when numba is not installed. The
+    in one namespace, the kernels' module's (with the names a helper of another module
+    reads in its own, such as its constants); None when numba is not installed. The
     functions must come in the order in which they call each other (callees first)."""
     try:
         import numba
     except ImportError:
         return None
     glb = dict(kernels[0].__globals__)
+    for f in helpers:  # what a helper of another module reads there (its constants)
+        for name, value in f.__globals__.items():
+            glb.setdefault(name, value)
     for f in (*helpers, *kernels):
         if f in kernels:
             jit = numba.njit(cache=True, nogil=True, inline="never")
