@@ -36,7 +36,6 @@ def uncompiled(monkeypatch, backend):
     """The 'numba' backend running the kernel as plain Python."""
     monkeypatch.setattr(ik_numba, "available", lambda: True)
     monkeypatch.setattr(ik_numba, "iterate", ik_numba.iterate_python)
-    monkeypatch.setattr(ik_numba, "residuals", ik_numba.residuals_python)
 
 
 def _problems(finger, n, seed):

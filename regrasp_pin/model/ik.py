@@ -5,11 +5,11 @@ respected at every iterate (projected steps with an active set: a joint at a lim
 whose step points outward is frozen for that step, and the step is recomputed for the
 others). Damping follows the error (lambda^2 = lambda0^2 + w |e|^2, Sugihara's
 Levenberg-Marquardt rule), so far targets take cautious steps and the last steps are
-nearly Gauss-Newton. Inner iterations evaluate cos/sin in
-single precision (errors of order 1e-8 m, far below any useful tolerance) and a final
-double-precision pass checks, and if needed finishes, every point, so the reported
-residuals are exact. Points that have not converged after ``max_iter`` iterations are
-restarted from a fixed set of seeds spread over the joint box (deterministic); the
+nearly Gauss-Newton. Inner iterations run to half the tolerance, and a final pass
+finishes the points just above it. Cos and sin come from :func:`~.trig.cos_sin`, the
+same bits in numpy, in the compiled loop and on any CPU. Points that have not
+converged after ``max_iter`` iterations are restarted from a fixed set of seeds spread
+over the joint box (deterministic); the
 first seed (in their fixed order) that converges is kept, else the smallest residual
 (not the smallest residual below the tolerance: between converged seeds that choice
 follows rounding noise). An unreachable target is not an error: it comes back with
@@ -310,20 +310,18 @@ def _finish(
     upper: np.ndarray,
     targets: np.ndarray,
     q: np.ndarray,
+    err: np.ndarray,
     tol_m: float,
     max_iter: int,
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Exact (double-precision) residuals for all points; finish those just above tol.
+    """Finish the points of a first pass (to half the tolerance) whose residuals ``err``
+    [m] at ``q`` are just above ``tol_m``.
 
-    Points far above the tolerance after the first pass have stalled (unreachable) or
-    run out of iterations; more iterations would not help them (restarts might).
+    The first pass's residuals are the exact ones: its tip positions are computed the
+    same way at every evaluation, so measuring them again would give the same bits.
+    Points far above the tolerance have stalled (unreachable) or run out of
+    iterations; more iterations would not help them (restarts might).
     """
-    if ik_backend() == "numba":
-        err = ik_numba.residuals(chain.packed(), targets, q)
-    else:
-        p, _ = chain.tip_soa(q, False)
-        d = targets - p
-        err = np.sqrt(_rowdot(d, d))
     bad = np.flatnonzero((err > tol_m) & (err <= _STALL_TOL_FACTOR * tol_m))
     iters = 0
     if bad.size:
@@ -399,8 +397,8 @@ def solve_position_ik(
     q = np.clip(np.ascontiguousarray(q_init.T, dtype=float), lower[:, None], upper[:, None])
     # Inner iterations with single-precision trig to half the tolerance, then a
     # double-precision pass that checks every point and finishes the few that need it.
-    q, _, iters = _iterate(chain, lower, upper, targets, q, 0.5 * tol_m, max_iter)
-    q, err, it = _finish(chain, lower, upper, targets, q, tol_m, max_iter)
+    q, err, iters = _iterate(chain, lower, upper, targets, q, 0.5 * tol_m, max_iter)
+    q, err, it = _finish(chain, lower, upper, targets, q, err, tol_m, max_iter)
     iters += it
     if restarts:
         bad = np.flatnonzero(err > tol_m)
@@ -412,8 +410,8 @@ def solve_position_ik(
             k = q.shape[0]
             q_try = np.repeat(seeds.T[:, :, None], bad.size, axis=2).reshape(k, -1)
             t_try = np.tile(targets.take(bad, axis=1), (1, ns))
-            q_try, _, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter)
-            q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, tol_m, max_iter)
+            q_try, e_try, it = _iterate(chain, lower, upper, t_try, q_try, 0.5 * tol_m, max_iter)
+            q_try, e_try, it2 = _finish(chain, lower, upper, t_try, q_try, e_try, tol_m, max_iter)
             iters += it + it2
             e_try = e_try.reshape(ns, bad.size).T  # (point, seed)
             # the first seed that converged (not the smallest residual below the

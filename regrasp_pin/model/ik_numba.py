@@ -24,10 +24,9 @@ import numpy as np
 from .numba_jit import compile_together
 from .trig import cos_sin_scalar
 
-__all__ = ["available", "iterate", "iterate_python", "residuals", "residuals_python"]
+__all__ = ["available", "iterate", "iterate_python"]
 
 _compiled: Callable[..., Any] | None = None
-_compiled_residuals: list[Callable[..., Any]] = []
 _failed = False
 
 
@@ -182,36 +181,18 @@ def iterate_python(chain_arrays, lower, upper, targets, q, tol_m, max_iter, cons
     return err, most
 
 
-def residuals_python(chain_arrays, targets, q):
-    """``(n,)`` distances [m] from the tips at ``q`` ``(k, n)`` to ``targets`` ``(3, n)``,
-    in double precision (the exact residuals that the IK reports)."""
-    k, n = q.shape
-    nj = chain_arrays[0].shape[0]
-    o = np.empty(3)
-    work = (np.empty((3, 3)), o, np.empty((nj, 3)), np.empty((nj, 3)), np.empty((3, k)))
-    err = np.empty(n)
-    for p in range(n):
-        _fk_jacobian(chain_arrays, q, p, work)
-        e0 = targets[0, p] - o[0]
-        e1 = targets[1, p] - o[1]
-        e2 = targets[2, p] - o[2]
-        err[p] = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-    return err
-
-
 def _compile() -> Callable[..., Any] | None:
     """The compiled :func:`iterate_python` (cached on disk), or None without numba."""
     global _compiled, _failed
     if _compiled is None and not _failed:
         compiled = compile_together(
             (cos_sin_scalar, _jacobian, _fk_jacobian, _dls_step),
-            (iterate_python, residuals_python),
+            (iterate_python,),
         )
         if compiled is None:
             _failed = True
             return None
         _compiled = compiled["iterate_python"]
-        _compiled_residuals.append(compiled["residuals_python"])
     return _compiled
 
 
@@ -238,19 +219,4 @@ def iterate(chain_arrays, lower, upper, targets, q, tol_m, max_iter, consts):
         float(tol_m),
         int(max_iter),
         consts,
-    )
-
-
-def residuals(chain_arrays, targets, q):
-    """The compiled :func:`residuals_python` (same arguments and results).
-
-    Raises:
-        ImportError: numba is not installed (check :func:`available` first).
-    """
-    if _compile() is None:
-        raise ImportError("the compiled IK kernel needs numba: pip install regrasp-pin[fast]")
-    return _compiled_residuals[0](
-        chain_arrays,
-        np.ascontiguousarray(targets, dtype=np.float64),
-        np.ascontiguousarray(q, dtype=np.float64),
     )
