@@ -37,9 +37,9 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check .
 	$(PY) -m mypy
 
-# the README's table and figures are the default IK backend's (numpy), whatever the shell sets
+# the README's table and figures: what make demo prints and draws
 docs-images: $(STAMP)
-	REGRASP_PIN_IK_BACKEND=numpy $(VENV)/bin/regrasp-pin demo --out out --quiet
+	$(VENV)/bin/regrasp-pin demo --out out --quiet
 	cp out/fig9_joint_angles.png out/fig2_manifold.png out/fig8_hopfield_path.png docs/
 	$(PY) docs/make_screenshots.py --plan out/plan.json
 

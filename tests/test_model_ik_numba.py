@@ -159,6 +159,13 @@ def test_backend_switch_and_its_errors(backend, monkeypatch):
         ik._backend.clear()
         monkeypatch.setenv("REGRASP_PIN_IK_BACKEND", "numpy")
         assert ik.ik_backend() == "numpy"
+        # without the variable: numba where it is installed (the same bits), else numpy
+        monkeypatch.delenv("REGRASP_PIN_IK_BACKEND")
+        ik._backend.clear()
+        assert ik.ik_backend() == "numpy"  # available() is False here
+        monkeypatch.setattr(ik_numba, "available", lambda: True)
+        ik._backend.clear()
+        assert ik.ik_backend() == "numba"
     finally:
         ik._backend[:] = saved
 

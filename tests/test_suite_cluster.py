@@ -18,6 +18,7 @@ from conftest import assert_close
 
 from regrasp_pin.exceptions import InputError, MissingExtraError
 from regrasp_pin.grasp.manifold import THREADS_ENV
+from regrasp_pin.model import ik_numba
 from regrasp_pin.plan import Plan
 from regrasp_pin.suite import neighbour_specs, run_scenario
 from regrasp_pin.suite.cluster import (
@@ -153,8 +154,11 @@ def test_a_local_cluster_reads_the_workers_backend_from_the_environment(monkeypa
     assert [local_manifold_threads(w) for w in (1, 2, 4)] == [4, 2, 1]
     monkeypatch.setenv("REGRASP_PIN_IK_BACKEND", "numpy")
     assert local_manifold_threads(1) == 1
-    monkeypatch.delenv("REGRASP_PIN_IK_BACKEND")
-    assert local_manifold_threads(1) == 1  # numpy, the default
+    monkeypatch.delenv("REGRASP_PIN_IK_BACKEND")  # numba where it is installed
+    monkeypatch.setattr(ik_numba, "available", lambda: True)
+    assert local_manifold_threads(1) == 4
+    monkeypatch.setattr(ik_numba, "available", lambda: False)
+    assert local_manifold_threads(1) == 1
 
 
 def test_scenarios_are_given_their_manifold_threads(tmp_path):

@@ -19,15 +19,14 @@ The work is done on component-major arrays ``(k, N)`` and only on the points tha
 have not converged yet (compacted with ``take``); consecutive points with the same start,
 bit for bit, share its first evaluation, and few points take the step in fewer numpy
 calls. Every point's result depends on that point alone, bit for bit, whatever the batch.
-The iterations run in numpy (the default and the reference),
-or, on request, in the same loop compiled per point by numba (:mod:`.ik_numba`,
-``pip install regrasp-pin[fast]``): :func:`set_ik_backend` or the
-environment variable ``REGRASP_PIN_IK_BACKEND=numba``. It is not chosen by merely
-being installed, because its single-precision cos/sin round differently from numpy's:
-the iterates differ by about 1e-7 rad, and a few points in a million stop one
-iteration earlier or converge on another branch (cold starts at the iteration cap),
-which can change a plan (2 or 3 of the 30 neighbour scenarios end differently). A plan
-should not depend on which packages happen to be installed.
+The iterations run in numpy (the reference) or in the same loop compiled per point by
+numba (:mod:`.ik_numba`, ``pip install regrasp-pin[fast]``), the default where numba
+is installed; :func:`set_ik_backend` or the environment variable
+``REGRASP_PIN_IK_BACKEND`` (``numpy`` or ``numba``) choose. The two give the same bits,
+since they do the same float64 operations in the same order, cos and sin included, so
+a plan does not depend on whether numba is installed (when their cos/sin were the
+libraries' own, in single precision, the iterates differed by about 1e-7 rad, and 2 or
+3 of the 30 neighbour scenarios ended differently).
 """
 
 from __future__ import annotations
@@ -46,6 +45,7 @@ __all__ = [
     "IK_BACKENDS",
     "IK_BACKEND_ENV",
     "IKResult",
+    "environment_backend",
     "ik_backend",
     "set_ik_backend",
     "solve_position_ik",
@@ -69,17 +69,23 @@ RESIDUAL_RTOL = 1e-9
 _backend: list[str] = []  # the chosen backend, once chosen
 
 
+def environment_backend() -> str:
+    """The backend a new process chooses (unchecked): ``REGRASP_PIN_IK_BACKEND`` if set,
+    else ``"numba"`` where numba is installed, else ``"numpy"``."""
+    return os.environ.get(IK_BACKEND_ENV) or ("numba" if ik_numba.available() else "numpy")
+
+
 def ik_backend() -> str:
     """The backend the IK iterations run on: ``"numba"`` or ``"numpy"``.
 
-    The default is numpy; the environment variable ``REGRASP_PIN_IK_BACKEND=numba``
-    asks for numba.
+    The environment variable ``REGRASP_PIN_IK_BACKEND`` chooses; without it, numba
+    where it is installed (the same results, faster), else numpy.
 
     Raises:
         InputError: the variable names no backend, or numba without numba installed.
     """
     if not _backend:
-        want = os.environ.get(IK_BACKEND_ENV, "numpy")
+        want = environment_backend()
         if want not in IK_BACKENDS:
             raise InputError(IK_BACKEND_ENV, f"is {want!r}", f"one of {IK_BACKENDS}")
         if want == "numba" and not ik_numba.available():

@@ -38,7 +38,7 @@ import numpy as np
 from .._validate import positive, positive_int
 from ..exceptions import InputError, MissingExtraError
 from ..grasp.manifold import THREADS_ENV, manifold_threads
-from ..model.ik import IK_BACKEND_ENV
+from ..model.ik import environment_backend
 from ..planning.timing import checked_time_law
 from .isolate import Task, run_isolated, warm_up
 from .run import ScenarioResult, outcome_template, run_scenario
@@ -155,8 +155,7 @@ def local_manifold_threads(workers: int) -> int:
     """:func:`manifold_threads` for a local cluster of ``workers`` on this machine's
     cores, by the IK backend its workers will read from the environment
     (``REGRASP_PIN_IK_BACKEND``; a backend set in code here does not reach them)."""
-    backend = os.environ.get(IK_BACKEND_ENV, "numpy")
-    return manifold_threads(workers, os.cpu_count() or 1, backend)
+    return manifold_threads(workers, os.cpu_count() or 1, environment_backend())
 
 
 @contextmanager
