@@ -401,8 +401,8 @@ def solve_position_ik(
         )
     targets = np.ascontiguousarray(targets_palm.T)
     q = np.clip(np.ascontiguousarray(q_init.T, dtype=float), lower[:, None], upper[:, None])
-    # Inner iterations with single-precision trig to half the tolerance, then a
-    # double-precision pass that checks every point and finishes the few that need it.
+    # iterations to half the tolerance, then a pass that finishes the few points just
+    # above it (their residuals are the first pass's: exact)
     q, err, iters = _iterate(chain, lower, upper, targets, q, 0.5 * tol_m, max_iter)
     q, err, it = _finish(chain, lower, upper, targets, q, err, tol_m, max_iter)
     iters += it

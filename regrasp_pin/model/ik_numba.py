@@ -2,10 +2,11 @@
 
 The same damped-least-squares iteration as :mod:`regrasp_pin.model.ik` (the same
 damping rule, active set at the limits, step cap, clipping, stop and stall tests, and
-single-precision cos/sin when asked), written one point at a time so that numba
-compiles it to a loop without temporaries. numpy remains the reference: the numpy path
-is kept and the tests check that both give the same joint coordinates and flags within
-tolerance. numba is imported only when the kernel is first needed
+cos/sin: :func:`~.trig.cos_sin_scalar`), written one point at a time so that numba
+compiles it to a loop without temporaries, with every float64 operation of numpy's
+in numpy's order. numpy remains the reference: the numpy path is kept and the tests
+check that both give the same joint coordinates, residuals and flags, bit for bit.
+numba is imported only when the kernel is first needed
 (``pip install regrasp-pin[fast]``); without it :func:`available` is False and
 :mod:`.ik` uses numpy.
 

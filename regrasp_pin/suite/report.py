@@ -189,7 +189,7 @@ def _missed_by(kind: str | None, group: Sequence[ScenarioResult]) -> str:
 
 
 #: The stages of a plan's setup, built before its search (``ScenarioResult.stage_s``)
-SETUP_STAGES = ("manifolds", "must hold")
+_SETUP_STAGES = ("manifolds", "must hold")
 
 
 def time_spent(results: Sequence[ScenarioResult], skipped: Sequence[ScenarioResult] = ()) -> str:
@@ -224,7 +224,7 @@ def time_spent(results: Sequence[ScenarioResult], skipped: Sequence[ScenarioResu
     builds, skipped_s = total(r.build_s for r in res), total(r.build_s for r in skipped)
     full = total(r.plan_s for r in res if r.ok)
     failed = total(r.plan_s for r in res if not r.ok)
-    setup = {k: total(r.stage_s.get(k) for r in res) for k in SETUP_STAGES}
+    setup = {k: total(r.stage_s.get(k) for r in res) for k in _SETUP_STAGES}
     search = full + failed - sum(setup.values()) - backups_plan
     rechecks = total(r.recheck_s for r in res)
     without = sum(1 for r in res if r.plan_s is not None and not r.stage_s)
