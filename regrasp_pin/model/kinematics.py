@@ -619,8 +619,7 @@ def _place_compiled(
     theta = host._angles(qT)
     want_R = R_out is not None
     R_fill = R_out if R_out is not None else np.empty((1, 1, 3, 3))
-    cos, sin = cos_sin(theta)  # as the numpy kernel's (:meth:`FingerChain._kernel`)
-    placements_numba.placements(cos, sin, *host._plan, *frames, want_R, R_fill, p_out)
+    placements_numba.placements(theta, *host._plan, *frames, want_R, R_fill, p_out)
 
 
 def attached_points(chains: list[FingerChain], p_off: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -7,8 +7,9 @@ collision geometry, a capsule's end); on the few hundred configurations of one c
 those calls cost more than their arithmetic. :func:`placements_python` does the same
 per configuration: the same products with the same nonzero constants, in the same
 order (no fused multiply-adds: numba does not ask LLVM to contract a multiply and an
-add, on any CPU), on the cosines and sines that numpy computed for the batch, so that
-its numbers are the numpy path's to the bit. It runs when the IK backend is numba
+add, on any CPU), on the cosines and sines of :func:`~.trig.cos_sin_scalar` (the
+numpy kernel's :func:`~.trig.cos_sin`, one angle at a time), so that its numbers are
+the numpy path's to the bit. It runs when the IK backend is numba
 (:func:`~regrasp_pin.model.ik.set_ik_backend`), which already compiles with numba;
 numpy remains the reference and the tests compare both, bit for bit. The function is
 plain Python too, which lets the tests run it uncompiled.
@@ -27,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from .numba_jit import compile_together
+from .trig import cos_sin_scalar
 
 __all__ = ["available", "frame_terms", "placements", "placements_python", "wanted"]
 
@@ -61,8 +63,7 @@ def _linear(idx, coef, n_terms, cols, r, out):
 
 
 def placements_python(
-    cos,
-    sin,
+    theta,
     o0,
     C0,
     t_idx,
@@ -88,7 +89,8 @@ def placements_python(
     when ``want_R``) with the palm-frame placement of the attached frame ``j`` at each
     configuration ``n``.
 
-    One chain (the host of the frames): ``cos``, ``sin`` ``(m, N)`` of its joint angles;
+    One chain (the host of the frames): ``theta`` ``(m, N)`` its joint angles [rad],
+    whose cosines and sines are :func:`~.trig.cos_sin_scalar`'s (the numpy kernel's);
     ``o0`` ``(3,)`` and ``C0`` ``(3, 3)`` the first joint's ``t`` and ``C``; per joint
     ``i`` the terms of ``W' t_i`` (``t_idx``, ``t_coef`` ``(m, 3)``, ``t_n`` ``(m,)``) and,
     where ``C_has[i]``, of column ``a`` of ``W' C_i`` (``C_idx``, ``C_coef`` ``(m, 3, 3)``,
@@ -99,7 +101,12 @@ def placements_python(
     The points are the innermost loop, as numpy's batches (each point's numbers its
     own): ``cols[b, r, n]`` is coordinate ``r`` of column ``b`` of ``W'`` at point ``n``.
     """
-    m, n_points = cos.shape
+    m, n_points = theta.shape
+    cos = np.empty((m, n_points))
+    sin = np.empty((m, n_points))
+    for i in range(m):
+        for n in range(n_points):
+            cos[i, n], sin[i, n] = cos_sin_scalar(theta[i, n])
     cols = np.empty((3, 3, n_points))
     new = np.empty((3, 3, n_points))
     o = np.empty((3, n_points))
@@ -230,7 +237,7 @@ def _compile() -> Callable[..., Any] | None:
     global _compiled, _failed
     if _compiled is None and not _failed:
         compiled = compile_together(
-            (_linear, _through_joint, _rotate, _frame), (placements_python,)
+            (cos_sin_scalar, _linear, _through_joint, _rotate, _frame), (placements_python,)
         )
         if compiled is None:
             _failed = True
