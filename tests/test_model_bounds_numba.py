@@ -1,7 +1,8 @@
 """The compiled broad phase (regrasp_pin.model.bounds_numba) against numpy's batches.
 
 The loop computes :class:`PairDistances`' lower bounds one (sample, column) at a time
-with numpy's formulas. Numpy's matrix products of the object frame go through BLAS, so
+with numpy's formulas, and the sweep parameter of every column with numpy's operations
+in numpy's order (the same bits). Numpy's matrix products of the object frame go through BLAS, so
 the two agree to rounding, not to the bit; what the verification decides from them must
 be the same: which samples are below their requirement, and the reports. Without numba
 the plain Python runs (a few hundred samples); with numba the compiled loop is checked
@@ -74,6 +75,9 @@ def _check_same_bounds(hands, step_rad):
             ref = _pairs(hands, case, 3 + case, step_rad, stride, "numpy")
             got = _pairs(hands, case, 3 + case, step_rad, stride, "numba")
             assert got._compiled and not ref._compiled
+            # the sweep parameter (the steps' sums in one order): the same bits
+            assert got._sweep.tobytes() == ref._sweep.tobytes()
+            assert got.max_step_m == ref.max_step_m > 0.0
             np.testing.assert_allclose(got.lb, ref.lb, rtol=0.0, atol=ROUNDING_M)
             assert np.array_equal(got.lb < got.required, ref.lb < ref.required)
             near += int(np.sum(ref.lb[:, ref.kind == 2] < 0.004 + 0.005))
@@ -85,6 +89,8 @@ def test_uncompiled_loop_gives_numpys_bounds(hands, backend, monkeypatch):
     monkeypatch.setattr(ik.ik_numba, "available", lambda: True)
     monkeypatch.setattr(bounds_numba, "wanted", lambda name: name == "numba")
     monkeypatch.setattr(bounds_numba, "bounds", bounds_numba.bounds_python)
+    monkeypatch.setattr(bounds_numba, "sweep", bounds_numba.sweep_python)
+    monkeypatch.setattr(bounds_numba, "interpolate", bounds_numba.interpolate_python)
     _check_same_bounds(hands, step_rad=0.05)
 
 

@@ -31,9 +31,18 @@ import numpy as np
 
 from .numba_jit import compile_together
 
-__all__ = ["available", "bounds", "bounds_python", "wanted"]
+__all__ = [
+    "available",
+    "bounds",
+    "bounds_python",
+    "interpolate",
+    "interpolate_python",
+    "sweep",
+    "sweep_python",
+    "wanted",
+]
 
-_compiled: Callable[..., Any] | None = None
+_compiled: dict[str, Callable[..., Any]] | None = None
 _failed = False
 _EPS = 1e-18  # squared segment lengths at or below this are points [m^2]
 
@@ -178,18 +187,96 @@ def bounds_python(
         out[k] = lb
 
 
-def _compile() -> Callable[..., Any] | None:
-    """The compiled :func:`bounds_python` (cached on disk), or None without numba."""
+def _body_step(c1, c0, R1, R0, rho):
+    """How far any point within ``rho`` of a body's centre moves between two samples,
+    ``|dc| + rho |dR|_F / sqrt(2)`` (as :func:`~regrasp_pin.model.distances._step_bound`,
+    its sums in the same order)."""
+    d0, d1, d2 = c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2]
+    dc = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    f = 0.0
+    for i in range(3):
+        for j in range(3):
+            d = R1[i, j] - R0[i, j]
+            f = f + d * d
+    return dc + rho * math.sqrt(f / 2.0)
+
+
+def sweep_python(c, R, T, rho, obj_radius, first, second, S):
+    """Fill ``S`` ``(D, P)`` with the sweep parameter of each column (the cumulative sum
+    of its two bodies' per-step bounds, 0 at the first sample) and return the largest
+    step, as :meth:`~regrasp_pin.model.distances.PairDistances._sweep_steps` does:
+    geometry centres ``c`` ``(D, G, 3)`` and orientations ``R`` ``(D, G, 3, 3)``, their
+    reaches ``rho`` ``(G,)`` [m], object poses ``T`` ``(D, 4, 4)`` and its radius, the
+    columns' geometries ``first``, ``second`` ``(P,)`` (-1: the object)."""
+    n_d, n_g = c.shape[0], c.shape[1]
+    n_p = first.shape[0]
+    step_g = np.empty(n_g)
+    most = 0.0
+    for col in range(n_p):
+        S[0, col] = 0.0
+    for k in range(n_d - 1):
+        for g in range(n_g):
+            step_g[g] = _body_step(c[k + 1, g], c[k, g], R[k + 1, g], R[k, g], rho[g])
+        step_o = _body_step(
+            T[k + 1, :3, 3], T[k, :3, 3], T[k + 1, :3, :3], T[k, :3, :3], obj_radius
+        )
+        for col in range(n_p):
+            other = step_o if second[col] < 0 else step_g[second[col]]
+            step = step_g[first[col]] + other
+            if step > most:
+                most = step
+            S[k + 1, col] = S[k, col] + step
+    return most
+
+
+def interpolate_python(lb_c, coarse, S, out):
+    """Fill ``out`` ``(D, P)`` with the bounds between the coarse samples ``coarse``
+    ``(C,)`` (increasing, the first and last sample among them) from theirs, ``lb_c``
+    ``(C, P)``: the better of the two neighbours' bounds less the sweep ``S`` ``(D, P)``
+    to them, less 1e-12 for its rounding; a coarse sample's own bound as it is (as
+    :meth:`~regrasp_pin.model.distances.PairDistances._bounds_coarse_to_fine`)."""
+    n_d, n_p = S.shape
+    hi = 0
+    for s in range(n_d):
+        while coarse[hi] < s:
+            hi += 1
+        if coarse[hi] == s:
+            for col in range(n_p):
+                out[s, col] = lb_c[hi, col]
+            continue
+        lo = hi - 1
+        a, b = coarse[lo], coarse[hi]
+        for col in range(n_p):
+            from_lo = lb_c[lo, col] - (S[s, col] - S[a, col])
+            from_hi = lb_c[hi, col] - (S[b, col] - S[s, col])
+            out[s, col] = max(from_lo, from_hi) - 1e-12
+
+
+def _compile() -> dict[str, Callable[..., Any]] | None:
+    """The compiled kernels (cached on disk) by name, or None without numba."""
     global _compiled, _failed
     if _compiled is None and not _failed:
         compiled = compile_together(
-            (_clip01, _place, _support, _object_bound, _near_pair_bound), (bounds_python,)
+            (_clip01, _place, _support, _object_bound, _near_pair_bound, _body_step),
+            (bounds_python, sweep_python, interpolate_python),
         )
         if compiled is None:
             _failed = True
             return None
-        _compiled = compiled["bounds_python"]
+        _compiled = compiled
     return _compiled
+
+
+def _kernel(name: str) -> Callable[..., Any]:
+    """The compiled kernel ``name``.
+
+    Raises:
+        ImportError: numba is not installed (check :func:`available` first).
+    """
+    kernels = _compile()
+    if kernels is None:
+        raise ImportError("the compiled broad phase needs numba: pip install regrasp-pin[fast]")
+    return kernels[name]
 
 
 def available() -> bool:
@@ -209,7 +296,23 @@ def bounds(*args: Any) -> None:
     Raises:
         ImportError: numba is not installed (check :func:`available` first).
     """
-    kernel = _compile()
-    if kernel is None:
-        raise ImportError("the compiled broad phase needs numba: pip install regrasp-pin[fast]")
-    kernel(*args)
+    _kernel("bounds_python")(*args)
+
+
+def sweep(*args: Any) -> float:
+    """The compiled :func:`sweep_python` (same arguments; fills ``S``, returns the
+    largest step [m]).
+
+    Raises:
+        ImportError: numba is not installed (check :func:`available` first).
+    """
+    return float(_kernel("sweep_python")(*args))
+
+
+def interpolate(*args: Any) -> None:
+    """The compiled :func:`interpolate_python` (same arguments; fills ``out``).
+
+    Raises:
+        ImportError: numba is not installed (check :func:`available` first).
+    """
+    _kernel("interpolate_python")(*args)

@@ -9,6 +9,7 @@ minima exact.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import weakref
@@ -275,10 +276,14 @@ def _step_bound(c: np.ndarray, R: np.ndarray, rho: np.ndarray) -> np.ndarray:
     Returns:
         Step bounds (D - 1, G) [m].
     """
-    dc = np.linalg.norm(np.diff(c, axis=0), axis=-1)
+    d = np.diff(c, axis=0)
+    dc = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
     dR = R[1:] - R[:-1]
-    dR = np.sqrt(np.einsum("...ij,...ij->...", dR, dR) / 2.0)
-    return dc + rho * dR
+    f = dR[..., 0, 0] * dR[..., 0, 0]  # the squares summed in order, on any CPU
+    for i, j in itertools.product(range(3), range(3)):
+        if i or j:
+            f = f + dR[..., i, j] * dR[..., i, j]
+    return dc + rho * np.sqrt(f / 2.0)
 
 
 class PairDistances:
@@ -356,10 +361,9 @@ class PairDistances:
         self._mid_local = 0.5 * (self._local[0] + self._local[1])  # capsule segments' middles
         self._c = _place(self._R, self._p, self._local[2])  # centres, palm frame (D, G, 3)
         self._compiled = bounds_numba.wanted(ik_backend())  # the same bounds to rounding
-        step = self._steps(obj.radius_m)
-        self._sweep = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])
         #: Largest per-step bound on the relative motion of two checked bodies [m].
-        self.max_step_m = float(step.max()) if step.size else 0.0
+        self.max_step_m: float
+        self._sweep, self.max_step_m = self._sweep_steps(obj.radius_m)
         self.lb = self._bounds_coarse_to_fine(coarse_stride)
         self.swept = np.full(self.lb.shape, -np.inf)
         self.exact = np.full(self.lb.shape, np.nan)
@@ -372,12 +376,15 @@ class PairDistances:
         self._result = coal.DistanceResult()
         self._functors: dict[int, Any] = {}
 
-    def _steps(self, obj_radius_m: float) -> np.ndarray:
-        """Per-step bounds ``(D - 1, P)`` [m] on the relative motion of each column's
-        two bodies: between samples s and s', no point of a geometry moves by more than
-        the sum of its per-step bounds ``|dc| + rho |dR|_2``, so a distance is
-        1-Lipschitz in the cumulative sum of the two bodies' steps (the sweep bound,
-        see :meth:`_update_sweep`)."""
+    def _sweep_steps(self, obj_radius_m: float) -> tuple[np.ndarray, float]:
+        """The sweep parameter ``S`` ``(D, P)`` [m] of each column, 0 at the first
+        sample, and the largest step of any column [m].
+
+        Between samples s and s', no point of a geometry moves by more than the sum of
+        its per-step bounds ``|dc| + rho |dR|_2``, so a distance is 1-Lipschitz in the
+        cumulative sum of the two bodies' steps (the sweep bound, see
+        :meth:`_update_sweep`). The compiled loop (:mod:`.bounds_numba`) gives the same
+        bits."""
         rho = np.array(
             [
                 np.linalg.norm(g.support[:3])
@@ -386,11 +393,27 @@ class PairDistances:
                 for g in self.geoms
             ]
         )
-        step_g = _step_bound(self._c, self._R, rho)  # (D - 1, G)
         T = self._T
+        if self._compiled:
+            S = np.empty((T.shape[0], self.first.size))
+            most = bounds_numba.sweep(
+                self._c,
+                self._R,
+                np.ascontiguousarray(T, dtype=np.float64),
+                rho,
+                float(obj_radius_m),
+                self.first,
+                self.second,
+                S,
+            )
+            return S, most
+        step_g = _step_bound(self._c, self._R, rho)  # (D - 1, G)
         step_o = _step_bound(T[:, None, :3, 3], T[:, None, :3, :3], np.array([obj_radius_m]))
         second = np.where(self.second < 0, 0, self.second)
-        return step_g[:, self.first] + np.where(self.second < 0, step_o[:, :1], step_g[:, second])
+        other = np.where(self.second < 0, step_o[:, :1], step_g[:, second])
+        step = step_g[:, self.first] + other
+        S = np.vstack([np.zeros((1, step.shape[1])), np.cumsum(step, axis=0)])
+        return S, float(step.max()) if step.size else 0.0
 
     def _bounds_coarse_to_fine(self, stride: int) -> np.ndarray:
         """Lower bounds ``(D, P)`` of every (sample, column), see ``coarse_stride``."""
@@ -401,13 +424,17 @@ class PairDistances:
         lb_c = self._bounds_rows(coarse)
         # a distance is 1-Lipschitz in the sweep parameter S (see _update_sweep): from
         # the coarse samples c0 <= s <= c1 around s, d(s) >= lb(c) - |S(s) - S(c)|
-        s = np.arange(n_d)
-        hi = np.searchsorted(coarse, s)
-        lo = np.where(coarse[hi] == s, hi, hi - 1)
         S = self._sweep
-        lb = np.maximum(lb_c[lo] - (S - S[coarse[lo]]), lb_c[hi] - (S[coarse[hi]] - S))
-        lb -= 1e-12  # rounding of S
-        lb[coarse] = lb_c
+        if self._compiled:  # the same bits
+            lb = np.empty(S.shape)
+            bounds_numba.interpolate(lb_c, coarse, S, lb)
+        else:
+            s = np.arange(n_d)
+            hi = np.searchsorted(coarse, s)
+            lo = np.where(coarse[hi] == s, hi, hi - 1)
+            lb = np.maximum(lb_c[lo] - (S - S[coarse[lo]]), lb_c[hi] - (S[coarse[hi]] - S))
+            lb -= 1e-12  # rounding of S
+            lb[coarse] = lb_c
         rows, cols = np.nonzero(lb < self.required)
         if rows.size:
             lb[rows, cols] = self._bounds(rows, cols)
