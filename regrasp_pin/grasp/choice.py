@@ -43,7 +43,7 @@ from ..model.hand import Finger, Hand
 from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
 from .manifold import Manifold
-from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon, is_force_closure, kept_quality
+from .quality import FORCE_CLOSURE_TOL, kept_quality
 from .screening import (
     ManifoldClearance,
     ScreeningEpsilons,
@@ -627,7 +627,6 @@ class _Screen:
         self.ka = ka
         self.other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
         self.other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
-        self.mu, self.scale = mu, obj.radius_m
         if epsilons is None:
             epsilons = ScreeningEpsilons(mu, obj.radius_m)
         elif (epsilons.mu, epsilons.scale_m) != (mu, obj.radius_m):
@@ -724,7 +723,7 @@ class _Screen:
             return "force closure"
         for row in self.frees:
             p_rest, n_rest = np.delete(p_all, row, 0), np.delete(n_all, row, 0)
-            if not is_force_closure(p_rest, n_rest, self.mu, torque_scale_m=self.scale):
+            if not self.epsilons.planner_closes(p_rest, n_rest):
                 self.rejected["not freeing"] += 1
                 self.refused["not freeing"].append((p_rest, n_rest))
                 return "not freeing"
@@ -743,7 +742,7 @@ class _Screen:
         if why == "force closure":
             eps = [self.epsilons(p, n) for p, n in sets]
         else:
-            eps = [ferrari_canny_epsilon(p, n, self.mu, torque_scale_m=self.scale) for p, n in sets]
+            eps = [self.epsilons.planner_epsilon(p, n) for p, n in sets]
         self.closest[why] = (max(eps), FORCE_CLOSURE_TOL)  # max: the first of equals
 
     def removable(self, p: np.ndarray, n: np.ndarray) -> int:

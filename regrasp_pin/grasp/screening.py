@@ -29,9 +29,16 @@ from ..model.hand import Hand
 from ..model.objects import ConvexObject
 from .contact import ContactModel
 from .manifold import Manifold
-from .quality import FORCE_CLOSURE_TOL, closure_certificate, contact_wrenches, ferrari_canny_epsilon
+from .quality import (
+    FORCE_CLOSURE_TOL,
+    closure_certificate,
+    contact_wrenches,
+    ferrari_canny_epsilon,
+    is_force_closure,
+)
 
 __all__ = [
+    "PLANNER_EDGES",
     "SCREEN_EDGES",
     "ManifoldClearance",
     "ObjectClearance",
@@ -44,6 +51,7 @@ __all__ = [
 ]
 
 SCREEN_EDGES = 6  # friction-cone edges used when screening candidates
+PLANNER_EDGES = 8  # the planner's own force-closure test's (ferrari_canny_epsilon's default)
 
 
 class ScreeningEpsilons:
@@ -58,6 +66,9 @@ class ScreeningEpsilons:
         self.scale_m = scale_m
         self._known: dict[tuple[bytes, bytes], float] = {}
         self._closes: dict[tuple[bytes, bytes], bool] = {}
+        # the planner's test (PLANNER_EDGES): force closure and, where read, epsilons
+        self._planner_closes: dict[tuple[bytes, bytes], bool] = {}
+        self._planner_known: dict[tuple[bytes, bytes], float] = {}
 
     def __call__(self, p: np.ndarray, n: np.ndarray) -> float:
         """The screening epsilon of contacts ``p``, ``n`` ``(F, 3)`` (object frame)."""
@@ -82,6 +93,30 @@ class ScreeningEpsilons:
         if key in self._closes:
             return self._closes[key]
         return self(p, n) > FORCE_CLOSURE_TOL  # the hull, kept by __call__
+
+    def planner_closes(self, p: np.ndarray, n: np.ndarray) -> bool:
+        """:func:`~.quality.is_force_closure` of contacts ``p``, ``n`` ``(F, 3)`` with
+        the planner's :data:`PLANNER_EDGES` cone edges (this torque scale), each set
+        decided once."""
+        key = _key(p, n)
+        known = self._planner_closes.get(key)
+        if known is None:
+            known = self._planner_closes[key] = is_force_closure(
+                p, n, self.mu, n_edges=PLANNER_EDGES, torque_scale_m=self.scale_m
+            )
+        return known
+
+    def planner_epsilon(self, p: np.ndarray, n: np.ndarray) -> float:
+        """:func:`~.quality.ferrari_canny_epsilon` of contacts ``p``, ``n`` ``(F, 3)``
+        with the planner's :data:`PLANNER_EDGES` cone edges (this torque scale), each
+        set's hull computed once."""
+        key = _key(p, n)
+        known = self._planner_known.get(key)
+        if known is None:
+            known = self._planner_known[key] = ferrari_canny_epsilon(
+                p, n, self.mu, n_edges=PLANNER_EDGES, torque_scale_m=self.scale_m
+            )
+        return known
 
 
 def _key(p: np.ndarray, n: np.ndarray) -> tuple[bytes, bytes]:
