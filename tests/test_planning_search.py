@@ -74,6 +74,8 @@ def problem():
             **kwargs,
         )
 
+    # what the tests of the search's own caches read
+    find.new_search, find.q_hand, find.stay, find.t_trig = new_search, q_hand, stay, t_trig
     return find
 
 
@@ -285,3 +287,38 @@ def test_by_the_cruise_law_a_regrasp_lands_sooner_within_the_same_limits(problem
     speeds = np.abs(np.diff(r.q, axis=0)) / np.diff(r.times_s)[:, None]
     limit = make_scenario("five_finger", "hexagon").hand.finger(FINGER).velocity_limit
     assert np.all(speeds <= limit * (1 + 1e-9))
+
+
+def test_the_candidates_clearance_of_the_others_is_measured_once_per_postures(problem, monkeypatch):
+    """The columns of the candidates' clearance of the holding fingers
+    (clear_of_fingers) are what clear_of_fingers gives, and are measured once for the
+    same postures of the others, whatever function gives them (the planner makes a new
+    one for every state); other postures are measured again."""
+    search = problem.new_search()
+    hand, contact = search.scene.hand, search.contact
+    m = search.manifolds[FINGER]
+    ka = int(np.searchsorted(m.times_s, problem.t_trig))
+    points = np.flatnonzero(m.reachable[ka])[::7][:60]
+    horizon = np.full(points.size, m.times_s.size - ka)
+    calls = []
+    real = search_module.clear_of_fingers
+
+    def counted(*args, **kwargs):
+        calls.append(args[2].shape[1])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(search_module, "clear_of_fingers", counted)
+    first = search._clear_of_others(FINGER, problem.stay, problem.q_hand, points, ka, horizon)
+    same = search._clear_of_others(
+        FINGER, problem.stay, lambda t: problem.q_hand(t), points[::-1], ka, horizon
+    )
+    assert calls == [points.size]
+    assert np.array_equal(same, first[:, ::-1])
+    postures = problem.q_hand(m.times_s[ka:])
+    direct = real(hand, FINGER, m.q[ka:, points], postures, problem.stay, contact.finger_trigger_m)
+    assert np.array_equal(first, direct)
+    assert not direct.all() and direct.any(), "some candidates must come near the others"
+    closer = search._clear_of_others(
+        FINGER, problem.stay, lambda t: problem.q_hand(t) * 1.05, points, ka, horizon
+    )
+    assert calls == [points.size, points.size] and closer.shape == first.shape

@@ -32,6 +32,7 @@ import functools
 import logging
 import math
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -50,6 +51,9 @@ from .regrasp import RegraspParams, RegraspResult, plan_regrasp
 from .schedule import TIME_TOL_S
 from .timing import duration_for_move, durations_for_moves, next_duration
 
+#: The other fingers' postures (and finger, lift-off time) whose candidates' clearance
+#: of them a search keeps (:meth:`RegraspSearch._clear_of_others`).
+_LASTING_KEPT = 32
 #: A new contact Q must keep the finger this far from the other fingers at landing [m].
 LANDING_FINGER_CLEARANCE_M = 0.001
 
@@ -167,8 +171,8 @@ class RegraspSearch:
     _distances: dict[str, ManifoldClearance] = field(
         default_factory=dict, init=False, repr=False, compare=False
     )
-    _lasting: tuple[tuple, dict[int, tuple[int, np.ndarray]]] | None = field(
-        default=None, init=False, repr=False, compare=False
+    _lasting: OrderedDict[tuple, tuple[Manifold, dict[int, tuple[int, np.ndarray]]]] = field(
+        default_factory=OrderedDict, init=False, repr=False, compare=False
     )
     _epsilons: ScreeningEpsilons | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -360,31 +364,38 @@ class RegraspSearch:
         the trigger distance) at the manifold's times from index ``ka`` on, measured
         over the first ``horizon[c]`` times of each (True after them).
 
-        A candidate's column depends on it alone; the columns of the last ``(finger,
-        others, q_hand, ka)`` asked are kept with the horizon they were measured over
-        (the candidates of one lift-off time are ranked again after each failed
-        attempt)."""
-        key = (finger, tuple(others), q_hand, ka)
-        if self._lasting is None or self._lasting[0] != key:
-            self._lasting = (key, {})
-        known = self._lasting[1]
+        A candidate's column depends on it alone, given the other fingers' postures
+        over those times: the columns are kept with the horizon they were measured over,
+        for the last :data:`_LASTING_KEPT` ``(finger, others, manifold, ka, postures)``
+        asked (the candidates of one lift-off time are ranked again after each failed
+        attempt, and other lift-off times, recoveries and backtracking ask again with
+        the same holds: about half of the columns asked)."""
+        m = self.manifolds[finger]
+        postures = q_hand(m.times_s[ka:])
+        key = (finger, tuple(others), id(m), ka, postures.shape, postures.tobytes())
+        entry = self._lasting.get(key)
+        if entry is None or entry[0] is not m:
+            entry = self._lasting[key] = (m, {})  # m kept alive: its id stays its own
+            while len(self._lasting) > _LASTING_KEPT:
+                self._lasting.popitem(last=False)
+        self._lasting.move_to_end(key)
+        known = entry[1]
         wanted = [int(i) for i in np.asarray(points).reshape(-1)]
         until = dict(zip(wanted, np.asarray(horizon, int).reshape(-1).tolist(), strict=True))
         missing = sorted({i for i in wanted if i not in known or known[i][0] < until[i]})
         if missing:
-            m = self.manifolds[finger]
             reach = np.array([until[i] for i in missing])
             ok = clear_of_fingers(
                 self.scene.hand,
                 finger,
                 m.q[ka:, missing],
-                q_hand(m.times_s[ka:]),
+                postures,
                 others,
                 self.contact.finger_trigger_m,
                 horizon=reach,
             )
             known.update(zip(missing, zip(reach.tolist(), ok.T, strict=True), strict=True))
-        K = self.manifolds[finger].times_s.size - ka
+        K = m.times_s.size - ka
         return np.stack([known[i][1] for i in wanted], axis=1) if wanted else np.ones((K, 0), bool)
 
     def _screening_epsilons(self) -> ScreeningEpsilons:
