@@ -238,6 +238,37 @@ def test_finger_clearance_matches_coal_pair_by_pair(hand):
             assert_close(fc(q), expected, atol=1e-9, what=f"{finger} to the other fingers")
 
 
+def test_finger_clearance_measures_a_configuration_once(hand, monkeypatch):
+    """A configuration asked again (the same bits) gives the same distance without a
+    measurement; another one is measured; the oldest is forgotten past the memo's
+    size."""
+    rng = np.random.default_rng(8)
+    fc = FingerClearance(hand, "index")
+    qs = []
+    for _ in range(4):
+        q = hand.neutral()
+        for f in hand.fingers.values():
+            q[f.q_indices] = rng.uniform(f.lower, f.upper)
+        qs.append(q)
+    first = [fc(q) for q in qs[:3]]
+    calls = []
+    measure = pin.computeDistances
+
+    def counted(*args):
+        calls.append(1)
+        return measure(*args)
+
+    monkeypatch.setattr(clearance.pin, "computeDistances", counted)
+    monkeypatch.setattr(clearance, "_MEMO_KEPT", 3)
+    assert [fc(q.copy()) for q in qs[:3]] == first and not calls
+    nudged = qs[0].copy()
+    nudged[hand.finger("index").q_indices[0]] += 1e-12
+    fc(nudged)  # another configuration: measured, and qs[0] (the oldest) forgotten
+    assert len(calls) == 1
+    assert fc(qs[0]) == first[0] and len(calls) == 2
+    assert first == [FingerClearance(hand, "index")(q) for q in qs[:3]]
+
+
 def test_finger_clearance_sees_two_fingers_pressed_together(hand):
     # index and middle both abducted toward each other until their links overlap
     fc = FingerClearance(hand, "index")

@@ -164,6 +164,10 @@ def _object_pairs(
     return built
 
 
+#: configurations whose distance a :class:`FingerClearance` keeps (about 1 MB)
+_MEMO_KEPT = 4096
+
+
 class FingerClearance:
     """Coal distances between one finger's collision geometries and the other fingers'.
 
@@ -200,6 +204,8 @@ class FingerClearance:
         self._gdata = pin.GeometryData(self._model)
         for k in range(len(self.pairs)):
             self._gdata.distanceRequests[k] = coal.DistanceRequest()
+        # the distances measured, by the configuration's bytes, the oldest dropped first
+        self._memo: dict[bytes, float] = {}
 
     @classmethod
     def shared(
@@ -227,15 +233,27 @@ class FingerClearance:
         return hand
 
     def __call__(self, q_full: np.ndarray) -> float:
-        """Smallest distance [m] between this finger and any other finger at ``q_full``."""
+        """Smallest distance [m] between this finger and any other finger at ``q_full``.
+
+        A configuration measured before (the same bits; one of the last
+        :data:`_MEMO_KEPT`) is not measured again: the searches ask for the same
+        candidates under the same postures again and again."""
         if not self.pairs:
             return float(np.inf)
         q = np.asarray(q_full, float)
+        key = q.tobytes()
+        known = self._memo.get(key)
+        if known is not None:
+            return known
         # Pinocchio returns the pair of the smallest distance (the first of equals; past
         # the last pair when none is finite and below +inf)
         k = pin.computeDistances(self._pin_model, self._data, self._model, self._gdata, q)
         results = self._gdata.distanceResults
-        return float(results[k].min_distance if k < len(results) else _smallest(results))
+        d = float(results[k].min_distance if k < len(results) else _smallest(results))
+        if len(self._memo) >= _MEMO_KEPT:
+            del self._memo[next(iter(self._memo))]
+        self._memo[key] = d
+        return d
 
 
 _SHARED: weakref.WeakKeyDictionary[Hand, dict[tuple, FingerClearance]] = weakref.WeakKeyDictionary()
