@@ -17,7 +17,8 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_pin import Hand
 from regrasp_pin.model import bounds_numba, ik
-from regrasp_pin.model.distances import PairDistances
+from regrasp_pin.model.clearance import LinkClearance
+from regrasp_pin.model.distances import PairDistances, object_gap_bounds
 from regrasp_pin.model.objects import Box, Prism
 from regrasp_pin.verify.finger_motion import densify, verify_finger_motion
 
@@ -85,19 +86,42 @@ def _check_same_bounds(hands, step_rad):
     assert near > 0 and below > 0
 
 
+def _check_same_object_bounds(hands, step_rad):
+    """object_gap_bounds (a finger's links and its fingertip link against the object)
+    on both paths, every case: equal to rounding, and each a lower bound of Coal's
+    distance."""
+    for case in range(len(CASES)):
+        hand, obj, finger, _, q_d, T_d = _motion(hands, case, 40 + case, step_rad)
+        f = hand.finger(finger)
+        tip = list(f.tip_geometry_ids)
+        groups = [[g for g in f.geometry_ids if g not in tip], tip]
+        ik.set_ik_backend("numpy")
+        ref = object_gap_bounds(hand, groups, obj, q_d, T_d)
+        ik.set_ik_backend("numba")
+        got = object_gap_bounds(hand, groups, obj, q_d, T_d)
+        np.testing.assert_allclose(got, ref, rtol=0.0, atol=ROUNDING_M)
+        rows = np.arange(0, q_d.shape[0], max(q_d.shape[0] // 12, 1))
+        links = LinkClearance(hand, finger, obj)(q_d[rows], T_d[rows])
+        assert np.all(got[0, rows] <= links + 1e-9)
+        assert np.ptp(got[0]) > 0.005  # and they follow the motion (not a constant)
+
+
 def test_uncompiled_loop_gives_numpys_bounds(hands, backend, monkeypatch):
     monkeypatch.setattr(ik.ik_numba, "available", lambda: True)
     monkeypatch.setattr(bounds_numba, "wanted", lambda name: name == "numba")
     monkeypatch.setattr(bounds_numba, "bounds", bounds_numba.bounds_python)
     monkeypatch.setattr(bounds_numba, "sweep", bounds_numba.sweep_python)
     monkeypatch.setattr(bounds_numba, "interpolate", bounds_numba.interpolate_python)
+    monkeypatch.setattr(bounds_numba, "object_bounds", bounds_numba.object_bounds_python)
     _check_same_bounds(hands, step_rad=0.05)
+    _check_same_object_bounds(hands, step_rad=0.2)
 
 
 def test_compiled_loop_gives_numpys_bounds(hands, backend):
     pytest.importorskip("numba")
     assert bounds_numba.available()
     _check_same_bounds(hands, step_rad=0.005)
+    _check_same_object_bounds(hands, step_rad=0.02)
 
 
 def test_compiled_bounds_never_exceed_coal_distances(hands, backend):

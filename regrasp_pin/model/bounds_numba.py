@@ -37,6 +37,8 @@ __all__ = [
     "bounds_python",
     "interpolate",
     "interpolate_python",
+    "object_bounds",
+    "object_bounds_python",
     "sweep",
     "sweep_python",
     "wanted",
@@ -187,6 +189,19 @@ def bounds_python(
         out[k] = lb
 
 
+def object_bounds_python(R, T, c, params, normals, offsets, out):
+    """Fill ``out`` ``(N, G)`` with the face-plane support bound of every geometry at
+    every sample against the object (:func:`~regrasp_pin.model.distances.
+    object_gap_bounds`'s, before the minimum over a group): placements ``R`` ``(N, G, 3,
+    3)`` and centres ``c`` ``(N, G, 3)`` (palm frame), object poses ``T`` ``(N, 4, 4)``,
+    support parameters ``(G, 6)``, the object's face planes ``normals`` ``(F, 3)``,
+    ``offsets`` ``(F,)``."""
+    Rog = np.empty((3, 3))
+    for r in range(out.shape[0]):
+        for g in range(out.shape[1]):
+            out[r, g] = _object_bound(R, T, c, params, normals, offsets, r, g, Rog)
+
+
 def _body_step(c1, c0, R1, R0, rho):
     """How far any point within ``rho`` of a body's centre moves between two samples,
     ``|dc| + rho |dR|_F / sqrt(2)`` (as :func:`~regrasp_pin.model.distances._step_bound`,
@@ -258,7 +273,7 @@ def _compile() -> dict[str, Callable[..., Any]] | None:
     if _compiled is None and not _failed:
         compiled = compile_together(
             (_clip01, _place, _support, _object_bound, _near_pair_bound, _body_step),
-            (bounds_python, sweep_python, interpolate_python),
+            (bounds_python, sweep_python, interpolate_python, object_bounds_python),
         )
         if compiled is None:
             _failed = True
@@ -316,3 +331,12 @@ def interpolate(*args: Any) -> None:
         ImportError: numba is not installed (check :func:`available` first).
     """
     _kernel("interpolate_python")(*args)
+
+
+def object_bounds(*args: Any) -> None:
+    """The compiled :func:`object_bounds_python` (same arguments; fills ``out``).
+
+    Raises:
+        ImportError: numba is not installed (check :func:`available` first).
+    """
+    _kernel("object_bounds_python")(*args)

@@ -757,7 +757,19 @@ def object_gap_bounds(
     R, p = _placements(geoms, q)  # (N, G, 3, 3), (N, G, 3)
     c = _place(R, p, np.array([g.centre for g in geoms]).reshape(-1, 3))
     params = np.array([g.support for g in geoms]).reshape(-1, 6)
-    bound = _placed_object_bound(obj, c, R, T, params)  # (N, G)
+    if bounds_numba.wanted(ik_backend()):  # the same bounds to rounding, in one loop
+        bound = np.empty((q.shape[0], len(geoms)))
+        bounds_numba.object_bounds(
+            np.ascontiguousarray(R),
+            np.ascontiguousarray(T),
+            c,
+            params,
+            np.ascontiguousarray(obj.normals, dtype=np.float64),
+            np.ascontiguousarray(obj.offsets, dtype=np.float64),
+            bound,
+        )
+    else:
+        bound = _placed_object_bound(obj, c, R, T, params)  # (N, G)
     start = 0
     for k, group in enumerate(groups):
         if group:
