@@ -26,7 +26,7 @@ import numpy as np
 
 from .._validate import positive
 from ..exceptions import InputError
-from ..model import placements_numba
+from ..model import placements_numba, tip_numba
 from ..model.hand import Finger
 from ..model.ik import ik_backend
 
@@ -122,12 +122,34 @@ def pad_cosines_and_overshoot(
     past the plane on which the tip sphere rests, ``(N,)`` [m]
     (:class:`~regrasp_pin.model.tip_reach.TipReach`; ``-inf`` without one): above
     ``ContactModel.tip_penetration_m``, the link sinks into a face under it."""
-    R, _ = finger.chain.poses(q, compiled=placements_numba.wanted(ik_backend()))
+    compiled = tip_numba.wanted(ik_backend())  # the same bits as numpy's, in one loop
+    R, _ = finger.chain.poses(q, compiled=compiled and placements_numba.wanted(ik_backend()))
+    reach = finger.tip_reach
+    if compiled and reach is not None:
+        n = np.ascontiguousarray(normals_palm, dtype=np.float64).reshape(-1, 3)
+        cos, over = np.empty(n.shape[0]), np.empty(n.shape[0])
+        tip_numba.pad_overshoot(
+            np.ascontiguousarray(R),
+            n,
+            np.ascontiguousarray(finger.pad_axis_tip, dtype=np.float64),
+            reach.centres,
+            reach.rotations,
+            reach.params,
+            reach.radius,
+            cos,
+            over,
+        )
+        return cos, over
     cos = _pad_cosines(finger, R, normals_palm)
-    if finger.tip_reach is None:
+    if reach is None:
         return cos, np.full(cos.shape, -np.inf)
-    u_tip = -np.einsum("nji,nj->ni", R, normals_palm)  # R^T (-n): into the object
-    return cos, finger.tip_reach.overshoot(u_tip)
+    n = normals_palm
+    # R^T (-n): into the object, in the tip frame (each sum in its written order)
+    u_tip = np.stack(
+        [-(R[:, 0, i] * n[:, 0] + R[:, 1, i] * n[:, 1] + R[:, 2, i] * n[:, 2]) for i in range(3)],
+        axis=1,
+    )
+    return cos, reach.overshoot(u_tip)
 
 
 def pad_cosines(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
@@ -146,6 +168,8 @@ def pad_cosines(finger: Finger, q: np.ndarray, normals_palm: np.ndarray) -> np.n
 
 
 def _pad_cosines(finger: Finger, R_tip: np.ndarray, normals_palm: np.ndarray) -> np.ndarray:
-    """:func:`pad_cosines` from the tip rotations ``(N, 3, 3)``."""
-    pad = R_tip @ finger.pad_axis_tip
-    return -np.einsum("ij,ij->i", pad, normals_palm)
+    """:func:`pad_cosines` from the tip rotations ``(N, 3, 3)``, each sum in its written
+    order (a matrix product or ``einsum`` sums in the order numpy picks for the CPU)."""
+    a, n = finger.pad_axis_tip, normals_palm
+    pad = [R_tip[:, j, 0] * a[0] + R_tip[:, j, 1] * a[1] + R_tip[:, j, 2] * a[2] for j in range(3)]
+    return -(pad[0] * n[:, 0] + pad[1] * n[:, 1] + pad[2] * n[:, 2])

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .support import PRIMITIVES, support, support_parameters
+from .support import PRIMITIVES, support_parameters
 
 __all__ = ["TipReach", "tip_reach"]
 
@@ -69,9 +69,19 @@ class TipReach:
         u = np.asarray(u_tip, float).reshape(-1, 3)
         if self.params.shape[0] == 0:
             return np.full(u.shape[0], -np.inf)
-        local = np.einsum("ni,gij->ngj", u, self.rotations)  # R_g^T u per geometry
-        reach = u @ self.centres.T + support(local, self.params[None])  # (N, G)
-        return reach.max(axis=1) - self.radius
+        u0, u1, u2 = u[:, 0], u[:, 1], u[:, 2]
+        best = np.full(u.shape[0], -np.inf)
+        # geometry by geometry, each sum in its written order (einsum and matrix products
+        # sum in the order numpy picks for the CPU): the compiled loop's bits
+        for R, c, par in zip(self.rotations, self.centres, self.params, strict=True):
+            local = [u0 * R[0, j] + u1 * R[1, j] + u2 * R[2, j] for j in range(3)]
+            uz = np.abs(local[2])
+            h = par[0] * np.abs(local[0]) + par[1] * np.abs(local[1]) + par[2] * uz
+            h = h + par[3] * uz
+            h = h + par[4] * np.sqrt(np.maximum(0.0, 1.0 - uz * uz))
+            h = h + par[5]
+            best = np.maximum(best, (u0 * c[0] + u1 * c[1] + u2 * c[2]) + h)
+        return best - self.radius
 
 
 def tip_reach(
