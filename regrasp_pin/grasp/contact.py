@@ -122,10 +122,9 @@ def pad_cosines_and_overshoot(
     past the plane on which the tip sphere rests, ``(N,)`` [m]
     (:class:`~regrasp_pin.model.tip_reach.TipReach`; ``-inf`` without one): above
     ``ContactModel.tip_penetration_m``, the link sinks into a face under it."""
-    compiled = tip_numba.wanted(ik_backend())  # the same bits as numpy's, in one loop
-    R, _ = finger.chain.poses(q, compiled=compiled and placements_numba.wanted(ik_backend()))
+    R, _ = finger.chain.poses(q, compiled=placements_numba.wanted(ik_backend()))
     reach = finger.tip_reach
-    if compiled and reach is not None:
+    if reach is not None and tip_numba.wanted(ik_backend()):  # numpy's bits, in one loop
         n = np.ascontiguousarray(normals_palm, dtype=np.float64).reshape(-1, 3)
         cos, over = np.empty(n.shape[0]), np.empty(n.shape[0])
         tip_numba.pad_overshoot(

@@ -18,6 +18,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -98,25 +99,23 @@ class ScreeningEpsilons:
         """:func:`~.quality.is_force_closure` of contacts ``p``, ``n`` ``(F, 3)`` with
         the planner's :data:`PLANNER_EDGES` cone edges (this torque scale), each set
         decided once."""
-        key = _key(p, n)
-        known = self._planner_closes.get(key)
-        if known is None:
-            known = self._planner_closes[key] = is_force_closure(
-                p, n, self.mu, n_edges=PLANNER_EDGES, torque_scale_m=self.scale_m
-            )
-        return known
+        return bool(self._planner_once(self._planner_closes, is_force_closure, p, n))
 
     def planner_epsilon(self, p: np.ndarray, n: np.ndarray) -> float:
         """:func:`~.quality.ferrari_canny_epsilon` of contacts ``p``, ``n`` ``(F, 3)``
         with the planner's :data:`PLANNER_EDGES` cone edges (this torque scale), each
         set's hull computed once."""
+        return float(self._planner_once(self._planner_known, ferrari_canny_epsilon, p, n))
+
+    def _planner_once(
+        self, table: dict[tuple[bytes, bytes], Any], test: Any, p: np.ndarray, n: np.ndarray
+    ) -> Any:
+        """``test(p, n)`` with the planner's cone edges and this torque scale, kept in
+        ``table`` by the contact set's numbers."""
         key = _key(p, n)
-        known = self._planner_known.get(key)
-        if known is None:
-            known = self._planner_known[key] = ferrari_canny_epsilon(
-                p, n, self.mu, n_edges=PLANNER_EDGES, torque_scale_m=self.scale_m
-            )
-        return known
+        if key not in table:
+            table[key] = test(p, n, self.mu, n_edges=PLANNER_EDGES, torque_scale_m=self.scale_m)
+        return table[key]
 
 
 def _key(p: np.ndarray, n: np.ndarray) -> tuple[bytes, bytes]:
