@@ -64,5 +64,34 @@ def machine_line() -> str:
     )
 
 
+def reference_s(repeats: int = 3) -> float:
+    """A fixed workload's wall time on this machine now [s]: the fastest of ``repeats``
+    runs (the others are that plus other jobs' noise) that build the canonical scenario
+    and plan it (:func:`regrasp_pin.make_scenario`, :func:`regrasp_pin.plan_manipulation`;
+    the IK backend and threads as they are set), after one run that compiles the kernels
+    and fills the caches (the first-time IK solves that the manifolds remember are
+    forgotten before each run).
+
+    A long bench run (the scenario suite) has no baseline of its own in the same run:
+    this workload, timed before and after it, is one. The same machine can run 10-15 %
+    slower an hour later, so a run's wall time divided by the reference compares across
+    hours and machines where the seconds alone do not.
+    """
+    import time
+
+    from regrasp_pin import make_scenario, plan_manipulation
+    from regrasp_pin.grasp.manifold import forget_first_times
+
+    def once() -> float:
+        forget_first_times()  # each run solves its manifolds' first times itself
+        t0 = time.perf_counter()
+        scen = make_scenario()
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+        return time.perf_counter() - t0
+
+    once()
+    return min(once() for _ in range(max(int(repeats), 1)))
+
+
 if __name__ == "__main__":
     print(machine_line())

@@ -16,6 +16,10 @@ planning times, the full plans won and lost with an exact sign test
 (:func:`regrasp_pin.suite.report.paired_change`), and every scenario whose outcome
 changed; for a baseline of other scenarios (another hand or seed), the two full-plan
 rates with a Fisher exact test (:func:`regrasp_pin.suite.report.rate_difference`).
+A fixed workload, the canonical scenario built and planned in this process
+(:func:`machine.reference_s`, the fastest of ``--reference`` runs), is timed before and after
+the suite: the machine's speed then, printed with the suite's wall time as a multiple
+of it, which compares across hours and machines where the seconds do not.
 Writes ``results.jsonl`` (one :class:`~regrasp_pin.suite.ScenarioResult` per line, in spec order),
 ``skipped.jsonl`` and ``summary.txt`` into ``--out``, with the plans and partial plans.
 
@@ -31,7 +35,7 @@ scenarios (both runs in this run, one after the other) and printed.
 
 Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
 [--out out/suite] [--jobs 1] [--speedup K] [--max-steps 800] [--grasp-backups 1] [--budget S]
-[--time-law minimum-jerk|cruise] [--baseline old/results.jsonl]``.
+[--time-law minimum-jerk|cruise] [--baseline old/results.jsonl] [--reference 3]``.
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from machine import machine_line
+from machine import machine_line, reference_s
 
 from regrasp_pin.planning.planner import PlannerParams
 from regrasp_pin.planning.timing import TIME_LAWS
@@ -113,6 +117,18 @@ def speedup(specs: list[ScenarioSpec], k: int, jobs: int, out: Path, **kw) -> st
     )
 
 
+def reference_line(before_s: float, after_s: float, done: SuiteRun) -> str:
+    """The reference workload (:func:`machine.reference_s`) before and after the suite,
+    and the suite's wall time as a multiple of their mean: the figure that compares
+    across hours and machines."""
+    mean = 0.5 * (before_s + after_s)
+    return (
+        f"reference workload (the canonical scenario built and planned here): {before_s:.2f} s "
+        f"before the suite, {after_s:.2f} s after; the suite's wall time {done.wall_s:.0f} s "
+        f"= {done.wall_s / mean:.0f} x the reference"
+    )
+
+
 def parse_args() -> argparse.Namespace:
     """The options, checked (hands resolved into ``args.hands``)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -166,6 +182,15 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument(
         "--baseline", type=Path, help="a previous results.jsonl (or its folder) to compare"
     )
+    parser.add_argument(
+        "--reference",
+        type=int,
+        default=3,
+        metavar="K",
+        help="time a fixed workload (the canonical scenario built and planned, the fastest "
+        "of K runs) before and after the suite, the run's baseline on this machine now "
+        "(default 3; 0: do not)",
+    )
     args = parser.parse_args()
     if args.baseline is not None:  # checked now, not after the whole run
         if args.baseline.is_dir():
@@ -176,6 +201,8 @@ def parse_args() -> argparse.Namespace:
         parser.error("--jobs: at least 1")
     if args.grasp_backups < 0:
         parser.error("--grasp-backups: at least 0")
+    if args.reference < 0:
+        parser.error("--reference: at least 0")
 
     hands = tuple(str(Path(h).resolve()) if h.endswith(".json") else h for h in args.hands or HANDS)
     for h in hands:
@@ -219,6 +246,7 @@ def main() -> None:
               f"{args.jobs} worker(s)", flush=True)  # fmt: skip
         measured = speedup(specs, min(k, n), args.jobs, args.out, **kw)
         print(measured, flush=True)
+    before = reference_s(args.reference) if args.reference else None
     print(f"{what}, {args.jobs} worker(s), budget {steps} steps{limit}, output {args.out}")
 
     def show(r: ScenarioResult, counted: int, total: int) -> None:
@@ -228,6 +256,7 @@ def main() -> None:
             print(result_line(r, counted, total), flush=True)
 
     done: SuiteRun = run_suite(specs, n, out=args.out, workers=args.jobs, on_result=show, **kw)
+    reference = "" if before is None else reference_line(before, reference_s(args.reference), done)
     results = done.results
     text = summarize(results)
     if skip:
@@ -237,6 +266,8 @@ def main() -> None:
             text += f" -- only {len(results)} of {n} found in {len(specs)} draws"
     text += "\n" + done.describe().split("\n", 1)[1]
     text += "\n" + time_spent(results, done.skipped)
+    if reference:
+        text += "\n" + reference
     if measured:
         text += "\n" + measured
     if args.baseline is not None:
