@@ -604,3 +604,31 @@ def test_when_no_lift_apart_passes_the_first_failure_stands(scenes, monkeypatch)
         transfer(scene, *case)
     # directions apart were tried, their failures dropped unreported
     assert info.value is first and tried[0] and len(tried) > 1 and not any(tried[1:])
+
+
+@pytest.mark.parametrize("duration_s", [0.04, 0.8])
+def test_the_failure_reported_is_the_dense_checks_whatever_the_samples_showed(
+    scenes, monkeypatch, duration_s
+):
+    """A via that fails at its own samples is given up without the dense check; the
+    failure a transfer reports is still the dense check's, the same numbers as with
+    every via checked densely (0.04 s: every via too fast, their geometry decides the
+    kind; 0.8 s, one via through the box's middle: a Coal failure)."""
+    scene, case = scenes["edge-static"], CASES[4][1:]
+    monkeypatch.setattr(transfer_module, "VIA_HEIGHTS", (0.0,))
+    monkeypatch.setattr(transfer_module, "_clear_vias", lambda *args: iter([]))
+    real_sure, found = transfer_module.failure_at_samples, []
+
+    def recorded(*args, **kwargs):
+        found.append(real_sure(*args, **kwargs))
+        return found[-1]
+
+    monkeypatch.setattr(transfer_module, "failure_at_samples", recorded)
+    with pytest.raises(PlanningError) as by_samples:
+        transfer(scene, *case, duration_s=duration_s)
+    assert found and all(x is not None for x in found)  # decided at the samples
+    monkeypatch.setattr(transfer_module, "failure_at_samples", lambda *args, **kwargs: None)
+    with pytest.raises(PlanningError) as dense:
+        transfer(scene, *case, duration_s=duration_s)
+    a, b = by_samples.value, dense.value
+    assert (a.kind, a.measured, a.required, a.time_s) == (b.kind, b.measured, b.required, b.time_s)

@@ -26,11 +26,13 @@ from regrasp_pin.model.distances import (
 from regrasp_pin.model.hand import Hand
 from regrasp_pin.model.motion import ObjectMotion
 from regrasp_pin.model.objects import Box, Prism
+from regrasp_pin.verify import finger_motion
 from regrasp_pin.verify.finger_motion import (
     OBJECT_LEVER_M,
     Failure,
     VerificationReport,
     densify,
+    failure_at_samples,
     verify_finger_motion,
 )
 
@@ -556,6 +558,86 @@ def test_broad_phase_never_changes_the_answer(five, allegro, case, seed, retreat
     c = np.asarray(centre) + retreat_m * np.asarray(away)
     T = np.stack([pose(c + rng.normal(0, 0.01, 3), rng.normal(0, 0.2, 3)) for _ in range(n)])
     assert_matches_brute_force(hand, obj, finger, t, q, T, rng.uniform(0.0, 0.01, n))
+
+
+@pytest.mark.parametrize("case", range(len(CASES)))
+def test_a_failure_at_the_samples_is_one_the_dense_check_finds(five, allegro, case, monkeypatch):
+    """Random motions of eight samples, grazing, penetrating and clear: a failure that
+    :func:`failure_at_samples` finds is a failing run of the dense check's (same check,
+    time within it, a margin no better than the dense minimum), and where it finds none
+    the given samples alone pass (the dense check with one step per interval)."""
+    hand_name, finger, obj, centre, away = CASES[case]
+    hand = five if hand_name == "five_finger" else allegro
+    f = hand.finger(finger)
+    monkeypatch.setattr(finger_motion, "MAX_REPORTED_FAILURES", 10_000)  # every run kept
+    outcomes = []
+    for seed in range(6):
+        rng = np.random.default_rng(1000 * case + seed)
+        n = 8
+        t = np.cumsum(rng.uniform(0.05, 0.2, n))
+        span = 1.06 if seed == 0 else 0.5
+        q_f = f.q_mid + rng.uniform(-0.5, 0.5, (n, f.k)) * span * (f.upper - f.lower)
+        q = hand.to_full(finger, q_f, np.tile(hand.neutral(), (n, 1)))
+        c = np.asarray(centre) + 0.02 * (seed % 3) * np.asarray(away)
+        T = np.stack([pose(c + rng.normal(0, 0.005, 3), rng.normal(0, 0.1, 3)) for _ in range(n)])
+        limits = {
+            "tip_clearance_m": rng.uniform(0.0, 0.01, n),
+            "link_clearance_m": 0.002,
+            "finger_clearance_m": 0.001,
+        }
+        sure = failure_at_samples(hand, obj, finger, t, q, T, **limits)
+        dense = verify_finger_motion(hand, obj, finger, t, q, T, **limits)
+        outcomes.append(sure is not None)
+        if sure is None:
+            coarse = verify_finger_motion(
+                hand, obj, finger, t, q, T, **limits, max_joint_step_rad=1e3
+            )
+            assert coarse.ok and coarse.n_samples == n
+            continue
+        assert not dense.ok
+        if sure.kind == "joint-limit":
+            assert not dense.joint_limits_ok
+            continue
+        assert sure.value < sure.required and sure.time_s in t
+        assert dense.min_clearance_margin_m <= sure.value - sure.required + 1e-12
+        assert any(
+            (x.kind, x.detail) == (sure.kind, sure.detail)
+            and x.t_first_s <= sure.time_s <= x.t_last_s
+            for x in dense.failures
+        )
+    assert any(outcomes)  # the cases fail at their samples, some of them
+
+
+def test_a_sweep_between_two_clear_samples_is_no_failure_at_the_samples(five):
+    """None says nothing: both samples clear the box, the motion between them does not."""
+    size, T, q, t = _sweep_case(five, 2)
+    obj, Ts = Box(size), np.tile(T, (2, 1, 1))
+    assert failure_at_samples(five, obj, "index", t, q, Ts, tip_clearance_m=0.0) is None
+    assert not verify_finger_motion(five, obj, "index", t, q, Ts, tip_clearance_m=0.0).ok
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "argument"),
+    [
+        ({"tip_clearance_m": -0.001}, "tip_clearance_m"),
+        ({"tip_clearance_m": [0.0, 0.0, 0.0]}, "tip_clearance_m"),
+        ({"link_clearance_m": -1.0}, "link_clearance_m"),
+        ({"finger_clearance_m": np.nan}, "finger_clearance_m"),
+        ({"penetration_tol_m": -1e-5}, "penetration_tol_m"),
+        ({"q_full": np.zeros((3, 15))}, "q_full"),
+    ],
+)
+def test_a_failure_at_the_samples_names_a_bad_argument(five, kwargs, argument):
+    args = {
+        "times_s": [0.0, 1.0],
+        "q_full": np.tile(five.neutral(), (2, 1)),
+        "T_palm_object": np.tile(pose([0, 0, 0.3]), (2, 1, 1)),
+        "tip_clearance_m": 0.0,
+    }
+    args.update(kwargs)
+    with pytest.raises(InputError) as err:
+        failure_at_samples(five, Box((0.04, 0.04, 0.04)), "index", **args)
+    assert err.value.argument == argument
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])

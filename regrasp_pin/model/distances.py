@@ -368,6 +368,8 @@ class PairDistances:
         self.swept = np.full(self.lb.shape, -np.inf)
         self.exact = np.full(self.lb.shape, np.nan)
         self.n_queries = 0
+        # where Coal could not measure a penetration and the value is the bound's
+        self.unmeasured = np.zeros(self.lb.shape, bool)
         self._request = coal.DistanceRequest()
         self._request.gjk_tolerance = 1e-9  # separation distances to ~1e-9 m
         # penetration depths (EPA) to 1e-6 m: tighter tolerances make EPA fail on
@@ -717,6 +719,7 @@ class PairDistances:
                 )
                 if not values[n] > -_MAX_DEPTH_M:  # keep the (negative) lower bound
                     values[n] = min(self.lb[rows[n], cols[n]], 0.0)
+                    self.unmeasured[rows[n], cols[n]] = True
                     logger.warning(
                         "Coal could not measure a penetration depth; using the "
                         "broad-phase bound %.6f m",

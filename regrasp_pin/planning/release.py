@@ -31,11 +31,11 @@ from ..model.clearance import LinkClearance
 from ..model.hand import Hand
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
-from ..verify.finger_motion import VerificationReport, verify_finger_motion
+from ..verify.finger_motion import Failure, VerificationReport, verify_finger_motion
 from .lift import back_off
 from .timing import check_joint_speed, duration_for_move, minimum_jerk
 
-__all__ = ["Release", "plan_release", "verify_or_raise"]
+__all__ = ["Release", "check_failure", "plan_release", "verify_or_raise"]
 
 
 @dataclass(frozen=True)
@@ -232,12 +232,20 @@ def verify_or_raise(
     )
     if report.ok:
         return report
-    worst = report.worst_failure
-    raise PlanningError(
+    raise check_failure(what, finger, report.worst_failure, report.time_s)
+
+
+def check_failure(
+    what: str, finger: str, worst: Failure | None, time_s: float | None
+) -> PlanningError:
+    """The PlanningError of a motion (``what``) that fails its Coal check with ``worst``
+    (None: only a joint left its limits, ``joint-limit``) at ``time_s`` [s]: its kind,
+    distance and the required one [m]."""
+    return PlanningError(
         f"{what} fails the Coal check"
         + ("" if worst is None else f" ({worst.kind}, {worst.value * 1e3:.2f} mm)"),
         finger=finger,
-        time_s=report.time_s,
+        time_s=time_s,
         kind=FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind,
         measured=None if worst is None else worst.value,
         required=None if worst is None else worst.required,

@@ -60,9 +60,9 @@ from ..model.clearance import FingerClearance, LinkClearance
 from ..model.hand import Finger, Hand, speed_shares
 from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject
-from ..verify.finger_motion import VerificationReport
+from ..verify.finger_motion import VerificationReport, failure_at_samples
 from .lift import along, back_off, directions_apart
-from .release import verify_or_raise
+from .release import check_failure, verify_or_raise
 from .timing import check_joint_speed, minimum_jerk, peak_ratio, progress, velocity_blend
 
 __all__ = ["LIFT_FRACTION", "VIA_HEIGHTS", "Transfer", "plan_transfer"]
@@ -285,7 +285,8 @@ def _through_vias(m: _Moving, ends: _Ends, reported: bool = True) -> Transfer:
     that is within the velocity limits and passes its Coal check (module docstring);
     else the failure :func:`plan_transfer` raises (``reported`` False, for a caller
     that drops the failure: the last Coal failure, else a too fast via's, without the
-    Coal checks of the too fast vias that :func:`_reported_failure` would make)."""
+    Coal checks of the too fast vias that :func:`_reported_failure` would make; each
+    via's as :class:`_CoalCheck` makes them)."""
     hand, obj, f, times, T, P, Q = m.hand, m.obj, m.f, m.times, m.T, m.P, m.Q
     finger, clearance_m, finger_clearance_m = f.name, m.clearance_m, m.finger_clearance_m
     lift, land, q_lift, q_app = ends.lift, ends.land, ends.q_lift, ends.q_app
@@ -311,35 +312,14 @@ def _through_vias(m: _Moving, ends: _Ends, reported: bool = True) -> Transfer:
         for h in VIA_HEIGHTS
     ]
     q_others = m.q_others
-
-    def coal_failure(
-        q: np.ndarray,
-    ) -> tuple[PlanningError | None, VerificationReport | None, np.ndarray]:
-        q_full = q_others.copy()
-        q_full[:, f.q_indices] = q
-        try:
-            report = verify_or_raise(
-                "the joint-space transfer",
-                hand,
-                obj,
-                finger,
-                times,
-                q_full,
-                T,
-                tip_clearance_m=required,
-                link_clearance_m=np.maximum(required, m.link_clearance_m),
-                finger_clearance_m=finger_clearance_m,
-            )
-        except PlanningError as exc:
-            return exc, None, q_full
-        return None, report, q_full
+    coal = _CoalCheck(m, required)
 
     # the fixed vias within the velocity limits first, then vias sampled clear of the
     # object and the other fingers; the fixed ones that are too fast only if none of
     # those passes, and then only their geometry decides whether a velocity failure
     # is reported
     too_fast: list[tuple[float, np.ndarray, PlanningError]] = []
-    failures: list[PlanningError] = []
+    failures: list[tuple[np.ndarray, PlanningError]] = []  # fixed vias failing Coal
 
     def sampled() -> Iterator[np.ndarray]:  # asked for only when a fixed via fails
         return _clear_vias(
@@ -356,14 +336,68 @@ def _through_vias(m: _Moving, ends: _Ends, reported: bool = True) -> Transfer:
             continue
         if math.isnan(height):
             checked.append(q)
-        failure, report, q_full = coal_failure(q)
+        failure, report, q_full = coal.failure(q)
         if report is not None:
             return _transfer(hand, obj, finger, times, T, q, q_full, report, height, (i_a, i_b))
         if failure is not None and not math.isnan(height):
-            failures.append(failure)
+            failures.append((q, failure))
     if not reported:
-        raise failures[-1] if failures else too_fast[0][2]
-    raise _reported_failure(too_fast, failures, coal_failure)
+        raise failures[-1][1] if failures else too_fast[0][2]
+    raise _reported_failure(too_fast, [q for q, _ in failures], coal)
+
+
+class _CoalCheck:
+    """The Coal checks of a transfer's trajectories through its vias: the finger
+    ``(S, k)`` [rad] at the transfer's times among the other fingers holding, its
+    fingertip ``required`` ``(S,)`` [m] from the object (its other links at least
+    that or their own clearance), clear of the other fingers.
+
+    A trajectory is first checked at its own samples
+    (:func:`~regrasp_pin.verify.finger_motion.failure_at_samples`): a failure there is
+    one of the dense check's, and most trajectories that fail show it there; the dense
+    check runs for the others, and for the failure a transfer reports, for its numbers
+    (:meth:`dense_failure`)."""
+
+    what = "the joint-space transfer"
+
+    def __init__(self, m: _Moving, required: np.ndarray) -> None:
+        self.m = m
+        self.clear = {
+            "tip_clearance_m": required,
+            "link_clearance_m": np.maximum(required, m.link_clearance_m),
+            "finger_clearance_m": m.finger_clearance_m,
+        }
+        self._dense: dict[bytes, PlanningError] = {}  # the dense checks' failures
+
+    def failure(
+        self, q: np.ndarray, at_samples: bool = True
+    ) -> tuple[PlanningError | None, VerificationReport | None, np.ndarray]:
+        """The check of the finger's trajectory ``q``: its failure or its report, and the
+        hand's trajectory ``(S, nq)``. With ``at_samples``, a failure found at the
+        trajectory's own samples comes without the dense check (its numbers those
+        samples')."""
+        m, f = self.m, self.m.f
+        q_full = m.q_others.copy()
+        q_full[:, f.q_indices] = q
+        args = (m.hand, m.obj, f.name, m.times, q_full, m.T)
+        if at_samples:
+            sure = failure_at_samples(*args, **self.clear)
+            if sure is not None:
+                return check_failure(self.what, f.name, sure, sure.time_s), None, q_full
+        try:
+            report = verify_or_raise(self.what, *args, **self.clear)
+        except PlanningError as exc:
+            self._dense[q.tobytes()] = exc
+            return exc, None, q_full
+        return None, report, q_full
+
+    def dense_failure(self, q: np.ndarray) -> PlanningError:
+        """The dense check's failure of ``q``, a trajectory known to fail."""
+        known = self._dense.get(q.tobytes())
+        if known is None:
+            known, _, _ = self.failure(q, at_samples=False)
+        assert known is not None  # failure_at_samples finds only the dense check's
+        return known
 
 
 @dataclass(frozen=True)
@@ -458,7 +492,7 @@ def _candidates(
     fixed: list[tuple[float, np.ndarray]],
     sampled: Callable[[], Iterator[np.ndarray]],
     through: Callable[[np.ndarray], np.ndarray],
-    failures: list[PlanningError],
+    failures: list[tuple[np.ndarray, PlanningError]],
     checked: list[np.ndarray],
 ) -> Iterator[tuple[float, np.ndarray]]:
     """``(via height, trajectory)`` to try: the fixed vias, then, if one of them failed
@@ -474,20 +508,21 @@ def _candidates(
 
 def _reported_failure(
     too_fast: list[tuple[float, np.ndarray, PlanningError]],
-    failures: list[PlanningError],
-    coal_failure: Callable[[np.ndarray], tuple[PlanningError | None, object, np.ndarray]],
+    failed: list[np.ndarray],
+    coal: _CoalCheck,
 ) -> PlanningError:
     """The failure of a transfer no via passed: the velocity failure a longer duration
     fixes soonest among the too fast fixed vias that pass their Coal check, else the
-    last Coal failure."""
-    last = failures[-1] if failures else None
+    last Coal failure (``failed``: the trajectories of the fixed vias that failed it, in
+    order), as the dense check finds it."""
+    last = failed[-1] if failed else None
     for _, q, speed_error in sorted(too_fast, key=lambda c: (_over_speed(c[2]), c[0])):
-        failure, _, _ = coal_failure(q)
+        failure, _, _ = coal.failure(q)
         if failure is None:
             return speed_error
-        last = failure
+        last = q
     assert last is not None  # VIA_HEIGHTS is not empty
-    return last
+    return coal.dense_failure(last)
 
 
 def _transfer(
