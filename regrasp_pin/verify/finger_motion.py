@@ -389,16 +389,16 @@ def verify_finger_motion(
         UnknownNameError: ``finger`` is not a finger of the hand.
     """
     start = time.perf_counter()
-    if not isinstance(hand, Hand):
-        raise InputError("hand", f"is a {type(hand).__name__}", "a regrasp_pin.Hand")
-    if not isinstance(obj, ConvexObject):
-        raise InputError("obj", f"is a {type(obj).__name__}", "a regrasp_pin.ConvexObject")
-    f = hand.finger(finger)
-    t, q, T, motion = _check_trajectory(times_s, q_full, T_palm_object, hand.model.nq)
-    clr = _per_sample(tip_clearance_m, "tip_clearance_m", t.size)
-    link_clr = _per_sample(link_clearance_m, "link_clearance_m", t.size)
-    ff_clr = positive(finger_clearance_m, "finger_clearance_m", allow_zero=True)
-    tol = positive(penetration_tol_m, "penetration_tol_m", allow_zero=True)
+    f, (t, q, T, motion), clr, link_clr, ff_clr, tol = _checked(
+        hand,
+        obj,
+        finger,
+        (times_s, q_full, T_palm_object),
+        tip_clearance_m,
+        link_clearance_m,
+        finger_clearance_m,
+        penetration_tol_m,
+    )
     step = positive(max_joint_step_rad, "max_joint_step_rad")
     tip_step = None if max_tip_step_m is None else positive(max_tip_step_m, "max_tip_step_m")
 
@@ -484,16 +484,16 @@ def failure_at_samples(
     Raises:
         InputError, UnknownNameError: as :func:`verify_finger_motion`.
     """
-    if not isinstance(hand, Hand):
-        raise InputError("hand", f"is a {type(hand).__name__}", "a regrasp_pin.Hand")
-    if not isinstance(obj, ConvexObject):
-        raise InputError("obj", f"is a {type(obj).__name__}", "a regrasp_pin.ConvexObject")
-    f = hand.finger(finger)
-    t, q, T, _ = _check_trajectory(times_s, q_full, T_palm_object, hand.model.nq)
-    clr = _per_sample(tip_clearance_m, "tip_clearance_m", t.size)
-    link_clr = _per_sample(link_clearance_m, "link_clearance_m", t.size)
-    ff_clr = positive(finger_clearance_m, "finger_clearance_m", allow_zero=True)
-    tol = positive(penetration_tol_m, "penetration_tol_m", allow_zero=True)
+    f, (t, q, T, _), clr, link_clr, ff_clr, tol = _checked(
+        hand,
+        obj,
+        finger,
+        (times_s, q_full, T_palm_object),
+        tip_clearance_m,
+        link_clearance_m,
+        finger_clearance_m,
+        penetration_tol_m,
+    )
     pairs = PairDistances(hand, obj, f, q, T, clr - tol, link_clr - tol, ff_clr)
     pairs.run(exact_minima=False)
     # NaN (not queried) is no failure; nor is a bound where Coal could not measure
@@ -501,6 +501,44 @@ def failure_at_samples(
     sure = (pairs.exact < pairs.required - SURE_FAILURE_M) & ~pairs.unmeasured
     found = _distance_failures(pairs, t, sure) + _joint_limit_failures(f, t, q)
     return min(found, key=_severity) if found else None
+
+
+def _checked(
+    hand: Hand,
+    obj: ConvexObject,
+    finger: str,
+    motion: tuple[np.ndarray, np.ndarray, np.ndarray],
+    tip_clearance_m: float | np.ndarray,
+    link_clearance_m: float | np.ndarray,
+    finger_clearance_m: float,
+    penetration_tol_m: float,
+) -> tuple[
+    Finger,
+    tuple[np.ndarray, np.ndarray, np.ndarray, ObjectMotion | None],
+    np.ndarray,
+    np.ndarray,
+    float,
+    float,
+]:
+    """The checks' arguments, checked (:func:`verify_finger_motion`'s): the finger, the
+    trajectory ``(times_s, q_full, T_palm_object)`` as :func:`_check_trajectory`
+    gives it, the tip and link clearances per sample [m], the finger clearance and the
+    penetration tolerance [m]."""
+    if not isinstance(hand, Hand):
+        raise InputError("hand", f"is a {type(hand).__name__}", "a regrasp_pin.Hand")
+    if not isinstance(obj, ConvexObject):
+        raise InputError("obj", f"is a {type(obj).__name__}", "a regrasp_pin.ConvexObject")
+    f = hand.finger(finger)
+    trajectory = _check_trajectory(*motion, hand.model.nq)
+    n = trajectory[0].size
+    return (
+        f,
+        trajectory,
+        _per_sample(tip_clearance_m, "tip_clearance_m", n),
+        _per_sample(link_clearance_m, "link_clearance_m", n),
+        positive(finger_clearance_m, "finger_clearance_m", allow_zero=True),
+        positive(penetration_tol_m, "penetration_tol_m", allow_zero=True),
+    )
 
 
 def _per_sample(value: float | np.ndarray, name: str, n: int) -> np.ndarray:
