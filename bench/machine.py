@@ -73,9 +73,10 @@ def reference_s(repeats: int = 3) -> float:
     forgotten before each run).
 
     A long bench run (the scenario suite) has no baseline of its own in the same run:
-    this workload, timed before and after it, is one. The same machine can run 10-15 %
-    slower an hour later, so a run's wall time divided by the reference compares across
-    hours and machines where the seconds alone do not.
+    this workload, timed before and after it, gauges the machine's speed while it ran
+    (the same machine can run 10-15 % slower an hour later). A coarse gauge: on the
+    2-core machine its value spread over 2.04-2.63 s within an hour, so it tells a
+    large change of the machine between two runs, not a few percent.
     """
     import time
 

@@ -17,9 +17,9 @@ planning times, the full plans won and lost with an exact sign test
 changed; for a baseline of other scenarios (another hand or seed), the two full-plan
 rates with a Fisher exact test (:func:`regrasp_pin.suite.report.rate_difference`).
 A fixed workload, the canonical scenario built and planned in this process
-(:func:`machine.reference_s`, the fastest of ``--reference`` runs), is timed before and after
-the suite: the machine's speed then, printed with the suite's wall time as a multiple
-of it, which compares across hours and machines where the seconds do not.
+(:func:`machine.reference_s`, the fastest of ``--reference`` runs), is timed before and
+after the suite and printed with the suite's wall time as a multiple of it: a coarse
+gauge of the machine's speed during the run.
 Writes ``results.jsonl`` (one :class:`~regrasp_pin.suite.ScenarioResult` per line, in spec order),
 ``skipped.jsonl`` and ``summary.txt`` into ``--out``, with the plans and partial plans.
 
@@ -119,8 +119,8 @@ def speedup(specs: list[ScenarioSpec], k: int, jobs: int, out: Path, **kw) -> st
 
 def reference_line(before_s: float, after_s: float, done: SuiteRun) -> str:
     """The reference workload (:func:`machine.reference_s`) before and after the suite,
-    and the suite's wall time as a multiple of their mean: the figure that compares
-    across hours and machines."""
+    and the suite's wall time as a multiple of their mean (a coarse gauge: it tells a
+    machine that changed by much between two runs)."""
     mean = 0.5 * (before_s + after_s)
     return (
         f"reference workload (the canonical scenario built and planned here): {before_s:.2f} s "
@@ -188,8 +188,8 @@ def parse_args() -> argparse.Namespace:
         default=3,
         metavar="K",
         help="time a fixed workload (the canonical scenario built and planned, the fastest "
-        "of K runs) before and after the suite, the run's baseline on this machine now "
-        "(default 3; 0: do not)",
+        "of K runs) before and after the suite, a coarse gauge of the machine's speed "
+        "during the run (default 3; 0: do not)",
     )
     args = parser.parse_args()
     if args.baseline is not None:  # checked now, not after the whole run
