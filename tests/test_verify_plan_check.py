@@ -189,8 +189,14 @@ def test_joint_limits_and_holding_count_are_reported(clean):
     assert any("only 2 fingers hold" in p for p in chk.problems)
 
 
-def test_bad_arguments_name_themselves(clean):
+def test_bad_arguments_name_themselves(clean, tmp_path):
     plan, _, _ = clean
+    path = tmp_path / "plan.json"
+    plan.save(path)
+    with pytest.raises(InputError, match=r"plan.*is a (str|PosixPath).*Plan\.load"):
+        recheck_plan(str(path))  # a path, not the plan it holds
+    with pytest.raises(InputError, match="plan"):
+        recheck_plan(path)
     with pytest.raises(ValueError, match="max_step_rad"):
         recheck_plan(plan, max_step_rad=0.0)
     bad = _with_q(plan, plan.q[:, :-1])

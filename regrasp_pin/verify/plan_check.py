@@ -54,12 +54,12 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from .._validate import positive, positive_int
 from ..exceptions import InputError
-from ..plan import ContactPhase
+from ..plan import ContactPhase, Plan
 from ._bounds import Shapes, hull_planes, object_bound, pair_bound, sphere_bound
 from ._closure import CLOSURE_TOL, weakest_hold
 
 if TYPE_CHECKING:
-    from ..plan import IdlePhase, JoinPhase, Plan, RegraspPhase, ReleasePhase
+    from ..plan import IdlePhase, JoinPhase, RegraspPhase, ReleasePhase
 
 __all__ = [
     "JointLimitViolation",
@@ -280,10 +280,15 @@ def recheck_plan(
         failure in ``problems``.
 
     Raises:
-        InputError: non-positive tolerances, or a plan whose fingers, joints or frames
+        InputError: ``plan`` not a :class:`~regrasp_pin.plan.Plan` (a path: load it
+            first), non-positive tolerances, or a plan whose fingers, joints or frames
             are not in its URDF, or whose ``q`` does not fit the URDF.
         ModelFileError: the plan's URDF cannot be loaded.
     """
+    if not isinstance(plan, Plan):
+        raise InputError(
+            "plan", f"is a {type(plan).__name__}", "a Plan, e.g. Plan.load('out/plan.json')"
+        )
     max_step = positive(max_step_rad, "max_step_rad")
     pen_tol = positive(penetration_tol_m, "penetration_tol_m", allow_zero=True)
     tip_tol = positive(contact_tol_m, "contact_tol_m", allow_zero=True)
