@@ -9,13 +9,20 @@ import numpy as np
 import pytest
 
 from regrasp_pin import make_scenario
+from regrasp_pin.backups import plan_scenario
+from regrasp_pin.exceptions import PlanningError
 from regrasp_pin.grasp.choice import NewContact
 from regrasp_pin.grasp.holding import start_holding
 from regrasp_pin.model.clearance import FingerClearance
+from regrasp_pin.planning import recovery
+from regrasp_pin.planning.advance import contenders as contenders_of
 from regrasp_pin.planning.recovery import _room_taken, _signature
 from regrasp_pin.planning.release import Release
 from regrasp_pin.planning.search import LANDING_FINGER_CLEARANCE_M
 from regrasp_pin.planning.state import PlanState
+from regrasp_pin.suite.build import build_scenario
+from regrasp_pin.suite.specs import neighbour_specs
+from regrasp_pin.verify.plan_check import recheck_plan
 
 
 @pytest.fixture(scope="module")
@@ -137,3 +144,22 @@ def test_states_whose_let_go_fingers_differ_are_not_the_same_for_the_backtrackin
     assert _signature(_state()) != same
     ended = replace(_state(index=_released(0.2, 0.5)), ended=(_released(0.1, 0.4),))
     assert _signature(ended) != same
+
+
+def test_a_backtrack_lets_another_finger_due_then_go_first(monkeypatch):
+    """The demo's -100 deg neighbour at 40 deg/s: the little finger, joined on a side
+    face that the turn carries out of its reach, cannot lift off at 1.87 s. Backing up
+    to its regrasp at 1.47 s, the ring finger, due then too, regrasps first, and the plan
+    goes on to the end (re-checked from the plan alone). Without that option the
+    backtrack only lands the little finger elsewhere on that face, and the plan fails."""
+    spec = next(s for s in neighbour_specs() if s.name == "five_finger-hexagon--100deg-40dps")
+    scen = build_scenario(spec)
+    plan = plan_scenario(scen)
+    check = recheck_plan(plan.plan, mu=scen.params.mu)
+    assert check.ok, check.problems
+    monkeypatch.setattr(
+        recovery, "contenders_of", lambda triggers, ctx: contenders_of(triggers, ctx)[:1]
+    )
+    with pytest.raises(PlanningError) as failed:
+        plan_scenario(scen)
+    assert failed.value.finger == "little" and failed.value.time_s == pytest.approx(1.87)

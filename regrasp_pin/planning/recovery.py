@@ -8,8 +8,9 @@ whose contact or links take the room of the finger's best new contact regrasps f
 out of that room, now or before one of the last regrasps (:func:`_make_room`); where
 the finger can only let go with an idle finger joining in its place, a neighbour that
 takes the joining finger's room regrasps first, out of it (:func:`_make_room_for_join`); an earlier
-regrasp is planned again, to let the finger go before it or to land in time, or, if
-time was not the problem, to land elsewhere (:func:`_backtrack`). An option already
+regrasp is planned again, with another finger due then going first, to let the finger
+go before it or to land in time, or, if time was not the problem, to land elsewhere
+(:func:`_backtrack`). An option already
 tried from the same state is not tried again (a retry that repeats what failed is not
 a search).
 """
@@ -28,6 +29,7 @@ from ..grasp.choice import TIP_GAP_M, NewContact, Room, apart_threshold, tip_gap
 from ..grasp.necessity import closure_possible_with
 from ..model.clearance import FingerClearance
 from .advance import Step, advance, window
+from .advance import contenders as contenders_of
 from .letgo import idle_fingers, join_origin
 from .schedule import TIME_TOL_S, LiftOffWindow
 from .search import LANDING_FINGER_CLEARANCE_M
@@ -476,10 +478,13 @@ def _backtrack(
     """Change an earlier decision so that ``trig.finger`` can go; None if none helps.
 
     The last regrasps are revisited, the latest first (at most ``_BACKTRACK_DEPTH``).
-    If the finger ran out of time (its window closed, or no regrasp landed in time),
-    it regrasps early, before that regrasp; or that regrasp lands one regrasp before
-    the finger's hold is lost. Otherwise that regrasp lands elsewhere than it did.
-    On success the steps after the revisited one are dropped (they are planned again).
+    At each, first another finger due then (a contender of that step) regrasps first,
+    as :func:`_another_first` offers at a failure: a finger whose regrasp came later
+    may, by going first, leave the revisited finger a way out. Then, if the finger ran
+    out of time (its window closed, or no regrasp landed in time), it regrasps early,
+    before that regrasp; or that regrasp lands one regrasp before the finger's hold is
+    lost. Otherwise that regrasp lands elsewhere than it did. On success the steps
+    after the revisited one are dropped (they are planned again).
     """
     timing = failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE)
     D = ctx.params.regrasp.duration_s
@@ -487,7 +492,12 @@ def _backtrack(
     for depth in range(1, min(_BACKTRACK_DEPTH, len(steps)) + 1):
         step = steps[-depth]
         kept = steps[: len(steps) - depth]
-        options: list[tuple[str, Trigger, dict]] = []
+        # another finger due then goes first (the key _another_first gives it)
+        options: list[tuple[str, Trigger, dict]] = [
+            (f"{alt.finger} first", alt, {})
+            for alt in contenders_of(step.triggers, ctx)
+            if alt.finger != step.trig.finger
+        ]
         h_then = step.before.holding.get(trig.finger)
         if (
             timing
