@@ -1,4 +1,5 @@
-"""Backing up (regrasp_pin.planning.recovery): which neighbour takes a finger's room."""
+"""Backing up (regrasp_pin.planning.recovery): which neighbour takes a finger's room,
+and another finger going first at a backtrack."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from regrasp_pin.exceptions import PlanningError
 from regrasp_pin.grasp.choice import NewContact
 from regrasp_pin.grasp.holding import start_holding
 from regrasp_pin.model.clearance import FingerClearance
+from regrasp_pin.plan import RegraspPhase
 from regrasp_pin.planning import recovery
 from regrasp_pin.planning.advance import contenders as contenders_of
 from regrasp_pin.planning.recovery import _room_taken, _signature
@@ -157,6 +159,10 @@ def test_a_backtrack_lets_another_finger_due_then_go_first(monkeypatch):
     plan = plan_scenario(scen)
     check = recheck_plan(plan.plan, mu=scen.params.mu)
     assert check.ok, check.problems
+    ring = [p for p in plan.plan.phases["ring"] if isinstance(p, RegraspPhase)]
+    assert any(p.t_start == pytest.approx(1.47) for p in ring)  # where the little went
+    little = plan.plan.phases["little"]
+    assert not any(isinstance(p, RegraspPhase) and p.t_start > 1.47 for p in little)
     monkeypatch.setattr(
         recovery, "contenders_of", lambda triggers, ctx: contenders_of(triggers, ctx)[:1]
     )

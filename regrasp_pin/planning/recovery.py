@@ -7,12 +7,11 @@ contact with which they would (:func:`_free_first`); a neighbour
 whose contact or links take the room of the finger's best new contact regrasps first,
 out of that room, now or before one of the last regrasps (:func:`_make_room`); where
 the finger can only let go with an idle finger joining in its place, a neighbour that
-takes the joining finger's room regrasps first, out of it (:func:`_make_room_for_join`); an earlier
-regrasp is planned again, with another finger due then going first, to let the finger
-go before it or to land in time, or, if time was not the problem, to land elsewhere
-(:func:`_backtrack`). An option already
-tried from the same state is not tried again (a retry that repeats what failed is not
-a search).
+takes the joining finger's room regrasps first, out of it (:func:`_make_room_for_join`);
+an earlier regrasp is planned again, with another finger due then going first, to let
+the finger go before it or to land in time, or, if time was not the problem, to land
+elsewhere (:func:`_backtrack`). An option already tried from the same state is not
+tried again (a retry that repeats what failed is not a search).
 """
 
 from __future__ import annotations
