@@ -174,14 +174,14 @@ def _planned_once(monkeypatch):
 
 
 def test_no_plan_exits_1_with_json_on_stdout(tmp_path, capsys, monkeypatch):
-    """A turn the five-finger hand cannot follow (-100 deg at 40 deg/s: two holds end
-    together at the start): exit code 1, the failure as JSON with its kind, and the
-    partial plan written. The failing finger is the little finger, which joined: it has
-    no start contact to change, so there is no backup. (Planned once: the second command
-    is given the failure the first planned, the same scenario; what it makes of it is
-    checked.)"""
+    """A turn the five-finger hand cannot follow (-140 deg at 40 deg/s; -100 deg failed
+    so until a backtrack let another finger due then go first): exit code 1, the
+    failure as JSON with its kind, and the partial plan written. The failing finger is
+    the little finger, which joined: it has no start contact to change, so there is no
+    backup. (Planned once: the second command is given the failure the first planned,
+    the same scenario; what it makes of it is checked.)"""
     asked = _planned_once(monkeypatch)
-    argv = ["demo", "--angle", "-100", "--rate", "40", "--no-plots", "--out", str(tmp_path)]
+    argv = ["demo", "--angle", "-140", "--rate", "40", "--no-plots", "--out", str(tmp_path)]
     assert main([*argv, "--json"]) == 1
     captured = capsys.readouterr()
     doc = json.loads(captured.out)
