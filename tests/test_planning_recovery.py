@@ -1,5 +1,5 @@
-"""Backing up (regrasp_pin.planning.recovery): which neighbour takes a finger's room,
-and another finger going first at a backtrack."""
+"""Backing up (regrasp_pin.planning.recovery): which neighbour takes a finger's room
+(and when none is asked), and another finger going first at a backtrack."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 from regrasp_pin import make_scenario
 from regrasp_pin.backups import plan_scenario
-from regrasp_pin.exceptions import PlanningError
+from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.grasp.choice import NewContact
 from regrasp_pin.grasp.holding import start_holding
 from regrasp_pin.model.clearance import FingerClearance
@@ -20,8 +20,8 @@ from regrasp_pin.planning import recovery
 from regrasp_pin.planning.advance import contenders as contenders_of
 from regrasp_pin.planning.recovery import _room_taken, _signature
 from regrasp_pin.planning.release import Release
-from regrasp_pin.planning.search import LANDING_FINGER_CLEARANCE_M
-from regrasp_pin.planning.state import PlanState
+from regrasp_pin.planning.search import LANDING_FINGER_CLEARANCE_M, SearchBudget
+from regrasp_pin.planning.state import PlanState, Trigger
 from regrasp_pin.suite.build import build_scenario
 from regrasp_pin.suite.specs import neighbour_specs
 from regrasp_pin.verify.plan_check import recheck_plan
@@ -122,6 +122,24 @@ def test_a_neighbour_whose_links_meet_the_finger_takes_the_room_of_its_posture(c
     assert _room_taken(ctx, state, "ring", "middle", wanted, sep, False) is None
     # the same contact with the fingers apart leaves the room
     assert _room_taken(ctx, state, "ring", "middle", _wanted(far, clear, t), sep) is None
+
+
+def test_no_neighbour_makes_room_for_a_finger_that_cannot_lift_off():
+    """A force-closure failure: without the finger the others are not in force closure,
+    so it never got to choose a contact, and room is not what it lacks (a neighbour
+    moving to free it is _free_first's, with that as its test). No neighbour is asked to
+    make room, and no search step is spent on it."""
+    budget = SearchBudget.of(100)
+    ctx = SimpleNamespace(budget=budget, tried=set())
+    trig = Trigger(time_s=1.0, finger="thumb", reason="joint near its limit", lost_s=1.3)
+    failure = PlanningError(
+        "without it the others are not in force closure",
+        finger="thumb",
+        time_s=1.0,
+        kind=FailureKind.FORCE_CLOSURE,
+    )
+    assert recovery._make_room(ctx, None, trig, [trig], [], failure) is None
+    assert budget.steps == 0 and not ctx.tried
 
 
 def _released(t_start: float, q_end: float) -> Release:

@@ -813,10 +813,10 @@ class _Screen:
             self._reject_links(links[refused], tip[refused])
             raise self.failure(screened + self.rejected["link clearance"], idx.size, screened)
         most = max(r for r, _, _ in passing)
-        # among those after which most fingers could let go: the quality kept, then first
-        _, position, j = max(
-            (kept(int(idx[j])), -position, position, j) for r, position, j in passing if r == most
-        )[1:]
+        # among those after which most fingers could let go (in order): the first that
+        # keeps the quality, else the first; each later one's hull only if needed
+        best = [(position, j) for r, position, j in passing if r == most]
+        position, j = next(((pos, j) for pos, j in best if kept(int(idx[j]))), best[0])
         return self.new_contact(int(idx[j]), position, j, ranked, P, n_P)
 
     def new_contact(

@@ -131,6 +131,8 @@ def _make_room(
     what follows is planned again after it."""
     if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
         return None  # a matter of time, not of room
+    if failure.kind == FailureKind.FORCE_CLOSURE:
+        return None  # the finger cannot lift off at all: the others' grasp (_free_first)
     name, h = trig.finger, state.holding[trig.finger]
     win, _ = window(ctx, state, trig, triggers)
     # where to go first from: now, or before one of the last regrasps (the finger
