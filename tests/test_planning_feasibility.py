@@ -1,14 +1,21 @@
 """What no plan can avoid (regrasp_pin.planning.feasibility): how long a finger could
-hold from the start without a regrasp, read from its manifold."""
+hold from the start without a regrasp, read from its manifold, and an idle finger that
+must hold where too few fingers reach the object."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
+from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.grasp.manifold import Manifold
 from regrasp_pin.planning.feasibility import longest_start_hold
+from regrasp_pin.planning.planner import plan_manipulation
+from regrasp_pin.planning.setup import plan_setup
+from regrasp_pin.suite.build import build_scenario
+from regrasp_pin.suite.specs import generate_specs
 
 TIMES = np.array([1.0, 1.5, 2.0, 2.5, 3.0])  # the motion's start need not be 0
 
@@ -64,3 +71,30 @@ def test_the_margin_to_the_limits_counts_and_none_holdable_is_the_start():
     assert longest_start_hold(_manifold(h, margin=0.1), 0.2) == TIMES[0]
     h[0] = False
     assert longest_start_hold(_manifold(h), 0.1) == TIMES[0]
+
+
+def test_an_idle_finger_that_must_hold_where_too_few_fingers_reach_proves_no_plan():
+    """Suite spec 42 (the five-finger hand turning a triangular prism -256 deg about
+    the thumb's contact): for two seconds neither the index nor the middle finger has a
+    usable contact, so the thumb, the ring and the idle little finger are the only
+    fingers that could hold, and all three must, each on one contact (a flight spans a
+    grid time). No contact of the little finger stays usable that long, so no plan
+    exists: the planner says so before any search, naming the little finger."""
+    scen = build_scenario(generate_specs(43, 0)[42])
+    with pytest.raises(PlanningError) as failed:
+        plan_manipulation(scen.hand, scen.obj, scen.motion, grasp=scen.grasp, params=scen.params)
+    exc = failed.value
+    assert exc.kind == FailureKind.INFEASIBLE and exc.finger == "little"
+    assert "regrasps" not in exc.partial.summary["stage_s"]  # no search ran
+    # the claim, read from the manifolds on its own
+    every = plan_setup(scen.hand, scen.obj, scen.motion, scen.params).every
+    t = every["little"].times_s
+    run = (t >= exc.time_s - 1e-9) & (t <= exc.time_s + exc.required + 1e-9)
+    assert run.sum() >= 3  # a stretch of grid times, longer than a flight
+    reach = {n: m.usable(0.0)[run].any(axis=1) for n, m in every.items()}
+    assert set(reach) == {"thumb", "index", "middle", "ring", "little"}
+    assert not reach["index"].any() and not reach["middle"].any()
+    assert all(reach[n].all() for n in ("thumb", "ring", "little"))
+    assert scen.params.min_holding == 3
+    assert not every["little"].usable(0.0)[run].all(axis=0).any()
+    assert every["ring"].usable(0.0)[run].all(axis=0).any()  # the ring could

@@ -38,10 +38,12 @@ def must_hold_runs(
     cannot let go (:func:`~regrasp_pin.grasp.necessity.must_hold`).
 
     An idle finger may join in place of one that lets go (:mod:`.planning.letgo`), so it
-    counts among those that could hold; its manifold is the one a join would build. The
-    runs are only claimed when every flight spans a grid time (regrasps last longer than
-    the grid step), as the proof needs, and ``params.prove_infeasible``; else there are
-    none.
+    counts among those that could hold; its manifold is the one a join would build. It
+    is examined too: where the others cannot hold without it (e.g. only three fingers
+    have a usable contact at all), it must be holding, on one contact through the run,
+    though it did not start in the grasp. The runs are only claimed when every flight
+    spans a grid time (regrasps last longer than the grid step), as the proof needs, and
+    ``params.prove_infeasible``; else there are none.
     """
     step = float(np.diff(m_times).max()) if m_times.size > 1 else np.inf
     if not params.prove_infeasible or params.regrasp.duration_s <= step + TIME_TOL_S:
@@ -52,7 +54,7 @@ def must_hold_runs(
         else dict(manifolds)
     )
     # a plan holds to the motion's end, its last sample included (planning.state)
-    return every, must_hold(every, sample, obj, params.mu, list(manifolds))
+    return every, must_hold(every, sample, obj, params.mu, list(every))
 
 
 def longest_start_hold(man: Manifold, margin_rad: float) -> float:
@@ -93,7 +95,7 @@ def first_infeasibility(
     """The first run that no plan can get through, with the time the finger's contact
     leaves its limits: a run from the start that the finger's tracked starting hold
     does not last through, or a later run no contact of the finger lasts through (as
-    the manifolds find); None if there is none."""
+    the manifolds find; the finger idle or holding); None if there is none."""
     bad = []
     for run in runs:
         held = state.holding.get(run.finger)
@@ -118,8 +120,8 @@ def no_plan_exists(
     which = "its contact does not stay" if run.k_from == 0 else "none of its contacts stays"
     return PlanningError(
         f"no plan exists: from t={run.t_from_s:.3f} s to t={run.t_to_s:.3f} s no grasp "
-        f"without it is in force closure, so it cannot let go, but {which} within its "
-        f"joint limits that long (it leaves them at t={lost:.3f} s)",
+        f"without it is in force closure, so it must hold without letting go, but "
+        f"{which} within its joint limits that long (it leaves them at t={lost:.3f} s)",
         finger=run.finger,
         time_s=run.t_from_s,
         partial=plan_until(ctx, state, ctx.scene.motion.t_start),
