@@ -128,11 +128,13 @@ def _make_room(
     then regrasps (now, or before one of the last regrasps if there is no time left
     now), lands before the finger's hold is lost, and keeps out of that room: its new
     contact away from the wanted one, its finger clear of the finger standing there;
-    what follows is planned again after it."""
+    what follows is planned again after it. Not after a failure of time (finger-busy,
+    too-late, budget), nor of force closure: that finger never chose a contact, as the
+    others do not hold without it (:func:`_free_first` moves one of them for that)."""
     if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
         return None  # a matter of time, not of room
     if failure.kind == FailureKind.FORCE_CLOSURE:
-        return None  # the finger cannot lift off at all: the others' grasp (_free_first)
+        return None  # it cannot lift off at all: a matter of the others' grasp
     name, h = trig.finger, state.holding[trig.finger]
     win, _ = window(ctx, state, trig, triggers)
     # where to go first from: now, or before one of the last regrasps (the finger
