@@ -151,13 +151,7 @@ def plan_manipulation(
     t0 = time.perf_counter()
     if grasp is None:
         grasp = initial_grasp(
-            hand,
-            obj,
-            manifolds,
-            sample,
-            contact=params.contact,
-            mu=params.mu,
-            must_hold=[r for r in runs if r.finger in manifolds],  # the grasp's fingers
+            hand, obj, manifolds, sample, contact=params.contact, mu=params.mu, must_hold=runs
         )
     stage["initial grasp"] = time.perf_counter() - t0
 

@@ -131,10 +131,13 @@ def _make_room(
     what follows is planned again after it. Not after a failure of time (finger-busy,
     too-late, budget), nor of force closure: that finger never chose a contact, as the
     others do not hold without it (:func:`_free_first` moves one of them for that)."""
-    if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
-        return None  # a matter of time, not of room
-    if failure.kind == FailureKind.FORCE_CLOSURE:
-        return None  # it cannot lift off at all: a matter of the others' grasp
+    if failure.kind in (
+        FailureKind.FINGER_BUSY,
+        FailureKind.TOO_LATE,
+        FailureKind.BUDGET,
+        FailureKind.FORCE_CLOSURE,
+    ):
+        return None  # a matter of time, or of the others' grasp: not of room
     name, h = trig.finger, state.holding[trig.finger]
     win, _ = window(ctx, state, trig, triggers)
     # where to go first from: now, or before one of the last regrasps (the finger
