@@ -34,7 +34,7 @@ one worker, the speed-up over one worker is first measured on the first ``--spee
 scenarios (both runs in this run, one after the other) and printed.
 
 Usage: ``python bench/suite.py [--n 100] [--seed 0] [--neighbours] [--hand NAME|FILE.json]
-[--out out/suite] [--jobs 1] [--speedup K] [--max-steps 800] [--grasp-backups 1] [--budget S]
+[--out out/suite] [--jobs 1] [--speedup K] [--max-steps 1600] [--grasp-backups 1] [--budget S]
 [--time-law minimum-jerk|cruise] [--baseline old/results.jsonl] [--reference 3]``.
 """
 

@@ -24,7 +24,7 @@ from regrasp_pin.plan import ContactPhase, IdlePhase, Plan, ReleasePhase
 from regrasp_pin.planning.planner import ManipulationPlan
 from regrasp_pin.scenarios import GraspSearch, contacts_held_through
 
-STEPS = 800  # the scenario's search budget (PlannerParams.max_steps)
+STEPS = 1600  # the scenario's search budget (PlannerParams.max_steps)
 
 
 @pytest.fixture(scope="module")

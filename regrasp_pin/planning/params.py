@@ -30,14 +30,17 @@ class PlannerParams:
         max_backtracks: Most times the planner backs up (another finger first, a
             neighbour making room, an earlier regrasp planned again) before the plan
             gets further in time than it ever got; each new furthest time gets as
-            many again (``max_steps`` bounds the whole search).
+            many again (``max_steps`` bounds the whole search). With 8, the
+            recoveries of the suites' crowded turns were cut before their options
+            ran out; 16 and 32 plan the same default suite (docs/findings.md).
         max_steps: The search budget of the whole call, in steps (a new contact
             chosen, a regrasp planned, a release or a join tried; see
             :class:`~.search.SearchBudget`): once spent, no new attempt starts and the
             planner stops with a ``budget`` failure and the partial plan. Counted, not
             timed, so that a plan is the same on every machine; on a 2-core machine a
-            step took 20-45 ms on average as measured (the suites' plans that spent 400
-            steps took 8-17 s), so 800 steps take about 35 s at most.
+            step takes 12-31 ms on average (2026-12-07: the three random suites' plans
+            that spent 300 steps or more, two workers), so 1600 steps take about 50 s
+            at most (the slowest plan of those suites took 33 s).
         budget_s: An optional wall-clock limit of the whole call [s] (manifolds and
             tracking included; a setup built before the call, ``setup=``, is not) on
             top of ``max_steps``, with the same effect; None (the default): none, so
@@ -80,8 +83,8 @@ class PlannerParams:
     candidates: int = 6
     start_step_s: float = 0.1
     max_starts: int = 5
-    max_backtracks: int = 8
-    max_steps: int = 800
+    max_backtracks: int = 16
+    max_steps: int = 1600
     budget_s: float | None = None
     fingers: tuple[str, ...] | None = None
     exit_tolerance_s: float = 0.25
