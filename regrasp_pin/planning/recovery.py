@@ -107,6 +107,8 @@ def _another_first(
 
 
 _BACKTRACK_DEPTH = 3  # how many earlier regrasps a failure may revisit
+#: failures of time, not of room: no neighbour making room mends them
+_OF_TIME = (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET)
 
 
 def _make_room(
@@ -131,12 +133,7 @@ def _make_room(
     what follows is planned again after it. Not after a failure of time (finger-busy,
     too-late, budget), nor of force closure: that finger never chose a contact, as the
     others do not hold without it (:func:`_free_first` moves one of them for that)."""
-    if failure.kind in (
-        FailureKind.FINGER_BUSY,
-        FailureKind.TOO_LATE,
-        FailureKind.BUDGET,
-        FailureKind.FORCE_CLOSURE,
-    ):
+    if failure.kind in _OF_TIME or failure.kind == FailureKind.FORCE_CLOSURE:
         return None  # a matter of time, or of the others' grasp: not of room
     name, h = trig.finger, state.holding[trig.finger]
     win, _ = window(ctx, state, trig, triggers)
@@ -298,7 +295,7 @@ def _make_room_for_join(
     decides whether the neighbour takes its room). What follows, the hand-over
     included, is planned again from the new state."""
     p = ctx.params
-    if failure.kind in (FailureKind.FINGER_BUSY, FailureKind.TOO_LATE, FailureKind.BUDGET):
+    if failure.kind in _OF_TIME:
         return None  # a matter of time, not of room
     name, h = trig.finger, state.holding[trig.finger]
     stay = [n for n in ctx.scene.hand.finger_names if n != name and n in state.holding]
