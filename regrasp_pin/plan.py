@@ -326,6 +326,10 @@ class Plan:
         summary: Free-form summary (totals, timings).
         mu: The friction coefficient the plan was made for (None: not recorded, as in
             older plans); the re-check verifies force closure with it.
+        torsion_m: The soft-finger torsional friction the plan was made for [m]
+            (:attr:`~regrasp_pin.grasp.contact.ContactModel.torsion_m`; 0: point
+            contacts, also for plans that do not record it); the re-check verifies
+            force closure with it.
     """
 
     hand: dict[str, Any]
@@ -336,6 +340,7 @@ class Plan:
     phases: dict[str, list[Phase]]
     summary: dict[str, Any] = field(default_factory=dict)
     mu: float | None = None
+    torsion_m: float = 0.0
 
     def __repr__(self) -> str:
         phases = {f: len(ps) for f, ps in self.phases.items()}
@@ -352,6 +357,7 @@ class Plan:
         self.T_palm_object = as_array(self.T_palm_object, "T_palm_object", (self.t.size, 7))
         if self.mu is not None:
             self.mu = positive(self.mu, "mu", allow_zero=True)
+        self.torsion_m = positive(self.torsion_m, "torsion_m", allow_zero=True)
 
     # ------------------------------------------------------------------ I/O
     def to_dict(self) -> dict[str, Any]:
@@ -366,6 +372,7 @@ class Plan:
             "phases": {f: [p.to_dict() for p in ps] for f, ps in self.phases.items()},
             "summary": self.summary,
             **({} if self.mu is None else {"mu": self.mu}),
+            **({"torsion_m": self.torsion_m} if self.torsion_m > 0.0 else {}),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -403,6 +410,7 @@ class Plan:
                 phases=phases,
                 summary=d.get("summary", {}),
                 mu=d.get("mu"),
+                torsion_m=d.get("torsion_m", 0.0),
             )
         except KeyError as exc:
             raise InputError(

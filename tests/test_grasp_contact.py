@@ -60,7 +60,14 @@ def test_the_pad_cone_is_the_fingers_own_unless_the_model_sets_one(hand):
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("cone_deg", 0.0), ("cone_deg", 181.0), ("ik_tol_m", np.nan), ("limit_margin_rad", -0.01)],
+    [
+        ("cone_deg", 0.0),
+        ("cone_deg", 181.0),
+        ("ik_tol_m", np.nan),
+        ("limit_margin_rad", -0.01),
+        ("torsion_m", -0.001),
+        ("torsion_m", np.inf),
+    ],
 )
 def test_contact_model_refuses_bad_values_by_name(field, value):
     with pytest.raises(InputError, match=f"ContactModel.{field}"):

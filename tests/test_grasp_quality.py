@@ -10,6 +10,7 @@ from scipy.spatial import ConvexHull
 
 from regrasp_pin.exceptions import InputError
 from regrasp_pin.grasp.quality import (
+    holding_fingers,
     FORCE_CLOSURE_TOL,
     closure_certificate,
     contact_wrenches,
@@ -111,6 +112,55 @@ def test_antipodal_point_pinch_cannot_resist_torque_about_its_axis():
     assert _resists(w, np.array([0, 0.1, 0, 0, 0, 0]))  # it does resist a sideways push
     assert ferrari_canny_epsilon(PINCH_P, PINCH_N, MU, torsion_m=0.005) > 0.01
     assert is_force_closure(PINCH_P, PINCH_N, MU, torsion_m=0.005)
+
+
+def test_soft_finger_wrenches_lie_within_the_elliptic_limit_surface():
+    """With torsional friction each contact adds two pure spins after its cone's edges
+    (k * (n_edges + 2) wrenches); every wrench, split into the force's normal and
+    tangential parts and the torque about the normal beyond ``p x f``, satisfies the
+    soft-finger limit ``|f_t|^2 / mu^2 + tau_n^2 / torsion^2 <= f_n^2`` (an inner
+    linearization: a grasp in force closure by it is by the elliptic model too)."""
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(4, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    p = -0.03 * n + rng.normal(scale=0.004, size=(4, 3))
+    torsion, scale = 0.002, 0.04
+    w = contact_wrenches(p, n, MU, n_edges=8, torque_scale_m=scale, torsion_m=torsion)
+    assert w.shape == (4 * 10, 6)
+    w = w.reshape(4, 10, 6)
+    for i in range(4):
+        f, tau = w[i, :, :3], w[i, :, 3:] * scale
+        f_n = -(f @ n[i])
+        f_t = f + f_n[:, None] * n[i]
+        spin = (tau - np.cross(p[i], f)) @ n[i]
+        assert_close(f_n, np.ones(10), atol=1e-12, what="unit normal force")
+        assert_close(
+            np.linalg.norm(tau - np.cross(p[i], f) - spin[:, None] * n[i], axis=1),
+            np.zeros(10),
+            atol=1e-15,
+            what="extra torque only about the normal",
+        )
+        limit = np.linalg.norm(f_t, axis=1) ** 2 / MU**2 + spin**2 / torsion**2
+        assert np.all(limit <= f_n**2 + 1e-9)
+        assert_close(np.abs(spin[8:]), np.full(2, torsion), atol=1e-15, what="the spins")
+    # the point-contact wrenches are the first n_edges of each contact's, unchanged
+    point = contact_wrenches(p, n, MU, n_edges=8, torque_scale_m=scale).reshape(4, 8, 6)
+    assert_close(w[:, :8], point, atol=0.0, what="cone edges")
+
+
+def test_a_pinch_holds_by_its_torsion_and_more_torsion_holds_better():
+    """Two antipodal soft contacts: epsilon 0 without torsion, positive with it and
+    growing with it (the wrench hull only grows); holding_fingers says 3 for point
+    contacts and 2 with torsion, and refuses a negative torsion by name."""
+    eps = [
+        ferrari_canny_epsilon(PINCH_P, PINCH_N, MU, torque_scale_m=0.03, torsion_m=t)
+        for t in (0.0, 0.0005, 0.001, 0.002)
+    ]
+    assert eps[0] == 0.0
+    assert 0.0 < eps[1] < eps[2] < eps[3]
+    assert holding_fingers(0.0) == 3 and holding_fingers(0.001) == 2
+    with pytest.raises(InputError, match="torsion_m"):
+        holding_fingers(-0.001)
 
 
 def test_single_contact_is_not_force_closure():

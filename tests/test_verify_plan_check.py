@@ -425,10 +425,50 @@ def test_force_closure_of_the_held_contacts_is_checked_given_mu(clean, tmp_path)
         recheck_plan(loaded, mu=-0.1)
 
 
+def test_a_plan_for_soft_fingertips_is_checked_with_its_torsion(clean, tmp_path):
+    """A plan records the torsional friction it was made for; the re-check reads it
+    through the file: two fingers may then hold (a soft pinch can), and force closure is
+    judged with the spins. Here the thumb also lets go while the ring is in the air:
+    the index and middle press the same way and are not in force closure, torsion or
+    not, which the problem names with the torsion; an explicit ``min_holding`` or
+    ``torsion_m`` overrides the plan's, and a negative one is refused by name."""
+    plan, _, _ = clean
+    soft = copy.deepcopy(plan)
+    soft.mu, soft.torsion_m = 0.8, 0.001
+    thumb = soft.phases["thumb"][0]
+    soft.phases["thumb"] = [
+        ContactPhase("thumb", 0.0, 0.2, thumb.p_object, thumb.n_object),
+        ContactPhase("thumb", 0.3, T_END, thumb.p_object, thumb.n_object),
+    ]
+    loaded = Plan.load(soft.save(tmp_path / "soft.json"))
+    assert loaded.torsion_m == 0.001
+    assert Plan.load(plan.save(tmp_path / "point.json")).torsion_m == 0.0
+    chk = recheck_plan(loaded)
+    assert chk.min_holding == 2
+    assert not any("only 2 fingers hold" in p for p in chk.problems)
+    assert chk.closure_fingers == ("index", "middle")
+    assert chk.min_closure_epsilon == 0.0
+    assert any("not in force closure" in p and "torsion 1 mm" in p for p in chk.problems)
+    strict = recheck_plan(loaded, min_holding=3)
+    assert any("only 2 fingers hold" in p for p in strict.problems)
+    # the held sets of the plan as made (three fingers) hold better with the spins
+    whole = Plan.load(plan.save(tmp_path / "whole.json"))
+    whole.mu = 0.8
+    point = recheck_plan(whole)
+    spun = recheck_plan(whole, torsion_m=0.001)
+    assert point.ok and spun.ok, (point.problems, spun.problems)
+    assert spun.min_closure_epsilon > point.min_closure_epsilon
+    with pytest.raises(InputError, match="torsion_m"):
+        recheck_plan(whole, torsion_m=-0.001)
+    with pytest.raises(InputError, match="torsion_m"):
+        Plan.from_dict({**whole.to_dict(), "torsion_m": -1.0})
+
+
 def test_the_recheck_epsilon_is_the_planners_and_zero_where_no_grasp_holds():
     """The re-check's own wrench model gives the planner's epsilon on random contact
-    sets (to rounding, whatever their order); two antipodal contacts, or contacts
-    on one face, are never in force closure (0)."""
+    sets (to rounding, whatever their order), with point contacts and with soft ones
+    (torsional friction, never less); two antipodal point contacts, or contacts on one
+    face, are never in force closure (0), two antipodal soft ones are."""
     rng = np.random.default_rng(12)
     for _ in range(20):
         k = int(rng.integers(3, 6))
@@ -442,7 +482,17 @@ def test_the_recheck_epsilon_is_the_planners_and_zero_where_no_grasp_holds():
         )
         order = rng.permutation(k)
         assert closure_epsilon(p[order], n[order], mu, 0.03) == pytest.approx(mine, abs=1e-12)
+        soft = closure_epsilon(p, n, mu, 0.03, 0.001)  # soft fingertips too
+        assert soft == pytest.approx(
+            ferrari_canny_epsilon(p, n, mu, torque_scale_m=0.03, torsion_m=0.001), abs=1e-12
+        )
+        assert soft >= mine - 1e-12
     z = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
     assert closure_epsilon(0.02 * z, z, 0.8, 0.03) == 0.0
+    pinch = closure_epsilon(0.02 * z, z, 0.8, 0.03, 0.001)  # a soft pinch holds
+    assert pinch == pytest.approx(
+        ferrari_canny_epsilon(0.02 * z, z, 0.8, torque_scale_m=0.03, torsion_m=0.001), abs=1e-12
+    )
+    assert pinch > 1e-3
     face = np.array([[0.01, 0.0, 0.02], [-0.01, 0.01, 0.02], [0.0, -0.01, 0.02]])
     assert closure_epsilon(face, np.tile([0.0, 0.0, 1.0], (3, 1)), 0.8, 0.03) == 0.0

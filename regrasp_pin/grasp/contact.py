@@ -59,6 +59,14 @@ class ContactModel:
             into the object at a contact [m] (the pad touches; a distal link shaped
             other than the pad, such as the Allegro's box, must not sink in when the
             pad tilts).
+        torsion_m: Soft-finger torsional friction [m]: the largest torque about the
+            contact normal per newton of normal force that a fingertip's contact patch
+            resists (about ``2/3 mu a`` for a patch of radius ``a`` under even
+            pressure). 0 (default): point contacts with friction, which resist no
+            such torque, so that at least three fingers must hold; above 0, two
+            opposed fingertips (a pinch) can be in force closure. Every force-closure
+            test of the grasp search, the planner, its proofs and the plan file's
+            re-check uses it (:func:`~regrasp_pin.grasp.quality.contact_wrenches`).
     """
 
     cone_deg: float | None = None
@@ -69,6 +77,7 @@ class ContactModel:
     choice_link_clearance_m: float = 0.003
     finger_trigger_m: float = 0.0015
     tip_penetration_m: float = 5e-5
+    torsion_m: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):

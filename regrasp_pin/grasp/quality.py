@@ -20,8 +20,12 @@ closure iff that radius is > 0.
 With point contacts a grasp needs wrenches that span all 6 dimensions: two antipodal
 point contacts can never resist a torque about the line through them, so their
 epsilon is 0. An optional soft-finger (torsional friction) model, ``torsion_m`` > 0,
-adds a torque ``+-torsion_m f_n`` about each normal; with it a two-finger pinch can
-be in force closure.
+lets each contact also resist a torque about its normal: the contact's wrenches
+satisfy ``|f_t|^2 / mu^2 + tau_n^2 / torsion_m^2 <= f_n^2`` (an elliptic limit
+surface). It is linearized from inside: the cone's edges (no torque about the normal)
+and two pure spins ``[-n_i, (p_i x -n_i +- torsion_m n_i) / L]``, whose convex hull lies
+within the ellipsoid, so that a grasp in force closure by them is in force closure by
+the soft-finger model too. With it a two-finger pinch can be in force closure.
 
 Force closure without the hull (:func:`closure_certificate`). The hull of ``k *
 n_edges`` wrenches in 6-D has a thousand facets or more (about 2.5 ms for five
@@ -54,6 +58,7 @@ __all__ = [
     "closure_certificate",
     "contact_wrenches",
     "ferrari_canny_epsilon",
+    "holding_fingers",
     "is_force_closure",
     "kept_quality",
 ]
@@ -69,6 +74,13 @@ _OUTSIDE_CONE = 1e-6
 #: the certificate's bounds of epsilon must clear the tolerance by this factor
 _CERTIFY_FACTOR = 1e3
 _DIRECTIONS = np.vstack([np.eye(6), -np.eye(6)])  # +-e_i
+
+
+def holding_fingers(torsion_m: float) -> int:
+    """The fewest contacts that can be in force closure: 3 for point contacts with
+    friction (``torsion_m == 0``: two cannot resist a torque about the line through
+    them), 2 with torsional friction [m] (a pinch)."""
+    return 2 if positive(torsion_m, "torsion_m", allow_zero=True) > 0.0 else 3
 
 
 def contact_wrenches(
@@ -93,10 +105,12 @@ def contact_wrenches(
             (e.g. the object radius) to compare different grasps of one object.
         torsion_m: Soft-finger torsional friction [m] (max torque about the normal
             per unit normal force); 0 (default) is a point contact with friction.
+            Above 0, each contact adds two pure spins about its normal after its
+            cone's edges (the module docstring).
 
     Returns:
         Wrenches ``[f (3), tau / torque_scale_m (3)]``, shape (k * n_edges, 6)
-        (``(k * 2 * n_edges, 6)`` with torsion), in contact-major order, every one
+        (``(k * (n_edges + 2), 6)`` with torsion), in contact-major order, every one
         with unit normal force.
 
     Raises:
@@ -111,11 +125,11 @@ def contact_wrenches(
     f = -n[:, None, :] + mu * (
         np.cos(phi)[None, :, None] * t1[:, None, :] + np.sin(phi)[None, :, None] * t2[:, None, :]
     )  # (k, m, 3)
-    tau = cross(p[:, None, :], f)  # (k, m, 3) about the centre of mass
+    if torsion > 0.0:  # the two pure spins after each contact's edges
+        f = np.concatenate([f, np.repeat(-n[:, None, :], 2, axis=1)], axis=1)  # (k, m + 2, 3)
+    tau = cross(p[:, None, :], f)  # about the centre of mass
     if torsion > 0.0:
-        spin = torsion * n[:, None, None, :] * np.array([1.0, -1.0])[None, None, :, None]
-        f = np.repeat(f[:, :, None, :], 2, axis=2)
-        tau = tau[:, :, None, :] + spin  # (k, m, 2, 3)
+        tau[:, m:] += torsion * n[:, None, :] * np.array([1.0, -1.0])[None, :, None]
     w = np.concatenate([f, tau / scale], axis=-1)
     return w.reshape(-1, 6)
 

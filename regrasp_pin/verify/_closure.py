@@ -9,7 +9,10 @@ gives the wrench ``(f, p x f / r)`` about the object frame's origin (its centre 
 mass), ``r`` the object's largest vertex distance from it. The contacts are in force
 closure when the origin lies inside the hull of their wrenches by more than
 ``CLOSURE_TOL`` (the Ferrari-Canny epsilon: the distance from the origin to the
-hull's nearest facet).
+hull's nearest facet). With soft fingertips (torsional friction ``torsion_m`` [m]) each
+contact also pushes along ``-n`` while spinning about ``n`` by ``+-torsion_m`` per unit
+normal force: two more wrenches, inside the soft-finger model's elliptic limit
+surface.
 """
 
 from __future__ import annotations
@@ -29,9 +32,12 @@ CLOSURE_TOL = 1e-9  # the epsilon a grasp in force closure exceeds
 TIME_TOL_S = 1e-9  # a phase holds within this of its ends (as the holding count)
 
 
-def epsilon(points: np.ndarray, normals: np.ndarray, mu: float, scale_m: float) -> float:
+def epsilon(
+    points: np.ndarray, normals: np.ndarray, mu: float, scale_m: float, torsion_m: float = 0.0
+) -> float:
     """The Ferrari-Canny epsilon (>= 0) of contacts ``points``, ``normals`` ``(F, 3)``
-    (object frame [m]) with friction ``mu``, torques divided by ``scale_m`` [m]."""
+    (object frame [m]) with friction ``mu`` and torsional friction ``torsion_m`` [m],
+    torques divided by ``scale_m`` [m]."""
     n = normals / np.linalg.norm(normals, axis=1, keepdims=True)
     # two tangents per normal: n x a for the axis a least aligned with n, then n x t1
     axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
@@ -43,8 +49,14 @@ def epsilon(points: np.ndarray, normals: np.ndarray, mu: float, scale_m: float) 
         np.cos(angle)[None, :, None] * t1[:, None, :]
         + np.sin(angle)[None, :, None] * t2[:, None, :]
     )
-    tau = np.cross(points[:, None, :], f) / scale_m
-    w = np.concatenate([f, tau], axis=-1).reshape(-1, 6)
+    tau = np.cross(points[:, None, :], f)
+    if torsion_m > 0.0:
+        push = np.stack([-n, -n], axis=1)  # (F, 2, 3)
+        spin = np.cross(points[:, None, :], push) + np.stack(
+            [torsion_m * n, -torsion_m * n], axis=1
+        )
+        f, tau = np.concatenate([f, push], axis=1), np.concatenate([tau, spin], axis=1)
+    w = np.concatenate([f, tau / scale_m], axis=-1).reshape(-1, 6)
     if w.shape[0] < 7 or np.linalg.matrix_rank(w - w.mean(axis=0), tol=1e-9) < 6:
         return 0.0  # the wrenches span fewer than 6 dimensions: no interior
     try:
@@ -57,8 +69,11 @@ def epsilon(points: np.ndarray, normals: np.ndarray, mu: float, scale_m: float) 
     return max(float(np.min(-hull.equations[:, -1])), 0.0)
 
 
-def weakest_hold(plan: Plan, mu: float) -> tuple[float, float, tuple[str, ...]]:
-    """Over the plan, the smallest epsilon of the contacts held at once (between two
+def weakest_hold(
+    plan: Plan, mu: float, torsion_m: float = 0.0
+) -> tuple[float, float, tuple[str, ...]]:
+    """Over the plan, the smallest epsilon of the contacts held at once (friction
+    ``mu``, torsional friction ``torsion_m`` [m]; between two
     consecutive phase ends, where the held set does not change; a phase holds within
     ``TIME_TOL_S`` of its ends), when it occurs (the middle of that interval [s]) and
     the fingers holding then; ``(inf, t0, ())`` for a plan without contact phases."""
@@ -85,7 +100,7 @@ def weakest_hold(plan: Plan, mu: float) -> tuple[float, float, tuple[str, ...]]:
         if held not in known:
             p = np.array([contacts[i][1].p_object for i in held]).reshape(-1, 3)
             n = np.array([contacts[i][1].n_object for i in held]).reshape(-1, 3)
-            known[held] = epsilon(p, n, mu, scale)
+            known[held] = epsilon(p, n, mu, scale, torsion_m)
         if known[held] < worst[0]:
             worst = (known[held], float(t), tuple(sorted(contacts[i][0] for i in held)))
     return worst

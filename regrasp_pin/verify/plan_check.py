@@ -257,8 +257,9 @@ def recheck_plan(
     max_step_rad: float = 1e-3,
     penetration_tol_m: float = 1e-4,
     contact_tol_m: float = 1e-4,
-    min_holding: int = 3,
+    min_holding: int | None = None,
     mu: float | None = None,
+    torsion_m: float | None = None,
 ) -> PlanCheck:
     """Re-check a plan file with Pinocchio and Coal only (see the module docstring).
 
@@ -268,12 +269,15 @@ def recheck_plan(
         penetration_tol_m: Largest accepted penetration of a moving finger into the
             object [m].
         contact_tol_m: Largest accepted fingertip-to-contact error while holding [m].
-        min_holding: Fewest fingers that must hold at every instant.
+        min_holding: Fewest fingers that must hold at every instant; None: 3 for
+            point contacts, 2 with torsional friction (a pinch can hold).
         mu: The friction coefficient to check force closure with: the contacts held
             at once must be in force closure at every instant (their Ferrari-Canny
             epsilon above 1e-9, computed here apart from the planner's). None: the
             plan's own ``mu`` (what it was made for); not checked for a plan that
             records none.
+        torsion_m: The soft-finger torsional friction to check force closure with [m]
+            (0: point contacts); None: the plan's own ``torsion_m``.
 
     Returns:
         A :class:`PlanCheck`; ``ok`` is False when any check fails, with one line per
@@ -292,7 +296,14 @@ def recheck_plan(
     max_step = positive(max_step_rad, "max_step_rad")
     pen_tol = positive(penetration_tol_m, "penetration_tol_m", allow_zero=True)
     tip_tol = positive(contact_tol_m, "contact_tol_m", allow_zero=True)
-    need = positive_int(min_holding, "min_holding", minimum=0)
+    torsion = (
+        plan.torsion_m if torsion_m is None else positive(torsion_m, "torsion_m", allow_zero=True)
+    )
+    need = (
+        (2 if torsion > 0.0 else 3)
+        if min_holding is None
+        else positive_int(min_holding, "min_holding", minimum=0)
+    )
     scene = _Scene(plan)
     problems: list[str] = []
 
@@ -314,7 +325,7 @@ def recheck_plan(
     n_hold, t_hold = _min_holding(plan)
     if n_hold < need:
         problems.append(f"only {n_hold} fingers hold at t={t_hold:.3f} s (need {need})")
-    closure = _closure(plan, plan.mu if mu is None else mu, problems)
+    closure = _closure(plan, plan.mu if mu is None else mu, torsion, problems)
 
     R_geom, x_geom = scene.kinematics(plan.q)
     err, err_finger, err_t = _contact_error(scene, scene.tips(plan.q))
@@ -601,17 +612,19 @@ def _joint_name_of_q(model: Any, iq: int) -> str:
 
 
 def _closure(
-    plan: Plan, mu: float | None, problems: list[str]
+    plan: Plan, mu: float | None, torsion_m: float, problems: list[str]
 ) -> tuple[float | None, float | None, tuple[str, ...]]:
-    """With ``mu``, the weakest hold of the plan (:func:`._closure.weakest_hold`), and a
-    problem appended when it is not in force closure; ``(None, None, ())`` without."""
+    """With ``mu``, the weakest hold of the plan (:func:`._closure.weakest_hold`, with
+    torsional friction ``torsion_m`` [m]), and a problem appended when it is not in
+    force closure; ``(None, None, ())`` without."""
     if mu is None:
         return None, None, ()
-    eps, t_eps, holders = weakest_hold(plan, positive(mu, "mu", allow_zero=True))
+    eps, t_eps, holders = weakest_hold(plan, positive(mu, "mu", allow_zero=True), torsion_m)
     if eps <= CLOSURE_TOL:
+        soft = f", torsion {torsion_m * 1e3:g} mm" if torsion_m > 0.0 else ""
         problems.append(
             f"the contacts held at t={t_eps:.3f} s ({', '.join(holders)}) are not in "
-            f"force closure (epsilon {eps:.3g}, mu={mu})"
+            f"force closure (epsilon {eps:.3g}, mu={mu}{soft})"
         )
     return eps, t_eps, holders
 
