@@ -544,7 +544,7 @@ def grasp_for_motion(
     if must_hold_check:  # on the unrestricted manifolds: what every finger could use
         every = with_idle_fingers(hand, manifolds, sample, motion, contact)
         # up to the motion's end, its last sample included, as the planner's proof
-        runs = must_hold(every, sample, obj, mu, list(fingers))
+        runs = must_hold(every, sample, obj, mu, list(fingers), torsion_m=contact.torsion_m)
     for name, index in (keep or {}).items():
         if not isinstance(index, (int, np.integer)) or not 0 <= index < len(sample):
             raise InputError(

@@ -100,6 +100,48 @@ def test_bound_holds_for_every_grasp_of_the_other_fingers(box):
     assert found_closure > 0  # the test exercised the bound
 
 
+def test_with_soft_fingertips_two_fingers_may_hold_and_the_bound_stays_an_upper_bound(box):
+    """With torsional friction the proof counts two fingers as enough (a soft pinch
+    between the top and bottom faces holds: exact test), still finds no grasp on one
+    face, and is never tighter than a soft grasp of the others that exists (random
+    pinches of two fingers on random faces, the planner's soft epsilon)."""
+    obj, sample = box
+    torsion = 0.001
+    times = np.linspace(0.0, 1.0, 3)
+    top = sample.normals[:, 2] > 0.99
+    bottom = sample.normals[:, 2] < -0.99
+    mans = {
+        "a": _manifold("a", np.ones((3, len(sample)), bool), times),
+        "b": _manifold("b", np.tile(top, (3, 1)), times),
+        "c": _manifold("c", np.tile(top | bottom, (3, 1)), times),
+    }
+    assert not closure_possible_without(mans, sample, obj, "a", MU).any()
+    soft = closure_possible_without(mans, sample, obj, "a", MU, torsion_m=torsion)
+    assert soft.all()
+    pinch = np.r_[np.flatnonzero(top)[0], np.flatnonzero(bottom)[0]]
+    p, n = sample.points[pinch], sample.normals[pinch]
+    assert is_force_closure(p, n, MU, torque_scale_m=obj.radius_m, torsion_m=torsion)
+    mans["c"] = _manifold("c", np.tile(top, (3, 1)), times)  # both on the top
+    assert not closure_possible_without(mans, sample, obj, "a", MU, torsion_m=torsion).any()
+    rng = np.random.default_rng(5)
+    found = 0
+    for _ in range(40):
+        faces = [rng.choice(6, size=2, replace=False) for _ in range(2)]
+        mans = {"a": mans["a"]}
+        for name, f in zip(("b", "c"), faces, strict=True):
+            near = np.isin(sample.face_ids, f) & (rng.random(len(sample)) < 0.3)
+            mans[name] = _manifold(name, np.tile(near, (3, 1)), times)
+        free = closure_possible_without(mans, sample, obj, "a", MU, torsion_m=torsion)
+        for _ in range(20):
+            ii = [rng.choice(np.flatnonzero(mans[x].usable(0.0)[0])) for x in ("b", "c")]
+            if ferrari_canny_epsilon(
+                sample.points[ii], sample.normals[ii], MU, torsion_m=torsion
+            ) > 0:
+                found += 1
+                assert free[0], "a soft pinch of the others exists"
+    assert found > 0  # the test exercised the bound
+
+
 def test_closure_possible_with_tests_the_one_more_contact_one_face_at_a_time(box):
     """Two contacts on the top face, and a finger that reaches two opposite side faces:
     both side faces' corners together would span with the top (the bound before, all

@@ -211,7 +211,7 @@ def test_a_finger_the_others_cannot_hold_without_says_whether_any_grasp_could_ke
             obj=SimpleNamespace(radius_m=0.03),
             motion=SimpleNamespace(t_end=T_END),
         ),
-        params=SimpleNamespace(min_holding=3, mu=0.8, contact=contact),
+        params=SimpleNamespace(fewest_holding=3, mu=0.8, contact=contact),
         manifolds={"thumb": man},
         # the fingers of the initial grasp; one that joined later is not among them
         active=("index", "middle", "ring") + (() if case == "joined" else ("thumb",)),

@@ -95,6 +95,6 @@ def test_an_idle_finger_that_must_hold_where_too_few_fingers_reach_proves_no_pla
     assert set(reach) == {"thumb", "index", "middle", "ring", "little"}
     assert not reach["index"].any() and not reach["middle"].any()
     assert all(reach[n].all() for n in ("thumb", "ring", "little"))
-    assert scen.params.min_holding == 3
+    assert scen.params.fewest_holding == 3
     assert not every["little"].usable(0.0)[run].all(axis=0).any()
     assert every["ring"].usable(0.0)[run].all(axis=0).any()  # the ring could

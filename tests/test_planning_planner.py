@@ -17,8 +17,9 @@ import pytest
 from conftest import CONE_60
 from scipy.spatial.transform import Rotation
 
-from regrasp_pin import Plan, make_scenario, plan_manipulation
+from regrasp_pin import Plan, make_scenario, plan_manipulation, plan_scenario
 from regrasp_pin.exceptions import FailureKind, InputError, PlanningError
+from regrasp_pin.grasp.contact import ContactModel
 from regrasp_pin.grasp.quality import is_force_closure
 from regrasp_pin.grasp.tracking import track_contact
 from regrasp_pin.plan import ContactPhase
@@ -282,11 +283,25 @@ def test_the_step_budget_stops_the_same_plan_at_the_same_step(demo, max_steps):
         ("release", 1),
         ("rush_duration_s", 0.0),
         ("threads", 0),
+        ("min_holding", 0),
+        ("min_holding", 2.0),
     ],
 )
 def test_planner_params_name_a_bad_value(field, value):
     with pytest.raises(InputError, match=f"PlannerParams.{field}"):
         PlannerParams(**{field: value})
+
+
+def test_the_fewest_holding_fingers_follow_the_contact_model_unless_given():
+    """Point contacts need three fingers in the hand while one is in the air, soft ones
+    (torsional friction) two: ``fewest_holding`` reads the contact model, also after a
+    ``replace`` of it; a ``min_holding`` given is kept."""
+    soft = ContactModel(torsion_m=0.001)
+    assert PlannerParams().fewest_holding == 3
+    assert PlannerParams(contact=soft).fewest_holding == 2
+    assert replace(PlannerParams(), contact=soft).fewest_holding == 2
+    assert PlannerParams(contact=soft, min_holding=3).fewest_holding == 3
+    assert PlannerParams(min_holding=4).fewest_holding == 4
 
 
 def test_a_budget_that_runs_out_while_backing_up_is_the_failure(monkeypatch):
@@ -628,3 +643,27 @@ def test_a_neighbour_makes_room_for_a_hand_over(tmp_path):
         check = recheck_plan(plan, max_step_rad=1e-3)
         assert check.ok, check.problems
         assert check.min_holding >= 3
+
+
+def test_soft_fingertips_let_two_fingers_hold_a_turn_point_contacts_cannot(tmp_path):
+    """Suite spec 7 (the Allegro turning a box -160 deg while it drifts): with point
+    contacts the plan fails (two holds end within one regrasp of each other, and three
+    fingers must hold while one is in the air); with soft fingertips (1 mm of
+    torsional friction, ``ContactModel.torsion_m``) the thumb and one finger may hold
+    the box alone, and the plan is full. Its file records the torsion, and the
+    re-check (its own wrench model, the torsion read from the file) finds every held
+    set in force closure, two fingers at times."""
+    spec = generate_specs(8, seed=0)[7]
+    with pytest.raises(PlanningError) as point:
+        plan_scenario(build_scenario(spec))
+    assert point.value.kind is not None and point.value.partial is not None
+    soft = ContactModel(torsion_m=0.001)
+    scen = build_scenario(spec, contact=soft)
+    assert scen.params.contact.torsion_m == 0.001 and scen.params.fewest_holding == 2
+    plan = plan_scenario(scen).plan
+    loaded = Plan.load(plan.save(tmp_path / "soft.json"))
+    assert loaded.torsion_m == 0.001
+    check = recheck_plan(loaded)
+    assert check.ok, check.problems
+    assert check.min_holding == 2 and check.min_closure_epsilon > 1e-9
+    assert not recheck_plan(loaded, torsion_m=0.0).ok  # two point contacts never hold

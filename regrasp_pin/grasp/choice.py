@@ -43,7 +43,7 @@ from ..model.hand import Finger, Hand
 from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
 from .manifold import Manifold
-from .quality import FORCE_CLOSURE_TOL, kept_quality
+from .quality import FORCE_CLOSURE_TOL, holding_fingers, kept_quality
 from .screening import (
     ManifoldClearance,
     ScreeningEpsilons,
@@ -628,12 +628,17 @@ class _Screen:
         self.other_p = np.array([p for p, _ in others.values()]).reshape(-1, 3)
         self.other_n = np.array([n for _, n in others.values()]).reshape(-1, 3)
         if epsilons is None:
-            epsilons = ScreeningEpsilons(mu, obj.radius_m)
-        elif (epsilons.mu, epsilons.scale_m) != (mu, obj.radius_m):
+            epsilons = ScreeningEpsilons(mu, obj.radius_m, contact.torsion_m)
+        elif (epsilons.mu, epsilons.scale_m, epsilons.torsion_m) != (
+            mu,
+            obj.radius_m,
+            contact.torsion_m,
+        ):
             raise InputError(
                 "epsilons",
-                f"use mu={epsilons.mu}, scale {epsilons.scale_m} m",
-                f"mu={mu} and the object's radius {obj.radius_m} m",
+                f"use mu={epsilons.mu}, scale {epsilons.scale_m} m, torsion {epsilons.torsion_m} m",
+                f"mu={mu}, the object's radius {obj.radius_m} m and the contact "
+                f"model's torsion {contact.torsion_m} m",
             )
         self.epsilons = epsilons
         self.link_clear, self.contact = link_clear, contact
@@ -749,7 +754,7 @@ class _Screen:
         """How many of the other contacts could let go, with ``(p, n)`` landed, the rest
         staying in force closure."""
         k = self.other_p.shape[0]
-        if k < 3:
+        if k < holding_fingers(self.epsilons.torsion_m):
             return 0
         closes = closes_without(
             np.vstack([self.other_p, p[None]]),
@@ -784,7 +789,8 @@ class _Screen:
             return kept_quality(self.eps(pts[i], normals[i]), self.eps(P, n_P))
 
         passing: list[tuple[int, int, int]] = []  # (removable, position, candidate)
-        best_removable = self.other_p.shape[0] if self.other_p.shape[0] >= 3 else 0
+        k = self.other_p.shape[0]
+        best_removable = k if k >= holding_fingers(self.epsilons.torsion_m) else 0
         clear = np.zeros(order.size, bool)
         links, tip = np.zeros(order.size), np.zeros(order.size)  # [m]
         screened = tested = 0

@@ -24,7 +24,7 @@ from .choice import DISTANCE_TOL_M, apart_threshold, exit_times
 from .contact import ContactModel
 from .manifold import Manifold
 from .necessity import MustHold
-from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon
+from .quality import FORCE_CLOSURE_TOL, ferrari_canny_epsilon, holding_fingers
 from .screening import (
     ManifoldClearance,
     ScreeningEpsilons,
@@ -236,10 +236,14 @@ def _closure_score(
 ) -> float:
     """The score of a combination in force closure with epsilon ``e``: first the fingers
     that can let go with the rest still in force closure (so that fingers can regrasp
-    later, with four fingers or more), then the smallest of those leave-one-out
-    epsilons, twice the shortest lasting fraction, the mean one and the epsilon."""
+    later: four fingers or more, three with torsional friction), then the smallest of
+    those leave-one-out epsilons, twice the shortest lasting fraction, the mean one and
+    the epsilon."""
     F = p.shape[0]
-    loo = leave_one_out(p, n, epsilons.mu, epsilons.scale_m, range(F), epsilons) if F > 3 else []
+    fewest = holding_fingers(epsilons.torsion_m)
+    loo = (
+        leave_one_out(p, n, epsilons.mu, epsilons.scale_m, range(F), epsilons) if F > fewest else []
+    )
     removable = [x for x in loo if x > FORCE_CLOSURE_TOL]
     return (
         len(removable)
@@ -340,7 +344,8 @@ def initial_grasp(
         min_finger_gap_m,
     )
     search = _CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
-    epsilons = ScreeningEpsilons(mu, obj.radius_m)  # each contact set's hull once
+    # each contact set's hull once
+    epsilons = ScreeningEpsilons(mu, obj.radius_m, contact.torsion_m)
     for trial in range(trials):
         # trial 0 is greedy; later trials shuffle the fingers and perturb each finger's
         # ranking, still favouring the long-lasting contacts
@@ -399,6 +404,7 @@ def initial_grasp(
         nrm[[pick[n] for n in names]],
         mu,
         torque_scale_m=obj.radius_m,
+        torsion_m=contact.torsion_m,
     )
     return Grasp(
         points_object={n: pts[pick[n]].copy() for n in names},

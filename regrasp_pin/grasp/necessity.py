@@ -27,7 +27,9 @@ Why it is a proof, and of what (docs/manifold.md):
   only adds wrenches;
 - holding needs only ``margin >= 0`` here (the planner asks for more);
 - fewer than three fingers never hold (two point contacts cannot resist a torque
-  about the line through them).
+  about the line through them); with torsional friction (soft fingertips) two may,
+  and each cone edge then spins about the normal by ``+-torsion_m`` as well (a box
+  around the soft-finger model's elliptic limit surface, so again a superset).
 
 It assumes what the planner does: contacts are the surface sample's points, a hold
 stays on one object point, and every flight lasts longer than the manifolds' time step.
@@ -48,7 +50,7 @@ from ..model.motion import ObjectMotion
 from ..model.objects import ConvexObject, SurfaceSample
 from .contact import ContactModel
 from .manifold import Manifold, build_manifolds
-from .quality import contact_wrenches
+from .quality import contact_wrenches, holding_fingers
 
 __all__ = [
     "MustHold",
@@ -155,13 +157,31 @@ def _positively_spanning(wrenches: np.ndarray) -> bool:
     return bool(residual <= SPAN_TOL * max(1.0, float(np.linalg.norm(b))))
 
 
+def _outer_wrenches(
+    p: np.ndarray, n: np.ndarray, mu_out: float, torsion_m: float, scale_m: float
+) -> np.ndarray:
+    """``(k * edges, 6)`` wrenches of contacts ``p``, ``n`` ``(k, 3)`` whose cone hull
+    contains every wrench the contact can apply: the circumscribed cone's
+    :data:`CONE_EDGES` edges (friction ``mu_out``), each also spinning by
+    ``+-torsion_m`` about the normal when ``torsion_m > 0`` (a box around the
+    soft-finger model's ellipse)."""
+    w = contact_wrenches(p, n, mu_out, n_edges=CONE_EDGES, torque_scale_m=scale_m)
+    if torsion_m <= 0.0:
+        return w
+    w = w.reshape(len(p), CONE_EDGES, 6)
+    spin = np.zeros((len(p), 1, 6))
+    spin[:, 0, 3:] = torsion_m * np.asarray(n, float) / scale_m
+    return np.concatenate([w + spin, w - spin], axis=1).reshape(-1, 6)
+
+
 def closure_possible_without(
     manifolds: Mapping[str, Manifold],
     sample: SurfaceSample,
     obj: ConvexObject,
     finger: str,
     mu: float,
-    min_fingers: int = 3,
+    min_fingers: int | None = None,
+    torsion_m: float = 0.0,
 ) -> np.ndarray:
     """``(T,)`` bool over the manifolds' times: whether the contacts that the fingers
     other than ``finger`` could use then could be in force closure (an upper bound;
@@ -173,9 +193,13 @@ def closure_possible_without(
         obj: The object.
         finger: The finger left out.
         mu: Friction coefficient.
-        min_fingers: Fewest fingers that can hold (3: two point contacts cannot resist
-            a torque about the line through them).
+        min_fingers: Fewest fingers that can hold; None: 3 for point contacts (two
+            cannot resist a torque about the line through them), 2 with torsional
+            friction (:func:`~.quality.holding_fingers`).
+        torsion_m: Torsional friction of the contacts [m] (0: point contacts).
     """
+    if min_fingers is None:
+        min_fingers = holding_fingers(torsion_m)
     others = [m.usable(0.0) for name, m in manifolds.items() if name != finger]
     if len(others) < min_fingers:
         return np.zeros(manifolds[finger].times_s.size, bool)
@@ -190,12 +214,12 @@ def closure_possible_without(
     # the cone edges at every (time, face) corner in one call, row for row what one
     # call per time gives; a time's rows are contiguous (faces in ascending order)
     kk, ff = np.nonzero(present[ks])
-    wrenches = contact_wrenches(
+    wrenches = _outer_wrenches(
         corners[ks[kk], ff].reshape(-1, 3),
         np.repeat(normals[ff], 4, axis=0),
         mu_out,
-        n_edges=CONE_EDGES,
-        torque_scale_m=obj.radius_m,
+        torsion_m,
+        obj.radius_m,
     ).reshape(kk.size, -1, 6)
     bounds = np.searchsorted(kk, np.arange(ks.size + 1))
     memo: dict[bytes, bool] = {}
@@ -216,6 +240,7 @@ def closure_possible_with(
     obj: ConvexObject,
     mu: float,
     rows: np.ndarray,
+    torsion_m: float = 0.0,
 ) -> bool:
     """Whether the contacts ``points``, ``normals`` ``(F, 3)`` (object frame) plus one
     contact that ``manifold``'s finger could use at one of the manifold times ``rows``
@@ -225,7 +250,7 @@ def closure_possible_with(
     so the fixed contacts with that face's corners must positively span, whatever the
     other faces offer. False proves that no contact of that finger landed at those
     times puts them in force closure (e.g. frees a finger whose neighbours do not hold
-    without it)."""
+    without it). ``torsion_m``: the contacts' torsional friction [m]."""
     rows = np.asarray(rows, int)
     if rows.size == 0:
         return False
@@ -233,9 +258,7 @@ def closure_possible_with(
     mu_out = mu / np.cos(np.pi / CONE_EDGES)
 
     def wrenches(p: np.ndarray, n: np.ndarray) -> np.ndarray:
-        return contact_wrenches(
-            p, n, mu_out, n_edges=CONE_EDGES, torque_scale_m=obj.radius_m
-        ).reshape(-1, 6)
+        return _outer_wrenches(p, n, mu_out, torsion_m, obj.radius_m)
 
     fixed = wrenches(
         np.asarray(points, float).reshape(-1, 3), np.asarray(normals, float).reshape(-1, 3)
@@ -259,8 +282,9 @@ def must_hold(
     obj: ConvexObject,
     mu: float,
     fingers: tuple[str, ...] | list[str] | None = None,
-    min_fingers: int = 3,
+    min_fingers: int | None = None,
     until_s: float | None = None,
+    torsion_m: float = 0.0,
 ) -> list[MustHold]:
     """Every run of times at which a finger cannot let go, by finger then time.
 
@@ -270,13 +294,17 @@ def must_hold(
         obj: The object.
         mu: Friction coefficient.
         fingers: The fingers to examine (default: all of ``manifolds``).
-        min_fingers: Fewest fingers that can hold (:func:`closure_possible_without`).
+        min_fingers: Fewest fingers that can hold (:func:`closure_possible_without`;
+            None: by ``torsion_m``).
         until_s: Times after this claim nothing [s]; None: every time.
+        torsion_m: Torsional friction of the contacts [m] (0: point contacts).
     """
     out = []
     for name in fingers if fingers is not None else list(manifolds):
         man = manifolds[name]
-        free = closure_possible_without(manifolds, sample, obj, name, mu, min_fingers)
+        free = closure_possible_without(
+            manifolds, sample, obj, name, mu, min_fingers, torsion_m=torsion_m
+        )
         if until_s is not None:
             free |= man.times_s > until_s + 1e-9
         usable = man.usable(0.0)

@@ -60,11 +60,14 @@ class ScreeningEpsilons:
     contact sets, each set computed once: a pure function of the contacts in their
     order (the same bits in, the same hull out), which the grasp search asks for again
     and again (a combination found by several trials, a leave-one-out set shared by
-    combinations that differ in the left-out finger)."""
+    combinations that differ in the left-out finger). ``torsion_m``: the contacts'
+    torsional friction [m] (:attr:`~.contact.ContactModel.torsion_m`; 0: point
+    contacts)."""
 
-    def __init__(self, mu: float, scale_m: float) -> None:
+    def __init__(self, mu: float, scale_m: float, torsion_m: float = 0.0) -> None:
         self.mu = mu
         self.scale_m = scale_m
+        self.torsion_m = torsion_m
         self._known: dict[tuple[bytes, bytes], float] = {}
         self._closes: dict[tuple[bytes, bytes], bool] = {}
         # the planner's test (PLANNER_EDGES): force closure and, where read, epsilons
@@ -76,7 +79,12 @@ class ScreeningEpsilons:
         key = _key(p, n)
         if key not in self._known:
             self._known[key] = ferrari_canny_epsilon(
-                p, n, self.mu, n_edges=SCREEN_EDGES, torque_scale_m=self.scale_m
+                p,
+                n,
+                self.mu,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=self.scale_m,
+                torsion_m=self.torsion_m,
             )
         return self._known[key]
 
@@ -87,7 +95,14 @@ class ScreeningEpsilons:
         a seventh of its time)."""
         key = _key(p, n)
         if key not in self._known and key not in self._closes:
-            w = contact_wrenches(p, n, self.mu, n_edges=SCREEN_EDGES, torque_scale_m=self.scale_m)
+            w = contact_wrenches(
+                p,
+                n,
+                self.mu,
+                n_edges=SCREEN_EDGES,
+                torque_scale_m=self.scale_m,
+                torsion_m=self.torsion_m,
+            )
             certain = closure_certificate(w, FORCE_CLOSURE_TOL)
             if certain is not None:
                 self._closes[key] = certain
@@ -114,7 +129,14 @@ class ScreeningEpsilons:
         ``table`` by the contact set's numbers."""
         key = _key(p, n)
         if key not in table:
-            table[key] = test(p, n, self.mu, n_edges=PLANNER_EDGES, torque_scale_m=self.scale_m)
+            table[key] = test(
+                p,
+                n,
+                self.mu,
+                n_edges=PLANNER_EDGES,
+                torque_scale_m=self.scale_m,
+                torsion_m=self.torsion_m,
+            )
         return table[key]
 
 
@@ -130,10 +152,12 @@ def leave_one_out(
     scale_m: float,
     rows: Iterable[int],
     epsilons: ScreeningEpsilons | None = None,
+    torsion_m: float = 0.0,
 ) -> list[float]:
     """The screening epsilon of contacts ``p``, ``n`` ``(F, 3)`` with each of ``rows``
-    left out in turn (> 0: the others hold without it); from ``epsilons`` if given."""
-    eps = epsilons or ScreeningEpsilons(mu, scale_m)
+    left out in turn (> 0: the others hold without it); from ``epsilons`` if given
+    (else with torsional friction ``torsion_m`` [m])."""
+    eps = epsilons or ScreeningEpsilons(mu, scale_m, torsion_m)
     return [eps(np.delete(p, j, 0), np.delete(n, j, 0)) for j in rows]
 
 

@@ -315,20 +315,23 @@ def _fingers_that_stay(
     a finger passes: ``choose_new_contact``'s ``frees``)."""
     p, name = ctx.params, trig.finger
     stay = [n for n in ctx.scene.hand.finger_names if n != name and n in state.holding]
-    if len(stay) < p.min_holding:
+    if len(stay) < p.fewest_holding:
         raise PlanningError(
-            f"only {len(stay)} fingers would hold (need {p.min_holding})",
+            f"only {len(stay)} fingers would hold (need {p.fewest_holding})",
             finger=name,
             time_s=win.preferred_s,
             kind=FailureKind.TOO_FEW_FINGERS,
             measured=len(stay),
-            required=p.min_holding,
+            required=p.fewest_holding,
         )
     p_stay = np.array([state.holding[n].p for n in stay])
     n_stay = np.array([state.holding[n].n for n in stay])
     scale = ctx.scene.obj.radius_m
-    if not is_force_closure(p_stay, n_stay, p.mu, torque_scale_m=scale):
-        eps_stay = ferrari_canny_epsilon(p_stay, n_stay, p.mu, torque_scale_m=scale)
+    torsion = p.contact.torsion_m
+    if not is_force_closure(p_stay, n_stay, p.mu, torque_scale_m=scale, torsion_m=torsion):
+        eps_stay = ferrari_canny_epsilon(
+            p_stay, n_stay, p.mu, torque_scale_m=scale, torsion_m=torsion
+        )
         raise PlanningError(
             f"{trig.reason} at t={trig.time_s:.3f} s, but without it the other fingers are "
             f"not in force closure{_must_let_go_note(ctx, state, name)}",

@@ -110,6 +110,7 @@ def _assemble(
         phases=_with_idle(hand, phases, float(times[0]), float(times[-1])),
         summary={},
         mu=params.mu,
+        torsion_m=params.contact.torsion_m,
     )
 
 

@@ -54,7 +54,9 @@ def must_hold_runs(
         else dict(manifolds)
     )
     # a plan holds to the motion's end, its last sample included (planning.state)
-    return every, must_hold(every, sample, obj, params.mu, list(every))
+    return every, must_hold(
+        every, sample, obj, params.mu, list(every), torsion_m=params.contact.torsion_m
+    )
 
 
 def longest_start_hold(man: Manifold, margin_rad: float) -> float:

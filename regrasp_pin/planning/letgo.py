@@ -88,7 +88,7 @@ def _try_release(
     end = motion.t_end - TIME_TOL_S
     if not p.release or win.empty or trig.lost_s >= end:
         return None
-    if len(stay) <= p.min_holding and _first_loss(ctx, state, gone=name) < end:
+    if len(stay) <= p.fewest_holding and _first_loss(ctx, state, gone=name) < end:
         return None
     q_hand = q_hand_of(ctx, state, stay)
     tried: list[str] = []
@@ -97,7 +97,7 @@ def _try_release(
         if rel is not None:
             others = (
                 f"{len(stay)} others go on"
-                if len(stay) > p.min_holding
+                if len(stay) > p.fewest_holding
                 else "the others hold to the end"
             )
             note = f"{why}; no verified regrasp: let go ({others})"
@@ -370,7 +370,7 @@ def _try_rejoin(
     """
     p, motion = ctx.params, ctx.scene.motion
     name, D = trig.finger, p.regrasp.duration_s
-    if not p.release or win.empty or len(stay) > p.min_holding:
+    if not p.release or win.empty or len(stay) > p.fewest_holding:
         return None  # none allowed, or the others take turns without it (a release)
     lost_by = _first_loss(ctx, state, gone=name)
     if lost_by >= motion.t_end - TIME_TOL_S:

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, replace
 from .._validate import positive, positive_int
 from ..exceptions import InputError
 from ..grasp.contact import ContactModel
+from ..grasp.quality import holding_fingers
 from .regrasp import RegraspParams
 from .timing import checked_time_law
 
@@ -22,7 +23,10 @@ class PlannerParams:
         manifold_dt_s: Time step of the joint-space manifolds used to choose Q [s].
         sample_spacing_m: Surface sampling spacing for the manifolds [m].
         lead_s: A regrasp preferably starts this long before its trigger [s].
-        min_holding: Fewest fingers that must hold while one is in the air.
+        min_holding: Fewest fingers that must hold while one is in the air; None (the
+            default): the fewest that can be in force closure under the contact model,
+            3 for point contacts and 2 with torsional friction (``contact.torsion_m``,
+            a pinch); read it as :attr:`fewest_holding`.
         mu: Friction coefficient for force closure.
         candidates: How many new contacts Q to try per lift-off time.
         start_step_s: Spacing of the lift-off times tried in a finger's window [s].
@@ -78,7 +82,7 @@ class PlannerParams:
     manifold_dt_s: float = 0.05
     sample_spacing_m: float = 0.002
     lead_s: float = 0.02
-    min_holding: int = 3
+    min_holding: int | None = None
     mu: float = 0.8
     candidates: int = 6
     start_step_s: float = 0.1
@@ -101,8 +105,9 @@ class PlannerParams:
             positive(getattr(self, name), f"PlannerParams.{name}")
         for name in ("lead_s", "exit_tolerance_s", "release_back_off_s"):
             positive(getattr(self, name), f"PlannerParams.{name}", allow_zero=True)
+        if self.min_holding is not None:
+            positive_int(self.min_holding, "PlannerParams.min_holding", 1)
         for name, least in (
-            ("min_holding", 1),
             ("candidates", 1),
             ("max_starts", 1),
             ("max_backtracks", 0),
@@ -120,6 +125,14 @@ class PlannerParams:
                 raise InputError(
                     f"PlannerParams.{name}", f"is {getattr(self, name)!r}", "True or False"
                 )
+
+    @property
+    def fewest_holding(self) -> int:
+        """The fewest fingers that must hold while one is in the air: ``min_holding``,
+        or by the contact model (:func:`~regrasp_pin.grasp.quality.holding_fingers`)."""
+        if self.min_holding is not None:
+            return self.min_holding
+        return holding_fingers(self.contact.torsion_m)
 
 
 def with_time_law(params: PlannerParams, time_law: str | None) -> PlannerParams:

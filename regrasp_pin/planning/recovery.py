@@ -226,6 +226,7 @@ def _may_free(ctx: PlanContext, base: PlanState, other: str, name: str, win: Lif
         ctx.scene.obj,
         ctx.params.mu,
         rows,
+        torsion_m=ctx.params.contact.torsion_m,
     )
 
 
@@ -300,7 +301,7 @@ def _make_room_for_join(
     name, h = trig.finger, state.holding[trig.finger]
     stay = [n for n in ctx.scene.hand.finger_names if n != name and n in state.holding]
     idle = idle_fingers(ctx, state)
-    if not p.release or not idle or len(stay) > p.min_holding:
+    if not p.release or not idle or len(stay) > p.fewest_holding:
         return None  # no hand-over: none allowed, nobody to join, or it may just let go
     win, _ = window(ctx, state, trig, triggers)
     D, motion = p.regrasp.duration_s, ctx.scene.motion

@@ -401,7 +401,9 @@ class RegraspSearch:
     def _screening_epsilons(self) -> ScreeningEpsilons:
         """The screening epsilons of contact sets, kept for the whole plan."""
         if self._epsilons is None:
-            self._epsilons = ScreeningEpsilons(self.mu, self.scene.obj.radius_m)
+            self._epsilons = ScreeningEpsilons(
+                self.mu, self.scene.obj.radius_m, self.contact.torsion_m
+            )
         return self._epsilons
 
     def _distances_of(self, finger: str) -> ManifoldClearance:
