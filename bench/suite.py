@@ -180,6 +180,14 @@ def parse_args() -> argparse.Namespace:
         "minimum-jerk)",
     )
     parser.add_argument(
+        "--torsion-mm",
+        type=float,
+        default=0.0,
+        metavar="MM",
+        help="soft fingertips: the torsional friction of every contact [mm] "
+        "(ContactModel.torsion_m; default 0: point contacts with friction)",
+    )
+    parser.add_argument(
         "--baseline", type=Path, help="a previous results.jsonl (or its folder) to compare"
     )
     parser.add_argument(
@@ -203,6 +211,8 @@ def parse_args() -> argparse.Namespace:
         parser.error("--grasp-backups: at least 0")
     if args.reference < 0:
         parser.error("--reference: at least 0")
+    if not args.torsion_mm >= 0.0 or args.torsion_mm == float("inf"):
+        parser.error("--torsion-mm: a finite number >= 0")
 
     hands = tuple(str(Path(h).resolve()) if h.endswith(".json") else h for h in args.hands or HANDS)
     for h in hands:
@@ -232,12 +242,15 @@ def main() -> None:
     limit = "" if args.budget is None else f" and {args.budget:g} s"
     if args.time_law is not None:
         limit += f", time law {args.time_law}"
+    if args.torsion_mm > 0.0:
+        limit += f", soft fingertips (torsion {args.torsion_mm:g} mm)"
     kw = {
         "skip_no_grasp": skip,
         "max_steps": args.max_steps,
         "budget_s": args.budget,
         "grasp_backups": args.grasp_backups,
         "time_law": args.time_law,
+        "torsion_m": args.torsion_mm * 1e-3,
     }
     k = args.speedup if args.speedup is not None else (8 if args.jobs > 1 else 0)
     measured = None

@@ -277,6 +277,28 @@ def test_plan_by_the_cruise_time_law(tmp_path, capsys):
     assert recheck_plan(plan).ok
 
 
+def test_plan_for_soft_fingertips_records_its_torsion(tmp_path):
+    """``--torsion-mm`` reaches the contact model of the grasp search and the planner:
+    the plan file records the torsional friction in metres, and its re-check (which
+    reads it from the file) passes."""
+    from regrasp_pin.verify.plan_check import recheck_plan
+
+    argv = ["plan", "--angle", "60", "--torsion-mm", "1", "--out", str(tmp_path)]
+    assert main([*argv, "--no-plots", "--no-viewer"]) == 0
+    plan = Plan.load(tmp_path / "plan.json")
+    assert plan.torsion_m == pytest.approx(0.001)
+    assert recheck_plan(plan).ok
+
+
+@pytest.mark.parametrize("command", ["plan", "suite"])
+@pytest.mark.parametrize("value", ["-1", "nan", "inf", "soft"])
+def test_a_torsion_must_be_a_number_at_least_zero(command, value, capsys):
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args([command, "--torsion-mm", value])
+    assert stop.value.code == 2
+    assert f"--torsion-mm: {value!r} is not a number >= 0 [mm]" in capsys.readouterr().err
+
+
 def test_an_unknown_time_law_is_refused_by_the_parser(capsys):
     with pytest.raises(SystemExit) as stop:
         build_parser().parse_args(["plan", "--time-law", "linear"])

@@ -236,6 +236,7 @@ def test_a_line_cut_short_is_dropped_on_resume(tmp_path):
         ({"workers": 0}, "workers"),
         ({"timeout_s": 0.0}, "timeout_s"),
         ({"time_law": "linear"}, "time_law"),
+        ({"torsion_m": -0.001}, "torsion_m"),
     ],
 )
 def test_bad_arguments_are_named(tmp_path, kwargs, argument):

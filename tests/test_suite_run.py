@@ -120,12 +120,14 @@ def test_a_finger_that_cannot_let_go_backs_up_onto_a_contact_it_holds_through(tm
     assert away > 2 * scen.hand.finger("thumb").tip_radius
 
 
-def test_bad_backups_name_the_argument():
+def test_bad_arguments_name_themselves():
     spec = _spec(34, "five_finger")
     with pytest.raises(InputError, match="grasp_backups"):
         run_scenario(spec, grasp_backups=-1)
     with pytest.raises(InputError, match="time_law"):
         run_scenario(spec, time_law="linear")
+    with pytest.raises(InputError, match="torsion_m"):
+        run_scenario(spec, torsion_m=-0.001)
 
 
 def test_an_error_while_building_a_backup_is_its_outcome(s034, monkeypatch):

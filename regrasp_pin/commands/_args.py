@@ -89,3 +89,24 @@ def chosen_time_law(args: argparse.Namespace) -> str:
     from ..scenarios import setup_time_law
 
     return args.time_law or setup_time_law(args.hand)
+
+
+def _torsion_mm(value: str) -> float:
+    """A finite number >= 0 (argparse ``type=`` of ``--torsion-mm``)."""
+    try:
+        mm = float(value)
+    except ValueError:
+        mm = -1.0
+    if not 0.0 <= mm < float("inf"):
+        raise argparse.ArgumentTypeError(f"{value!r} is not a number >= 0 [mm]")
+    return mm
+
+
+def add_torsion(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """The ``--torsion-mm MM`` option (``ContactModel.torsion_m``, in mm)."""
+    group.add_argument(
+        "--torsion-mm", type=_torsion_mm, default=0.0, metavar="MM",
+        help="soft fingertips: the torque about its normal a contact resists per newton "
+        "pressing it [mm] (about 2/3 mu times the contact patch's radius; with it two "
+        "fingers can hold alone); default 0: point contacts with friction",
+    )  # fmt: skip

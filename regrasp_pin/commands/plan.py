@@ -13,6 +13,7 @@ from ._args import (
     HAND_METAVAR,
     add_grasp_backups,
     add_time_law,
+    add_torsion,
     chosen_time_law,
     hand_argument,
     output_folder,
@@ -87,6 +88,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument("--json", action="store_true", help="print one JSON object, also on failure")
     out.add_argument("--no-plots", action="store_true", help="no matplotlib figures")
     out.add_argument("--no-viewer", action="store_true", help="no static viewer page (plan.html)")
+    add_torsion(what)
     search = parser.add_argument_group("the search")
     search.add_argument("--seed", type=int, default=0, help="seed of the searches (default: 0)")
     add_grasp_backups(search)
@@ -125,10 +127,12 @@ def load_object(spec: str, scale: float, hand: str) -> tuple[ConvexObject, str |
 
 
 def _scenario(args: argparse.Namespace, obj: ConvexObject) -> Scenario:
+    from ..grasp.contact import ContactModel
     from ..scenario_motion import relative_motion_from_csv, relative_twist, scenario_for_motion
     from ..scenarios import hand_model, scenario_for_hand, setup_fingers
 
     hand = hand_model(args.hand)
+    contact = ContactModel(torsion_m=args.torsion_mm * 1e-3)
     fingers = args.fingers or (
         hand.finger_names if args.hand.endswith(".json") else setup_fingers(args.hand)
     )
@@ -145,9 +149,17 @@ def _scenario(args: argparse.Namespace, obj: ConvexObject) -> Scenario:
         what = f"{args.angle:g} deg at {args.rate:g} deg/s about its axis {args.axis or (0, 0, 1)}"
     else:
         return scenario_for_hand(
-            hand, obj, fingers=fingers, angle_deg=args.angle, rate_deg_s=args.rate, seed=args.seed
+            hand,
+            obj,
+            fingers=fingers,
+            angle_deg=args.angle,
+            rate_deg_s=args.rate,
+            seed=args.seed,
+            contact=contact,
         )
-    return scenario_for_motion(hand, obj, rel, fingers=fingers, seed=args.seed, what=what)
+    return scenario_for_motion(
+        hand, obj, rel, fingers=fingers, seed=args.seed, what=what, contact=contact
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,7 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from ._args import HAND_METAVAR, add_grasp_backups, add_time_law, hand_argument, output_folder
+from ._args import (
+    HAND_METAVAR,
+    add_grasp_backups,
+    add_time_law,
+    add_torsion,
+    hand_argument,
+    output_folder,
+)
 
 NAME = "suite"
 HELP = (
@@ -68,6 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
     add_grasp_backups(where)
     add_time_law(where)
+    add_torsion(where)
     report = parser.add_argument_group("report")
     report.add_argument(
         "--report", metavar="DIR", type=Path, default=None,
@@ -124,6 +132,8 @@ def run(args: argparse.Namespace) -> int:
 
     specs, n, skip, what = _specs(args)
     where = args.scheduler or f"a local cluster of {args.workers or 'all cores'} worker(s)"
+    if args.torsion_mm > 0.0:
+        what += f", soft fingertips (torsion {args.torsion_mm:g} mm)"
     print(f"{what} on {where}, output {args.out}", flush=True)
     from ..suite.cluster import load_run
 
@@ -155,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
             max_steps=args.max_steps,
             grasp_backups=args.grasp_backups,
             time_law=args.time_law,
+            torsion_m=args.torsion_mm * 1e-3,
             on_result=progress,
         )
     except KeyboardInterrupt:

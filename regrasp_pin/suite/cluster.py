@@ -246,6 +246,7 @@ def run_suite(
     budget_s: float | None = None,
     grasp_backups: int = 1,
     time_law: str | None = None,
+    torsion_m: float = 0.0,
     on_result: Callable[[ScenarioResult, int, int], None] | None = None,
     task: Task = run_scenario,
 ) -> SuiteRun:
@@ -274,19 +275,21 @@ def run_suite(
             (:func:`~.run.run_scenario`; 0: none).
         time_law: The regrasps' time law (``RegraspParams.time_law``; None: the
             scenario's own).
+        torsion_m: The fingertips' torsional friction [m] (``ContactModel.torsion_m``;
+            0: point contacts).
         on_result: Called with ``(result, counted, n)`` as each result arrives
             (skipped ones included, ``counted`` unchanged); it may raise
             KeyboardInterrupt to stop the run, as Ctrl-C does.
         task: ``task(spec, out_dir=, max_steps=, budget_s=, grasp_backups=,
-            time_law=) -> ScenarioResult``, a
+            time_law=, torsion_m=) -> ScenarioResult``, a
             module-level function; default :func:`~.run.run_scenario`.
 
     Returns:
         The :class:`SuiteRun`.
 
     Raises:
-        InputError: bad ``n``, ``workers``, ``timeout_s``, ``grasp_backups`` or
-            ``time_law``; dask not installed.
+        InputError: bad ``n``, ``workers``, ``timeout_s``, ``grasp_backups``,
+            ``time_law`` or ``torsion_m``; dask not installed.
         KeyboardInterrupt: the run was stopped; the finished results are on disk.
     """
     specs = list(specs)
@@ -296,6 +299,7 @@ def run_suite(
     positive_int(grasp_backups, "grasp_backups", minimum=0)
     if time_law is not None:
         checked_time_law(time_law)
+    positive(torsion_m, "torsion_m", allow_zero=True)
     limit = None if timeout_s is None else positive(timeout_s, "timeout_s")
     ledger = _Ledger(Path(out), specs, resume=resume, skip_no_grasp=skip_no_grasp)
     run = SuiteRun([], [], 0.0, 0, ledger.size)
@@ -305,6 +309,7 @@ def run_suite(
         "budget_s": budget_s,
         "grasp_backups": grasp_backups,
         "time_law": time_law,
+        "torsion_m": torsion_m,
     }
     t_start = time.perf_counter()
     try:

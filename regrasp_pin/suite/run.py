@@ -18,6 +18,7 @@ import numpy as np
 from .._validate import known_fields, positive, positive_int
 from ..backups import plan_scenario, recorded_backups
 from ..exceptions import ContactError, FailureKind, PlanningError
+from ..grasp.contact import ContactModel
 from ..plan import Plan
 from ..planning.params import with_time_law
 from ..planning.timing import checked_time_law
@@ -195,6 +196,7 @@ def run_scenario(
     budget_s: float | None = None,
     grasp_backups: int = 1,
     time_law: str | None = None,
+    torsion_m: float = 0.0,
 ) -> ScenarioResult:
     """Build and plan one spec; re-check a full plan from its saved file.
 
@@ -222,23 +224,27 @@ def run_scenario(
         grasp_backups: Most initial grasps to back up to (0: none).
         time_law: The regrasps' time law (``RegraspParams.time_law``; None: the
             scenario's own).
+        torsion_m: The fingertips' torsional friction [m]
+            (:attr:`~regrasp_pin.grasp.contact.ContactModel.torsion_m`: the initial
+            grasp, the planner and the re-check alike); 0: point contacts.
 
     Returns:
         The :class:`ScenarioResult`.
 
     Raises:
-        InputError: a bad ``max_steps``, ``budget_s``, ``grasp_backups`` or
-            ``time_law`` (before any work).
+        InputError: a bad ``max_steps``, ``budget_s``, ``grasp_backups``,
+            ``time_law`` or ``torsion_m`` (before any work).
     """
     steps = None if max_steps is None else positive_int(max_steps, "max_steps")
     budget = None if budget_s is None else positive(budget_s, "budget_s")
     backups = positive_int(grasp_backups, "grasp_backups", minimum=0)
     if time_law is not None:
         checked_time_law(time_law)
+    contact = ContactModel(torsion_m=torsion_m)  # names a bad value
     result = outcome_template(spec)
     t0 = time.perf_counter()
     try:
-        scen = build_scenario(spec)
+        scen = build_scenario(spec, contact)
     except Exception as exc:  # no initial grasp ("grasp"), or a bug ("build")
         result.build_s = time.perf_counter() - t0
         _record_failure(result, exc, "grasp" if isinstance(exc, ContactError) else "build")
