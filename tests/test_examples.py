@@ -71,6 +71,23 @@ def test_allegro_regrasp_lands_on_its_new_contact(tmp_path, capsys):
     assert np.linalg.norm(result.tip_object[-1] - want) < 1e-4
 
 
+def test_soft_fingertips_plan_a_turn_with_two_fingers_holding_at_times(tmp_path, capsys):
+    """The example's plan is for soft fingertips (its file records the torsion), two
+    fingers hold the box alone at times, and the re-check, reading the torsion from the
+    file, finds every held set in force closure; with point contacts it fails."""
+    spec = importlib.util.spec_from_file_location("soft", EXAMPLES / "soft_fingertips.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    plan = Plan.load(module.main(out=tmp_path))
+    printed = capsys.readouterr().out
+    assert "point contacts: finger-" in printed or "point contacts: too-" in printed
+    assert plan.torsion_m == 0.001
+    check = recheck_plan(plan)
+    assert check.ok, check.problems
+    assert check.min_holding == 2 and check.min_closure_epsilon > 1e-9
+    assert any(len(held) == 2 for _, _, held in module.holding(plan))
+
+
 def test_examples_are_listed():
     listed = (EXAMPLES / "README.md").read_text()
     for script in EXAMPLES.glob("*.py"):

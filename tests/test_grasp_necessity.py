@@ -134,9 +134,10 @@ def test_with_soft_fingertips_two_fingers_may_hold_and_the_bound_stays_an_upper_
         free = closure_possible_without(mans, sample, obj, "a", MU, torsion_m=torsion)
         for _ in range(20):
             ii = [rng.choice(np.flatnonzero(mans[x].usable(0.0)[0])) for x in ("b", "c")]
-            if ferrari_canny_epsilon(
-                sample.points[ii], sample.normals[ii], MU, torsion_m=torsion
-            ) > 0:
+            if (
+                ferrari_canny_epsilon(sample.points[ii], sample.normals[ii], MU, torsion_m=torsion)
+                > 0
+            ):
                 found += 1
                 assert free[0], "a soft pinch of the others exists"
     assert found > 0  # the test exercised the bound

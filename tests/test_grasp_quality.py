@@ -10,11 +10,11 @@ from scipy.spatial import ConvexHull
 
 from regrasp_pin.exceptions import InputError
 from regrasp_pin.grasp.quality import (
-    holding_fingers,
     FORCE_CLOSURE_TOL,
     closure_certificate,
     contact_wrenches,
     ferrari_canny_epsilon,
+    holding_fingers,
     is_force_closure,
 )
 from regrasp_pin.model.objects import Box
