@@ -290,7 +290,7 @@ def test_plan_for_soft_fingertips_records_its_torsion(tmp_path):
     assert recheck_plan(plan).ok
 
 
-@pytest.mark.parametrize("command", ["plan", "suite"])
+@pytest.mark.parametrize("command", ["demo", "plan", "suite"])
 @pytest.mark.parametrize("value", ["-1", "nan", "inf", "soft"])
 def test_a_torsion_must_be_a_number_at_least_zero(command, value, capsys):
     with pytest.raises(SystemExit) as stop:

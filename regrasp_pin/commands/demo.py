@@ -12,6 +12,7 @@ from ._args import (
     HAND_METAVAR,
     add_grasp_backups,
     add_time_law,
+    add_torsion,
     chosen_time_law,
     hand_argument,
     output_file,
@@ -65,19 +66,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     add_grasp_backups(parser)
     add_time_law(parser)
+    add_torsion(parser)
 
 
 def _scenario(args: argparse.Namespace) -> Scenario:
+    from ..grasp.contact import ContactModel
     from ..scenarios import hand_model, make_scenario, scenario_for_hand, setup_objects
 
+    contact = ContactModel(torsion_m=args.torsion_mm * 1e-3)
     if not args.fingers:
-        return make_scenario(args.hand, args.obj, angle_deg=args.angle, rate_deg_s=args.rate)
+        return make_scenario(
+            args.hand, args.obj, angle_deg=args.angle, rate_deg_s=args.rate, contact=contact
+        )
     return scenario_for_hand(
         hand_model(args.hand),
         setup_objects(args.hand)[args.obj](),
         fingers=args.fingers,
         angle_deg=100.0 if args.angle is None else args.angle,
         rate_deg_s=args.rate,
+        contact=contact,
     )
 
 
