@@ -129,6 +129,31 @@ def test_a_holding_finger_near_a_still_one_triggers(holds):
     assert prox[first.finger].trigger_s <= first.trigger_s + 1e-9
 
 
+def test_a_still_finger_that_moves_is_measured_where_it_is_at_each_time(holds):
+    """A finger that let go moves while it backs off and parks, and another may land
+    near it meanwhile: ``base_q`` has one configuration per time. Moved along its own
+    hold's configurations without holding, the neighbour gives the holding finger the
+    proximity it had when both held; left where it was at the start, it does not."""
+    hand, holding, grid, base = holds
+    times = grid[::5]
+    kw = {"trigger_m": TRIGGER_M, "lost_m": LOST_M}
+    first = min(
+        holding_proximity(hand, holding, times, base, **kw).values(),
+        key=lambda p: (p.trigger_s, p.finger),
+    )
+    gone = first.other
+    rest = {n: h for n, h in holding.items() if n != gone}
+    moving = np.tile(base, (times.size, 1))
+    moving[:, hand.finger(gone).q_indices] = holding[gone].q_at(times)
+    prox = holding_proximity(hand, rest, times, moving, still=[gone], **kw)
+    assert prox[first.finger].other == gone
+    assert prox[first.finger].trigger_s == pytest.approx(first.trigger_s)
+    start = base.copy()
+    start[hand.finger(gone).q_indices] = holding[gone].q_at(times[:1])[0]
+    left = holding_proximity(hand, rest, times, start, still=[gone], **kw).get(first.finger)
+    assert left is None or (left.trigger_s, left.other) != (prox[first.finger].trigger_s, gone)
+
+
 def test_candidates_stay_clear_until_a_finger_comes_near(holds):
     """clear_of_fingers against computeDistances at every time: the mask is False
     from the first time the candidate finger is within the limit of another one."""

@@ -111,10 +111,11 @@ def holding_proximity(
         hand: The hand.
         holding: The fingers that hold, and their holds.
         times_s: ``(T,)`` increasing times to check [s].
-        base_q: ``(nq,)`` configuration of the fingers that do not hold.
+        base_q: ``(nq,)`` configuration of the fingers that do not hold, or ``(T, nq)``
+            one per time (a finger that let go moves while it backs off and parks).
         trigger_m: A regrasp should start below this distance [m].
         lost_m: The hold is lost below this distance [m] (< ``trigger_m``).
-        still: Fingers that do not hold and stay at ``base_q`` (idle, or let go):
+        still: Fingers that do not hold and are at ``base_q`` (idle, or let go):
             a holding finger that comes near one of them must regrasp too.
 
     Returns:

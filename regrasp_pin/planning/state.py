@@ -98,12 +98,15 @@ def pending_triggers(
 ) -> list[Trigger]:
     """The pending triggers, earliest first (ties by name): a contact near its joint
     limits (or infeasible), or a holding finger near another finger (holding, idle,
-    or let go and still; ``gone``: fingers that are neither, e.g. one about to let go)."""
+    or let go: backing off, parking or still; ``gone``: fingers that are neither, e.g.
+    one about to let go)."""
     p = ctx.params
     times = ctx.grid[ctx.grid >= state.now - TIME_TOL_S]
-    base = ctx.base_q.copy()
-    for n, rel in state.released.items():  # where a finger that let go stays
-        base[ctx.scene.hand.fingers[n].q_indices] = rel.q[-1]
+    # a finger that let go moves while it backs off and parks (another finger may
+    # regrasp meanwhile and land near it), then stays
+    base = with_released(
+        ctx, state, times, np.broadcast_to(ctx.base_q, (times.size, ctx.base_q.size))
+    )
     prox = holding_proximity(
         ctx.scene.hand,
         state.holding,
@@ -188,13 +191,22 @@ def q_hand_of(
             q[:, hand.fingers[n].q_indices] = holding_q(
                 hand, motion, n, state.holding[n], times, tol
             )
-        for n, rel in state.released.items():  # let go: still, after the back-off
-            idx = hand.fingers[n].q_indices
-            for j in range(idx.size):
-                q[:, idx[j]] = np.interp(times, rel.times_s, rel.q[:, j])
-        return q
+        return with_released(ctx, state, times, q)
 
     return q_hand
+
+
+def with_released(
+    ctx: PlanContext, state: PlanState, times: np.ndarray, q: np.ndarray
+) -> np.ndarray:
+    """Hand configurations ``q`` ``(T, nq)`` at ``times`` [s] (a copy) with the fingers
+    that let go where their releases put them: backing off, parking, then still."""
+    q = np.array(q, float)
+    for n, rel in state.released.items():
+        idx = ctx.scene.hand.fingers[n].q_indices
+        for j in range(idx.size):
+            q[:, idx[j]] = np.interp(times, rel.times_s, rel.q[:, j])
+    return q
 
 
 def hold_ends(
