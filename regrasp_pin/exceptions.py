@@ -136,11 +136,13 @@ ADVICE = {
     "ContactModel.choice_link_clearance_m (new contacts), or use a larger object",
     FailureKind.GRID_UNREACHABLE: "lower RegraspParams.grid_spacing_m or the contact keep-out",
     FailureKind.NO_CANDIDATE: "lower ContactModel.choice_margin_rad or turn more slowly",
-    FailureKind.FORCE_CLOSURE: "use more fingers or a higher friction coefficient mu",
+    FailureKind.FORCE_CLOSURE: "use more fingers, a higher friction coefficient mu, or soft "
+    "fingertips (ContactModel.torsion_m) if the hand has them",
     FailureKind.TOO_LATE: "shorten RegraspParams.duration_s or extend the motion",
     FailureKind.SHORT_HOLD: "turn more slowly or place the object deeper in the fingers' workspace",
     FailureKind.FINGER_BUSY: "turn more slowly so that the fingers can take turns",
-    FailureKind.TOO_FEW_FINGERS: "lower PlannerParams.min_holding or use more fingers",
+    FailureKind.TOO_FEW_FINGERS: "use more fingers, or soft fingertips (ContactModel.torsion_m: "
+    "two fingers can then hold), or lower PlannerParams.min_holding",
     FailureKind.BUDGET: "raise the planner's budget (PlannerParams.max_steps, or budget_s if set)",
     FailureKind.INFEASIBLE: "turn less or about another axis, or place the object where that "
     "finger's contacts stay within its limits longer",
