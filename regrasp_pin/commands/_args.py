@@ -49,15 +49,21 @@ def output_file(path: str | Path, option: str) -> Path:
     return file
 
 
+def _at_least_zero(value: str, convert: type[int] | type[float], what: str) -> float:
+    """``convert(value)`` if it is finite and >= 0, else an ArgumentTypeError saying it
+    is not ``what`` (argparse ``type=`` helpers)."""
+    try:
+        x = convert(value)
+    except ValueError:
+        x = -1
+    if not 0 <= x < float("inf"):
+        raise argparse.ArgumentTypeError(f"{value!r} is not {what}")
+    return x
+
+
 def _backups(value: str) -> int:
     """A whole number >= 0 (argparse ``type=`` of ``--grasp-backups``)."""
-    try:
-        k = int(value)
-    except ValueError:
-        k = -1
-    if k < 0:
-        raise argparse.ArgumentTypeError(f"{value!r} is not a whole number >= 0")
-    return k
+    return int(_at_least_zero(value, int, "a whole number >= 0"))
 
 
 def add_grasp_backups(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
@@ -93,13 +99,7 @@ def chosen_time_law(args: argparse.Namespace) -> str:
 
 def _torsion_mm(value: str) -> float:
     """A finite number >= 0 (argparse ``type=`` of ``--torsion-mm``)."""
-    try:
-        mm = float(value)
-    except ValueError:
-        mm = -1.0
-    if not 0.0 <= mm < float("inf"):
-        raise argparse.ArgumentTypeError(f"{value!r} is not a number >= 0 [mm]")
-    return mm
+    return float(_at_least_zero(value, float, "a number >= 0 [mm]"))
 
 
 def add_torsion(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:

@@ -152,12 +152,11 @@ def leave_one_out(
     scale_m: float,
     rows: Iterable[int],
     epsilons: ScreeningEpsilons | None = None,
-    torsion_m: float = 0.0,
 ) -> list[float]:
     """The screening epsilon of contacts ``p``, ``n`` ``(F, 3)`` with each of ``rows``
     left out in turn (> 0: the others hold without it); from ``epsilons`` if given
-    (else with torsional friction ``torsion_m`` [m])."""
-    eps = epsilons or ScreeningEpsilons(mu, scale_m, torsion_m)
+    (they carry the contacts' torsion; else point contacts)."""
+    eps = epsilons or ScreeningEpsilons(mu, scale_m)
     return [eps(np.delete(p, j, 0), np.delete(n, j, 0)) for j in rows]
 
 

@@ -104,9 +104,7 @@ def pending_triggers(
     times = ctx.grid[ctx.grid >= state.now - TIME_TOL_S]
     # a finger that let go moves while it backs off and parks (another finger may
     # regrasp meanwhile and land near it), then stays
-    base = with_released(
-        ctx, state, times, np.broadcast_to(ctx.base_q, (times.size, ctx.base_q.size))
-    )
+    base = with_released(ctx, state, times, np.tile(ctx.base_q, (times.size, 1)))
     prox = holding_proximity(
         ctx.scene.hand,
         state.holding,
@@ -199,9 +197,9 @@ def q_hand_of(
 def with_released(
     ctx: PlanContext, state: PlanState, times: np.ndarray, q: np.ndarray
 ) -> np.ndarray:
-    """Hand configurations ``q`` ``(T, nq)`` at ``times`` [s] (a copy) with the fingers
-    that let go where their releases put them: backing off, parking, then still."""
-    q = np.array(q, float)
+    """The hand configurations ``q`` ``(T, nq)`` at ``times`` [s], changed in place,
+    with the fingers that let go where their releases put them: backing off, parking,
+    then still."""
     for n, rel in state.released.items():
         idx = ctx.scene.hand.fingers[n].q_indices
         for j in range(idx.size):
