@@ -21,6 +21,7 @@ from regrasp_pin.model.objects import Box
 
 MU = 0.5
 BOX = Box((0.06, 0.04, 0.04))
+HALF = np.array([0.03, 0.02, 0.02])  # the box's half sides [m]
 SCALE_M = BOX.radius_m
 
 # Thumb on +x opposite two fingers on -x (normals are the box's OUTWARD normals).
@@ -95,6 +96,53 @@ def test_epsilon_is_the_inscribed_ball_radius():
     assert_close(np.max(w @ a), eps, atol=1e-12, what="support along the nearest facet")
     assert _in_hull(w, 0.999 * eps * a)
     assert not _in_hull(w, 1.001 * eps * a)
+
+
+def _merged_hull_epsilon(w: np.ndarray) -> float:
+    """Epsilon from qhull's default hull (merged facets), the reference."""
+    return max(float(np.min(-ConvexHull(w).equations[:, -1])), 0.0)
+
+
+def test_epsilon_without_merged_facets_is_the_default_hulls():
+    # random grasps of 3-5 contacts on a box's faces, point and soft: many sets in force
+    # closure, others not, some degenerate (contacts sharing a face)
+    rng = np.random.default_rng(7)
+    checked = closing = 0
+    for _ in range(150):
+        k = int(rng.integers(3, 6))
+        faces = rng.integers(0, 6, size=k)
+        n = np.zeros((k, 3))
+        n[np.arange(k), faces // 2] = np.where(faces % 2 == 0, 1.0, -1.0)
+        p = rng.uniform(-1.0, 1.0, size=(k, 3)) * HALF
+        p[n != 0] = (n * HALF)[n != 0]
+        torsion = float(rng.choice([0.0, 0.002]))
+        w = contact_wrenches(p, n, MU, torque_scale_m=SCALE_M, torsion_m=torsion)
+        eps = ferrari_canny_epsilon(p, n, MU, torque_scale_m=SCALE_M, torsion_m=torsion)
+        try:
+            ref = _merged_hull_epsilon(w)
+        except Exception:  # the default hull raises on sets of fewer dimensions
+            ref = 0.0
+        assert_close(eps, ref, rtol=1e-9, atol=1e-15, what="epsilon against the merged hull")
+        checked += 1
+        closing += ref > FORCE_CLOSURE_TOL
+    assert checked == 150 and 30 <= closing <= 140  # both kinds were exercised
+
+
+def test_a_hull_whose_facet_leaves_a_wrench_outside_is_refused():
+    from regrasp_pin.grasp.quality import _checked_offsets
+
+    w = contact_wrenches(QUAD_P, QUAD_N, MU, torque_scale_m=SCALE_M)
+    hull = ConvexHull(w, qhull_options="Q0")
+    eq, simplices = hull.equations.copy(), hull.simplices
+    assert _checked_offsets(w, eq, simplices) == pytest.approx(
+        _merged_hull_epsilon(w), rel=1e-9
+    )
+    moved = eq.copy()
+    moved[0, -1] -= 1e-9  # the plane pushed 1 nm inwards: its vertices lie outside it
+    assert _checked_offsets(w, moved, simplices) is None
+    tilted = eq.copy()
+    tilted[0, :6] = -tilted[0, :6]  # a flipped facet: the wrenches on its other side
+    assert _checked_offsets(w, tilted, simplices) is None
 
 
 def test_antipodal_point_pinch_cannot_resist_torque_about_its_axis():
