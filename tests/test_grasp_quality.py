@@ -134,9 +134,7 @@ def test_a_hull_whose_facet_leaves_a_wrench_outside_is_refused():
     w = contact_wrenches(QUAD_P, QUAD_N, MU, torque_scale_m=SCALE_M)
     hull = ConvexHull(w, qhull_options="Q0")
     eq, simplices = hull.equations.copy(), hull.simplices
-    assert _checked_offsets(w, eq, simplices) == pytest.approx(
-        _merged_hull_epsilon(w), rel=1e-9
-    )
+    assert _checked_offsets(w, eq, simplices) == pytest.approx(_merged_hull_epsilon(w), rel=1e-9)
     moved = eq.copy()
     moved[0, -1] -= 1e-9  # the plane pushed 1 nm inwards: its vertices lie outside it
     assert _checked_offsets(w, moved, simplices) is None
