@@ -517,21 +517,27 @@ def _spread_out(
     waits for a narrower pass); one pass per spacing (widest first), so the first
     candidates cover the surface and the later ones fill in. ``admit`` filters."""
     chosen: list[int] = []
-    refused: set[int] = set()
+    skip: set[int] = set()  # refused by admit, or chosen
     for spacing in spacings:
         near = spacing + DISTANCE_TOL_M if spacing > 0 else 0.0  # 0: any point
+        # the points within `near` of a chosen one, kept up to date as points are chosen
+        # (the same distances as measured from each point to the chosen ones)
+        blocked = np.zeros(len(points), bool)
+        for c in chosen if near > 0.0 else ():
+            blocked |= np.linalg.norm(points - points[c], axis=1) < near
         for j in order:
             j = int(j)
             if len(chosen) == limit:
                 return chosen
-            if j in refused or j in chosen:
-                continue
-            if (np.linalg.norm(points[chosen] - points[j], axis=1) < near).any():
+            if j in skip or blocked[j]:
                 continue
             if not admit(j):
-                refused.add(j)
+                skip.add(j)
                 continue
             chosen.append(j)
+            skip.add(j)
+            if near > 0.0:
+                blocked |= np.linalg.norm(points - points[j], axis=1) < near
     return chosen
 
 
