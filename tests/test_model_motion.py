@@ -212,3 +212,33 @@ def test_rotations_are_scipys_slerp_and_each_point_alone():
     assert_close(got, Slerp(t, rot)(tq).as_matrix(), atol=2e-15, what="slerp")
     assert_close(got[np.isin(tq, t)], rot.as_matrix(), atol=2e-15, what="at the samples")
     assert motion.pose(tq[5:9]).tobytes() == motion.pose(tq)[5:9].tobytes()
+
+
+def test_poses_asked_for_again_are_the_same_bits_and_the_callers_own():
+    from regrasp_pin.model import motion as motion_module
+
+    fresh = ObjectMotion.constant_twist(
+        _start_pose(), axis_palm=AXIS, point_palm=POINT, rate_rad_s=RATE,
+        velocity_palm_m_s=VEL, duration_s=2.0, dt_s=0.01,
+    )  # fmt: skip
+    rng = np.random.default_rng(3)
+    times = [rng.uniform(0.0, 2.0, int(n)) for n in rng.integers(1, 50, 80)]
+    scalars = [0.0, -0.0, 1.25, 2.0]
+    first = [fresh.pose(t) for t in times] + [fresh.pose(t) for t in scalars]
+    first[0][:] = 0.0  # the caller's copy: the kept poses must not change with it
+    first[0] = fresh.pose(times[0].copy())
+    again = [fresh.pose(t.copy()) for t in times] + [fresh.pose(t) for t in scalars]
+    assert len(fresh._poses) <= motion_module._POSES_KEPT
+    # an independent motion (nothing kept yet) answers each one alone
+    for t, a, b in zip(times + scalars, first, again, strict=True):
+        other = ObjectMotion.constant_twist(
+            _start_pose(), axis_palm=AXIS, point_palm=POINT, rate_rad_s=RATE,
+            velocity_palm_m_s=VEL, duration_s=2.0, dt_s=0.01,
+        )  # fmt: skip
+        assert a.tobytes() == b.tobytes() == other.pose(t).tobytes()
+    # bad times are still refused
+    with pytest.raises(InputError, match="t_s"):
+        fresh.pose(np.array([2.5]))
+    import pickle
+
+    assert pickle.loads(pickle.dumps(fresh))._poses == {}

@@ -22,6 +22,26 @@ __all__ = ["ObjectMotion"]
 
 _ROTATION_TOL = 1e-6  # max |R^T R - I| and |det R - 1| accepted for a rotation matrix
 _TIME_SLACK_S = 1e-9  # times this close outside [t_start, t_end] are clamped to the range
+#: ObjectMotion.pose keeps the poses of this many times or time arrays
+_POSES_KEPT = 32
+#: ... of at most this many times each
+_POSES_MAX_TIMES = 4096
+
+
+def _times_key(t_s: object) -> object:
+    """What :meth:`ObjectMotion.pose` keeps the poses of ``t_s`` under: a Python float's
+    bits (``-0.0`` apart from ``0.0``), or a 1-D float64 array's bytes (short enough);
+    None: not kept."""
+    if type(t_s) is float:
+        return t_s.hex()
+    if (
+        isinstance(t_s, np.ndarray)
+        and t_s.dtype == np.float64
+        and t_s.ndim == 1
+        and t_s.size <= _POSES_MAX_TIMES
+    ):
+        return (t_s.size, t_s.tobytes())
+    return None
 
 
 class ObjectMotion:
@@ -57,6 +77,7 @@ class ObjectMotion:
         mats[:, 3, 3] = 1.0
         mats.setflags(write=False)
         self._mats = mats
+        self._poses: dict[object, np.ndarray] = {}  # see pose()
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -195,6 +216,11 @@ class ObjectMotion:
     def pose(self, t_s: float | np.ndarray) -> np.ndarray:
         """The interpolated pose at a time or at times: linear translation, slerped rotation.
 
+        The planner asks for the poses at the same times again and again (each holding
+        finger, each choice and path variant): the poses of the last
+        :data:`_POSES_KEPT` float times or arrays of float64 times asked for are kept
+        and returned again (a copy: the same bits).
+
         Args:
             t_s: A time [s] or times, shape (K,), within ``[t_start, t_end]``.
 
@@ -204,13 +230,28 @@ class ObjectMotion:
         Raises:
             InputError: for NaN or times outside ``[t_start, t_end]``.
         """
+        key = _times_key(t_s)
+        known = None if key is None else self._poses.get(key)
+        if known is not None:
+            return known.copy()
         t, scalar = self._check_query(t_s)
         R, p = self._interpolate(t)
         out = np.zeros((t.size, 4, 4))
         out[:, :3, :3] = R
         out[:, :3, 3] = p
         out[:, 3, 3] = 1.0
-        return out[0] if scalar else out
+        out = out[0] if scalar else out
+        if key is not None:
+            if len(self._poses) >= _POSES_KEPT:
+                self._poses.clear()  # (threads may share the motion: no ordered eviction)
+            self._poses[key] = out.copy()
+        return out
+
+    def __getstate__(self) -> dict:
+        """Pickled without the kept poses."""
+        state = self.__dict__.copy()
+        state["_poses"] = {}
+        return state
 
     def transform_points(self, t_s: float | np.ndarray, p_object: np.ndarray) -> np.ndarray:
         """Points of the object frame expressed in the palm frame at time(s) ``t_s``.
