@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,7 +34,7 @@ def as_array(
         want is not None and have != want for have, want in zip(arr.shape, shape, strict=False)
     ):
         raise InputError(argument, f"has shape {arr.shape}", f"shape {_shape_text(shape)}")
-    if finite and not np.all(np.isfinite(arr)):
+    if finite and not np.isfinite(arr).all():
         raise InputError(argument, "contains NaN or inf", "finite values")
     return arr
 
@@ -52,7 +53,7 @@ def as_batch(
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != width:
         raise InputError(argument, f"has shape {given}", f"shape ({width},) or (N, {width})")
-    if finite and not np.all(np.isfinite(arr)):
+    if finite and not np.isfinite(arr).all():
         raise InputError(argument, "contains NaN or inf", "finite values")
     return arr, single
 
@@ -63,7 +64,7 @@ def positive(value: float, argument: str, *, allow_zero: bool = False) -> float:
         v = float(value)
     except (TypeError, ValueError):
         raise InputError(argument, f"{value!r} is not a number", "a positive number") from None
-    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         expected = "a finite number >= 0" if allow_zero else "a finite number > 0"
         raise InputError(argument, f"{value!r} is not allowed", expected)
     return v
