@@ -70,7 +70,10 @@ def checkout(commit: str, into: Path) -> Path:
     ).stdout
     into.mkdir(parents=True, exist_ok=True)
     with tarfile.open(fileobj=io.BytesIO(tar)) as t:
-        t.extractall(into, filter="data")
+        if hasattr(tarfile, "data_filter"):  # Python >= 3.11.4, 3.10.12
+            t.extractall(into, filter="data")
+        else:
+            t.extractall(into)  # our own repository's archive
     return into
 
 
