@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 from conftest import assert_close
 from scipy.optimize import linprog
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, QhullError
 
 from regrasp_pin.exceptions import InputError
 from regrasp_pin.grasp.quality import (
     FORCE_CLOSURE_TOL,
+    _checked_epsilon,
     closure_certificate,
     contact_wrenches,
     ferrari_canny_epsilon,
@@ -120,7 +121,7 @@ def test_epsilon_without_merged_facets_is_the_default_hulls():
         eps = ferrari_canny_epsilon(p, n, MU, torque_scale_m=SCALE_M, torsion_m=torsion)
         try:
             ref = _merged_hull_epsilon(w)
-        except Exception:  # the default hull raises on sets of fewer dimensions
+        except QhullError:  # the default hull raises on sets of fewer dimensions
             ref = 0.0
         assert_close(eps, ref, rtol=1e-9, atol=1e-15, what="epsilon against the merged hull")
         checked += 1
@@ -129,18 +130,16 @@ def test_epsilon_without_merged_facets_is_the_default_hulls():
 
 
 def test_a_hull_whose_facet_leaves_a_wrench_outside_is_refused():
-    from regrasp_pin.grasp.quality import _checked_offsets
-
     w = contact_wrenches(QUAD_P, QUAD_N, MU, torque_scale_m=SCALE_M)
     hull = ConvexHull(w, qhull_options="Q0")
     eq, simplices = hull.equations.copy(), hull.simplices
-    assert _checked_offsets(w, eq, simplices) == pytest.approx(_merged_hull_epsilon(w), rel=1e-9)
+    assert _checked_epsilon(w, eq, simplices) == pytest.approx(_merged_hull_epsilon(w), rel=1e-9)
     moved = eq.copy()
     moved[0, -1] -= 1e-9  # the plane pushed 1 nm inwards: its vertices lie outside it
-    assert _checked_offsets(w, moved, simplices) is None
+    assert _checked_epsilon(w, moved, simplices) is None
     tilted = eq.copy()
     tilted[0, :6] = -tilted[0, :6]  # a flipped facet: the wrenches on its other side
-    assert _checked_offsets(w, tilted, simplices) is None
+    assert _checked_epsilon(w, tilted, simplices) is None
 
 
 def test_antipodal_point_pinch_cannot_resist_torque_about_its_axis():

@@ -217,10 +217,10 @@ def _simplicial_epsilon(w: np.ndarray) -> float | None:
         hull = ConvexHull(w, qhull_options="Q0")
     except QhullError:
         return None
-    return _checked_offsets(w, hull.equations, hull.simplices)
+    return _checked_epsilon(w, hull.equations, hull.simplices)
 
 
-def _checked_offsets(w: np.ndarray, equations: np.ndarray, simplices: np.ndarray) -> float | None:
+def _checked_epsilon(w: np.ndarray, equations: np.ndarray, simplices: np.ndarray) -> float | None:
     """The epsilon of a hull's facets ``equations`` ``(F, 7)`` (vertices ``simplices``
     ``(F, 6)`` into ``w``), or None if a wrench lies outside a facet's plane or a vertex
     off it by more than ``_HULL_CHECK_TOL``."""
