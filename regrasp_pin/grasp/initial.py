@@ -523,8 +523,9 @@ def _spread_out(
         # the points within `near` of a chosen one, kept up to date as points are chosen
         # (the same distances as measured from each point to the chosen ones)
         blocked = np.zeros(len(points), bool)
-        for c in chosen if near > 0.0 else ():
-            blocked |= np.linalg.norm(points - points[c], axis=1) < near
+        if near > 0.0:
+            for c in chosen:
+                blocked |= np.linalg.norm(points - points[c], axis=1) < near
         for j in order:
             j = int(j)
             if len(chosen) == limit:

@@ -40,7 +40,7 @@ def _times_key(t_s: object) -> object:
         and t_s.ndim == 1
         and t_s.size <= _POSES_MAX_TIMES
     ):
-        return (t_s.size, t_s.tobytes())
+        return t_s.tobytes()  # 1-D: its length is in the bytes
     return None
 
 
@@ -241,11 +241,12 @@ class ObjectMotion:
         out[:, :3, 3] = p
         out[:, 3, 3] = 1.0
         out = out[0] if scalar else out
-        if key is not None:
-            if len(self._poses) >= _POSES_KEPT:
-                self._poses.clear()  # (threads may share the motion: no ordered eviction)
-            self._poses[key] = out.copy()
-        return out
+        if key is None:
+            return out
+        if len(self._poses) >= _POSES_KEPT:
+            self._poses.clear()  # (threads may share the motion: no ordered eviction)
+        self._poses[key] = out
+        return out.copy()
 
     def __getstate__(self) -> dict:
         """Pickled without the kept poses."""
