@@ -160,6 +160,7 @@ class Attempt:
         measured: The measured value (units by kind: m, rad, rad/s, ...), or None.
         required: The value that was required, or None.
         what: What was tried (e.g. ``"Q=(0.01, 0.02, 0.0) start=1.90 m=9"``).
+        other: For ``finger-collision``, the finger it came too near, when known.
     """
 
     kind: FailureKind
@@ -168,6 +169,7 @@ class Attempt:
     measured: float | None = None
     required: float | None = None
     what: str = ""
+    other: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The attempt as JSON-serializable data (the kind by its value)."""
@@ -200,6 +202,7 @@ class _Outcome(RegraspError):
         measured: float | None = None,
         required: float | None = None,
         attempts: Iterable[Attempt] = (),
+        other: str | None = None,
     ) -> None:
         self.finger = finger
         self.time_s = time_s
@@ -208,6 +211,7 @@ class _Outcome(RegraspError):
         self.measured = None if measured is None else float(measured)
         self.required = None if required is None else float(required)
         self.attempts = tuple(attempts)
+        self.other = other
         super().__init__(_where(finger, time_s) + reason)
 
     def as_attempt(self, what: str = "") -> Attempt:
@@ -219,6 +223,7 @@ class _Outcome(RegraspError):
             measured=self.measured,
             required=self.required,
             what=what,
+            other=self.other,
         )
 
 
@@ -232,6 +237,7 @@ class ContactError(_Outcome):
         kind: A :class:`FailureKind` (default ``NO_CANDIDATE``).
         measured, required: The numbers behind the failure, when there are any.
         attempts: Failed attempts that led here, as data.
+        other: For ``finger-collision``, the finger it came too near, when known.
     """
 
     default_kind = FailureKind.NO_CANDIDATE
@@ -247,6 +253,7 @@ class PlanningError(_Outcome):
         kind: A :class:`FailureKind`: what the failure was (default ``BUDGET``).
         measured, required: The numbers behind it (units by kind), when there are any.
         attempts: Every failed attempt of the search that led here, as data.
+        other: For ``finger-collision``, the finger it came too near, when known.
         partial: Whatever was planned before the failure (e.g. a partial plan), or None.
     """
 

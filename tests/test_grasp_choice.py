@@ -835,10 +835,12 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     monkeypatch.setattr(
         screening_module, "ferrari_canny_epsilon", lambda *a, **k: calls.append(1) or real(*a, **k)
     )
-    seen = []
+    seen, at = [], []
     real_gap = FingerClearance.__call__
     monkeypatch.setattr(
-        FingerClearance, "__call__", lambda self, q: seen.append(real_gap(self, q)) or seen[-1]
+        FingerClearance,
+        "__call__",
+        lambda self, q: at.append(np.array(q)) or seen.append(real_gap(self, q)) or seen[-1],
     )
     # 1 m from every other finger: nothing passes, and no epsilon is computed (not even
     # P's: it is read only to compare a passing candidate's with it)
@@ -851,6 +853,15 @@ def test_finger_clearance_is_tested_before_force_closure(five, monkeypatch):
     assert e.value.kind == FailureKind.FINGER_COLLISION and e.value.required == 1.0
     assert e.value.measured == max(seen) and 0.0 < e.value.measured < 1.0
     assert len(calls) == 0
+    # and the finger it came nearest to: measured against each other finger alone
+    q_best = at[int(np.argmax(seen))]
+    alone_to = {
+        o: real_gap(FingerClearance(hand, "middle", others=[o]), q_best)
+        for o in hand.finger_names
+        if o != "middle"
+    }
+    assert e.value.other == min(alone_to, key=alone_to.get)
+    assert min(alone_to.values()) == e.value.measured
     free = choose_new_contact(
         hand, box, manifolds["middle"], sample, 1.5, q_hand_arrive=q_hand,
         finger_clearance_m=-1.0, **kw,
@@ -870,10 +881,12 @@ def test_candidates_too_near_another_finger_do_not_use_up_the_checks(five, monke
         P_object=P, n_P_object=n_P, others=others, contact=CONTACT, mu=MU, link_check=False,
         q_hand_arrive=q_hand,
     )  # fmt: skip
-    seen = []
+    seen, at = [], []
     real_gap = FingerClearance.__call__
     monkeypatch.setattr(
-        FingerClearance, "__call__", lambda self, q: seen.append(real_gap(self, q)) or seen[-1]
+        FingerClearance,
+        "__call__",
+        lambda self, q: at.append(np.array(q)) or seen.append(real_gap(self, q)) or seen[-1],
     )
     first = choose_new_contact(hand, box, manifolds["middle"], sample, 1.5, max_checks=1,
                                finger_clearance_m=-1.0, **kw)  # fmt: skip

@@ -238,6 +238,30 @@ def test_finger_clearance_matches_coal_pair_by_pair(hand):
             assert_close(fc(q), expected, atol=1e-9, what=f"{finger} to the other fingers")
 
 
+def test_finger_clearance_names_the_finger_it_measures_to(hand):
+    """``nearest``: the distance of the call and the other finger it belongs to, the
+    one whose pairs alone, by Coal, give that distance (random configurations); a
+    clearance without pairs is infinite and names none."""
+    rng = np.random.default_rng(15)
+    for finger in ("index", "ring", "thumb"):
+        fc = FingerClearance(hand, finger)
+        mine = hand.finger(finger).geometry_ids
+        for _ in range(4):
+            q = hand.neutral()
+            for f in hand.fingers.values():
+                q[f.q_indices] = rng.uniform(f.lower, f.upper)
+            d, other = fc.nearest(q)
+            assert d == fc(q)
+            each = {
+                n: _coal_pairs(hand, mine, [g for g in o.geometry_ids if g not in mine], q)
+                for n, o in hand.fingers.items()
+                if n != finger
+            }
+            assert_close(each[other], d, atol=1e-9, what=f"{finger} to {other}")
+            assert all(v >= d - 1e-9 for v in each.values())
+    assert FingerClearance(hand, "index", others=[]).nearest(hand.neutral()) == (np.inf, None)
+
+
 def test_finger_clearance_measures_a_configuration_once(hand, monkeypatch):
     """A configuration asked again (the same bits) gives the same distance without a
     measurement; another one is measured; the oldest is forgotten past the memo's

@@ -126,7 +126,32 @@ def test_errors_carry_kind_numbers_and_json_attempts():
             "measured": 5.0,
             "required": 4.0,
             "what": "start 1.2 s",
+            "other": None,
         }
     ]
     assert err.as_attempt("x").kind is K.VELOCITY
     assert ContactError("none").kind is K.NO_CANDIDATE
+
+
+def test_finger_collision_summary_names_the_fingers_come_near():
+    """A finger-collision summary names the fingers its attempts came too near, most
+    often first (ties by name), and the nearest miss's where they differ; attempts of
+    other kinds and attempts that do not know the finger are not counted."""
+    attempts = [
+        Attempt(K.FINGER_COLLISION, measured=-0.002, required=0.001, other="ring"),
+        Attempt(K.FINGER_COLLISION, measured=0.0004, required=0.001, other="middle"),
+        Attempt(K.FINGER_COLLISION, measured=-0.001, required=0.001, other="ring"),
+        Attempt(K.FINGER_COLLISION, measured=-0.003, required=0.001),
+        Attempt(K.FINGER_COLLISION, measured=-0.003, required=0.001, other="index"),
+        Attempt(K.OBJECT_CLEARANCE, measured=0.001, required=0.003, other="thumb"),
+    ]
+    text = failure_summary(attempts, K.BUDGET)
+    assert "mostly finger-collision near ring (2), index (1), middle (1) (" in text
+    assert "the nearest 0.40 mm from middle, need 1.00 mm" in text
+    assert "thumb" not in text
+    # one finger named: the nearest miss's is that one, not named twice
+    one = failure_summary(attempts[:3], K.BUDGET)
+    assert "mostly finger-collision near ring (2), middle (1) (the nearest 0.40 mm from" in one
+    alone = failure_summary(attempts[:1], K.BUDGET)
+    assert "mostly finger-collision near ring (1) (the nearest -2.00 mm, need" in alone
+    assert "mostly finger-collision (the nearest" in failure_summary(attempts[3:4], K.BUDGET)

@@ -15,8 +15,10 @@ from regrasp_pin.exceptions import FailureKind, PlanningError
 from regrasp_pin.grasp.holding import holding_q, rest_configuration
 from regrasp_pin.model.clearance import FingerClearance
 from regrasp_pin.model.motion import ObjectMotion
-from regrasp_pin.planning.release import plan_release
+from regrasp_pin.model.objects import Box
+from regrasp_pin.planning.release import check_failure, plan_release
 from regrasp_pin.planning.timing import duration_for_move
+from regrasp_pin.verify.finger_motion import verify_finger_motion
 
 T_RELEASE_S = 0.3
 CLEARANCE_M = 0.003
@@ -252,3 +254,21 @@ def test_where_the_normal_is_out_of_reach_the_finger_backs_off_tilted(scene):
         if rescued == 3:
             break
     assert rescued == 3
+
+
+def test_a_motion_into_another_finger_fails_naming_that_finger():
+    """The failure of a motion that fails its Coal check by coming too near another
+    finger names that finger (the verification's, from the hand's geometries), and so
+    does its attempt record."""
+    hand = make_scenario().hand
+    q = np.tile(hand.neutral(), (3, 1))
+    f = hand.finger("index")
+    q[:, f.q_indices] = np.linspace([0.0, 0.65, 0.87], [-0.349, 0.65, 0.87], 3)  # into middle
+    T = np.tile(np.eye(4), (3, 1, 1))
+    T[:, 2, 3] = 0.3  # the object far away
+    report = verify_finger_motion(
+        hand, Box((0.04, 0.04, 0.04)), "index", [0.0, 0.5, 1.0], q, T, tip_clearance_m=0.0
+    )
+    error = check_failure("the move", "index", report.worst_failure, report.time_s)
+    assert error.kind is FailureKind.FINGER_COLLISION and error.other == "middle"
+    assert error.measured < 0.0 and error.as_attempt("the move").other == "middle"

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 import regrasp_pin.suite
 from regrasp_pin import ferrari_canny_epsilon, make_scenario
 from regrasp_pin.exceptions import (
+    Attempt,
     ContactError,
     FailureKind,
     InputError,
@@ -395,6 +396,27 @@ def test_summary_gives_how_far_distance_failures_missed():
     rows = {ln.split()[0]: ln for ln in text.splitlines() if ln.startswith("  ")}
     assert "missed by 0.10-9.00 mm, median 0.50 mm" in rows["object-clearance"]
     assert "missed by" not in rows["velocity"]
+
+
+def test_summary_names_the_fingers_that_finger_collisions_came_near():
+    """Per finger-collision failure, the finger its attempts of that kind name most
+    often (ties by name), counted over the failures; attempts of other kinds, and
+    failures whose attempts name none, are not counted; other kinds get no such part."""
+    named = [["ring", "middle", "ring"], ["middle", "index"], ["thumb"], []]
+    results = []
+    for i, others in enumerate(named):
+        r = _result(f"f{i}", "allegro", "box", "object-axis", False, "finger-collision", "plan")
+        r.attempts = [Attempt(FailureKind.FINGER_COLLISION, other=o).to_dict() for o in others] + [
+            Attempt(FailureKind.VELOCITY, other="little").to_dict()
+        ]
+        results.append(r)
+    fast = _result("v", "allegro", "box", "object-axis", False, "velocity", "plan")
+    fast.attempts = [Attempt(FailureKind.VELOCITY, other="ring").to_dict()]
+    rows = {
+        ln.split()[0]: ln for ln in summarize([*results, fast]).splitlines() if ln.startswith("  ")
+    }
+    assert "; near index 1, ring 1, thumb 1" in rows["finger-collision"]
+    assert "near" not in rows["velocity"]
 
 
 def test_results_round_trip_through_json():

@@ -503,6 +503,8 @@ def test_finger_into_neighbour_is_a_finger_finger_failure(five):
     assert not r.ok and r.joint_limits_ok
     assert {x.kind for x in r.failures} == {"finger-finger"}
     assert all(x.detail.startswith("index_") and " vs middle_" in x.detail for x in r.failures)
+    # the finger it came too near, from the hand's geometries (the names only say so)
+    assert {x.other for x in r.failures} == {"middle"}
     assert r.min_finger_finger_m < 0
 
 

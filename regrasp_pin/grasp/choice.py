@@ -665,8 +665,10 @@ class _Screen:
             "finger clearance": 0,
             "not freeing": 0,
         }
-        # per reason, the rejected candidate nearest to passing: (measured, required)
+        # per reason, the rejected candidate nearest to passing: (measured, required),
+        # and for the finger clearance the finger it came nearest to
         self.closest: dict[str, tuple[float, float]] = {}
+        self.closest_other: str | None = None
         self.window = _REMOVABLE_WINDOW
 
     def with_others(self, p: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -688,13 +690,16 @@ class _Screen:
         links, tip = self.link_clear(points)
         return passes_object_clearance(links, tip, self.contact), links, tip
 
-    def _reject(self, why: str, measured: float, required: float) -> None:
+    def _reject(self, why: str, measured: float, required: float, other: str | None = None) -> None:
         """Count a rejection and keep the one nearest to passing (the largest
-        ``measured - required``; the first of equals)."""
+        ``measured - required``; the first of equals), with ``other``, the finger a
+        finger-clearance rejection came nearest to."""
         self.rejected[why] += 1
         best = self.closest.get(why)
         if best is None or measured - required > best[0] - best[1]:
             self.closest[why] = (measured, required)
+            if why == "finger clearance":
+                self.closest_other = other
 
     def _reject_links(self, links: np.ndarray, tip: np.ndarray) -> None:
         """Count the candidates refused for their links, whose distances are ``links``
@@ -719,7 +724,8 @@ class _Screen:
             q_all[self.finger.q_indices] = self.manifold.q[k, i]
             d = clear_of(q_all)
             if d < self.finger_clearance_m:
-                self._reject("finger clearance", d, self.finger_clearance_m)
+                _, other = clear_of.nearest(q_all)  # measured: from the memo
+                self._reject("finger clearance", d, self.finger_clearance_m, other)
                 return "finger clearance"
         p_all, n_all = self.with_others(p, n)
         if not self.epsilons.closes(p_all, n_all):
@@ -890,6 +896,7 @@ class _Screen:
             }[main],
             measured=measured,
             required=required,
+            other=self.closest_other if main == "finger clearance" else None,
         )
 
 

@@ -183,14 +183,16 @@ class FingerClearance:
         self.finger = hand.finger(finger)
         mine = set(self.finger.geometry_ids)
         keep = set(hand.finger_names if others is None else others) - {finger}
-        self.pairs = [
-            (a, b)
+        named = [
+            ((a, b), name)
             for name, other in hand.fingers.items()
             if name in keep
             for a in self.finger.geometry_ids
             for b in other.geometry_ids
             if b not in mine
         ]
+        self.pairs = [pair for pair, _ in named]
+        self._other_of = [name for _, name in named]  # the finger of each pair's second
         # the pairs as the collision pairs of a copy of the hand's geometry model, with
         # Coal's default distance request each: Pinocchio computes them all in C++ (it
         # leaves out a geometry whose collisions are disabled: the copy enables them)
@@ -204,8 +206,9 @@ class FingerClearance:
         self._gdata = pin.GeometryData(self._model)
         for k in range(len(self.pairs)):
             self._gdata.distanceRequests[k] = coal.DistanceRequest()
-        # the distances measured, by the configuration's bytes, the oldest dropped first
-        self._memo: dict[bytes, float] = {}
+        # the distances measured and the index of the pair nearest, by the
+        # configuration's bytes, the oldest dropped first
+        self._memo: dict[bytes, tuple[float, int]] = {}
 
     @classmethod
     def shared(
@@ -238,8 +241,19 @@ class FingerClearance:
         A configuration measured before (the same bits; one of the last
         :data:`_MEMO_KEPT`) is not measured again: the searches ask for the same
         candidates under the same postures again and again."""
+        return self._measured(q_full)[0]
+
+    def nearest(self, q_full: np.ndarray) -> tuple[float, str | None]:
+        """:meth:`__call__`'s distance [m] and the other finger it is measured to (of
+        equal distances the first pair's; None without pairs, or when no distance is
+        finite)."""
+        d, k = self._measured(q_full)
+        return d, (self._other_of[k] if 0 <= k < len(self.pairs) and np.isfinite(d) else None)
+
+    def _measured(self, q_full: np.ndarray) -> tuple[float, int]:
+        """The smallest distance [m] at ``q_full`` and the index of its pair."""
         if not self.pairs:
-            return float(np.inf)
+            return float(np.inf), -1
         q = np.asarray(q_full, float)
         key = q.tobytes()
         known = self._memo.get(key)
@@ -252,8 +266,8 @@ class FingerClearance:
         d = float(results[k].min_distance if k < len(results) else _smallest(results))
         if len(self._memo) >= _MEMO_KEPT:
             del self._memo[next(iter(self._memo))]
-        self._memo[key] = d
-        return d
+        self._memo[key] = (d, int(k))
+        return d, int(k)
 
 
 _SHARED: weakref.WeakKeyDictionary[Hand, dict[tuple, FingerClearance]] = weakref.WeakKeyDictionary()

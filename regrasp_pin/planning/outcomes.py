@@ -87,9 +87,20 @@ def failure_summary(attempts: Sequence[Attempt], default: FailureKind) -> str:
     )
     head = f"{len(attempts)} attempts failed ({parts}); " if attempts else ""
     near = nearest_miss(attempts, kind)
+    others = Counter(a.other for a in attempts if a.kind == kind and a.other is not None)
+    mostly = f"{head}mostly {kind.value}{_others(others)}"
     if near is None:
-        return f"{head}mostly {kind.value}: {_advice_without_distance(attempts, kind)}"
-    return f"{head}mostly {kind.value}{_numbers(near)}: {_advice(near)}"
+        return f"{mostly}: {_advice_without_distance(attempts, kind)}"
+    return f"{mostly}{_numbers(near, len(others) > 1)}: {_advice(near)}"
+
+
+def _others(counts: Counter[str]) -> str:
+    """The fingers that attempts came too near (finger collisions) and how often:
+    most often first, then by name; "" when none is named."""
+    if not counts:
+        return ""
+    ranked = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+    return " near " + ", ".join(f"{name} ({n})" for name, n in ranked)
 
 
 def _advice_without_distance(attempts: Sequence[Attempt], kind: FailureKind) -> str:
@@ -103,9 +114,12 @@ def _advice_without_distance(attempts: Sequence[Attempt], kind: FailureKind) -> 
     return ADVICE[kind]
 
 
-def _numbers(near: Attempt) -> str:
+def _numbers(near: Attempt, name_other: bool = False) -> str:
+    """The nearest miss's numbers [mm], and with ``name_other`` the finger it came
+    too near."""
     assert near.measured is not None and near.required is not None
-    return f" (the nearest {near.measured * 1e3:.2f} mm, need {near.required * 1e3:.2f} mm)"
+    other = "" if near.other is None or not name_other else f" from {near.other}"
+    return f" (the nearest {near.measured * 1e3:.2f} mm{other}, need {near.required * 1e3:.2f} mm)"
 
 
 def _advice(near: Attempt) -> str:

@@ -250,6 +250,7 @@ def plan_manipulation(
                     measured=exc.measured,
                     required=exc.required,
                     attempts=exc.attempts,
+                    other=exc.other,
                 ) from exc
             state = redone
         if state.now > furthest + TIME_TOL_S:
@@ -361,6 +362,7 @@ def _with_partial(
         kind=failure.kind,
         measured=failure.measured,
         required=failure.required,
+        other=failure.other,
     )
 
 

@@ -417,6 +417,7 @@ def plan_regrasp(
         measured=last.measured,
         required=last.required,
         attempts=attempts,
+        other=last.other,
     )
 
 
@@ -713,6 +714,7 @@ def _attempt(
             kind=worst.failure_kind,
             measured=worst.value,
             required=worst.required,
+            other=worst.other,
         )
     # smallest Coal distance of the whole finger to the object in flight (between the
     # lift-off and landing zones; the middle half of the motion if the path is short)

@@ -249,4 +249,5 @@ def check_failure(
         kind=FailureKind.JOINT_LIMIT if worst is None else worst.failure_kind,
         measured=None if worst is None else worst.value,
         required=None if worst is None else worst.required,
+        other=None if worst is None else worst.other,
     )

@@ -615,6 +615,7 @@ class RegraspSearch:
             measured=None if last is None else last.measured,
             required=None if last is None else last.required,
             attempts=attempts,
+            other=None if last is None else last.other,
         )
 
 

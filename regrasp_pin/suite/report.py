@@ -188,6 +188,23 @@ def _missed_by(kind: str | None, group: Sequence[ScenarioResult]) -> str:
     return f"; missed by {lo:.2f}-{hi:.2f} mm, median {mid:.2f} mm"
 
 
+def _came_near(kind: str | None, group: Sequence[ScenarioResult]) -> str:
+    """For finger collisions, the fingers that the failing fingers came too near: per
+    scenario the one its attempts of that kind name most often (ties by name), counted
+    over the scenarios; "" when none is named (results of older versions)."""
+    if kind != FailureKind.FINGER_COLLISION.value:
+        return ""
+    near: Counter[str] = Counter()
+    for r in group:
+        named = Counter(a["other"] for a in r.attempts if a.get("kind") == kind and a.get("other"))
+        if named:
+            near[min(named, key=lambda f: (-named[f], f))] += 1
+    if not near:
+        return ""
+    ranked = sorted(near.items(), key=lambda kv: (-kv[1], kv[0]))
+    return "; near " + ", ".join(f"{f} {c}" for f, c in ranked)
+
+
 #: The stages of a plan's setup, built before its search (``ScenarioResult.stage_s``)
 _SETUP_STAGES = ("manifolds", "must hold")
 
@@ -341,7 +358,7 @@ def _failure_lines(res: list[ScenarioResult], failed: list[ScenarioResult]) -> l
         detail = ", ".join(f"{s} {c}" for s, c in sorted(stages.items(), key=str))
         if fingers:
             detail += "; " + ", ".join(f"{f} {c}" for f, c in fingers.most_common())
-        detail += _missed_by(kind, group)
+        detail += _came_near(kind, group) + _missed_by(kind, group)
         lines.append(f"  {kind!s:24}{count:4d}   ({detail})")
     backed = [r for r in res if r.backups]
     if backed:

@@ -124,6 +124,9 @@ class Failure:
         t_first_s: First time of the run [s].
         t_last_s: Last time of the run [s].
         n_samples: Number of dense samples in the run.
+        other: For ``"finger-finger"``, the finger whose geometry the finger came too
+            near (of a geometry that several fingers carry, the first in the hand's
+            order); None for the other kinds.
     """
 
     time_s: float
@@ -134,6 +137,7 @@ class Failure:
     t_first_s: float = math.nan
     t_last_s: float = math.nan
     n_samples: int = 1
+    other: str | None = None
 
     @property
     def failure_kind(self) -> FailureKind:
@@ -432,7 +436,7 @@ def verify_finger_motion(
     )
     dist, minima_exact = pairs.run(exact_minima)
     joint_fail = _joint_limit_failures(f, t_d, q_d)
-    dist_fail = _distance_failures(pairs, t_d)
+    dist_fail = _distance_failures(pairs, t_d, _owners(hand))
     all_fail = sorted(dist_fail + joint_fail, key=lambda x: (x.t_first_s, x.kind, x.detail))
     worst = min(all_fail, key=_severity) if all_fail else None
     return VerificationReport(
@@ -499,7 +503,7 @@ def failure_at_samples(
     # NaN (not queried) is no failure; nor is a bound where Coal could not measure
     # (the dense check's own bound there may prove the requirement)
     sure = (pairs.exact < pairs.required - SURE_FAILURE_M) & ~pairs.unmeasured
-    found = _distance_failures(pairs, t, sure) + _joint_limit_failures(f, t, q)
+    found = _distance_failures(pairs, t, _owners(hand), sure) + _joint_limit_failures(f, t, q)
     return min(found, key=_severity) if found else None
 
 
@@ -600,17 +604,27 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     )
 
 
+def _owners(hand: Hand) -> dict[int, str]:
+    """Geometry id -> the finger that carries it (the first in the hand's order)."""
+    return {g: name for name, f in reversed(list(hand.fingers.items())) for g in f.geometry_ids}
+
+
 def _distance_failures(
-    pairs: PairDistances, t_d: np.ndarray, fail: np.ndarray | None = None
+    pairs: PairDistances,
+    t_d: np.ndarray,
+    owners: dict[int, str],
+    fail: np.ndarray | None = None,
 ) -> list[Failure]:
     """Runs of samples where an exact distance is below its requirement (or, given,
-    where ``fail`` ``(D, columns)`` says so)."""
+    where ``fail`` ``(D, columns)`` says so); ``owners``: :func:`_owners`."""
     if fail is None:
         fail = pairs.exact < pairs.required  # NaN (not queried: proven by the bound) -> False
     out = []
     for col in np.nonzero(fail.any(axis=0))[0]:
         g1 = pairs.geoms[pairs.first[col]].name
-        g2 = "object" if pairs.second[col] < 0 else pairs.geoms[pairs.second[col]].name
+        second = None if pairs.second[col] < 0 else pairs.geoms[pairs.second[col]]
+        g2 = "object" if second is None else second.name
+        other = None if second is None else owners.get(second.gid)
         margin = pairs.exact[:, col] - pairs.required[:, col]
         for lo, hi in _runs(fail[:, col]):
             w = lo + int(np.argmin(margin[lo:hi]))
@@ -624,6 +638,7 @@ def _distance_failures(
                     float(t_d[lo]),
                     float(t_d[hi - 1]),
                     hi - lo,
+                    other,
                 )
             )
     return out
