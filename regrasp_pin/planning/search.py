@@ -29,6 +29,7 @@ run out.
 from __future__ import annotations
 
 import functools
+import hashlib
 import logging
 import math
 import time
@@ -54,6 +55,8 @@ from .timing import duration_for_move, durations_for_moves, next_duration
 #: The other fingers' postures (and finger, lift-off time) whose candidates' clearance
 #: of them a search keeps (:meth:`RegraspSearch._clear_of_others`).
 _LASTING_KEPT = 32
+#: regrasps kept by what they follow from, per plan (:meth:`RegraspSearch._plan_once`)
+_PLANNED_KEPT = 256
 #: A new contact Q must keep the finger this far from the other fingers at landing [m].
 LANDING_FINGER_CLEARANCE_M = 0.001
 
@@ -175,6 +178,11 @@ class RegraspSearch:
         default_factory=OrderedDict, init=False, repr=False, compare=False
     )
     _epsilons: ScreeningEpsilons | None = field(default=None, init=False, repr=False, compare=False)
+    # the regrasps planned, verified or failed, by everything they follow from
+    # (:meth:`_planned_key`), the most recently used last
+    _planned: OrderedDict[bytes, RegraspResult | PlanningError] = field(
+        default_factory=OrderedDict, init=False, repr=False, compare=False
+    )
 
     def find(
         self,
@@ -530,34 +538,90 @@ class RegraspSearch:
         """:func:`~.regrasp.plan_regrasp` of ``choice`` at ``duration`` by ``route``; a
         failure is recorded in ``call.attempts`` and ``call.failed``, and one already in
         ``call.failed`` is raised again at no cost."""
-        finger, P, failed = call.finger, call.P, call.failed
+        finger, failed = call.finger, call.failed
         key = (round(start, 9), choice.index, choice.q_arrive.tobytes(), round(duration, 9), route)
         if key in failed:
             raise failed[key]
         call.budget.spend()
+        params = replace(self.regrasp, duration_s=duration)
+        shared = self._planned_key(call, start, choice, q0, params, route)
         try:
-            return plan_regrasp(
-                self.scene.hand,
-                self.scene.obj,
-                self.scene.motion,
-                finger,
-                start,
-                P[0],
-                P[1],
-                choice.p_object,
-                choice.n_object,
-                q0,
-                call.q_hand,
-                others_tips_object=call.others_tips,
-                params=replace(self.regrasp, duration_s=duration),
-                q_land=choice.q_arrive,
-                route=route,
-            )
+            known = None if shared is None else self._planned.get(shared)
+            if known is None:
+                known = self._plan_regrasp(call, start, choice, q0, params, route, shared)
+            elif shared is not None:
+                self._planned.move_to_end(shared)  # the most recently used last
+            if isinstance(known, PlanningError):
+                raise known
+            return known
         except PlanningError as exc:
             failed[key] = exc
             call.attempts.append(exc.as_attempt(what))
             log.debug("regrasp %s: %s", finger, exc)
             raise
+
+    def _plan_regrasp(
+        self,
+        call: _Call,
+        start: float,
+        choice: NewContact,
+        q0: np.ndarray,
+        params: RegraspParams,
+        route: str,
+        shared: bytes | None,
+    ) -> RegraspResult | PlanningError:
+        """:func:`~.regrasp.plan_regrasp`'s verified regrasp or its failure, kept by
+        ``shared`` (the most recent :data:`_PLANNED_KEPT`)."""
+        try:
+            out: RegraspResult | PlanningError = plan_regrasp(
+                self.scene.hand,
+                self.scene.obj,
+                self.scene.motion,
+                call.finger,
+                start,
+                call.P[0],
+                call.P[1],
+                choice.p_object,
+                choice.n_object,
+                q0,
+                call.q_hand,
+                others_tips_object=call.others_tips,
+                params=params,
+                q_land=choice.q_arrive,
+                route=route,
+            )
+        except PlanningError as exc:
+            out = exc
+        if shared is not None:
+            self._planned[shared] = out
+            while len(self._planned) > _PLANNED_KEPT:
+                self._planned.popitem(last=False)
+        return out
+
+    @staticmethod
+    def _planned_key(
+        call: _Call,
+        start: float,
+        choice: NewContact,
+        q0: np.ndarray,
+        params: RegraspParams,
+        route: str,
+    ) -> bytes | None:
+        """The digest of everything a regrasp of this plan follows from: the finger, its
+        lift-off time, P and Q, its start and landing configurations, the other
+        fingers' tips and motion (a :class:`~.state.HandMotion`'s key), the parameters
+        and the route; None when the other fingers' motion has no key."""
+        hand_key = getattr(call.q_hand, "key", None)
+        if not isinstance(hand_key, bytes):
+            return None
+        digest = hashlib.sha1(f"{call.finger}\0{start!r}\0{route}\0{params!r}".encode())
+        digest.update(hand_key)
+        for a in (
+            call.P[0], call.P[1], choice.p_object, choice.n_object, q0, choice.q_arrive,
+            call.others_tips,
+        ):  # fmt: skip
+            digest.update(np.ascontiguousarray(a, float).tobytes())
+        return digest.digest()
 
     def _after_velocity(
         self,

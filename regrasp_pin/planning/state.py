@@ -11,7 +11,7 @@ fingers' configurations over time (:func:`q_hand_of`) and the hold a landing sta
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import hashlib
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -30,6 +30,7 @@ from .schedule import TIME_TOL_S, held_until, regrasp_chain
 from .search import RegraspSearch, SearchBudget
 
 __all__ = [
+    "HandMotion",
     "PlanContext",
     "PlanState",
     "Trigger",
@@ -172,26 +173,57 @@ def loss_reason(h: Holding, lost_s: float) -> str:
     return reasons[min(k, len(reasons) - 1)] or "it leaves the joint limits"
 
 
-def q_hand_of(
-    ctx: PlanContext, state: PlanState, stay: list[str]
-) -> Callable[[np.ndarray], np.ndarray]:
-    """Hand configurations over time with the ``stay`` fingers holding (exact IK)."""
-    hand, motion, tol, base_q = (
-        ctx.scene.hand,
-        ctx.scene.motion,
-        ctx.params.contact.ik_tol_m,
-        ctx.base_q,
-    )
+class HandMotion:
+    """The hand's configurations over time ``(S,) -> (S, nq)`` [rad] with the ``stay``
+    fingers holding (exact IK, :func:`~regrasp_pin.grasp.holding.holding_q`), the
+    fingers that let go where their releases put them, the others at the plan's base
+    configuration.
 
-    def q_hand(times: np.ndarray) -> np.ndarray:
-        q = np.broadcast_to(base_q, (times.size, hand.model.nq)).copy()
-        for n in stay:
+    :attr:`key` digests everything those configurations follow from (the base
+    configuration, each holding finger's contact and track, each release's samples;
+    the hand, the motion and the IK tolerance are the plan's): two of one plan with the
+    same key give the same configurations at any times, bit for bit.
+    """
+
+    def __init__(self, ctx: PlanContext, state: PlanState, stay: list[str]):
+        self._ctx, self._state, self._stay = ctx, state, list(stay)
+        self._key: bytes | None = None
+
+    def __call__(self, times: np.ndarray) -> np.ndarray:
+        """The configurations ``(S, nq)`` [rad] at ``times`` ``(S,)`` [s]."""
+        ctx, state = self._ctx, self._state
+        hand, motion = ctx.scene.hand, ctx.scene.motion
+        q = np.broadcast_to(ctx.base_q, (times.size, hand.model.nq)).copy()
+        for n in self._stay:
             q[:, hand.fingers[n].q_indices] = holding_q(
-                hand, motion, n, state.holding[n], times, tol
+                hand, motion, n, state.holding[n], times, ctx.params.contact.ik_tol_m
             )
         return with_released(ctx, state, times, q)
 
-    return q_hand
+    @property
+    def key(self) -> bytes:
+        """The digest of what the configurations follow from (computed once)."""
+        if self._key is None:
+            digest = hashlib.sha1(np.ascontiguousarray(self._ctx.base_q, float).tobytes())
+            for n in sorted(self._stay):
+                h = self._state.holding[n]
+                tr = h.track
+                digest.update(n.encode() + b"\0")
+                for a in (h.p, h.n, tr.times_s, tr.q, [tr.followed_until_s]):
+                    digest.update(np.ascontiguousarray(a, float).tobytes())
+            for n in sorted(self._state.released):
+                rel = self._state.released[n]
+                digest.update(b"released " + n.encode() + b"\0")
+                for a in (rel.times_s, rel.q):
+                    digest.update(np.ascontiguousarray(a, float).tobytes())
+            self._key = digest.digest()
+        return self._key
+
+
+def q_hand_of(ctx: PlanContext, state: PlanState, stay: list[str]) -> HandMotion:
+    """Hand configurations over time with the ``stay`` fingers holding (exact IK):
+    a :class:`HandMotion`."""
+    return HandMotion(ctx, state, stay)
 
 
 def with_released(
