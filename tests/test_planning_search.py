@@ -61,15 +61,16 @@ def problem():
             )
         return q
 
-    def find(fresh=False, time_law="minimum-jerk", **kwargs):
-        search = new_search(time_law) if fresh or time_law != "minimum-jerk" else kept
+    def find(fresh=False, time_law="minimum-jerk", search=None, hand_motion=None, **kwargs):
+        if search is None:
+            search = new_search(time_law) if fresh or time_law != "minimum-jerk" else kept
         return search.find(
             FINGER,
             (h.p, h.n),
             [t_trig - p.lead_s],
             lambda t: holding_q(hand, motion, FINGER, h, np.array([t]), p.contact.ik_tol_m)[0],
             {n: (holding[n].p, holding[n].n) for n in stay},
-            q_hand,
+            q_hand if hand_motion is None else hand_motion,
             SearchBudget(),
             **kwargs,
         )
@@ -322,3 +323,51 @@ def test_the_candidates_clearance_of_the_others_is_measured_once_per_postures(pr
         FINGER, problem.stay, lambda t: problem.q_hand(t) * 1.05, points, ka, horizon
     )
     assert calls == [points.size, points.size] and closer.shape == first.shape
+
+
+class _Keyed:
+    """The other fingers' motion with a key, as :class:`~regrasp_pin.planning.state.
+    HandMotion` has: the search keeps the regrasps planned under it."""
+
+    def __init__(self, q_hand, key):
+        self.q_hand, self.key = q_hand, key
+
+    def __call__(self, t):
+        return self.q_hand(t)
+
+
+def test_a_regrasp_planned_before_under_the_same_motion_is_not_planned_again(problem, monkeypatch):
+    """A second search of the same plan (another call, as a recovery makes) under the
+    other fingers' same motion gets every regrasp it planned before, verified or
+    failed, without planning it: the same attempts and the same regrasp as a search
+    that starts afresh. Under another motion (another key), or one without a key, it
+    plans them again."""
+
+    def second_only(result):
+        second_only.seen += 1
+        return _reject(result) if second_only.seen == 1 else None
+
+    planned = []
+    real = search_module.plan_regrasp
+    monkeypatch.setattr(
+        search_module, "plan_regrasp", lambda *a, **k: planned.append(a[5]) or real(*a, **k)
+    )
+
+    def run(search, hand_motion):
+        second_only.seen, planned[:] = 0, []
+        found = problem(search=search, hand_motion=hand_motion, landing_check=second_only)
+        return found, len(planned)
+
+    reference, n_reference = run(problem.new_search(), problem.q_hand)
+    assert n_reference >= 2  # the first landing rejected: at least two regrasps planned
+    search = problem.new_search()
+    first, n_first = run(search, _Keyed(problem.q_hand, b"the others' motion"))
+    again, n_again = run(search, _Keyed(problem.q_hand, b"the others' motion"))
+    assert n_first == n_reference and n_again == 0
+    assert again.result is first.result
+    for found in (first, again):
+        assert found.attempts == reference.attempts
+        assert found.result.Q_object.tolist() == reference.result.Q_object.tolist()
+        assert found.result.q.tolist() == reference.result.q.tolist()
+    assert run(search, _Keyed(problem.q_hand, b"another motion"))[1] == n_reference
+    assert run(search, problem.q_hand)[1] == n_reference

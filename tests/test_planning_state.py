@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import held_grasp
 
-from regrasp_pin import Hand, PlannerParams
+from regrasp_pin import Hand, PlannerParams, make_scenario
+from regrasp_pin.grasp.holding import holding_q
 from regrasp_pin.planning import state as plan_state
 
 
@@ -75,3 +78,42 @@ def test_the_triggers_measure_a_finger_that_let_go_where_it_is_then(hand, monkey
     rel = state.released["middle"]
     for j, i in enumerate(f.q_indices):
         np.testing.assert_allclose(seen["base"][:, i], np.interp(times, rel.times_s, rel.q[:, j]))
+
+
+def test_a_hand_motion_is_its_holds_and_releases_and_its_key_says_which():
+    """``HandMotion``: the holding fingers by their exact IK, the others at the base
+    configuration, bit for bit; its key is the same for the same holds (other objects,
+    copied arrays, the fingers in another order) and differs when a contact moves by
+    1e-12 m, a finger lets go or another finger holds."""
+    scen = make_scenario()
+    _, base, holding = held_grasp(scen)
+    hand, motion, tol = scen.hand, scen.motion, scen.params.contact.ik_tol_m
+    ctx = SimpleNamespace(
+        scene=SimpleNamespace(hand=hand, motion=motion), params=scen.params, base_q=base
+    )
+    state = SimpleNamespace(holding=holding, released={})
+    stay = ["thumb", "middle", "ring"]
+    times = np.linspace(0.3, 0.8, 11)
+    moving = plan_state.HandMotion(ctx, state, stay)
+    expected = np.tile(base, (times.size, 1))
+    for n in stay:
+        expected[:, hand.fingers[n].q_indices] = holding_q(hand, motion, n, holding[n], times, tol)
+    assert np.array_equal(moving(times), expected)
+
+    def copied(h, **change):
+        track = dataclasses.replace(h.track, times_s=h.track.times_s.copy(), q=h.track.q.copy())
+        return dataclasses.replace(
+            h, **{"p": h.p.copy(), "n": h.n.copy(), "track": track, **change}
+        )
+
+    same = SimpleNamespace(holding={n: copied(h) for n, h in holding.items()}, released={})
+    assert plan_state.HandMotion(ctx, same, stay[::-1]).key == moving.key
+    nudged = dict(same.holding, middle=copied(holding["middle"], p=holding["middle"].p + 1e-12))
+    rel = SimpleNamespace(times_s=times, q=np.tile(hand.fingers["index"].q_mid, (times.size, 1)))
+    others = [
+        plan_state.HandMotion(ctx, SimpleNamespace(holding=nudged, released={}), stay),
+        plan_state.HandMotion(ctx, SimpleNamespace(holding=holding, released={"index": rel}), stay),
+        plan_state.HandMotion(ctx, state, ["thumb", "middle", "index"]),
+    ]
+    keys = {moving.key, *(o.key for o in others)}
+    assert len(keys) == 4
