@@ -105,6 +105,19 @@ def sums(results_path: Path) -> dict[str, float]:
     }
 
 
+def wall_times(runs: dict[str, tuple[subprocess.Popen, float]]) -> dict[str, float]:
+    """Each run's wall time [s], from its start to its own end: the runs are polled
+    together (waiting for one after the other would give a run that ends first the
+    other's end)."""
+    wall: dict[str, float] = {}
+    while len(wall) < len(runs):
+        for name, (proc, t0) in runs.items():
+            if name not in wall and proc.poll() is not None:
+                wall[name] = time.perf_counter() - t0
+        time.sleep(0.2)
+    return wall
+
+
 def main() -> None:
     args = parse_args()
     print(machine_line())
@@ -115,11 +128,10 @@ def main() -> None:
         out = args.out / name
         print(f"{name}: {commit[:10]} on cores {cores}, log {out / 'suite.log'}", flush=True)
         runs[name] = (start(tree, out, args.suite_args, cores), time.perf_counter())
-    wall = {}
-    for name, (proc, t0) in runs.items():
-        if proc.wait() != 0:
+    wall = wall_times(runs)
+    for name, (proc, _) in runs.items():
+        if proc.returncode != 0:
             sys.exit(f"{name}: bench/suite.py failed, see {args.out / name / 'suite.log'}")
-        wall[name] = time.perf_counter() - t0
     got = {name: sums(args.out / name / "run" / "results.jsonl") for name in runs}
     print(f"{'':12} {'base':>10} {'new':>10} {'new/base':>9}")
     for key in ("wall", "builds", "planning", "re-checks"):
