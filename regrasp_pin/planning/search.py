@@ -552,7 +552,8 @@ class RegraspSearch:
             elif shared is not None:
                 self._planned.move_to_end(shared)  # the most recently used last
             if isinstance(known, PlanningError):
-                raise known
+                # raised again as it was first: without the frames of every raise since
+                raise known.with_traceback(None)
             return known
         except PlanningError as exc:
             failed[key] = exc
