@@ -24,6 +24,12 @@ Every failure is recorded as an :class:`~regrasp_pin.exceptions.Attempt`. The se
 ends with the first verified regrasp, or with a :class:`~regrasp_pin.exceptions.
 PlanningError` of the dominant kind when the start times, the candidates or the budget
 run out.
+
+The searches of one plan keep the regrasps they planned, verified or failed, by
+everything a regrasp follows from (the other fingers' motion by its
+:attr:`~.state.HandMotion.key`): a recovery that searches again from a state it
+revisits gets a regrasp planned before at once, the same result or failure, and
+spends its step and records its attempt as before, so the search goes the same way.
 """
 
 from __future__ import annotations
@@ -55,7 +61,7 @@ from .timing import duration_for_move, durations_for_moves, next_duration
 #: The other fingers' postures (and finger, lift-off time) whose candidates' clearance
 #: of them a search keeps (:meth:`RegraspSearch._clear_of_others`).
 _LASTING_KEPT = 32
-#: regrasps kept by what they follow from, per plan (:meth:`RegraspSearch._plan_once`)
+#: The regrasps a plan's searches keep by what they follow from (:meth:`RegraspSearch._plan_once`).
 _PLANNED_KEPT = 256
 #: A new contact Q must keep the finger this far from the other fingers at landing [m].
 LANDING_FINGER_CLEARANCE_M = 0.001
@@ -537,7 +543,8 @@ class RegraspSearch:
     ) -> RegraspResult:
         """:func:`~.regrasp.plan_regrasp` of ``choice`` at ``duration`` by ``route``; a
         failure is recorded in ``call.attempts`` and ``call.failed``, and one already in
-        ``call.failed`` is raised again at no cost."""
+        ``call.failed`` is raised again at no cost. A regrasp this plan's searches
+        planned before, input for input (:meth:`_planned_key`), is not planned again."""
         finger, failed = call.finger, call.failed
         key = (round(start, 9), choice.index, choice.q_arrive.tobytes(), round(duration, 9), route)
         if key in failed:
