@@ -551,17 +551,12 @@ class RegraspSearch:
             raise failed[key]
         call.budget.spend()
         params = replace(self.regrasp, duration_s=duration)
-        shared = self._planned_key(call, start, choice, q0, params, route)
         try:
-            known = None if shared is None else self._planned.get(shared)
-            if known is None:
-                known = self._plan_regrasp(call, start, choice, q0, params, route, shared)
-            elif shared is not None:
-                self._planned.move_to_end(shared)  # the most recently used last
-            if isinstance(known, PlanningError):
-                # raised again as it was first: without the frames of every raise since
-                raise known.with_traceback(None)
-            return known
+            out = self._plan_regrasp(call, start, choice, q0, params, route)
+            if isinstance(out, PlanningError):
+                # raised as it was first: without the frames of any raise since
+                raise out.with_traceback(None)
+            return out
         except PlanningError as exc:
             failed[key] = exc
             call.attempts.append(exc.as_attempt(what))
@@ -576,10 +571,14 @@ class RegraspSearch:
         q0: np.ndarray,
         params: RegraspParams,
         route: str,
-        shared: bytes | None,
     ) -> RegraspResult | PlanningError:
-        """:func:`~.regrasp.plan_regrasp`'s verified regrasp or its failure, kept by
-        ``shared`` (the most recent :data:`_PLANNED_KEPT`)."""
+        """:func:`~.regrasp.plan_regrasp`'s verified regrasp or its failure: the one kept
+        if this plan's searches planned it before (:meth:`_planned_key`), else planned
+        and kept (the most recent :data:`_PLANNED_KEPT`)."""
+        shared = self._planned_key(call, start, choice, q0, params, route)
+        if shared is not None and shared in self._planned:
+            self._planned.move_to_end(shared)  # the most recently used last
+            return self._planned[shared]
         try:
             out: RegraspResult | PlanningError = plan_regrasp(
                 self.scene.hand,
