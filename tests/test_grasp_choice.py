@@ -391,6 +391,9 @@ def test_grasps_with_fingers_too_close_are_refused_with_the_closest_distance(fiv
     err = info.value
     assert err.kind == FailureKind.FINGER_COLLISION and err.required == 0.2
     assert d - 1e-9 <= err.measured < 0.2  # at least as far apart as the chosen grasp
+    # the two fingers of the closest refusal are named, in the message too
+    assert {err.finger, err.other} <= set(names) and err.finger != err.other
+    assert f"{err.finger} and {err.other} {err.measured * 1e3:.3f} mm apart" in str(err)
 
 
 def test_no_initial_grasp_names_the_finger(five):
@@ -1431,6 +1434,26 @@ def test_combination_search_finds_an_admissible_grasp_whenever_one_exists(seed):
         assert search.refused > 0 and search.closest < gap_m
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_combination_search_names_the_two_fingers_of_its_closest_refusal(seed):
+    """Where no combination is admissible, the closest refused gap is the table's
+    distance between the finger refused there and the picked finger nearest it."""
+    rng = np.random.default_rng(300 + seed)
+    names, ids, per_finger, pts, table = _table_problem(rng, 5, 0.0012)
+    gap_m, sep = 0.001, 0.0
+    search = _CombinationSearch(
+        per_finger, pts, sep, _TableGaps(table, ids, gap_m, seed), gap_m, max_nodes=10**6
+    )
+    assert search.closest_pair() is None  # nothing refused yet
+    # few distances reach 1 mm: these tables have no admissible combination
+    assert search.complete(names, {f: np.arange(5) for f in names}) is None
+    name, i, picked = search.closest_at
+    by_table = {o: table[name, i, o, j] for o, j in picked}
+    assert min(by_table.values()) == search.closest < gap_m
+    assert search.closest_pair() == (name, min(by_table, key=lambda o: (by_table[o], o)))
+    assert name not in dict(picked)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_combination_search_a_finger_too_close_in_one_batch_is_the_loop_over_candidates(seed):
     """``_too_close`` decides from the bounds and the distances known, and measures the
@@ -1452,8 +1475,8 @@ def test_combination_search_a_finger_too_close_in_one_batch_is_the_loop_over_can
             if all(np.linalg.norm(pts[i] - pts[j]) >= sep for j in picked.values())
         ]
         reference = _TableGaps(table, ids, gap_m, seed)  # the same bounds, its own memo
-        every = [reference.smallest(name, i, picked) for i in spaced]
-        expected = None if any(g >= gap_m for g in every) else every
+        every = [(reference.smallest(name, i, picked), i) for i in spaced]
+        expected = None if any(g >= gap_m for g, _ in every) else every
         assert search._too_close(name, picked) == expected
 
 

@@ -381,13 +381,17 @@ def initial_grasp(
     closest = search.closest
     if best is None and search.refused:
         known = bool(np.isfinite(closest))
+        pair = search.closest_pair() if known else None
         raise ContactError(
             f"every grasp tried ({search.refused}) puts two fingers too close"
             + (
-                f" (the best {closest * 1e3:.3f} mm apart, need {min_finger_gap_m * 1e3:.3f} mm)"
-                if known
+                f" (the best: {pair[0]} and {pair[1]} {closest * 1e3:.3f} mm apart, "
+                f"need {min_finger_gap_m * 1e3:.3f} mm)"
+                if pair is not None
                 else " (finger_clearance refused them)"
             ),
+            finger=None if pair is None else pair[0],
+            other=None if pair is None else pair[1],
             kind=FailureKind.FINGER_COLLISION,
             measured=closest if known else None,
             required=min_finger_gap_m if known else None,
@@ -542,6 +546,11 @@ def _spread_out(
     return chosen
 
 
+#: Where a refused gap was measured: the refused finger, its candidate (a sample index)
+#: and the picked fingers' ``(finger, sample index)`` pairs
+_Where = tuple[str, int, tuple[tuple[str, int], ...]]
+
+
 class _CombinationSearch:
     """Depth-first search for one contact per finger under the pairwise constraints.
 
@@ -553,6 +562,9 @@ class _CombinationSearch:
     Attributes:
         refused: Dead ends where every spaced candidate was too close to a picked finger.
         closest: The largest finger distance [m] among those refused (-inf: none).
+        closest_at: Where it was measured: the refused finger, its candidate (a sample
+            index) and the picked fingers' ``(finger, sample index)`` pairs; None with
+            ``closest`` -inf (the first of equal distances is kept).
     """
 
     def __init__(
@@ -567,6 +579,7 @@ class _CombinationSearch:
         self.per_finger, self.sep = per_finger, sep
         self.gaps, self.min_gap_m, self.max_nodes = gaps, min_gap_m, max_nodes
         self.refused, self.closest = 0, -np.inf
+        self.closest_at: _Where | None = None
         # which candidates are closer than ``sep``: one table over every finger's
         # candidates (sample index -> row), looked up in the search's inner loops; two
         # exactly ``sep`` apart (the sample's points lie on grids) are apart on every
@@ -580,11 +593,14 @@ class _CombinationSearch:
         dist = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
         self._near = dist < apart_threshold(sep)
         # _admissible per (finger, picked): None, or the gaps of its spaced candidates
-        self._known: dict[tuple[str, tuple[tuple[str, int], ...]], list[float] | None] = {}
+        self._known: dict[
+            tuple[str, tuple[tuple[str, int], ...]], list[tuple[float, int]] | None
+        ] = {}
         # subtrees searched to the end without a combination, per (picked, fingers still
-        # to pick in their order): (candidates it took, dead ends, closest gap)
+        # to pick in their order): (candidates it took, dead ends, closest gap, where)
         self._failed: dict[
-            tuple[tuple[tuple[str, int], ...], tuple[str, ...]], tuple[int, int, float]
+            tuple[tuple[tuple[str, int], ...], tuple[str, ...]],
+            tuple[int, int, float, _Where | None],
         ] = {}
         self._cuts = 0  # searches cut short by the node budget
 
@@ -603,26 +619,42 @@ class _CombinationSearch:
             return None
         return self.gaps.smallest(name, i, picked)
 
-    def _dead_end(self, gaps: list[float]) -> None:
-        """Record a finger whose spaced candidates (``gaps`` [m]) were all too close."""
-        if gaps:
+    def _dead_end(
+        self, name: str, picked: Mapping[str, int], refused: list[tuple[float, int]]
+    ) -> None:
+        """Record a finger whose spaced candidates (``refused``: their gaps [m] and
+        sample indices) were all too close to the ``picked`` fingers."""
+        if refused:
             self.refused += 1
-            self.closest = max(self.closest, max(gaps))
+            gap, i = max(refused, key=lambda gi: gi[0])  # the first of equals
+            if gap > self.closest:
+                self.closest = gap
+                self.closest_at = (name, i, tuple(sorted(picked.items())))
+
+    def closest_pair(self) -> tuple[str, str] | None:
+        """The two fingers of :attr:`closest`: the refused finger and the picked finger
+        nearest it (of equal distances the first by name); None when none was refused."""
+        if self.closest_at is None:
+            return None
+        name, i, picked = self.closest_at
+        other = min(picked, key=lambda oj: (self.gaps.smallest(name, i, dict([oj])), oj[0]))
+        return name, other[0]
 
     def _admissible(self, name: str, picked: Mapping[str, int]) -> bool:
         """Whether some candidate of ``name`` is spaced from and clear of ``picked``."""
         key = (name, tuple(sorted(picked.items())))
         if key not in self._known:
             self._known[key] = self._too_close(name, picked)
-        gaps = self._known[key]
-        if gaps is None:
+        refused = self._known[key]
+        if refused is None:
             return True
-        self._dead_end(gaps)
+        self._dead_end(name, picked, refused)
         return False
 
-    def _too_close(self, name: str, picked: Mapping[str, int]) -> list[float] | None:
+    def _too_close(self, name: str, picked: Mapping[str, int]) -> list[tuple[float, int]] | None:
         """None if some candidate of ``name`` is spaced from and clear of ``picked``;
-        else the finger gaps [m] of its spaced candidates (all too small).
+        else the finger gaps [m] of its spaced candidates (all too small), each with the
+        candidate's sample index.
 
         One batch over the candidates: the capsule bounds and the distances already
         measured decide most of them; Coal measures the rest, a candidate at a time in
@@ -644,7 +676,7 @@ class _CombinationSearch:
             gaps[r] = self.gaps.smallest(name, int(ids[cand[r]]), picked)
             if gaps[r] >= self.min_gap_m:
                 return None
-        return gaps.tolist()
+        return list(zip(gaps.tolist(), ids[cand].tolist(), strict=True))
 
     def _extend(
         self,
@@ -665,16 +697,23 @@ class _CombinationSearch:
         if known is not None and budget[0] >= known[0]:
             budget[0] -= known[0]
             self.refused += known[1]
-            self.closest = max(self.closest, known[2])
+            self._merge_closest(known[2], known[3])
             return None
-        start = (budget[0], self.refused, self.closest, self._cuts)
-        self.closest = -np.inf  # this subtree's own, merged on the way out
+        start = (budget[0], self.refused, self._cuts)
+        outer = self.closest, self.closest_at
+        self.closest, self.closest_at = -np.inf, None  # this subtree's own, merged after
         found = self._search(order, ranks, chosen, picked, budget)
-        mine = self.closest
-        self.closest = max(start[2], mine)
-        if found is None and self._cuts == start[3]:
-            self._failed[key] = (start[0] - budget[0], self.refused - start[1], mine)
+        mine = self.closest, self.closest_at
+        self.closest, self.closest_at = outer
+        self._merge_closest(*mine)
+        if found is None and self._cuts == start[2]:
+            self._failed[key] = (start[0] - budget[0], self.refused - start[1], *mine)
         return found
+
+    def _merge_closest(self, gap: float, at: _Where | None) -> None:
+        """Take a subtree's closest refused gap [m] and where it was, if larger."""
+        if gap > self.closest:
+            self.closest, self.closest_at = gap, at
 
     def _search(
         self,
@@ -687,7 +726,7 @@ class _CombinationSearch:
         """:meth:`_extend` at one node: its finger's candidates in rank order."""
         name = order[len(chosen)]
         ids = self.per_finger[name][0]
-        too_close = []
+        too_close: list[tuple[float, int]] = []
         for c in ranks[name]:
             if budget[0] <= 0:
                 self._cuts += 1
@@ -696,7 +735,7 @@ class _CombinationSearch:
             i = int(ids[c])
             g = self._gap(name, i, picked)
             if g is None or g < self.min_gap_m:
-                too_close += [] if g is None else [g]
+                too_close += [] if g is None else [(g, i)]
                 continue
             chosen[name], picked[name] = int(c), i
             # forward check: every finger still to pick keeps an admissible candidate
@@ -705,7 +744,7 @@ class _CombinationSearch:
                 if found is not None:
                     return found
             del chosen[name], picked[name]
-        self._dead_end(too_close)
+        self._dead_end(name, picked, too_close)
         return None
 
 
