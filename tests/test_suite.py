@@ -428,6 +428,29 @@ def test_results_round_trip_through_json():
     assert back.failure_kind == "velocity" and back.regrasp_ms == [1.5]
 
 
+def test_a_failure_records_the_finger_it_came_near():
+    from regrasp_pin.suite.run import _record_failure
+
+    r = _result("a", "allegro", "box", "object-axis", False, None, None, [])
+    err = ContactError(
+        "two fingers too close",
+        finger="ring",
+        other="middle",
+        kind=FailureKind.FINGER_COLLISION,
+        measured=0.0019,
+        required=0.002,
+    )
+    _record_failure(r, err, "grasp")
+    assert (r.failure_kind, r.finger, r.other, r.failed_stage) == (
+        "finger-collision",
+        "ring",
+        "middle",
+        "grasp",
+    )
+    back = ScenarioResult.from_dict(json.loads(json.dumps(r.to_dict())))
+    assert back.other == "middle"
+
+
 def test_grasp_clearance_keeps_the_initial_fingers_apart():
     # make_scenario's grasp for this neighbour has the index inside the middle finger;
     # asking for clearance gives another grasp whose fingers are apart, or none

@@ -276,3 +276,27 @@ def test_describe_counts_the_skipped_specs_by_kind():
     text = SuiteRun(results=[], skipped=skipped, wall_s=1.0, workers=1).describe()
     assert "skipped without an initial grasp: 3 (infeasible 2, force-closure 1)" in text
     assert "skipped without an initial grasp: 0\n" in SuiteRun([], [], 1.0, 1).describe() + "\n"
+
+
+def test_describe_names_the_fingers_of_the_skipped_finger_collisions():
+    from regrasp_pin.suite.cluster import SuiteRun
+    from regrasp_pin.suite.run import outcome_template
+
+    near = [("middle", "index"), ("ring", "middle"), ("middle", "index"), (None, None)]
+    skipped = [
+        replace(
+            outcome_template(s),
+            ok=False,
+            failure_kind="finger-collision",
+            failed_stage="grasp",
+            finger=f,
+            other=o,
+        )
+        for s, (f, o) in zip(_named("a", "b", "c", "d"), near, strict=True)
+    ]
+    skipped.append(replace(outcome_template(_named("e")[0]), failure_kind="no-candidate"))
+    text = SuiteRun(results=[], skipped=skipped, wall_s=1.0, workers=1).describe()
+    assert (
+        "skipped without an initial grasp: 5 (finger-collision 4 [middle near index 2, "
+        "ring near middle 1], no-candidate 1)"
+    ) in text

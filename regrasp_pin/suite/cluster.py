@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import positive, positive_int
-from ..exceptions import InputError, MissingExtraError
+from ..exceptions import FailureKind, InputError, MissingExtraError
 from ..grasp.manifold import THREADS_ENV, manifold_threads
 from ..model.ik import environment_backend
 from ..planning.timing import checked_time_law
@@ -99,9 +99,10 @@ class SuiteRun:
     def describe(self) -> str:
         """Skipped specs, wall time, workers and the scheduling overhead, in a few lines."""
         kinds = Counter(r.failure_kind or "no kind" for r in self.skipped).most_common()
+        counts = ", ".join(_kind_count(k, n, self.skipped) for k, n in kinds)
         lines = [
             f"skipped without an initial grasp: {len(self.skipped)}"
-            + (f" ({', '.join(f'{k} {n}' for k, n in kinds)})" if kinds else ""),
+            + (f" ({counts})" if kinds else ""),
             f"wall time: {self.wall_s:.0f} s on {self.workers} worker(s) "
             f"({self.startup_s:.1f} s to start them)"
             + (f"; {self.resumed} earlier result(s) kept, skips included" if self.resumed else ""),
@@ -405,3 +406,16 @@ class _Ledger:
         _write_sorted(self.folder / RESULTS, results)
         _write_sorted(self.folder / SKIPPED, skipped)
         return results, skipped
+
+
+def _kind_count(kind: str, n: int, skipped: list[ScenarioResult]) -> str:
+    """``"<kind> <n>"``; for finger collisions with the fingers named, which finger came
+    near which, counted (most first, then by name): ``"finger-collision 4 [middle near
+    index 2, ring near middle 2]"``."""
+    pairs = Counter(
+        f"{r.finger} near {r.other}"
+        for r in skipped
+        if r.failure_kind == kind == FailureKind.FINGER_COLLISION.value and r.finger and r.other
+    )
+    named = sorted(pairs.items(), key=lambda kv: (-kv[1], kv[0]))
+    return f"{kind} {n}" + (" [" + ", ".join(f"{p} {c}" for p, c in named) + "]" if named else "")

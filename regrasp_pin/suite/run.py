@@ -53,6 +53,8 @@ class ScenarioResult:
             ``"build"`` (another error while building), ``"plan"``, ``"run"`` (the
             process or worker running it: timeout, crash, lost worker), or None.
         finger: The finger of the failure, if any.
+        other: For a ``finger-collision`` failure, the finger it came too near, when
+            known (the planner's, or the initial grasp's nearest pair).
         time_s: When in the motion the failure happened [s], if known.
         measured: The failure's measured value (units by kind), if any.
         required: The value that was required, if any.
@@ -99,6 +101,7 @@ class ScenarioResult:
     failure: str | None = None
     failed_stage: str | None = None
     finger: str | None = None
+    other: str | None = None
     time_s: float | None = None
     measured: float | None = None
     required: float | None = None
@@ -168,6 +171,7 @@ def _record_failure(result: ScenarioResult, exc: Exception, stage: str) -> None:
             line.strip().replace("\n", " ") for line in tb[-3:-1]
         )
     result.finger = getattr(exc, "finger", None)
+    result.other = getattr(exc, "other", None)
     time_s = getattr(exc, "time_s", None)
     result.time_s = None if time_s is None else float(time_s)
     result.measured = getattr(exc, "measured", None)
