@@ -104,12 +104,15 @@ def test_combination_search_names_the_two_fingers_of_its_closest_refusal(seed):
         per_finger, pts, sep, _TableGaps(table, ids, gap_m, seed), gap_m, max_nodes=10**6
     )
     assert search.closest_pair() is None  # nothing refused yet
-    # few distances reach 1 mm: these tables have no admissible combination
-    assert search.complete(names, {f: np.arange(5) for f in names}) is None
+    # few distances reach 1 mm: these tables have no admissible combination (the
+    # fingers in a shuffled order, numpy's strings, as initial_grasp's later trials)
+    order = list(np.random.default_rng(seed).permutation(names))
+    assert search.complete(order, {f: np.arange(5) for f in names}) is None
     name, i, picked = search.closest_at
     by_table = {o: table[name, i, o, j] for o, j in picked}
     assert min(by_table.values()) == search.closest < gap_m
     assert search.closest_pair() == (name, min(by_table, key=lambda o: (by_table[o], o)))
+    assert all(type(f) is str for f in search.closest_pair())  # not numpy's strings
     assert name not in dict(picked)
 
 

@@ -108,9 +108,10 @@ class CombinationSearch:
         if refused:
             self.refused += 1
             gap, i = max(refused, key=lambda gi: gi[0])  # the first of equals
-            if gap > self.closest:
+            if gap > self.closest:  # names as plain strings (a trial's order is numpy's)
                 self.closest = gap
-                self.closest_at = (name, i, tuple(sorted(picked.items())))
+                where = tuple(sorted((str(o), int(j)) for o, j in picked.items()))
+                self.closest_at = (str(name), int(i), where)
 
     def closest_pair(self) -> tuple[str, str] | None:
         """The two fingers of :attr:`closest`: the refused finger and the picked finger
