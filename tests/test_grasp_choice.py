@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import re
+from types import SimpleNamespace
 
 import coal
 import numpy as np
@@ -51,6 +52,7 @@ from regrasp_pin.grasp.initial import (
     _grasp_score,
     _spread_out,
     _start_candidates,
+    _too_close,
     initial_grasp,
 )
 from regrasp_pin.grasp.manifold import Manifold, build_manifold
@@ -392,6 +394,30 @@ def test_grasps_with_fingers_too_close_are_refused_with_the_closest_distance(fiv
     # the two fingers of the closest refusal are named, in the message too
     assert {err.finger, err.other} <= set(names) and err.finger != err.other
     assert f"{err.finger} and {err.other} {err.measured * 1e3:.3f} mm apart" in str(err)
+
+
+def test_grasps_refused_by_the_callers_finger_clearance_say_so(five):
+    hand, box, _, sample, manifolds, _ = five
+    calls = []
+
+    def never(q_fingers):  # a caller's clearance that refuses every grasp
+        calls.append(q_fingers)
+        return -1.0
+
+    with pytest.raises(ContactError) as info:
+        initial_grasp(hand, box, manifolds, sample, mu=MU, finger_clearance=never)
+    err = info.value
+    # every complete grasp it was asked about is counted as refused by it, beside the
+    # combination search's own closest refusal (this scene has some)
+    assert err.kind == FailureKind.FINGER_COLLISION
+    assert f"; finger_clearance refused {len(calls)})" in str(err) and calls
+    assert {err.finger, err.other} <= set(manifolds) and err.measured < err.required
+    # refused by it alone: no pair, no numbers
+    alone = _too_close(SimpleNamespace(closest_pair=lambda: None, refused=4), 4, 0.002)
+    assert str(alone).endswith(
+        "every grasp tried (4) puts two fingers too close (finger_clearance refused 4)"
+    )
+    assert (alone.finger, alone.other, alone.measured, alone.required) == (None,) * 4
 
 
 def test_no_initial_grasp_names_the_finger(five):

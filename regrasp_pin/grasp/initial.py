@@ -340,6 +340,7 @@ def initial_grasp(
         min_finger_gap_m,
     )
     search = CombinationSearch(per_finger, pts, sep, gap, min_finger_gap_m)
+    by_clearance = 0  # combinations refused by the caller's finger_clearance
     # each contact set's hull once
     epsilons = ScreeningEpsilons(mu, obj.radius_m, contact.torsion_m)
     for trial in range(trials):
@@ -367,6 +368,7 @@ def initial_grasp(
             q_pick = {n: manifolds[n].q[t_index, pick[n]].copy() for n in names}
             if finger_clearance is not None and finger_clearance(q_pick) <= 0.0:
                 search.refused += 1
+                by_clearance += 1
                 continue
             best_score, best_rank, best = score, r, (dict(pick), e, q_pick)
     if rank is not None and best is not None:
@@ -374,24 +376,8 @@ def initial_grasp(
         best, best_rank, best_score = climb.run(
             best, best_rank, best_score, rank, manifolds, t_index, finger_clearance
         )
-    closest = search.closest
     if best is None and search.refused:
-        known = bool(np.isfinite(closest))
-        pair = search.closest_pair() if known else None
-        raise ContactError(
-            f"every grasp tried ({search.refused}) puts two fingers too close"
-            + (
-                f" (the best: {pair[0]} and {pair[1]} {closest * 1e3:.3f} mm apart, "
-                f"need {min_finger_gap_m * 1e3:.3f} mm)"
-                if pair is not None
-                else " (finger_clearance refused them)"
-            ),
-            finger=None if pair is None else pair[0],
-            other=None if pair is None else pair[1],
-            kind=FailureKind.FINGER_COLLISION,
-            measured=closest if known else None,
-            required=min_finger_gap_m if known else None,
-        )
+        raise _too_close(search, by_clearance, min_finger_gap_m)
     if best is None:
         raise ContactError(
             f"no combination of the usable contacts is in force closure (mu={mu}) with the "
@@ -412,6 +398,30 @@ def initial_grasp(
         q=q_pick,
         indices={n: pick[n] for n in names},
         epsilon=float(e_full if e_full > 0 else e),
+    )
+
+
+def _too_close(search: CombinationSearch, by_clearance: int, min_gap_m: float) -> ContactError:
+    """The failure of a grasp search whose every grasp put two fingers too close: the
+    combination search's closest refusal (its two fingers, their gap [m] against
+    ``min_gap_m``), and how many complete grasps the caller's ``finger_clearance``
+    refused (``by_clearance``)."""
+    pair = search.closest_pair()  # None when only finger_clearance refused
+    by_caller = f"finger_clearance refused {by_clearance}" if by_clearance else ""
+    if pair is None:
+        detail = f" ({by_caller})"
+    else:
+        detail = (
+            f" (the best: {pair[0]} and {pair[1]} {search.closest * 1e3:.3f} mm apart, need "
+            f"{min_gap_m * 1e3:.3f} mm" + (f"; {by_caller}" if by_caller else "") + ")"
+        )
+    return ContactError(
+        f"every grasp tried ({search.refused}) puts two fingers too close" + detail,
+        finger=None if pair is None else pair[0],
+        other=None if pair is None else pair[1],
+        kind=FailureKind.FINGER_COLLISION,
+        measured=None if pair is None else search.closest,
+        required=None if pair is None else min_gap_m,
     )
 
 

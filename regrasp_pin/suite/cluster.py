@@ -412,10 +412,12 @@ def _kind_count(kind: str, n: int, skipped: list[ScenarioResult]) -> str:
     """``"<kind> <n>"``; for finger collisions with the fingers named, which finger came
     near which, counted (most first, then by name): ``"finger-collision 4 [middle near
     index 2, ring near middle 2]"``."""
+    if kind != FailureKind.FINGER_COLLISION.value:
+        return f"{kind} {n}"
     pairs = Counter(
         f"{r.finger} near {r.other}"
         for r in skipped
-        if r.failure_kind == kind == FailureKind.FINGER_COLLISION.value and r.finger and r.other
+        if r.failure_kind == kind and r.finger and r.other
     )
     named = sorted(pairs.items(), key=lambda kv: (-kv[1], kv[0]))
     return f"{kind} {n}" + (" [" + ", ".join(f"{p} {c}" for p, c in named) + "]" if named else "")
