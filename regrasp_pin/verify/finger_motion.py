@@ -436,7 +436,7 @@ def verify_finger_motion(
     )
     dist, minima_exact = pairs.run(exact_minima)
     joint_fail = _joint_limit_failures(f, t_d, q_d)
-    dist_fail = _distance_failures(pairs, t_d, _owners(hand))
+    dist_fail = _distance_failures(pairs, t_d, hand)
     all_fail = sorted(dist_fail + joint_fail, key=lambda x: (x.t_first_s, x.kind, x.detail))
     worst = min(all_fail, key=_severity) if all_fail else None
     return VerificationReport(
@@ -503,7 +503,7 @@ def failure_at_samples(
     # NaN (not queried) is no failure; nor is a bound where Coal could not measure
     # (the dense check's own bound there may prove the requirement)
     sure = (pairs.exact < pairs.required - SURE_FAILURE_M) & ~pairs.unmeasured
-    found = _distance_failures(pairs, t, _owners(hand), sure) + _joint_limit_failures(f, t, q)
+    found = _distance_failures(pairs, t, hand, sure) + _joint_limit_failures(f, t, q)
     return min(found, key=_severity) if found else None
 
 
@@ -612,15 +612,18 @@ def _owners(hand: Hand) -> dict[int, str]:
 def _distance_failures(
     pairs: PairDistances,
     t_d: np.ndarray,
-    owners: dict[int, str],
+    hand: Hand,
     fail: np.ndarray | None = None,
 ) -> list[Failure]:
     """Runs of samples where an exact distance is below its requirement (or, given,
-    where ``fail`` ``(D, columns)`` says so); ``owners``: :func:`_owners`."""
+    where ``fail`` ``(D, columns)`` says so), each naming the ``hand``'s finger of a
+    second geometry that belongs to one."""
     if fail is None:
         fail = pairs.exact < pairs.required  # NaN (not queried: proven by the bound) -> False
+    failing = np.nonzero(fail.any(axis=0))[0]
+    owners = _owners(hand) if failing.size else {}  # read only where something failed
     out = []
-    for col in np.nonzero(fail.any(axis=0))[0]:
+    for col in failing:
         g1 = pairs.geoms[pairs.first[col]].name
         second = None if pairs.second[col] < 0 else pairs.geoms[pairs.second[col]]
         g2 = "object" if second is None else second.name
